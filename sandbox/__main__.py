@@ -1,0 +1,7 @@
+"""``python -m sandbox`` runs the command-line interface."""
+
+import sys
+
+from sandbox.cli import main
+
+sys.exit(main())

@@ -1,0 +1,161 @@
+"""Flatness-based controller with a second-order state extension, eqs. (4)-(6).
+
+Pure functions over arrays of vehicles (shape ``(n, ...)``). The extension states
+``chi = (chi1, chi2)`` [m/s] are the "ideal velocity vector" of the report; they live in
+the fleet state and are advanced by the simulation loop with :func:`advance_extension`.
+
+Symbols (report -> code): ``x1, x2`` -> ``pos[:, 0], pos[:, 1]``; ``x3`` -> ``theta``;
+``x_ref, x_ref', x_ref''`` -> ``p_ref, v_ref, a_ref``; ``k1..k4, kp`` -> :class:`Gains`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sandbox.dynamics import wrap_angle
+
+#: Below this speed ``|chi|`` [m/s] the direction of chi is undefined (a vehicle at rest):
+#: the vehicle holds its heading (v2 = 0) instead of dividing by zero in eq. (5).
+CHI_HOLD = 1e-3
+#: The feedforward of eq. (5) divides by ``max(|chi|^2, CHI_REG^2)`` [m/s]: exact above
+#: this speed, bounded near rest (where numerical noise in chi would otherwise be turned
+#: into turn rates of thousands of rad/s).
+CHI_REG = 0.01
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Controller gains (scalars, or arrays of shape ``(n,)`` for per-vehicle gains).
+
+    Defaults are the report's values for every simulation: ``k1 = k3 = -100`` [1/s^2],
+    ``k2 = k4 = -20`` [1/s], ``kp = 2`` [1/s]. The error dynamics are then
+    ``s^2 + 20 s + 100``: a double pole at -10 rad/s.
+    """
+
+    k1: float | np.ndarray = -100.0
+    k2: float | np.ndarray = -20.0
+    k3: float | np.ndarray = -100.0
+    k4: float | np.ndarray = -20.0
+    kp: float | np.ndarray = 2.0
+
+
+def extension_rate(
+    pos: np.ndarray,
+    chi: np.ndarray,
+    p_ref: np.ndarray,
+    v_ref: np.ndarray,
+    a_ref: np.ndarray,
+    gains: Gains,
+) -> np.ndarray:
+    """Time derivative of the extension states, eq. (6) (eq. (4) when the ref is 0).
+
+    Parameters
+    ----------
+    pos : ndarray, shape (n, 2) [m]
+        Positions ``(x1, x2)``.
+    chi : ndarray, shape (n, 2) [m/s]
+        Extension states.
+    p_ref, v_ref, a_ref : ndarray, shape (n, 2) [m], [m/s], [m/s^2]
+        Reference position and its first and second derivatives (true or estimated).
+    gains : Gains
+
+    Returns
+    -------
+    chi_dot : ndarray, shape (n, 2) [m/s^2]
+    """
+    k_pos = np.stack(np.broadcast_arrays(gains.k1, gains.k3), axis=-1)
+    k_vel = np.stack(np.broadcast_arrays(gains.k2, gains.k4), axis=-1)
+    return k_pos * (pos - p_ref) + k_vel * (chi - v_ref) + a_ref  # eq. (6)
+
+
+def flat_inputs(
+    theta: np.ndarray, chi: np.ndarray, chi_dot: np.ndarray, kp: float | np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Control inputs ``(v1, v2)`` from the extension states, eq. (5).
+
+    ``v1 = |chi|``; ``v2`` is the turn rate of chi (flatness feedforward, eq. (3)) minus
+    ``kp`` times the heading error ``x3 - angle(chi)``, wrapped to ``[-pi, pi)``. Where
+    ``|chi| < CHI_HOLD`` the angle of chi is undefined and the vehicle holds its heading
+    (``v2 = 0``); below ``CHI_REG`` the feedforward's divisor is floored at
+    ``CHI_REG^2``. No NaN is ever produced for finite inputs.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (n,) [rad]
+    chi, chi_dot : ndarray, shape (n, 2) [m/s], [m/s^2]
+    kp : float or ndarray, shape (n,) [1/s]
+
+    Returns
+    -------
+    v1 : ndarray, shape (n,) [m/s]
+    v2 : ndarray, shape (n,) [rad/s]
+    """
+    c1, c2 = chi[..., 0], chi[..., 1]
+    norm2 = c1 * c1 + c2 * c2
+    v1 = np.sqrt(norm2)  # eq. (5)
+    defined = norm2 >= CHI_HOLD * CHI_HOLD
+    safe = np.maximum(norm2, CHI_REG * CHI_REG)
+    feedforward = (-c2 * chi_dot[..., 0] + c1 * chi_dot[..., 1]) / safe  # eq. (5)
+    # "arctan2(chi1, chi2)" in the report is the angle of the vector (chi1, chi2).
+    heading_error = wrap_angle(theta - np.arctan2(c2, c1))
+    v2 = np.where(defined, feedforward - kp * heading_error, 0.0)  # eq. (5)
+    return v1, v2
+
+
+def advance_extension(
+    chi: np.ndarray,
+    chi_dot: np.ndarray,
+    dt: float,
+    v1_max: np.ndarray,
+    accel_max: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Integrate the extension states one control period, with saturation.
+
+    Explicit Euler ``chi + dt * chi_dot``, then the limits act on chi itself (state
+    clamping, the anti-windup of this product): the change of chi is at most
+    ``accel_max * dt`` in norm and ``|chi| <= v1_max``. Because ``v1 = |chi|``, the
+    commanded speed then never exceeds its limits and chi never winds up beyond what the
+    vehicle is asked to do.
+
+    Parameters
+    ----------
+    chi, chi_dot : ndarray, shape (n, 2)
+    dt : float [s]
+    v1_max, accel_max : ndarray, shape (n,) [m/s], [m/s^2]
+        ``inf`` where unlimited.
+
+    Returns
+    -------
+    chi_next : ndarray, shape (n, 2) [m/s]
+    chi_dot_applied : ndarray, shape (n, 2) [m/s^2]
+        ``(chi_next - chi) / dt``: the rate actually applied (use it for eq. (5)).
+    """
+    step = chi_dot * dt
+    step_norm = np.hypot(step[..., 0], step[..., 1])
+    limit = accel_max * dt
+    scale = np.where(step_norm > limit, limit / np.maximum(step_norm, 1e-300), 1.0)
+    nxt = chi + step * scale[..., None]
+    norm = np.hypot(nxt[..., 0], nxt[..., 1])
+    scale = np.where(norm > v1_max, v1_max / np.maximum(norm, 1e-300), 1.0)
+    nxt = nxt * scale[..., None]
+    return nxt, (nxt - chi) / dt
+
+
+def discrete_spectral_radius(k_pos: float, k_vel: float, dt: float) -> float:
+    """Spectral radius of the discrete error dynamics of eq. (6) with period ``dt``.
+
+    With a vehicle that follows chi exactly, the tracking error ``e = x - x_ref`` and
+    ``c = chi - x_ref'`` evolve under the report's forward-Euler update as
+    ``e+ = e + dt c``, ``c+ = c + dt (k_pos e + k_vel c)``. The loop is stable only if
+    the spectral radius of that matrix is below 1; for the report's gains
+    (-100, -20) this requires ``dt < 0.2`` s.
+
+    >>> round(discrete_spectral_radius(-100.0, -20.0, 0.01), 3)
+    0.9
+    >>> discrete_spectral_radius(-100.0, -20.0, 0.25) > 1.0
+    True
+    """
+    m = np.array([[1.0, dt], [dt * k_pos, 1.0 + dt * k_vel]])
+    return float(np.max(np.abs(np.linalg.eigvals(m))))

@@ -1,0 +1,70 @@
+"""Error types raised by sandbox.
+
+Every error the package raises on purpose derives from :class:`SandboxError`, so callers
+(and the CLI) can tell a user mistake from a bug.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+class SandboxError(Exception):
+    """Base class of every error raised on purpose by sandbox."""
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One problem found in a scenario document.
+
+    Attributes
+    ----------
+    path : str
+        Dotted path of the offending field, e.g. ``vehicles[2].offset`` (``""`` for the
+        document itself).
+    message : str
+        What is wrong, with the value found and what is allowed.
+    line : int or None
+        1-based line of the field in the YAML file, when known.
+    """
+
+    path: str
+    message: str
+    line: int | None = None
+
+    def format(self, source: str | None) -> str:
+        """Return the one-line form ``FILE:LINE: path: message``."""
+        where = source or "<scenario>"
+        if self.line is not None:
+            where = f"{where}:{self.line}"
+        field = f" {self.path}:" if self.path else ""
+        return f"{where}:{field} {self.message}"
+
+
+class ScenarioError(SandboxError, ValueError):
+    """A scenario document is invalid; carries every problem found in it.
+
+    Parameters
+    ----------
+    problems : list of Problem
+    source : str or None
+        The file the document came from, used in messages.
+    """
+
+    def __init__(self, problems: list[Problem], source: str | None = None) -> None:
+        self.problems = list(problems)
+        self.source = source
+        super().__init__("\n".join(p.format(source) for p in self.problems))
+
+    @property
+    def lines(self) -> list[str]:
+        """One formatted line per problem."""
+        return [p.format(self.source) for p in self.problems]
+
+
+class SimulationError(SandboxError):
+    """The simulation could not be set up or continued."""
+
+
+class OutputError(SandboxError):
+    """Outputs of a run could not be written."""

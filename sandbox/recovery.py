@@ -1,0 +1,239 @@
+"""Collision-avoidance (recovery) strategies of section 4, selected by name.
+
+Every strategy shifts each avoiding vehicle's target away from the obstacles within its
+safe zone, eqs. (22)/(26):
+
+    x_ref = slot + beta * sum_i alpha_i * vect_avoid_i,   vect_avoid_i = u_i / dist_i
+
+with ``u_i`` the unit vector from obstacle i to the vehicle (eq. (24)) and ``dist_i`` the
+distance (eq. (25)). Strategies differ only in the weight ``alpha(dist)``:
+
+- ``none``: 0;
+- ``discontinuous`` (4.1): 1 inside R, 0 outside (a switch);
+- ``continuous`` (4.2, eq. (27)): 1 inside r, a linear ramp from 1 to 0 between r and R;
+- ``smooth`` (the conclusion's proposal): a hyperbolic-tangent transition between r and R,
+  scaled to equal exactly 1 at r and 0 at R.
+
+Obstacles are the other vehicles (centre-to-centre distance) and the static obstacles
+(distance from the vehicle centre to the nearest surface point, pushing away from it).
+Pure numpy; neighbours come from a KD-tree (scipy) above a few dozen vehicles.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from sandbox.scenario import ObstacleSpec
+
+Weight = Callable[[np.ndarray, float, float | None, float], np.ndarray]
+STRATEGIES: dict[str, Weight] = {}
+#: Below this many vehicles all pairs are checked directly (cheaper than a tree).
+BRUTE_FORCE_MAX = 48
+#: Distances are floored here [m] so that eq. (23) stays finite.
+MIN_DIST = 1e-6
+
+
+def register_strategy(name: str) -> Callable[[Weight], Weight]:
+    """Decorator adding a weight function ``alpha(dist, R, r, steepness)`` by name."""
+
+    def add(func: Weight) -> Weight:
+        if name in STRATEGIES:
+            raise ValueError(f"recovery strategy {name!r} is already registered")
+        STRATEGIES[name] = func
+        return func
+
+    return add
+
+
+@register_strategy("none")
+def no_avoidance(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.ndarray:
+    """No recovery: alpha = 0."""
+    return np.zeros_like(dist)
+
+
+@register_strategy("discontinuous")
+def discontinuous(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.ndarray:
+    """Section 4.1: alpha = 1 within the safe zone R, else 0 (eq. (22))."""
+    return (dist < R).astype(float)
+
+
+@register_strategy("continuous")
+def continuous(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.ndarray:
+    """Section 4.2, eq. (27): 1 below r, ``1 - (dist - r)/(R - r)`` between, 0 above R."""
+    return np.clip(1.0 - (dist - r) / (R - r), 0.0, 1.0)  # eq. (27)
+
+
+@register_strategy("smooth")
+def smooth(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.ndarray:
+    """Conclusion: a tanh transition centred between r and R, 1 at r and 0 at R.
+
+    ``alpha = (tanh(s (c - dist) / w) + tanh(s)) / (2 tanh(s))`` with ``c = (R + r)/2``,
+    ``w = (R - r)/2`` and ``s`` the steepness; clipped to [0, 1] outside [r, R].
+    """
+    c, w = 0.5 * (R + r), 0.5 * (R - r)
+    t = np.tanh(steepness)
+    return np.clip((np.tanh(steepness * (c - dist) / w) + t) / (2.0 * t), 0.0, 1.0)
+
+
+def neighbour_pairs(pos: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs ``(i, j)``, ``i < j``, of vehicles closer than ``radius`` [m]."""
+    n = len(pos)
+    if n < 2:
+        empty = np.zeros(0, dtype=np.intp)
+        return empty, empty
+    if n <= BRUTE_FORCE_MAX:
+        i, j = np.triu_indices(n, 1)
+        d2 = np.sum((pos[i] - pos[j]) ** 2, axis=1)
+        keep = d2 < radius * radius
+        return i[keep], j[keep]
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(pos).query_pairs(radius, output_type="ndarray")
+    return pairs[:, 0], pairs[:, 1]
+
+
+class ObstacleField:
+    """Static obstacles as geometry for distance queries.
+
+    Circles are kept as centres and radii, walls as capsules (segment plus radius), boxes
+    and polygons as convex polygons (pymunk hulls them too).
+    """
+
+    def __init__(self, obstacles: tuple[ObstacleSpec, ...]) -> None:
+        circles = [o for o in obstacles if o.type == "circle"]
+        self.circle_center = np.array([o.center for o in circles], dtype=float).reshape(-1, 2)
+        self.circle_radius = np.array([o.radius for o in circles], dtype=float)
+        walls = [o for o in obstacles if o.type == "wall"]
+        self.wall_a = np.array([o.start for o in walls], dtype=float).reshape(-1, 2)
+        self.wall_b = np.array([o.end for o in walls], dtype=float).reshape(-1, 2)
+        self.wall_radius = np.array([o.thickness / 2 for o in walls], dtype=float)
+        self.polygons = [
+            np.array(o.outline(), dtype=float) for o in obstacles if o.type in ("box", "polygon")
+        ]
+        self.empty = not obstacles
+
+    def nearest(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Distance to each obstacle's surface and the nearest surface point.
+
+        Parameters
+        ----------
+        pos : ndarray, shape (n, 2) [m]
+
+        Returns
+        -------
+        dist : ndarray, shape (n, m) [m]
+            Negative inside an obstacle.
+        point : ndarray, shape (n, m, 2) [m]
+        """
+        dists, points = [], []
+        if len(self.circle_radius):
+            rel = pos[:, None, :] - self.circle_center[None]
+            norm = np.maximum(np.linalg.norm(rel, axis=-1), MIN_DIST)
+            dists.append(norm - self.circle_radius)
+            points.append(self.circle_center + rel / norm[..., None] * self.circle_radius[:, None])
+        if len(self.wall_radius):
+            q = _closest_on_segments(pos, self.wall_a, self.wall_b)
+            rel = pos[:, None, :] - q
+            norm = np.maximum(np.linalg.norm(rel, axis=-1), MIN_DIST)
+            dists.append(norm - self.wall_radius)
+            points.append(q + rel / norm[..., None] * self.wall_radius[:, None])
+        for poly in self.polygons:
+            a, b = poly, np.roll(poly, -1, axis=0)
+            q = _closest_on_segments(pos, a, b)
+            d = np.linalg.norm(pos[:, None, :] - q, axis=-1)
+            k = np.argmin(d, axis=1)
+            rows = np.arange(len(pos))
+            inside = _inside_convex(pos, poly)
+            dists.append(np.where(inside, -d[rows, k], d[rows, k])[:, None])
+            points.append(q[rows, k][:, None, :])
+        if not dists:
+            return np.zeros((len(pos), 0)), np.zeros((len(pos), 0, 2))
+        return np.concatenate(dists, axis=1), np.concatenate(points, axis=1)
+
+
+def _closest_on_segments(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Closest point of each segment ``a[k]-b[k]`` to each point ``p[i]``: (n, m, 2)."""
+    ab = b - a
+    t = np.einsum("nmk,mk->nm", p[:, None, :] - a[None], ab) / np.maximum(
+        np.sum(ab * ab, axis=1), 1e-300
+    )
+    t = np.clip(t, 0.0, 1.0)
+    return a[None] + t[..., None] * ab[None]
+
+
+def _inside_convex(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    edge = np.roll(poly, -1, axis=0) - poly
+    rel = p[:, None, :] - poly[None]
+    cross = edge[None, :, 0] * rel[..., 1] - edge[None, :, 1] * rel[..., 0]
+    return np.all(cross >= 0, axis=1) | np.all(cross <= 0, axis=1)
+
+
+def avoidance_shift(
+    pos: np.ndarray,
+    avoiders: np.ndarray,
+    strategy: str,
+    beta: float,
+    R: float,
+    r: float | None,
+    steepness: float,
+    obstacles: ObstacleField,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The shift ``beta * sum_i alpha_i vect_avoid_i`` of each vehicle's target.
+
+    Implements eqs. (22)-(27) for all vehicles at once.
+
+    Parameters
+    ----------
+    pos : ndarray, shape (n, 2) [m]
+        Vehicle positions.
+    avoiders : ndarray, shape (n,), bool
+        Vehicles that apply the strategy (others get a zero shift, but are still
+        obstacles for the rest).
+    strategy : str
+        A key of :data:`STRATEGIES`.
+    beta : float
+        Aggressiveness of the avoidance [m^2].
+    R, r : float [m]
+        Safe-zone radius and (continuous/smooth) inner radius.
+    steepness : float
+        Steepness of the ``smooth`` transition.
+    obstacles : ObstacleField
+
+    Returns
+    -------
+    shift : ndarray, shape (n, 2) [m]
+    active : ndarray, shape (n,), bool
+        Vehicles with at least one obstacle weighted above zero (mode ``avoid``).
+    """
+    n = len(pos)
+    shift = np.zeros((n, 2))
+    active = np.zeros(n, dtype=bool)
+    if strategy == "none" or not np.any(avoiders):
+        return shift, active
+    weight = STRATEGIES[strategy]
+    i, j = neighbour_pairs(pos, R)
+    if len(i):
+        rel = pos[i] - pos[j]  # from j to i
+        dist = np.maximum(np.linalg.norm(rel, axis=1), MIN_DIST)  # eq. (25)
+        alpha = weight(dist, R, r, steepness)
+        vect = rel / (dist * dist)[:, None]  # eqs. (23)-(24): u / dist
+        contrib = alpha[:, None] * vect
+        on = alpha > 0
+        np.add.at(shift, i, contrib)
+        np.add.at(shift, j, -contrib)
+        active[i[on]] = True
+        active[j[on]] = True
+    if not obstacles.empty:
+        dist, point = obstacles.nearest(pos)
+        dist = np.maximum(dist, MIN_DIST)
+        alpha = weight(dist, R, r, steepness)
+        rel = pos[:, None, :] - point
+        vect = rel / (dist * dist)[..., None]
+        shift += np.sum(alpha[..., None] * vect, axis=1)
+        active |= np.any(alpha > 0, axis=1)
+    shift *= beta  # eq. (22) / (26)
+    shift[~avoiders] = 0.0
+    active &= avoiders
+    return shift, active

@@ -1,0 +1,215 @@
+"""The physics: a pymunk Space of vehicles and static obstacles, stepped at a fixed rate.
+
+The only module that imports pymunk. Each vehicle is a dynamic circle of diameter d driven
+by the unicycle kinematics through velocity constraints (pymunk's ``examples/tank.py``
+pattern): a kinematic *control body* carries the commanded velocity, and a ``PivotJoint``
+and a ``GearJoint`` with ``max_bias = 0`` and finite ``max_force`` make the vehicle follow
+it. Contacts therefore win over the motors: vehicles really collide, stop at walls and can
+be shoved. Control bodies live in a second, never-stepped Space so that the bulk reads and
+writes of ``pymunk.batch`` cover exactly the vehicles.
+
+Collisions are counted with ``begin`` callbacks: one event per contact episode of a pair.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pymunk
+import pymunk.batch
+
+from sandbox.run import CollisionEvent
+from sandbox.scenario import ObstacleSpec, VehicleSpec
+
+VEHICLE = 1
+OBSTACLE = 2
+#: Contact overlap the solver tolerates [m] (pymunk's default, 0.1, is meant for pixels).
+COLLISION_SLOP = 0.002
+FRICTION = 0.3
+#: Angular motor limit as a multiple of ``motor_accel / radius`` [rad/s^2].
+ANGULAR_MOTOR_FACTOR = 4.0
+
+_READ = (
+    pymunk.batch.BodyFields.POSITION
+    | pymunk.batch.BodyFields.ANGLE
+    | pymunk.batch.BodyFields.VELOCITY
+    | pymunk.batch.BodyFields.ANGULAR_VELOCITY
+)
+_WRITE = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY
+
+
+@dataclass
+class PhysicalState:
+    """Vehicle state read back from the physics, all arrays indexed by vehicle.
+
+    Attributes
+    ----------
+    pos : ndarray, shape (n, 2) [m]
+    theta : ndarray, shape (n,) [rad]   (unwrapped body angle, x3)
+    vel : ndarray, shape (n, 2) [m/s]
+    omega : ndarray, shape (n,) [rad/s]
+    """
+
+    pos: np.ndarray
+    theta: np.ndarray
+    vel: np.ndarray
+    omega: np.ndarray
+
+
+class World:
+    """The pymunk world of one run.
+
+    Parameters
+    ----------
+    vehicles : sequence of VehicleSpec
+    obstacles : sequence of ObstacleSpec
+    """
+
+    def __init__(self, vehicles: tuple[VehicleSpec, ...], obstacles: tuple[ObstacleSpec, ...]):
+        self.space = pymunk.Space()
+        self.space.collision_slop = COLLISION_SLOP
+        self.space.sleep_time_threshold = float("inf")
+        self.control_space = pymunk.Space()
+        self.names = [v.name for v in vehicles]
+        self.obstacle_names = [o.name for o in obstacles]
+        self.time = 0.0
+        self.events: list[CollisionEvent] = []
+        self.bodies: list[pymunk.Body] = []
+        self.controls: list[pymunk.Body] = []
+        self.joints: list[tuple[pymunk.PivotJoint, pymunk.GearJoint]] = []
+        for i, v in enumerate(vehicles):
+            self._add_vehicle(i, v)
+        for k, o in enumerate(obstacles):
+            self._add_obstacle(k, o)
+        self.space.on_collision(VEHICLE, VEHICLE, begin=self._on_vehicle_vehicle)
+        self.space.on_collision(VEHICLE, OBSTACLE, begin=self._on_vehicle_obstacle)
+        self._read_buffer = pymunk.batch.Buffer()
+        self._write_buffer = pymunk.batch.Buffer()
+        self._rows = self._row_order(self.space, self.bodies)
+        self._control_rows = self._row_order(self.control_space, self.controls)
+        self._write = np.zeros((len(self.controls), 3))
+
+    # ------------------------------------------------------------------ construction
+    def _add_vehicle(self, index: int, v: VehicleSpec) -> None:
+        radius = v.diameter / 2.0
+        moment = pymunk.moment_for_circle(v.mass, 0.0, radius)
+        body = pymunk.Body(v.mass, moment)
+        body.position = (v.pose[0], v.pose[1])
+        body.angle = v.pose[2]
+        shape = pymunk.Circle(body, radius)
+        shape.collision_type = VEHICLE
+        shape.friction = FRICTION
+        shape.elasticity = 0.0
+        shape.sandbox_index = index
+        control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        control.position = body.position
+        control.angle = body.angle
+        self.control_space.add(control)
+        pivot = pymunk.PivotJoint(control, body, (0, 0), (0, 0))
+        pivot.max_bias = 0.0
+        pivot.max_force = v.mass * v.motor_accel
+        gear = pymunk.GearJoint(control, body, 0.0, 1.0)
+        gear.max_bias = 0.0
+        gear.max_force = moment * ANGULAR_MOTOR_FACTOR * v.motor_accel / radius
+        self.space.add(body, shape, pivot, gear)
+        self.bodies.append(body)
+        self.controls.append(control)
+        self.joints.append((pivot, gear))
+
+    def _add_obstacle(self, index: int, o: ObstacleSpec) -> None:
+        body = self.space.static_body
+        if o.type == "circle":
+            shape = pymunk.Circle(body, o.radius, offset=o.center)
+        elif o.type == "wall":
+            shape = pymunk.Segment(body, o.start, o.end, o.thickness / 2.0)
+        else:
+            shape = pymunk.Poly(body, [tuple(p) for p in o.outline()])
+        shape.collision_type = OBSTACLE
+        shape.friction = FRICTION
+        shape.elasticity = 0.0
+        shape.sandbox_index = index
+        self.space.add(shape)
+
+    @staticmethod
+    def _row_order(space: pymunk.Space, bodies: list[pymunk.Body]) -> np.ndarray:
+        """Rows of the bulk buffer that hold each body, in the order of ``bodies``."""
+        buf = pymunk.batch.Buffer()
+        pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.BODY_ID, buf)
+        ids = list(memoryview(buf.int_buf()).cast("P"))
+        where = {body_id: row for row, body_id in enumerate(ids)}
+        return np.array([where[b.id] for b in bodies], dtype=np.intp)
+
+    # ------------------------------------------------------------------ collisions
+    def _on_vehicle_vehicle(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+        a, b = sorted(s.sandbox_index for s in arbiter.shapes)
+        self.events.append(
+            CollisionEvent(self.time, self.names[a], self.names[b], "vehicle_vehicle")
+        )
+
+    def _on_vehicle_obstacle(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+        first, second = arbiter.shapes
+        if first.collision_type != VEHICLE:
+            first, second = second, first
+        self.events.append(
+            CollisionEvent(
+                self.time,
+                self.names[first.sandbox_index],
+                self.obstacle_names[second.sandbox_index],
+                "vehicle_obstacle",
+            )
+        )
+
+    # ------------------------------------------------------------------ bulk I/O
+    def read_state(self) -> PhysicalState:
+        """Read every vehicle's pose and velocity from the physics (one bulk call)."""
+        buf = self._read_buffer
+        buf.clear()
+        pymunk.batch.get_space_bodies(self.space, _READ, buf)
+        rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 6)[self._rows]
+        return PhysicalState(
+            pos=rows[:, 0:2].copy(),
+            theta=rows[:, 2].copy(),
+            vel=rows[:, 3:5].copy(),
+            omega=rows[:, 5].copy(),
+        )
+
+    def write_commands(self, theta: np.ndarray, v1: np.ndarray, v2: np.ndarray, dt: float):
+        """Set the control bodies' velocities from unicycle commands (one bulk call).
+
+        The velocity is directed along ``x3 + v2 dt / 2``, the mean heading over the
+        period, so that a constant ``(v1, v2)`` traces the arc of eq. (1).
+        """
+        heading = theta + 0.5 * v2 * dt
+        out = self._write
+        out[self._control_rows, 0] = v1 * np.cos(heading)
+        out[self._control_rows, 1] = v1 * np.sin(heading)
+        out[self._control_rows, 2] = v2
+        self._write_buffer.set_float_buf(out.tobytes())
+        pymunk.batch.set_space_bodies(self.control_space, _WRITE, self._write_buffer)
+
+    def step(self, dt: float, substeps: int, t0: float) -> None:
+        """Advance the physics from time ``t0`` by one period ``dt`` [s] in ``substeps``.
+
+        Collision events are stamped with the start time of the substep they occur in.
+        """
+        h = dt / substeps
+        for s in range(substeps):
+            self.time = t0 + s * h
+            self.space.step(h)
+
+    # ------------------------------------------------------------------ failures
+    def immobilize(self, index: int) -> None:
+        """Make a vehicle an immovable wreck (the ``crash`` failure).
+
+        Its motors get unlimited force against a control body at rest, so contacts can no
+        longer move it; it still collides (and counts) as a vehicle.
+        """
+        pivot, gear = self.joints[index]
+        pivot.max_force = math.inf
+        gear.max_force = math.inf
+        self.controls[index].velocity = (0.0, 0.0)
+        self.controls[index].angular_velocity = 0.0
+        self.bodies[index].velocity = (0.0, 0.0)
+        self.bodies[index].angular_velocity = 0.0
