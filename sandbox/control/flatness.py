@@ -17,7 +17,10 @@ import numpy as np
 from sandbox.dynamics import wrap_angle
 
 #: Below this speed ``|chi|`` [m/s] the direction of chi is undefined (a vehicle at rest):
-#: the vehicle holds its heading (v2 = 0) instead of dividing by zero in eq. (5).
+#: the vehicle holds its heading (v2 = 0) instead of dividing by zero in eq. (5), and
+#: stands still (v1 = 0): driving at ``|chi|`` along a heading unrelated to chi pushes
+#: a parked vehicle off its point (eq. (4) then ends in a millimetre orbit spinning at
+#: about 5 rad/s, or a 0.5 m orbit when ``v2_max`` is 3 rad/s).
 CHI_HOLD = 1e-3
 #: The feedforward of eq. (5) divides by ``max(|chi|^2, CHI_REG^2)`` [m/s]: exact above
 #: this speed, bounded near rest (where numerical noise in chi would otherwise be turned
@@ -78,8 +81,8 @@ def flat_inputs(
     ``v1 = |chi|``; ``v2`` is the turn rate of chi (flatness feedforward, eq. (3)) minus
     ``kp`` times the heading error ``x3 - angle(chi)``, wrapped to ``[-pi, pi)``. Where
     ``|chi| < CHI_HOLD`` the angle of chi is undefined and the vehicle holds its heading
-    (``v2 = 0``); below ``CHI_REG`` the feedforward's divisor is floored at
-    ``CHI_REG^2``. No NaN is ever produced for finite inputs.
+    and stands still (``v1 = v2 = 0``); below ``CHI_REG`` the feedforward's divisor is
+    floored at ``CHI_REG^2``. No NaN is ever produced for finite inputs.
 
     Parameters
     ----------
@@ -101,7 +104,7 @@ def flat_inputs(
     # "arctan2(chi1, chi2)" in the report is the angle of the vector (chi1, chi2).
     heading_error = wrap_angle(theta - np.arctan2(c2, c1))
     v2 = np.where(defined, feedforward - kp * heading_error, 0.0)  # eq. (5)
-    return v1, v2
+    return np.where(defined, v1, 0.0), v2
 
 
 def advance_extension(
