@@ -16,8 +16,12 @@ def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
     -1.5707963267948966
     >>> float(wrap_angle(np.pi))
     -3.141592653589793
+    >>> float(wrap_angle(np.nextafter(-np.pi, -np.inf)))
+    -3.141592653589793
     """
-    return (np.asarray(angle, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+    wrapped = (np.asarray(angle, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+    # Rounding maps angles a hair below -pi (nextafter(-pi, -inf)) to +pi: fold back.
+    return np.where(wrapped >= np.pi, -np.pi, wrapped)
 
 
 def unicycle_rates(theta: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
