@@ -1,0 +1,57 @@
+"""Small helpers shared by the tests: write a scenario, run it, get its metrics.
+
+Import them with ``from helpers import run_scenario, write_yaml, SCENARIOS`` (pytest puts
+``tests/`` on the import path through ``conftest.py``).
+
+>>> run, metrics = run_scenario(SCENARIOS / "paper" / "rotating_circle.yaml", duration=2)
+>>> run, metrics = run_scenario({"reference": {"type": "point", "position": [0, 0]},
+...                              "vehicles": [{"pose": [1, 0, 0]}]}, "vehicle.v1_max=1")
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from sandbox import Run, compute_metrics, load_scenario, simulate
+
+#: The repository root and its bundled scenarios.
+REPO = Path(__file__).resolve().parent.parent
+SCENARIOS = REPO / "scenarios"
+PAPER = SCENARIOS / "paper"
+
+
+def write_yaml(tmp_path: Path, doc: Mapping[str, Any], name: str = "scenario.yaml") -> Path:
+    """Write a scenario document to ``tmp_path / name`` and return the path."""
+    path = Path(tmp_path) / name
+    path.write_text(yaml.safe_dump(dict(doc), sort_keys=False), encoding="utf-8")
+    return path
+
+
+def run_scenario(
+    source: str | Path | Mapping[str, Any], *sets: str, **fields: Any
+) -> tuple[Run, dict[str, Any]]:
+    """Load, run and measure a scenario; return ``(run, metrics)``.
+
+    Parameters
+    ----------
+    source : path or mapping
+        A scenario file or document.
+    *sets : str
+        ``path=value`` overrides, as the CLI's ``--set`` (``"recovery.beta=2.5"``).
+    **fields
+        Top-level overrides, e.g. ``duration=5`` or ``seed=3``.
+    """
+    overrides = list(sets) + [f"{k}={json.dumps(v)}" for k, v in fields.items()]
+    run = simulate(load_scenario(source, overrides=overrides))
+    return run, compute_metrics(run)
+
+
+def window(run: Run, start: float, stop: float = np.inf) -> np.ndarray:
+    """Boolean mask of the recorded samples with ``start <= t < stop`` [s]."""
+    return (run.t >= start) & (run.t < stop)
