@@ -1,9 +1,9 @@
 """Small helpers shared by the tests: write a scenario, run it, get its metrics.
 
-Import them with ``from helpers import run_scenario, write_yaml, SCENARIOS`` (pytest puts
-``tests/`` on the import path through ``conftest.py``).
+Import them with ``from helpers import run_scenario, write_yaml, PAPER`` (pytest
+puts ``tests/`` on the import path through ``conftest.py``).
 
->>> run, metrics = run_scenario(SCENARIOS / "paper" / "rotating_circle.yaml", duration=2)
+>>> run, metrics = run_scenario(PAPER / "rotating_circle.yaml", duration=2)
 >>> run, metrics = run_scenario({"reference": {"type": "point", "position": [0, 0]},
 ...                              "vehicles": [{"pose": [1, 0, 0]}]}, "vehicle.v1_max=1")
 """
@@ -26,7 +26,9 @@ SCENARIOS = REPO / "scenarios"
 PAPER = SCENARIOS / "paper"
 
 
-def write_yaml(tmp_path: Path, doc: Mapping[str, Any], name: str = "scenario.yaml") -> Path:
+def write_yaml(
+    tmp_path: Path, doc: Mapping[str, Any], name: str = "scenario.yaml"
+) -> Path:
     """Write a scenario document to ``tmp_path / name`` and return the path."""
     path = Path(tmp_path) / name
     path.write_text(yaml.safe_dump(dict(doc), sort_keys=False), encoding="utf-8")

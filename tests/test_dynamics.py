@@ -27,7 +27,8 @@ def test_wrap_angle_values(angle: float, expected: float) -> None:
 
 
 def test_wrap_angle_across_pi_is_the_short_way() -> None:
-    # From pi - 0.1 to -pi + 0.1 the short way is +0.2 rad (through pi), not -2 pi + 0.2.
+    # From pi - 0.1 to -pi + 0.1 the short way is +0.2 rad (through pi),
+    # not -2 pi + 0.2.
     a, b = math.pi - 0.1, -math.pi + 0.1
     assert float(wrap_angle(b - a)) == pytest.approx(0.2, abs=1e-12)
     assert float(wrap_angle(a - b)) == pytest.approx(-0.2, abs=1e-12)

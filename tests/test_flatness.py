@@ -79,7 +79,7 @@ def test_eq5_inputs() -> None:
 
 
 def test_eq5_feedforward_is_the_turn_rate_of_chi() -> None:
-    # chi = (3, 4) turning at 1 rad/s has chi' = 1 * (-4, 3); aligned heading atan2(4, 3):
+    # chi = (3, 4) turning at 1 rad/s has chi' = 1 * (-4, 3); heading atan2(4, 3):
     # v1 = 5, v2 = (-4*-4 + 3*3) / 25 - 0 = 25/25 = 1 rad/s.
     v1, v2 = flat_inputs(np.array([math.atan2(4, 3)]), v(3, 4), v(-4, 3), 2.0)
     assert (v1[0], v2[0]) == pytest.approx((5.0, 1.0))
@@ -99,7 +99,8 @@ def test_eq5_arctan2_convention_angle_of_chi() -> None:
 
 def test_eq5_heading_error_wraps_across_pi() -> None:
     # heading pi - 0.1, chi at angle -pi + 0.1: the error x3 - angle(chi) = 2 pi - 0.2
-    # wraps to -0.2, so v2 = -2 * (-0.2) = +0.4 (turn left through pi), not -2(2pi - 0.2).
+    # wraps to -0.2, so v2 = -2 * (-0.2) = +0.4 (turn left through pi),
+    # not -2 (2 pi - 0.2).
     chi = v(math.cos(-math.pi + 0.1), math.sin(-math.pi + 0.1))
     _, v2 = flat_inputs(np.array([math.pi - 0.1]), chi, v(0, 0), 2.0)
     assert v2[0] == pytest.approx(0.4)
@@ -125,8 +126,8 @@ def test_eq5_below_chi_hold_the_vehicle_stands_still() -> None:
 
 
 def test_eq5_feedforward_is_bounded_below_chi_reg() -> None:
-    # chi = (0.005, 0), chi' = (0, 1): exact feedforward 0.005 / 0.005^2 = 200 rad/s; the
-    # divisor is floored at CHI_REG^2 = 1e-4, giving 0.005 / 1e-4 = 50 rad/s.
+    # chi = (0.005, 0), chi' = (0, 1): exact feedforward 0.005 / 0.005^2 = 200 rad/s;
+    # the divisor is floored at CHI_REG^2 = 1e-4, giving 0.005 / 1e-4 = 50 rad/s.
     assert CHI_HOLD < 0.005 < CHI_REG == 0.01
     v1, v2 = flat_inputs(np.array([0.0]), v(0.005, 0), v(0, 1), 2.0)
     assert v1[0] == pytest.approx(0.005)
@@ -142,8 +143,9 @@ def test_advance_without_limits_is_explicit_euler() -> None:
 
 
 def test_advance_acceleration_limit() -> None:
-    # step = dt chi' = (3, 4), norm 5 > accel_max dt = 0.1: scaled by 0.02 to (0.06, 0.08);
-    # the applied rate is (6, 8), of norm exactly accel_max = 10, in the same direction.
+    # step = dt chi' = (3, 4), norm 5 > accel_max dt = 0.1: scaled by 0.02 to
+    # (0.06, 0.08); the applied rate is (6, 8), of norm exactly accel_max = 10, in the
+    # same direction.
     nxt, applied = advance_extension(v(0, 0), v(300, 400), 0.01, INF, np.array([10.0]))
     np.testing.assert_allclose(nxt, [[0.06, 0.08]])
     np.testing.assert_allclose(applied, [[6.0, 8.0]])
@@ -159,7 +161,8 @@ def test_advance_speed_limit_clamps_chi() -> None:
 
 def test_advance_anti_windup_no_stored_excess() -> None:
     # 100 steps pushing at 1000 m/s^2 against v1_max = 2 leave chi at (2, 0), not at
-    # 2 + 100 * 0.01 * 1000; one step braking at -100 m/s^2 then gives 2 - 1 = 1 at once.
+    # 2 + 100 * 0.01 * 1000; one step braking at -100 m/s^2 then gives 2 - 1 = 1
+    # at once.
     chi, vmax = v(0, 0), np.array([2.0])
     for _ in range(100):
         chi, _ = advance_extension(chi, v(1000, 0), 0.01, vmax, INF)
@@ -171,8 +174,11 @@ def test_advance_anti_windup_no_stored_excess() -> None:
 def test_advance_per_vehicle_limits() -> None:
     chi = np.zeros((2, 2))
     rate = np.array([[100.0, 0.0], [100.0, 0.0]])
-    nxt, _ = advance_extension(chi, rate, 0.1, np.array([np.inf, 4.0]), np.array([np.inf, 20.0]))
-    # vehicle 0: 0.1 * 100 = 10; vehicle 1: the step 10 > 20 * 0.1 = 2, so 2 (< v1_max 4)
+    nxt, _ = advance_extension(
+        chi, rate, 0.1, np.array([np.inf, 4.0]), np.array([np.inf, 20.0])
+    )
+    # vehicle 0: 0.1 * 100 = 10;
+    # vehicle 1: the step 10 > 20 * 0.1 = 2, so 2 (< v1_max 4)
     np.testing.assert_allclose(nxt, [[10.0, 0.0], [2.0, 0.0]])
 
 
@@ -181,7 +187,9 @@ def test_limited_inputs_respect_the_limits() -> None:
     rng = np.random.default_rng(1)
     chi = rng.normal(size=(50, 2))
     rate = rng.normal(scale=1e3, size=(50, 2))
-    nxt, applied = advance_extension(chi * 0.1, rate, 0.01, np.full(50, 1.0), np.full(50, 5.0))
+    nxt, applied = advance_extension(
+        chi * 0.1, rate, 0.01, np.full(50, 1.0), np.full(50, 5.0)
+    )
     v1, _ = flat_inputs(np.zeros(50), nxt, applied, 2.0)
     assert np.all(v1 <= 1.0 + 1e-12)
     assert np.all(np.hypot(*applied.T) <= 5.0 + 1e-9)

@@ -26,9 +26,15 @@ def test_backward_difference_first_steps_and_after() -> None:
     #   step 2: x' = (3-1, 1-0)/0.1   = (20, 10), x'' = (20-10, 10-0)/0.1 = (100, 100)
     #   step 3: x' = (6-3, 3-1)/0.1   = (30, 20), x'' = (30-20, 20-10)/0.1 = (100, 100)
     est = BackwardDifference(0.1)
-    out = [est.update(np.array(x, dtype=float)) for x in ((0, 0), (1, 0), (3, 1), (6, 3))]
-    expected = [((0, 0), (0, 0)), ((10, 0), (0, 0)), ((20, 10), (100, 100)),
-                ((30, 20), (100, 100))]
+    out = [
+        est.update(np.array(x, dtype=float)) for x in ((0, 0), (1, 0), (3, 1), (6, 3))
+    ]
+    expected = [
+        ((0, 0), (0, 0)),
+        ((10, 0), (0, 0)),
+        ((20, 10), (100, 100)),
+        ((30, 20), (100, 100)),
+    ]
     for (vel, acc), (ev, ea) in zip(out, expected, strict=True):
         np.testing.assert_allclose(vel, ev, atol=1e-9)
         np.testing.assert_allclose(acc, ea, atol=1e-7)
@@ -69,8 +75,8 @@ def test_rotate_offsets_eq11() -> None:
 
 
 def test_rotate_offsets_quarter_turns_and_arrays() -> None:
-    # Leader heading +x2 (pi/2): "behind-left" (-1, 1) is (-1, -1) in the world frame and
-    # "behind-right" (-1, -1) is (1, -1).
+    # Leader heading +x2 (pi/2): "behind-left" (-1, 1) is (-1, -1) in the world frame
+    # and "behind-right" (-1, -1) is (1, -1).
     out = rotate_offsets(DELTA, math.pi / 2)
     np.testing.assert_allclose(out, [[0, 0], [-1, -1], [1, -1]], atol=1e-12)
     # one angle per row
@@ -89,7 +95,10 @@ CIRCLE_REF = (np.array([5.0, 0.0]), np.array([0.0, 1.0]), np.array([-0.2, 0.0]))
 def test_registry_has_the_five_laws() -> None:
     assert set(LAWS) == {"fixed", "rotating", "virtual", "leader_ref", "own_estimate"}
     assert not LAWS["virtual"].needs_leader
-    assert all(LAWS[k].needs_leader for k in ("fixed", "rotating", "leader_ref", "own_estimate"))
+    assert all(
+        LAWS[k].needs_leader
+        for k in ("fixed", "rotating", "leader_ref", "own_estimate")
+    )
     assert LAWS["virtual"].needs_reference and LAWS["leader_ref"].needs_reference
 
 
@@ -160,7 +169,8 @@ def test_own_estimate_eq17_to_eq20_each_slot_differentiated() -> None:
     np.testing.assert_allclose(vel, [[1, 0], [-9, 10]], atol=1e-9)
     np.testing.assert_array_equal(acc, np.zeros((2, 2)))
     # step 2: leader (0.2, 0) heading pi: follower slot (-0.8, 0);
-    #   x'_follower = (-0.8 - 0.1, 0 - 1)/0.1 = (-9, -10); x'' = (0, -20)/0.1 = (0, -200)
+    #   x'_follower = (-0.8 - 0.1, 0 - 1)/0.1 = (-9, -10);
+    #   x''_follower = (-9 - -9, -10 - 10)/0.1 = (0, -200)
     slot, vel, acc = law.targets(inputs((0.2, 0.0), theta=math.pi))
     np.testing.assert_allclose(vel, [[1, 0], [-9, -10]], atol=1e-9)
     np.testing.assert_allclose(acc, [[0, 0], [0, -200]], atol=1e-6)

@@ -19,7 +19,9 @@ REFERENCES = {
     "circle": CircleReference((1.0, -1.0), 5.0, 1.0, 0.3),
     "circle_cw": CircleReference((0.0, 0.0), 3.0, -2.0, 0.0),
     "lemniscate": LemniscateReference((0.0, 1.0), 6.0, 1.2),
-    "waypoints": WaypointsReference(((0.0, 0.0), (5.0, 0.0), (8.0, 4.0), (8.0, 10.0)), 1.0),
+    "waypoints": WaypointsReference(
+        ((0.0, 0.0), (5.0, 0.0), (8.0, 4.0), (8.0, 10.0)), 1.0
+    ),
 }
 
 

@@ -66,8 +66,17 @@ def test_arc_matches_open_loop_unicycle() -> None:
     world = World((VehicleSpec("a", tuple(pose0[0])),), ())
     states = drive(world, 1.0, 0.5, 400)
     one_step = [
-        np.hypot(*(unicycle_step(np.array([[*a.pos[0], a.theta[0]]]), np.array([1.0]),
-                                 np.array([0.5]), H)[0, :2] - b.pos[0]))
+        np.hypot(
+            *(
+                unicycle_step(
+                    np.array([[*a.pos[0], a.theta[0]]]),
+                    np.array([1.0]),
+                    np.array([0.5]),
+                    H,
+                )[0, :2]
+                - b.pos[0]
+            )
+        )
         for a, b in zip(states[1:-1], states[2:], strict=True)
     ]
     assert max(one_step) < 2e-5
@@ -95,15 +104,20 @@ def test_equal_commands_keep_distances() -> None:
 
 @pytest.mark.parametrize("speed", [0.5, 1.0, 5.0])
 def test_vehicle_driven_into_a_wall_stops_at_it(speed: float) -> None:
-    # Wall x1 = 2 m, 0.1 m thick: its face is at 1.95 m; the vehicle's radius is 0.25 m,
-    # so its centre must stop at 1.95 - 0.25 = 1.70 m (pymunk tolerates 2 mm of overlap).
-    wall = ObstacleSpec("wall", "wall", start=(2.0, -2.0), end=(2.0, 2.0), thickness=0.1)
+    # Wall x1 = 2 m, 0.1 m thick: its face is at 1.95 m; the vehicle's radius is
+    # 0.25 m, so its centre must stop at 1.95 - 0.25 = 1.70 m (pymunk tolerates 2 mm
+    # of overlap).
+    wall = ObstacleSpec(
+        "wall", "wall", start=(2.0, -2.0), end=(2.0, 2.0), thickness=0.1
+    )
     world = World((VehicleSpec("a", (0.0, 0.0, 0.0), diameter=0.5),), (wall,))
     steps = int(round(2.0 / speed / H)) + 300  # reach the wall, then push for 3 s
     end = drive(world, speed, 0.0, steps)[-1]
     assert end.pos[0, 0] == pytest.approx(1.70, abs=0.003)
     assert end.pos[0, 1] == pytest.approx(0.0, abs=1e-9)
-    assert [(e.a, e.b, e.kind) for e in world.events] == [("a", "wall", "vehicle_obstacle")]
+    assert [(e.a, e.b, e.kind) for e in world.events] == [
+        ("a", "wall", "vehicle_obstacle")
+    ]
     # the contact begins when the vehicle arrives, (1.70 m at `speed`), not before
     assert world.events[0].t == pytest.approx(1.70 / speed, abs=2 * H)
 
@@ -121,8 +135,13 @@ def test_head_on_vehicles_collide_once() -> None:
 def test_wall_collision_counted_in_a_run(tmp_path) -> None:
     doc = {
         "duration": 4.0,
-        "vehicles": [{"name": "cart", "pose": [0, 0, 0],
-                      "drive": {"type": "commands", "schedule": [[0, 1.0, 0.0]]}}],
+        "vehicles": [
+            {
+                "name": "cart",
+                "pose": [0, 0, 0],
+                "drive": {"type": "commands", "schedule": [[0, 1.0, 0.0]]},
+            }
+        ],
         "obstacles": [{"type": "wall", "name": "wall", "from": [2, -2], "to": [2, 2]}],
     }
     run, metrics = run_scenario(doc)
@@ -138,7 +157,8 @@ def test_commanded_limits_are_never_exceeded() -> None:
     # (2 m/s, 3 rad/s, 10 m/s^2).
     run, metrics = run_scenario(
         PAPER / "rotating_circle.yaml",
-        "vehicles[1].pose=[1, -3, 3.14]", "vehicles[2].pose=[9, -4, 0]",
+        "vehicles[1].pose=[1, -3, 3.14]",
+        "vehicles[2].pose=[9, -4, 0]",
         duration=6.0,
     )
     assert metrics["status"] == "ok"
@@ -151,7 +171,9 @@ def test_commanded_limits_are_never_exceeded() -> None:
     dchi = np.hypot(*np.diff(run.chi, axis=0).transpose(2, 0, 1))
     assert dchi.max() == pytest.approx(10.0 * H)
     assert np.all(dchi <= 10.0 * H + 1e-12)
-    np.testing.assert_allclose(v1, np.where(chi_speed < 1e-3, 0.0, chi_speed), atol=1e-12)
+    np.testing.assert_allclose(
+        v1, np.where(chi_speed < 1e-3, 0.0, chi_speed), atol=1e-12
+    )
     # the bodies obey too: measured speed never above v1_max (plus the motor's lag)
     step_speed = np.hypot(*np.diff(run.pose[..., :2], axis=0).transpose(2, 0, 1)) / H
     assert step_speed.max() <= 2.0 + 1e-6
