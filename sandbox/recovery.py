@@ -226,11 +226,13 @@ def avoidance_shift(
         active[i[on]] = True
         active[j[on]] = True
     if not obstacles.empty:
-        dist, point = obstacles.nearest(pos)
-        dist = np.maximum(dist, MIN_DIST)
-        alpha = weight(dist, R, r, steepness)
-        rel = pos[:, None, :] - point
-        vect = rel / (dist * dist)[..., None]
+        signed, point = obstacles.nearest(pos)
+        # A centre inside an obstacle (negative distance; possible only at the start) is
+        # pushed out of it with full weight: u_i points from the surface point outward.
+        dist = np.maximum(np.abs(signed), MIN_DIST)  # eq. (25)
+        alpha = weight(np.maximum(signed, MIN_DIST), R, r, steepness)
+        rel = (pos[:, None, :] - point) * np.where(signed < 0, -1.0, 1.0)[..., None]
+        vect = rel / (dist * dist)[..., None]  # eqs. (23)-(24)
         shift += np.sum(alpha[..., None] * vect, axis=1)
         active |= np.any(alpha > 0, axis=1)
     shift *= beta  # eq. (22) / (26)
