@@ -162,3 +162,37 @@ def discrete_spectral_radius(k_pos: float, k_vel: float, dt: float) -> float:
     """
     m = np.array([[1.0, dt], [dt * k_pos, 1.0 + dt * k_vel]])
     return float(np.max(np.abs(np.linalg.eigvals(m))))
+
+
+def error_poles(k_pos: float, k_vel: float) -> np.ndarray:
+    """Continuous-time poles of the tracking error of eq. (6), shape (2,) [1/s].
+
+    With the vehicle following chi, ``e'' = k_pos e + k_vel e'``: the poles are the roots
+    of ``s^2 - k_vel s - k_pos``. Both lie in the left half plane iff ``k_pos < 0`` and
+    ``k_vel < 0`` (the report's sign convention).
+
+    >>> error_poles(-100.0, -20.0).real.tolist()
+    [-10.0, -10.0]
+    """
+    disc = np.sqrt(complex(k_vel * k_vel + 4.0 * k_pos))
+    return np.array([(k_vel + disc) / 2.0, (k_vel - disc) / 2.0])
+
+
+def max_stable_period(k_pos: float, k_vel: float) -> float:
+    """Longest control period [s] for which eq. (6) under forward Euler is stable.
+
+    The discrete error poles are ``z = 1 + dt s`` for the continuous poles ``s`` of
+    :func:`error_poles`; ``|1 + dt s| < 1`` holds iff ``dt < -2 Re(s) / |s|^2``. The bound
+    is the smallest over both poles: ``0.2`` s for the report's gains (``s = -10``
+    double), ``0`` when the gains are not stable in continuous time (no period helps).
+    :func:`discrete_spectral_radius` is below 1 exactly for ``0 < dt <`` this bound.
+
+    >>> max_stable_period(-100.0, -20.0)
+    0.2
+    >>> max_stable_period(100.0, -20.0)
+    0.0
+    """
+    if not (k_pos < 0 and k_vel < 0):
+        return 0.0
+    s = error_poles(k_pos, k_vel)
+    return float(np.min(-2.0 * s.real / (s.real**2 + s.imag**2)))
