@@ -3,8 +3,10 @@
 Definitions (the keys of ``metrics.json``):
 
 - ``collisions``: contact episodes counted from pymunk ``begin`` callbacks, one per onset of
-  contact of a pair; ``vehicle_vehicle`` and ``vehicle_obstacle`` apart; ``events`` lists
-  ``{t, a, b}``.
+  contact of a pair; ``vehicle_vehicle`` and ``vehicle_obstacle`` apart;
+  ``healthy``: the episodes in which no vehicle involved had an active failure (two
+  healthy vehicles, or a healthy vehicle and a static obstacle): what recovery is
+  meant to prevent; ``events`` lists ``{t, a, b, kind, healthy}``.
 - ``min_distance``: smallest centre-to-centre distance between two vehicles over the
   recorded samples [m] (null with a single vehicle).
 - per vehicle, ``formation_error``: distance from the vehicle to its slot as its law defines
@@ -98,6 +100,21 @@ def mode_switches(mode: np.ndarray) -> int:
     return int(np.count_nonzero(np.diff(m) != 0))
 
 
+def healthy_events(run: Run) -> list[bool]:
+    """Whether each collision event involved only vehicles without an active failure.
+
+    A vehicle's failure state at an event is the one recorded for the control period the
+    event falls in (exact with ``record_every = 1``). Obstacle names are not vehicles.
+    """
+    index = {name: i for i, name in enumerate(run.names)}
+    out = []
+    for e in run.events:
+        k = max(int(np.searchsorted(run.t, e.t + 1e-9, side="right")) - 1, 0)
+        ids = [index[x] for x in (e.a, e.b) if x in index]
+        out.append(len(run.t) == 0 or not any(bool(run.failed[k, i]) for i in ids))
+    return out
+
+
 def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
@@ -143,13 +160,18 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
             healthy_settled.append(settle is not None)
     vv = [e for e in run.events if e.kind == "vehicle_vehicle"]
     vo = [e for e in run.events if e.kind == "vehicle_obstacle"]
+    healthy = healthy_events(run)
     out: dict[str, Any] = {
         "status": run.status,
         "collisions": {
             "total": len(run.events),
             "vehicle_vehicle": len(vv),
             "vehicle_obstacle": len(vo),
-            "events": [{"t": round(e.t, 6), "a": e.a, "b": e.b} for e in run.events],
+            "healthy": int(sum(healthy)),
+            "events": [
+                {"t": round(e.t, 6), "a": e.a, "b": e.b, "kind": e.kind, "healthy": h}
+                for e, h in zip(run.events, healthy, strict=True)
+            ],
         },
         "min_distance": min_distance(run.pose),
         "converged": bool(healthy_settled) and all(healthy_settled),

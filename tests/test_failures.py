@@ -112,8 +112,8 @@ def shove(kind: str, pusher_motor: float) -> np.ndarray:
 
 
 def test_a_stopped_vehicle_is_shoved_by_a_stronger_motor():
-    # Motor force is mass x motor_accel. A pusher twice as strong as the brakes moves the
-    # stopped vehicle as if it were free: contact at t = 0.5 s, then 3 s at 0.5 m/s.
+    # Motor force is mass x motor_accel. A pusher twice as strong as the brakes moves
+    # the stopped vehicle as if it were free: contact at t = 0.5 s, then 3 s at 0.5 m/s.
     pos = shove("stop", pusher_motor=400.0)
     assert pos[-1, 0] == pytest.approx(1.5, abs=0.05)
     # one half as strong does not move it

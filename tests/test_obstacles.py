@@ -29,8 +29,11 @@ def rammer(obstacle: dict, schedule: list, duration: float = 4.0) -> dict:
         "dt": 0.01,
         "vehicle": {"diameter": D},
         "vehicles": [
-            {"name": "car", "pose": [0, 0, 0],
-             "drive": {"type": "commands", "schedule": schedule}},
+            {
+                "name": "car",
+                "pose": [0, 0, 0],
+                "drive": {"type": "commands", "schedule": schedule},
+            },
         ],
         "obstacles": [obstacle],
     }
@@ -41,12 +44,25 @@ def rammer(obstacle: dict, schedule: list, duration: float = 4.0) -> dict:
 OBSTACLES = {
     "circle": {"type": "circle", "name": "post", "center": [2.5, 0.0], "radius": 0.5},
     "box": {"type": "box", "name": "crate", "center": [3.0, 0.0], "size": [2.0, 3.0]},
-    "rotated box": {"type": "box", "name": "crate", "center": [2.0 + math.sqrt(2), 0.0],
-                    "size": [2.0, 2.0], "angle": math.pi / 4},  # a corner at x1 = 2
-    "polygon": {"type": "polygon", "name": "rock",
-                "points": [[2.0, -1.0], [4.0, -1.5], [4.0, 1.5], [2.0, 1.0]]},
-    "wall": {"type": "wall", "name": "wall", "from": [2.1, -3.0], "to": [2.1, 3.0],
-             "thickness": 0.2},
+    "rotated box": {
+        "type": "box",
+        "name": "crate",
+        "center": [2.0 + math.sqrt(2), 0.0],
+        "size": [2.0, 2.0],
+        "angle": math.pi / 4,
+    },  # a corner at x1 = 2
+    "polygon": {
+        "type": "polygon",
+        "name": "rock",
+        "points": [[2.0, -1.0], [4.0, -1.5], [4.0, 1.5], [2.0, 1.0]],
+    },
+    "wall": {
+        "type": "wall",
+        "name": "wall",
+        "from": [2.1, -3.0],
+        "to": [2.1, 3.0],
+        "thickness": 0.2,
+    },
 }
 
 
@@ -55,7 +71,9 @@ def test_a_vehicle_driven_into_an_obstacle_stops_and_counts_one_collision(kind):
     run = simulate(load_scenario(rammer(OBSTACLES[kind], [[0.0, 1.0, 0.0]])))
     m = compute_metrics(run)
     x_final = run.pose[-1, 0, 0]
-    assert x_final == pytest.approx(2.0 - D / 2, abs=0.01)  # at the face, not through it
+    assert x_final == pytest.approx(
+        2.0 - D / 2, abs=0.01
+    )  # at the face, not through it
     assert np.max(run.pose[:, 0, 0]) < 2.0 - D / 2 + 0.01
     # it keeps pushing (v1 = 1 commanded) but no longer moves
     assert np.ptp(run.pose[-100:, 0, 0]) < 1e-3
@@ -78,15 +96,22 @@ def test_contact_episodes_are_counted_once_each():
 
 
 def test_vehicle_vehicle_collision_has_time_and_names():
-    # Head-on at 1 m/s each from 3 m apart (centres): contact when 0.5 m apart, t = 1.25 s.
+    # Head-on at 1 m/s each from 3 m apart (centres): contact when 0.5 m apart, at
+    # t = (3 - 0.5) / 2 = 1.25 s.
     doc = {
         "duration": 3.0,
         "vehicle": {"diameter": D},
         "vehicles": [
-            {"name": "east", "pose": [0, 0, 0],
-             "drive": {"type": "commands", "schedule": [[0, 1.0, 0]]}},
-            {"name": "west", "pose": [3, 0, math.pi],
-             "drive": {"type": "commands", "schedule": [[0, 1.0, 0]]}},
+            {
+                "name": "east",
+                "pose": [0, 0, 0],
+                "drive": {"type": "commands", "schedule": [[0, 1.0, 0]]},
+            },
+            {
+                "name": "west",
+                "pose": [3, 0, math.pi],
+                "drive": {"type": "commands", "schedule": [[0, 1.0, 0]]},
+            },
         ],
         "formation": {"law": "virtual"},
         "reference": {"type": "point", "position": [0, 5]},
@@ -118,7 +143,9 @@ def test_nearest_wall():
     # (1, 0): foot (1, 2), 2 - 0.1 = 1.9 away, surface point (1, 1.9);
     # (-3, 6): nearest the end (0, 2), sqrt(9 + 16) - 0.1 = 4.9 away,
     #          surface point (0, 2) + (-3, 4)/5 * 0.1 = (-0.06, 2.08).
-    f = field(ObstacleSpec("wall", "w", start=(0.0, 2.0), end=(4.0, 2.0), thickness=0.2))
+    f = field(
+        ObstacleSpec("wall", "w", start=(0.0, 2.0), end=(4.0, 2.0), thickness=0.2)
+    )
     dist, point = f.nearest(np.array([[1.0, 0.0], [-3.0, 6.0]]))
     np.testing.assert_allclose(dist[:, 0], [1.9, 4.9])
     np.testing.assert_allclose(point[:, 0], [[1.0, 1.9], [-0.06, 2.08]])
@@ -136,7 +163,9 @@ def test_nearest_box():
 def test_nearest_rotated_box():
     # a 2 x 2 box turned by 45 degrees has its corners at distance sqrt(2) on the axes:
     # (3, 0) is 3 - sqrt(2) = 1.5858 from the corner (sqrt(2), 0).
-    f = field(ObstacleSpec("box", "b", center=(0.0, 0.0), size=(2.0, 2.0), angle=math.pi / 4))
+    f = field(
+        ObstacleSpec("box", "b", center=(0.0, 0.0), size=(2.0, 2.0), angle=math.pi / 4)
+    )
     dist, point = f.nearest(np.array([[3.0, 0.0]]))
     np.testing.assert_allclose(dist[:, 0], [3.0 - math.sqrt(2)])
     np.testing.assert_allclose(point[:, 0], [[math.sqrt(2), 0.0]], atol=1e-12)
@@ -144,7 +173,8 @@ def test_nearest_rotated_box():
 
 def test_nearest_polygon():
     # triangle (0,0), (4,0), (0,3): the hypotenuse is 3 x1 + 4 x2 = 12.
-    # (2, 2): |6 + 8 - 12| / 5 = 0.4 outside, foot (2, 2) - 0.4 (0.6, 0.8) = (1.76, 1.68);
+    # (2, 2): |6 + 8 - 12| / 5 = 0.4 outside,
+    #         foot (2, 2) - 0.4 (0.6, 0.8) = (1.76, 1.68);
     # (1, 1): inside, 1 from each of the three sides -> -1;
     # (-1, -1): nearest the vertex (0, 0), sqrt(2) away.
     f = field(ObstacleSpec("polygon", "p", points=((0.0, 0.0), (4.0, 0.0), (0.0, 3.0))))

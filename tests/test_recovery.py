@@ -1,4 +1,4 @@
-"""Recovery strategies of section 4: the weights alpha, the avoidance vectors, the modes.
+"""Recovery strategies of section 4: weights alpha, avoidance vectors, modes.
 
 Equation-level tests use hand-computed values (arithmetic in the comments); the
 scenario-level tests check that the shift really acts in a run, for every formation law.
@@ -48,7 +48,11 @@ NO_OBSTACLES = ObstacleField(())
         ("smooth", 0.5, 1.0),
         ("smooth", 0.75, 1.0),  # (tanh 2 + tanh 2)/(2 tanh 2)
         ("smooth", 1.125, 0.5),  # (0 + tanh 2)/(2 tanh 2)
-        ("smooth", 0.9375, (math.tanh(1) + math.tanh(2)) / (2 * math.tanh(2))),  # 0.8950
+        (
+            "smooth",
+            0.9375,
+            (math.tanh(1) + math.tanh(2)) / (2 * math.tanh(2)),
+        ),  # 0.8950
         ("smooth", 1.5, 0.0),
         ("smooth", 2.0, 0.0),
     ],
@@ -67,19 +71,27 @@ def test_alpha_is_continuous_monotone_and_symmetric(strategy):
     # Point symmetry about the middle of [r, R]: alpha(c + x) = 1 - alpha(c - x).
     x = np.linspace(0.0, 0.375, 50)
     w = STRATEGIES[strategy]
-    np.testing.assert_allclose(w(1.125 + x, R, r, 2.0), 1 - w(1.125 - x, R, r, 2.0), atol=1e-12)
+    np.testing.assert_allclose(
+        w(1.125 + x, R, r, 2.0), 1 - w(1.125 - x, R, r, 2.0), atol=1e-12
+    )
 
 
 def test_smooth_is_flatter_than_the_ramp_at_both_ends():
     # The point of the conclusion's proposal: the mode changes more gently at r and R.
     eps = 1e-4
     for edge, sign in ((r, +1), (R, -1)):
-        ramp = abs(STRATEGIES["continuous"](np.array([edge + sign * eps]), R, r, 2.0)[0]
-                   - STRATEGIES["continuous"](np.array([edge]), R, r, 2.0)[0])
-        tanh = abs(STRATEGIES["smooth"](np.array([edge + sign * eps]), R, r, 2.0)[0]
-                   - STRATEGIES["smooth"](np.array([edge]), R, r, 2.0)[0])
+        ramp = abs(
+            STRATEGIES["continuous"](np.array([edge + sign * eps]), R, r, 2.0)[0]
+            - STRATEGIES["continuous"](np.array([edge]), R, r, 2.0)[0]
+        )
+        tanh = abs(
+            STRATEGIES["smooth"](np.array([edge + sign * eps]), R, r, 2.0)[0]
+            - STRATEGIES["smooth"](np.array([edge]), R, r, 2.0)[0]
+        )
         # slope ratio s (1 - tanh(s)^2) / tanh(s) = 0.147 for s = 2
-        assert tanh / ramp == pytest.approx(2 * (1 - math.tanh(2) ** 2) / math.tanh(2), rel=1e-2)
+        assert tanh / ramp == pytest.approx(
+            2 * (1 - math.tanh(2) ** 2) / math.tanh(2), rel=1e-2
+        )
 
 
 def test_registering_a_strategy_twice_is_refused():
@@ -98,8 +110,9 @@ ALL = np.ones(3, dtype=bool)
 
 
 def test_discontinuous_shift_is_beta_times_the_sum_of_vectors():
-    shift, active = avoidance_shift(THREE, ALL, "discontinuous", 2.0, R, None, 2.0,
-                                    NO_OBSTACLES)
+    shift, active = avoidance_shift(
+        THREE, ALL, "discontinuous", 2.0, R, None, 2.0, NO_OBSTACLES
+    )
     # eq. (22) with beta = 2
     expected = 2.0 * np.array([[-1.0, 1.2 / 1.44], [1.0, 0.0], [0.0, -1.2 / 1.44]])
     np.testing.assert_allclose(shift, expected, atol=1e-12)
@@ -120,8 +133,9 @@ def test_non_avoiders_get_no_shift_but_still_repel():
     # The leader (A) does not avoid (leader_avoids: false): its shift is zero, B and C
     # still steer away from it.
     avoiders = np.array([False, True, True])
-    shift, active = avoidance_shift(THREE, avoiders, "discontinuous", 1.0, R, None, 2.0,
-                                    NO_OBSTACLES)
+    shift, active = avoidance_shift(
+        THREE, avoiders, "discontinuous", 1.0, R, None, 2.0, NO_OBSTACLES
+    )
     np.testing.assert_allclose(shift[0], [0.0, 0.0])
     np.testing.assert_allclose(shift[1], [1.0, 0.0])
     np.testing.assert_allclose(shift[2], [0.0, -1.2 / 1.44])
@@ -131,8 +145,9 @@ def test_non_avoiders_get_no_shift_but_still_repel():
 def test_no_shift_outside_the_safe_zone_and_with_strategy_none():
     far = np.array([[0.0, 0.0], [1.6, 0.0]])
     for strategy in ("discontinuous", "continuous", "smooth"):
-        shift, active = avoidance_shift(far, np.ones(2, bool), strategy, 1.0, R, r, 2.0,
-                                        NO_OBSTACLES)
+        shift, active = avoidance_shift(
+            far, np.ones(2, bool), strategy, 1.0, R, r, 2.0, NO_OBSTACLES
+        )
         assert not shift.any() and not active.any()
     shift, active = avoidance_shift(THREE, ALL, "none", 1.0, R, r, 2.0, NO_OBSTACLES)
     assert not shift.any() and not active.any()
@@ -143,26 +158,34 @@ def test_static_obstacle_repels_from_its_nearest_surface_point():
     # its surface point (1.0, 0): vect = ((0, 0) - (1, 0)) / 1.0^2 = (-1, 0).
     # A wall from (-2, 1.25) to (2, 1.25), 0.5 thick: surface at y = 1.0, point (0, 1):
     # vect = (0, -1) / 1.0^2. Beta = 0.5 -> shift = 0.5 * (-1, -1).
-    field = ObstacleField((
-        ObstacleSpec("circle", "post", center=(1.2, 0.0), radius=0.2),
-        ObstacleSpec("wall", "wall", start=(-2.0, 1.25), end=(2.0, 1.25), thickness=0.5),
-    ))
-    shift, active = avoidance_shift(np.zeros((1, 2)), np.ones(1, bool), "discontinuous",
-                                    0.5, R, None, 2.0, field)
+    field = ObstacleField(
+        (
+            ObstacleSpec("circle", "post", center=(1.2, 0.0), radius=0.2),
+            ObstacleSpec(
+                "wall", "wall", start=(-2.0, 1.25), end=(2.0, 1.25), thickness=0.5
+            ),
+        )
+    )
+    shift, active = avoidance_shift(
+        np.zeros((1, 2)), np.ones(1, bool), "discontinuous", 0.5, R, None, 2.0, field
+    )
     np.testing.assert_allclose(shift, [[-0.5, -0.5]], atol=1e-12)
     assert active.tolist() == [True]
 
 
 def test_obstacle_push_points_outward_even_from_inside():
-    # A centre that ends up inside an obstacle (it can only start there) is pushed out of
-    # it, never further in.
-    field = ObstacleField((
-        ObstacleSpec("box", "box", center=(0.0, 0.0), size=(4.0, 2.0)),
-        ObstacleSpec("circle", "post", center=(10.0, 0.0), radius=1.0),
-    ))
+    # A centre that ends up inside an obstacle (it can only start there) is pushed out
+    # of it, never further in.
+    field = ObstacleField(
+        (
+            ObstacleSpec("box", "box", center=(0.0, 0.0), size=(4.0, 2.0)),
+            ObstacleSpec("circle", "post", center=(10.0, 0.0), radius=1.0),
+        )
+    )
     pos = np.array([[0.0, 0.7], [10.0, -0.5]])
-    shift, _ = avoidance_shift(pos, np.ones(2, bool), "discontinuous", 1.0, R, None, 2.0,
-                               field)
+    shift, _ = avoidance_shift(
+        pos, np.ones(2, bool), "discontinuous", 1.0, R, None, 2.0, field
+    )
     assert shift[0, 1] > 0  # nearest face of the box is y = +1: out is +y
     assert shift[1, 1] < 0  # nearest surface point of the circle is below
 
@@ -175,7 +198,11 @@ def test_backward_differences_are_linear_so_estimate_reads_the_shifted_target():
     # derivatives of the shifted target slot + shift itself, the conclusion's proposal.
     rng = np.random.default_rng(1)
     slot, shift = rng.normal(size=(20, 3, 2)), rng.normal(size=(20, 3, 2))
-    a, b, c = BackwardDifference(0.01), BackwardDifference(0.01), BackwardDifference(0.01)
+    a, b, c = (
+        BackwardDifference(0.01),
+        BackwardDifference(0.01),
+        BackwardDifference(0.01),
+    )
     for k in range(20):
         v_sum, acc_sum = a.update(slot[k] + shift[k])
         v1, a1 = b.update(slot[k])
@@ -224,7 +251,9 @@ def test_recovery_acts_with_every_formation_law(law):
 
 def test_leader_avoids_only_when_asked():
     for leader_avoids in (False, True):
-        doc = crossing("rotating", "discontinuous", beta=1.0, leader_avoids=leader_avoids)
+        doc = crossing(
+            "rotating", "discontinuous", beta=1.0, leader_avoids=leader_avoids
+        )
         # red starts just beside the leader, within its safe zone
         doc["vehicles"][1]["pose"] = [0.0, -1.0, 0.0]
         run = simulate(load_scenario(doc))
