@@ -19,8 +19,8 @@ from types import FrameType
 
 from sandbox.errors import SandboxError, ScenarioError
 from sandbox.metrics import compute_metrics, summary_rows
-from sandbox.output import load_run_dir, write_run_dir
-from sandbox.run import STATUS_DIVERGED, STATUS_INTERRUPTED
+from sandbox.output import check_out_dir, load_run_dir, write_run_dir, write_text_atomic
+from sandbox.run import STATUS_DIVERGED, STATUS_INTERRUPTED, Run
 from sandbox.scenario import load_scenario
 from sandbox.simulation import Simulation
 
@@ -81,17 +81,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     for line in scenario.warnings:
         print(f"warning: {line}", file=sys.stderr)
     out_dir = Path(args.out) if args.out else Path("runs") / scenario.name
+    check_out_dir(out_dir)  # before simulating: refuse early, not after a long run
+    # SIGINT/SIGTERM only raise the flag until the outputs are written: the run stops
+    # at the next step and its outputs so far are still written whole (atomically).
     with _StopFlag() as stop:
         run = Simulation(scenario).run(progress=_progress_printer(), should_stop=stop)
-    metrics = compute_metrics(run)
-    write_run_dir(run, metrics, out_dir)
+        metrics = compute_metrics(run)
+        write_run_dir(run, metrics, out_dir)
     _print_summary(scenario.name, metrics, out_dir)
-    if args.gif:
-        from sandbox.render import write_gif
-
-        info = write_gif(run, Path(args.gif), fps=args.fps, size=args.size, speed=args.speed,
-                         zones=args.zones, follow=args.follow)
-        print(f"gif: {info['path']} ({info['frames']} frames, {info['duration']:.1f} s)")
+    if args.gif and run.status != STATUS_INTERRUPTED:
+        _gif(run, args)
     if run.status == STATUS_DIVERGED:
         d = metrics.get("diverged", {})
         print(f"error: the run diverged at t = {d.get('t', 0):.3f} s "
@@ -103,6 +102,22 @@ def cmd_run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return EXIT_INTERRUPTED
     return EXIT_OK
+
+
+def _gif(run: Run, args: argparse.Namespace) -> None:
+    """Render ``run`` to ``args.gif`` (atomically: temporary file, then rename)."""
+    from sandbox.render import write_gif
+
+    try:
+        info = write_gif(run, Path(args.gif), fps=args.fps, size=args.size,
+                         speed=args.speed, zones=args.zones, follow=args.follow)
+    except ValueError as exc:  # an option the renderer refuses (fps, size, ...)
+        raise GifOptionError(f"--gif {args.gif}: {exc}") from None
+    print(f"gif: {info['path']} ({info['frames']} frames, {info['duration']:.1f} s)")
+
+
+class GifOptionError(SandboxError):
+    """A GIF option the renderer refuses."""
 
 
 def _print_summary(name: str, metrics: dict, out_dir: Path) -> None:
@@ -161,12 +176,8 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def cmd_render(args: argparse.Namespace) -> int:
     """``sandbox render RUN_DIR --gif PATH``: a GIF from a saved run."""
-    from sandbox.render import write_gif
-
     run = load_run_dir(Path(args.run_dir))
-    info = write_gif(run, Path(args.gif), fps=args.fps, size=args.size, speed=args.speed,
-                     zones=args.zones, follow=args.follow)
-    print(f"gif: {info['path']} ({info['frames']} frames, {info['duration']:.1f} s)")
+    _gif(run, args)
     return EXIT_OK
 
 
@@ -180,10 +191,41 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_schema(args: argparse.Namespace) -> int:
+    """``sandbox schema [--out FILE]``: the JSON Schema of the scenario format."""
+    from sandbox.schema import schema_json
+
+    text = schema_json()
+    if not args.out:
+        sys.stdout.write(text)
+        return EXIT_OK
+    write_text_atomic(Path(args.out), text)
+    print(f"schema: {args.out}")
+    return EXIT_OK
+
+
+def _positive(kind: type) -> Callable[[str], float]:
+    """An argparse type: a finite number greater than 0."""
+
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            message = f"expected a number, got {text!r}"
+            raise argparse.ArgumentTypeError(message) from None
+        if not (0 < value < float("inf")):
+            raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+        return value
+
+    return parse
+
+
 def _add_gif_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--fps", type=float, default=25.0, help="frames per second (default 25)")
-    p.add_argument("--size", type=int, default=640, help="frame size in pixels (default 640)")
-    p.add_argument("--speed", type=float, default=1.0,
+    p.add_argument("--fps", type=_positive(float), default=25.0,
+                   help="frames per second, at most 50 (default 25)")
+    p.add_argument("--size", type=_positive(int), default=640,
+                   help="frame size in pixels (default 640)")
+    p.add_argument("--speed", type=_positive(float), default=1.0,
                    help="playback speed relative to simulated time (default 1)")
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
     p.add_argument("--follow", choices=("leader",), default=None,
@@ -200,7 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run a scenario file")
     p.add_argument("file", help="scenario YAML file")
     p.add_argument("--out", help="output directory (default runs/<name>/)")
-    p.add_argument("--duration", type=float, help="override the duration [s]")
+    p.add_argument("--duration", help="override the duration [s]")
     p.add_argument("--set", action="append", metavar="PATH=VALUE",
                    help="override a field, e.g. --set recovery.beta=2.5 (repeatable)")
     p.add_argument("--gif", help="also render the run to this GIF file")
@@ -221,6 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("run_dir")
     p.add_argument("--out", help="directory for the PNGs (default: the run directory)")
     p.set_defaults(func=cmd_plot)
+    p = sub.add_parser("schema", help="print the JSON Schema of scenario files")
+    p.add_argument("--out", help="write it to this file instead of printing it")
+    p.set_defaults(func=cmd_schema)
     return parser
 
 
@@ -233,8 +278,19 @@ def main(argv: list[str] | None = None) -> int:
         for line in exc.lines:
             print(line, file=sys.stderr)
         return EXIT_INVALID
+    except GifOptionError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
     except SandboxError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except BrokenPipeError:
+        # The reader of our output went away (e.g. `sandbox schema | head`).
+        sys.stderr.close()
+        return EXIT_FAILED
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -732,7 +732,7 @@ class _Reader:
         return tuple(pts)
 
 
-_BAD_NAME = re.compile(r"[,\"'/\\\n\r\x00]")
+_BAD_NAME = re.compile(r"""[,"'/\\\n\r\x00]""")
 
 
 def _vector_kind(size: int, length: bool) -> str:
@@ -964,9 +964,9 @@ def _vehicles(
                 )
         offset = rd.vector(m, "offset", sub, 2, (0.0, 0.0), length=True)
         color = rd.string(m, "color", sub, PALETTE[i % len(PALETTE)])
-        drive = (
-            _drive(rd, m["drive"], f"{sub}.drive") if m.get("drive") else DriveSpec()
-        )
+        drive = DriveSpec()
+        if m.get("drive") is not None:
+            drive = _drive(rd, m["drive"], f"{sub}.drive")
         p = _vehicle_params(rd, m, sub, params)
         if pose is None or offset is None or None in pose or name is None:
             continue
@@ -1355,7 +1355,8 @@ def parse_scenario(
 
     default_name = Path(source).stem if source else "scenario"
     name = rd.name(doc, "name", "", default_name) or default_name
-    description = doc.get("description") or ""
+    description = doc.get("description")
+    description = "" if description is None else description
     if not isinstance(description, str):
         rd.fail("description", "not a string", _describe(description), "a text")
         description = ""
