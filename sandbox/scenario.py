@@ -27,9 +27,8 @@ from scipy.spatial import cKDTree
 
 from sandbox.control.flatness import (
     Gains,
-    discrete_spectral_radius,
     error_poles,
-    max_stable_period,
+    max_control_period,
 )
 from sandbox.control.formation import LAWS
 from sandbox.errors import Problem, ScenarioError
@@ -1663,10 +1662,11 @@ def _check_gains(
     The loop advances chi by forward Euler once per period ``dt`` and the vehicle moves
     with the chi of the period's start, so the tracking error obeys ``e+ = e + dt c``,
     ``c+ = c + dt (k_pos e + k_vel c)``: its poles are ``z = 1 + dt s`` for the poles
-    ``s`` of ``s^2 - k_vel s - k_pos`` (see
-    :func:`~sandbox.control.flatness.max_stable_period`). Gains that are unstable for
-    every period are a warning (a deliberate experiment); stable gains with too long a
-    period are an error. The heading loop ``e3+ = (1 - dt kp) e3`` needs ``dt kp < 2``.
+    ``s`` of ``s^2 - k_vel s - k_pos``. The bound is
+    :func:`~sandbox.control.flatness.max_control_period` (``|z| < 1`` and ``Re z > 0``;
+    0.1 s for the report's gains). Gains unstable for every period are a warning (a
+    deliberate experiment); stable gains with too long a period are an error. The
+    heading loop ``e3+ = (1 - dt kp) e3`` needs ``dt kp < 2``.
     """
     checked: set[tuple[Any, ...]] = set()
     for where, v in vehicles:
@@ -1688,39 +1688,29 @@ def _check_gains(
             names = f"k{2 * int(axis) - 1} = {k_pos:g}, k{2 * int(axis)} = {k_vel:g}"
             if len(axes) == 1:
                 names = f"k1 = k3 = {k_pos:g}, k2 = k4 = {k_vel:g}"
-            bound = max_stable_period(k_pos, k_vel)
-            poles = ", ".join(_pole_text(s) for s in error_poles(k_pos, k_vel))
+            bound = max_control_period(k_pos, k_vel)
+            poles = error_poles(k_pos, k_vel)
+            shown = ", ".join(_pole_text(s) for s in poles)
             if bound == 0.0:
-                rd.warn(
-                    here,
-                    f"gains {names} of {who} do not stabilise eq. (6) for any "
-                    f"control period: the error poles s = {poles} [1/s] (roots of "
-                    f"s^2 - k_vel s - k_pos) need k_pos < 0 and k_vel < 0, the "
-                    "report's sign convention; expect the run to diverge",
-                )
+                rd.warn(here, f"gains {names} of {who} do not stabilise eq. (6) for "
+                        f"any control period: the error poles s = {shown} [1/s] (roots "
+                        "of s^2 - k_vel s - k_pos) need k_pos < 0 and k_vel < 0, the "
+                        "report's sign convention; expect the run to diverge")
                 continue
             if dt >= bound:
-                rho = discrete_spectral_radius(k_pos, k_vel, dt)
-                rd.fail(
-                    dt_path,
-                    f"control period too long for the gains of {who} "
-                    f"({names}): eq. (6) is advanced by forward Euler once per period, "
-                    f"so its error poles s = {poles} [1/s] become z = 1 + dt s, stable "
-                    "only while |z| < 1, i.e. dt < min(-2 Re s / |s|^2) = "
-                    f"{bound:.4g} s",
-                    f"dt = {dt:g} s, |z| = {rho:.3g}",
-                    f"dt < {bound:.4g} s, and well below it (the report uses 0.01 s)",
-                )
+                z = 1.0 + dt * poles
+                got_z = ", ".join(_pole_text(complex(v)) for v in z)
+                rd.fail(dt_path, f"control period too long for the gains of {who} "
+                        f"({names}): eq. (6) is advanced by forward Euler once per "
+                        f"period, so its error poles s = {shown} [1/s] become "
+                        "z = 1 + dt s; the loop needs |z| < 1 and, because a unicycle "
+                        "cannot back up (v1 = |chi| >= 0) and so cannot follow a chi "
+                        "that reverses every period, Re z > 0: dt < min(-2 Re s / "
+                        f"|s|^2, 1 / max|Re s|) = {bound:.4g} s",
+                        f"dt = {dt:g} s, z = {got_z}",
+                        f"dt < {bound:.4g} s, and well below it; the report uses "
+                        "0.01 s")
                 return
-            if np.any((1.0 + dt * error_poles(k_pos, k_vel)).real < 0):
-                rd.warn(
-                    dt_path,
-                    f"dt = {dt:g} s with the gains of {who} ({names}) "
-                    "gives error poles z = 1 + dt s with negative real part: the error "
-                    f"changes sign every period (chattering); dt < "
-                    f"{1.0 / max(-s.real for s in error_poles(k_pos, k_vel)):.4g} s "
-                    "avoids it",
-                )
         if g.kp <= 0:
             rd.warn(
                 here,

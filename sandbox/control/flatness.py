@@ -167,9 +167,9 @@ def discrete_spectral_radius(k_pos: float, k_vel: float, dt: float) -> float:
 def error_poles(k_pos: float, k_vel: float) -> np.ndarray:
     """Continuous-time poles of the tracking error of eq. (6), shape (2,) [1/s].
 
-    With the vehicle following chi, ``e'' = k_pos e + k_vel e'``: the poles are the roots
-    of ``s^2 - k_vel s - k_pos``. Both lie in the left half plane iff ``k_pos < 0`` and
-    ``k_vel < 0`` (the report's sign convention).
+    With the vehicle following chi, ``e'' = k_pos e + k_vel e'``: the poles are the
+    roots of ``s^2 - k_vel s - k_pos``. Both lie in the left half plane iff
+    ``k_pos < 0`` and ``k_vel < 0`` (the report's sign convention).
 
     >>> error_poles(-100.0, -20.0).real.tolist()
     [-10.0, -10.0]
@@ -182,7 +182,7 @@ def max_stable_period(k_pos: float, k_vel: float) -> float:
     """Longest control period [s] for which eq. (6) under forward Euler is stable.
 
     The discrete error poles are ``z = 1 + dt s`` for the continuous poles ``s`` of
-    :func:`error_poles`; ``|1 + dt s| < 1`` holds iff ``dt < -2 Re(s) / |s|^2``. The bound
+    :func:`error_poles`; ``|1 + dt s| < 1`` iff ``dt < -2 Re(s) / |s|^2``. The bound
     is the smallest over both poles: ``0.2`` s for the report's gains (``s = -10``
     double), ``0`` when the gains are not stable in continuous time (no period helps).
     :func:`discrete_spectral_radius` is below 1 exactly for ``0 < dt <`` this bound.
@@ -196,3 +196,31 @@ def max_stable_period(k_pos: float, k_vel: float) -> float:
         return 0.0
     s = error_poles(k_pos, k_vel)
     return float(np.min(-2.0 * s.real / (s.real**2 + s.imag**2)))
+
+
+def max_control_period(k_pos: float, k_vel: float) -> float:
+    """Longest control period [s] the closed loop of eqs. (5)-(6) tolerates.
+
+    Two conditions on the discrete error poles ``z = 1 + dt s``: ``|z| < 1`` (the linear
+    bound of :func:`max_stable_period`), and ``Re z > 0`` for every pole, i.e.
+    ``dt < 1 / max|Re s|``: with ``Re z < 0`` the error, hence chi, reverses direction
+    from one period to the next, and a unicycle cannot follow (``v1 = |chi| >= 0``: it
+    has to turn around instead of backing up). For the report's gains (``s = -10``
+    double) the second condition is the binding one: ``0.1`` s, not the linear ``0.2``
+    s. Measured on the full simulation (point stabilization from 0.2 m and 5 m): the
+    report's gains converge at ``dt = 0.097`` s and diverge at ``0.103`` s; with poles
+    ``-7.5 +- 6.6j`` the bound is ``0.133`` s (diverges from about ``0.137`` s); with
+    poles ``-1 +- 1.7j`` it is the linear ``0.5`` s (diverges just above). For widely
+    separated real poles it is conservative (poles ``-2, -8``: bound ``0.125`` s, the
+    loop still converges at ``0.2`` s).
+
+    >>> max_control_period(-100.0, -20.0)
+    0.1
+    >>> max_control_period(100.0, -20.0)
+    0.0
+    """
+    linear = max_stable_period(k_pos, k_vel)
+    if linear == 0.0:
+        return 0.0
+    s = error_poles(k_pos, k_vel)
+    return float(min(linear, 1.0 / np.max(-s.real)))
