@@ -1,33 +1,37 @@
 """Headless animation of a recorded run: frames in memory and animated GIFs.
 
-This is the only module that draws frames. It reads a :class:`sandbox.run.Run` and never
-touches the simulation. Frames are drawn with Pillow's ``ImageDraw`` plus a few vectorized
-numpy stamps (vehicle bodies, slot marks), on a canvas of palette indices: every colour a
-frame can contain is known before drawing starts (white, black, greys, orange, red, each
-vehicle's colour and a few paler shades of it for trails), so no per-frame quantization is
-needed and the GIF palette is exact. Drawing is not antialiased.
+This is the only module that draws frames. It reads a :class:`sandbox.run.Run` and
+never touches the simulation. Frames are drawn with Pillow's ``ImageDraw`` (and, for
+large fleets, vectorized numpy stamps of the bodies) on a canvas of palette indices:
+every colour a frame can contain is known before drawing starts (white, black, greys,
+orange, red, each vehicle's colour and a few paler shades of it for trails), so no
+per-frame quantization is needed and the GIF palette is exact. Drawing is not
+antialiased (that would need blended colours outside the palette).
 
 Timing
 ------
-Frame ``k`` shows simulated time ``t0 + k * speed / fps`` [s] (the recorded sample nearest
-to it), except the last frame, which always shows the final sample. A run lasting ``D``
-seconds gives ``round(D * fps / speed)`` frames, each displayed ``1 / fps`` seconds: a
-20 s run at 25 fps gives 500 frames of 40 ms (20 s in all); ``speed=2`` gives 250 frames
-of 40 ms (10 s), i.e. the frame interval stays ``1 / fps`` and there are fewer frames.
+Frame ``k`` shows simulated time ``t0 + k * speed / fps`` [s] (the recorded sample
+nearest to it), except the last frame, which always shows the final sample. A run
+lasting ``D`` seconds gives ``round(D * fps / speed)`` frames, each displayed
+``1 / fps`` seconds: a 20 s run at 25 fps gives 500 frames of 40 ms (20 s in all);
+``speed=2`` gives 250 frames of 40 ms (10 s), i.e. the frame interval stays ``1 / fps``
+and there are fewer frames.
 
 GIF delays are whole centiseconds. Frame ``k`` is given the delay
 ``round((k + 1) * 100 / fps) - round(k * 100 / fps)`` [cs], so delays are exact when
 ``100 / fps`` is an integer (25 fps: 4 cs = 40 ms; 20 fps: 50 ms; 50 fps: 20 ms) and
 otherwise alternate (30 fps: 30, 40, 30, ... ms) so that the total stays within 5 ms of
-``frames / fps``. :func:`write_gif` accepts ``0 < fps <= 50`` because browsers slow down
-delays under 20 ms. A frame identical to the previous one (a run recorded more coarsely
-than the frame rate) is merged into it and their delays are added, so the GIF may hold
-fewer frames than :func:`render_frames` yields; the total duration is unchanged.
+``frames / fps``. :func:`write_gif` accepts ``0 < fps <= 50`` because browsers slow
+down delays under 20 ms. A frame identical to the previous one (a run recorded more
+coarsely than the frame rate) is merged into it and their delays are added, so the GIF
+may hold fewer frames than :func:`render_frames` yields; the total duration is
+unchanged.
 
 Large fleets
 ------------
-Above :data:`LARGE_FLEET` vehicles, trails, slot marks and avoidance zones are not drawn;
-bodies, heading lines, failure marks and collision flashes still are, vectorized.
+Above :data:`LARGE_FLEET` vehicles, trails, slot marks and avoidance zones are not
+drawn; bodies (with heading lines and avoidance rings) are stamped with numpy for all
+vehicles at once; failure marks and collision flashes are still drawn.
 """
 
 from __future__ import annotations
@@ -60,9 +64,9 @@ __all__ = [
 
 #: Fleets larger than this are drawn without trails, slot marks and zones.
 LARGE_FLEET = 100
-#: How long a collision flash stays visible [s] of simulated time (at least 1.5 frames).
+#: How long a collision flash stays visible [s] (simulated; at least 1.5 frames).
 COLLISION_FLASH = 0.3
-#: Highest frame rate :func:`write_gif` accepts [1/s] (GIF delays under 20 ms are slowed).
+#: Highest frame rate :func:`write_gif` accepts [1/s] (browsers slow delays < 20 ms).
 MAX_GIF_FPS = 50.0
 #: Frames encoded per imageio call in :func:`write_gif` (bounds memory on long runs).
 GIF_CHUNK = 128
@@ -72,7 +76,7 @@ _BAR_HEIGHT = 18  # [px] band at the bottom for the scale bar
 _MARGIN = 0.04  # fraction of the image size kept free around the content
 _TRAIL_LEVELS = 4  # fading steps of a trail
 _TRAIL_FADE = (0.2, 0.45, 0.65, 0.82)  # blend toward white of each step, newest first
-_TRAIL_POINTS = 64  # at most this many points per trail
+_TRAIL_POINTS = 40  # at most about this many points per trail
 _DASH_PX = (8.0, 6.0)  # reference path: dash and gap lengths [px]
 _MIN_DETAIL_PX = 3.0  # bodies smaller than this radius [px] get no edge nor heading
 
@@ -161,7 +165,7 @@ class Camera:
         return np.stack((x, y), axis=-1)
 
     def centered_on(self, center: ArrayLike) -> Camera:
-        """The same camera moved so that ``center`` [m] is drawn at the anchor."""
+        """Return this camera moved so that ``center`` [m] is drawn at the anchor."""
         c = np.asarray(center, dtype=float)
         return Camera((float(c[0]), float(c[1])), self.scale, self.size, self.anchor)
 
@@ -169,8 +173,8 @@ class Camera:
     def fit(cls, lo: ArrayLike, hi: ArrayLike, size: int) -> Camera:
         """Camera showing the world box ``[lo, hi]`` [m] whole, with a margin.
 
-        The box is centred in the viewport, the part of the image below the heads-up band
-        and above the scale-bar band.
+        The box is centred in the viewport, the part of the image below the heads-up
+        band and above the scale-bar band.
         """
         lo = np.asarray(lo, dtype=float)
         hi = np.asarray(hi, dtype=float)
@@ -178,11 +182,13 @@ class Camera:
         extent = np.maximum(hi - lo, 1e-9)
         scale = float(min((x1 - x0) / extent[0], (y1 - y0) / extent[1]))
         mid = (lo + hi) / 2.0
-        return cls((float(mid[0]), float(mid[1])), scale, size, ((x0 + x1) / 2, (y0 + y1) / 2))
+        return cls(
+            (float(mid[0]), float(mid[1])), scale, size, ((x0 + x1) / 2, (y0 + y1) / 2)
+        )
 
     @classmethod
     def for_run(cls, run: Run, size: int = 640, follow: str | None = None) -> Camera:
-        """The camera of the first frame of ``run``.
+        """Build the camera of the first frame of ``run``.
 
         Parameters
         ----------
@@ -190,9 +196,9 @@ class Camera:
         size : int [px]
         follow : {None, "leader"} or str
             ``None``: the whole run is framed (every pose, the reference path and the
-            obstacles) and the camera never moves. ``"leader"`` or a vehicle name: a window
-            centred on that vehicle (the fleet centroid when ``"leader"`` is asked of a
-            run without leader), sized to contain the initial formation comfortably;
+            obstacles) and the camera never moves. ``"leader"`` or a vehicle name: a
+            window centred on that vehicle (the fleet centroid when ``"leader"`` is
+            asked of a run without leader), 1.3 times as wide as the initial formation;
             :func:`render_frames` recentres it on every frame.
 
         Returns
@@ -207,7 +213,7 @@ class Camera:
         track = _follow_track(run, follow)
         first = pos[0][np.isfinite(pos[0]).all(axis=1)]
         spread = float(np.max(np.linalg.norm(first - track[0], axis=1), initial=0.0))
-        width = max(1.6 * 2.0 * (spread + reach), 10.0 * reach, 1e-3)  # [m]
+        width = max(1.3 * 2.0 * (spread + reach), 10.0 * reach, 1e-3)  # [m]
         c = track[0]
         return cls.fit(c - width / 2, c + width / 2, size)
 
@@ -220,26 +226,44 @@ def _viewport(size: int) -> tuple[float, float, float, float]:
 
 def _content_bounds(run: Run, reach: float) -> tuple[np.ndarray, np.ndarray]:
     """World bounding box [m] of poses, reference path and obstacles."""
-    chunks = [run.pose[:, :, :2].reshape(-1, 2)]
-    chunks.append(np.asarray(run.reference, dtype=float).reshape(-1, 2))
+    boxes = [_finite_box(run.pose[:, :, :2]), _finite_box(run.reference)]
     path = _reference_path(run)
     if path is not None:
-        chunks.append(path)
+        boxes.append(_finite_box(path))
     for kind, geom in _obstacles(run):
         if kind == "circle":
             (cx, cy), r = geom
-            chunks.append(np.array([[cx - r, cy - r], [cx + r, cy + r]]))
+            boxes.append((np.array([cx - r, cy - r]), np.array([cx + r, cy + r])))
         else:
-            chunks.append(geom)
-    pts = np.concatenate(chunks, axis=0)
-    pts = pts[np.isfinite(pts).all(axis=1)]
-    if len(pts) == 0:
-        pts = np.zeros((1, 2))
-    lo, hi = pts.min(axis=0) - reach, pts.max(axis=0) + reach
+            boxes.append(_finite_box(geom))
+    found = [b for b in boxes if b is not None]
+    if found:
+        lo = np.min([b[0] for b in found], axis=0) - reach
+        hi = np.max([b[1] for b in found], axis=0) + reach
+    else:
+        lo, hi = np.full(2, -reach), np.full(2, reach)
     side = max(float(np.max(hi - lo)), 8.0 * reach, 0.5)  # [m] never a degenerate box
     half = np.maximum((hi - lo) / 2.0, side / 2.0)
     mid = (lo + hi) / 2.0
     return mid - half, mid + half
+
+
+def _finite_box(points: ArrayLike) -> tuple[np.ndarray, np.ndarray] | None:
+    """Bounding box ``(lo, hi)`` of the finite points of an array (..., 2), or None.
+
+    Reads a large (possibly memory-mapped) array a block of samples at a time.
+    """
+    arr = np.asarray(points, dtype=float)
+    arr = arr.reshape(len(arr), -1, 2) if arr.ndim >= 2 else arr.reshape(1, -1, 2)
+    step = max(1, 1_000_000 // max(arr.shape[1], 1))
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    for start in range(0, len(arr), step):
+        block = arr[start : start + step].reshape(-1, 2)
+        block = block[np.isfinite(block).all(axis=1)]
+        if len(block):
+            lo = np.minimum(lo, block.min(axis=0))
+            hi = np.maximum(hi, block.max(axis=0))
+    return (lo, hi) if np.isfinite(lo).all() else None
 
 
 def _follow_track(run: Run, follow: str) -> np.ndarray:
@@ -257,7 +281,8 @@ def _follow_track(run: Run, follow: str) -> np.ndarray:
         track = pos[:, run.names.index(follow)].copy()
     else:
         raise ValueError(
-            f"follow: expected None, 'leader' or a vehicle name {run.names}, got {follow!r}"
+            f"follow: expected None, 'leader' or a vehicle name in {run.names}, "
+            f"got {follow!r}"
         )
     # Hold the last finite point where the followed point is undefined.
     good = np.isfinite(track).all(axis=1)
@@ -288,7 +313,7 @@ class FramePlan:
     durations_ms: np.ndarray
 
     def __len__(self) -> int:
-        """Number of frames ``K``."""
+        """Return the number of frames ``K``."""
         return len(self.times)
 
 
@@ -306,8 +331,8 @@ def frame_plan(run: Run, fps: float = 25.0, speed: float = 1.0) -> FramePlan:
     Returns
     -------
     FramePlan
-        ``round(D * fps / speed)`` frames (at least one) for a run lasting ``D`` seconds;
-        see the module docstring.
+        ``round(D * fps / speed)`` frames (at least one) for a run lasting ``D``
+        seconds; see the module docstring.
 
     Examples
     --------
@@ -330,7 +355,9 @@ def frame_plan(run: Run, fps: float = 25.0, speed: float = 1.0) -> FramePlan:
     times[-1] = t[-1]  # the end state is always shown
     right = np.clip(np.searchsorted(t, times), 1, max(len(t) - 1, 1))
     left = right - 1
-    nearer_left = np.abs(times - t[left]) <= np.abs(t[np.minimum(right, len(t) - 1)] - times)
+    nearer_left = np.abs(times - t[left]) <= np.abs(
+        t[np.minimum(right, len(t) - 1)] - times
+    )
     index = np.where(nearer_left, left, right).clip(0, len(t) - 1)
     centis = np.round(np.arange(count + 1) * 100.0 / fps).astype(np.int64)
     return FramePlan(times, index, np.diff(centis) * 10)
@@ -338,7 +365,7 @@ def frame_plan(run: Run, fps: float = 25.0, speed: float = 1.0) -> FramePlan:
 
 # ---------------------------------------------------------------------------- scene
 def _reference_path(run: Run) -> np.ndarray | None:
-    """Reference path points (m, 2) [m]: ``info["reference_path"]``, else the samples."""
+    """Return the reference path (m, 2) [m]: ``info["reference_path"]`` or samples."""
     raw = run.info.get("reference_path") if isinstance(run.info, dict) else None
     pts = None
     if raw is not None:
@@ -352,7 +379,7 @@ def _reference_path(run: Run) -> np.ndarray | None:
 
 
 def _obstacles(run: Run) -> list[tuple[str, Any]]:
-    """Obstacles as ``("circle", ((x, y), r))`` or ``("polygon", points (m, 2))`` [m]."""
+    """List obstacles as ``("circle", ((x, y), r))`` or ``("polygon", (m, 2))`` [m]."""
     out: list[tuple[str, Any]] = []
     raw = run.info.get("obstacles", []) if isinstance(run.info, dict) else []
     for ob in raw or []:
@@ -441,7 +468,9 @@ def _dashes(path: np.ndarray, on: float, off: float) -> np.ndarray:
         return np.zeros((0, 2, 2))
     starts = np.arange(0.0, s[-1], on + off)
     ends = np.minimum(starts + on, s[-1])
-    a = np.stack((np.interp(starts, s, path[:, 0]), np.interp(starts, s, path[:, 1])), -1)
+    a = np.stack(
+        (np.interp(starts, s, path[:, 0]), np.interp(starts, s, path[:, 1])), -1
+    )
     b = np.stack((np.interp(ends, s, path[:, 0]), np.interp(ends, s, path[:, 1])), -1)
     return np.stack((a, b), axis=1)
 
@@ -513,7 +542,9 @@ def _stamp_discs(
         if fill is not None:
             val = np.where(inside, fill[i][:, None, None], val)
         fine = (
-            np.ones((len(i), 1, 1), bool) if detail is None else detail[i][:, None, None]
+            np.ones((len(i), 1, 1), bool)
+            if detail is None
+            else detail[i][:, None, None]
         )
         if edge is not None:
             rim = inside & fine & (d2 > np.maximum(r - edge_width, 0.0) ** 2)
@@ -533,7 +564,7 @@ def _stamp_discs(
 
 
 def _flat(points: np.ndarray) -> list[float]:
-    """Pixel points (m, 2) as a flat list for ``ImageDraw`` (which puts x at a centre)."""
+    """Flatten pixel points (m, 2) for ``ImageDraw`` (whose integer x is a centre)."""
     return (points - 0.5).ravel().tolist()
 
 
@@ -563,9 +594,8 @@ class _Scene:
         self.camera = Camera.for_run(run, self.size, follow)
         self.track = None if follow is None else _follow_track(run, follow)
         self.radius_px = np.asarray(run.diameter, dtype=float) / 2.0 * self.camera.scale
-        mode = np.asarray(run.mode)
-        self.failed = np.asarray(run.failed, dtype=bool) | (mode == MODE_FAILED)
-        self.avoid = mode == MODE_AVOID
+        self.mode = np.asarray(run.mode)
+        self.failed_raw = np.asarray(run.failed, dtype=bool)
         self.slot = np.asarray(run.slot, dtype=float)
         self.reference = np.asarray(run.reference, dtype=float).reshape(-1, 2)
         # Trails: a fixed sample grid, so the polylines do not shimmer between frames.
@@ -596,7 +626,9 @@ class _Scene:
         self._prepare_events(step)
         label = run.info.get("scenario_name") if isinstance(run.info, dict) else None
         self.hud_prefix = f"{label}   " if label else ""
-        self.background = None if self.track is not None else self._background(self.camera)
+        self.background = (
+            None if self.track is not None else self._background(self.camera)
+        )
 
     # ------------------------------------------------------------ preparation
     def _prepare_events(self, step: float) -> None:
@@ -630,7 +662,9 @@ class _Scene:
                 u, v = cam.world_to_pixel([cx, cy]) - 0.5
                 rp = r * cam.scale
                 draw.ellipse(
-                    [u - rp, v - rp, u + rp, v + rp], fill=OBSTACLE, outline=OBSTACLE_EDGE
+                    [u - rp, v - rp, u + rp, v + rp],
+                    fill=OBSTACLE,
+                    outline=OBSTACLE_EDGE,
                 )
             else:
                 pts = _flat(cam.world_to_pixel(geom))
@@ -663,6 +697,8 @@ class _Scene:
         else:
             assert self.background is not None
             img = self.background.copy()
+        failed = self.failed_raw[k] | (self.mode[k] == MODE_FAILED)
+        avoid = (self.mode[k] == MODE_AVOID) & ~failed
         draw = ImageDraw.Draw(img)
         draw.fontmode = "1"
         if self.trails:
@@ -673,34 +709,70 @@ class _Scene:
             draw.line([u - 4, v, u + 4, v], fill=PATH, width=1)
             draw.line([u, v - 4, u, v + 4], fill=PATH, width=1)
         if self.zones:
-            self._draw_zones(draw, cam, k)
-        canvas = np.array(img)
+            self._draw_zones(draw, cam, k, avoid, failed)
         centers = cam.world_to_pixel(self.pos[k])
-        if not self.large:
-            slots = cam.world_to_pixel(self.slot[k])
-            ring_r = np.clip(0.35 * self.radius_px, 3.0, 8.0)
-            _stamp_discs(canvas, slots, ring_r, fill=None, edge=self.body, edge_width=1.5)
-        radius = np.maximum(self.radius_px, 0.75)
-        detail = radius >= _MIN_DETAIL_PX
-        _stamp_discs(
-            canvas,
-            centers,
-            radius,
-            fill=self.body,
-            edge=np.full(self.n, BLACK),
-            heading=self.theta[k],
-            heading_width=np.maximum(2.0, 0.2 * radius),
-            detail=detail,
-            halo=self.avoid[k] & ~self.failed[k],
-            halo_width=max(2.0, min(4.0, 0.25 * float(np.median(radius)))),
-        )
-        img = Image.fromarray(canvas)
-        draw = ImageDraw.Draw(img)
-        draw.fontmode = "1"
-        self._draw_failures(draw, centers, radius, k)
+        radius = np.maximum(self.radius_px, 0.75)  # [px] every body shows
+        halo = max(2.0, min(4.0, 0.25 * float(np.median(radius))))  # [px]
+        if self.large:  # vectorized stamps; no slot marks
+            canvas = np.array(img)
+            _stamp_discs(
+                canvas,
+                centers,
+                radius,
+                fill=self.body,
+                edge=np.full(self.n, BLACK),
+                heading=self.theta[k],
+                heading_width=np.maximum(2.0, 0.2 * radius),
+                detail=radius >= _MIN_DETAIL_PX,
+                halo=avoid,
+                halo_width=halo,
+            )
+            img = Image.fromarray(canvas)
+            draw = ImageDraw.Draw(img)
+            draw.fontmode = "1"
+        else:
+            self._draw_slots(draw, cam.world_to_pixel(self.slot[k]))
+            self._draw_bodies(draw, centers, radius, self.theta[k], avoid, halo)
+        self._draw_failures(draw, centers[failed], radius[failed])
         self._draw_flashes(draw, cam, self.t[k])
         self._draw_hud(draw, self.t[k])
         return np.asarray(img)
+
+    def _draw_slots(self, draw: ImageDraw.ImageDraw, slots: np.ndarray) -> None:
+        ring = np.clip(0.35 * self.radius_px, 3.0, 8.0)  # [px]
+        for i in np.flatnonzero(np.isfinite(slots).all(axis=1)):
+            u, v = slots[i] - 0.5
+            r = ring[i]
+            width = 2 if r >= 5 else 1
+            draw.ellipse(
+                [u - r, v - r, u + r, v + r], outline=int(self.body[i]), width=width
+            )
+
+    def _draw_bodies(
+        self,
+        draw: ImageDraw.ImageDraw,
+        centers: np.ndarray,
+        radius: np.ndarray,
+        theta: np.ndarray,
+        avoid: np.ndarray,
+        halo: float,
+    ) -> None:
+        """Bodies (fill, black edge, heading line) and orange rings of avoiders."""
+        ok = np.isfinite(centers).all(axis=1) & np.isfinite(theta)
+        for i in np.flatnonzero(ok):
+            u, v = centers[i] - 0.5
+            r = float(radius[i])
+            if avoid[i]:
+                h = r + halo
+                draw.ellipse([u - h, v - h, u + h, v + h], fill=ORANGE)
+            box = [u - r, v - r, u + r, v + r]
+            if r < _MIN_DETAIL_PX:
+                draw.ellipse(box, fill=int(self.body[i]))
+                continue
+            draw.ellipse(box, fill=int(self.body[i]), outline=BLACK, width=1)
+            tip = (u + r * math.cos(theta[i]), v - r * math.sin(theta[i]))
+            width = max(2, int(round(0.2 * r)))
+            draw.line([u, v, *tip], fill=BLACK, width=width)
 
     def _draw_trails(self, draw: ImageDraw.ImageDraw, cam: Camera, k: int) -> None:
         k0 = int(self.trail_start[k])
@@ -709,7 +781,7 @@ class _Scene:
         idx = np.concatenate((grid, [k]))
         if len(idx) < 2:
             return
-        pts = cam.world_to_pixel(self.pos[idx])  # (m, n, 2)
+        pts = cam.world_to_pixel(self.pos[idx]) - 0.5  # (m, n, 2), ImageDraw's pixels
         age = self.t[k] - self.t[idx[1:]]  # each segment takes its newer end's age
         levels = self.trail_idx.shape[1]
         band = np.minimum((age / self.trail_seconds * levels).astype(int), levels - 1)
@@ -720,28 +792,37 @@ class _Scene:
             good = np.isfinite(chunk).all(axis=(0, 2))
             for i in np.flatnonzero(good):
                 draw.line(
-                    _flat(chunk[:, i]), fill=int(self.trail_idx[i, b]), width=self.trail_width
+                    chunk[:, i].ravel().tolist(),
+                    fill=int(self.trail_idx[i, b]),
+                    width=self.trail_width,
                 )
 
-    def _draw_zones(self, draw: ImageDraw.ImageDraw, cam: Camera, k: int) -> None:
+    def _draw_zones(
+        self,
+        draw: ImageDraw.ImageDraw,
+        cam: Camera,
+        k: int,
+        avoid: np.ndarray,
+        failed: np.ndarray,
+    ) -> None:
         centers = cam.world_to_pixel(self.pos[k]) - 0.5
         for i in range(self.n):
-            if self.failed[k, i] or not np.isfinite(centers[i]).all():
+            if failed[i] or not np.isfinite(centers[i]).all():
                 continue
-            color = ORANGE if self.avoid[k, i] else ZONE
+            color = ORANGE if avoid[i] else ZONE
             u, v = centers[i]
             for rz in self.zone_radii:
                 rp = rz * cam.scale
                 draw.ellipse([u - rp, v - rp, u + rp, v + rp], outline=color, width=1)
 
     def _draw_failures(
-        self, draw: ImageDraw.ImageDraw, centers: np.ndarray, radius: np.ndarray, k: int
+        self, draw: ImageDraw.ImageDraw, centers: np.ndarray, radius: np.ndarray
     ) -> None:
-        for i in np.flatnonzero(self.failed[k]):
-            if not np.isfinite(centers[i]).all():
+        for c, r in zip(centers, radius, strict=True):
+            if not np.isfinite(c).all():
                 continue
-            u, v = centers[i] - 0.5
-            h = max(float(radius[i]), 5.0)
+            u, v = c - 0.5
+            h = max(float(r), 5.0)
             width = max(2, int(round(0.22 * h)))
             draw.line([u - h, v - h, u + h, v + h], fill=BLACK, width=width)
             draw.line([u - h, v + h, u + h, v - h], fill=BLACK, width=width)
@@ -758,7 +839,12 @@ class _Scene:
             for a in np.arange(8) * (np.pi / 4):
                 c, s = math.cos(a), math.sin(a)
                 draw.line(
-                    [u + 1.2 * rho * c, v + 1.2 * rho * s, u + 1.7 * rho * c, v + 1.7 * rho * s],
+                    [
+                        u + 1.2 * rho * c,
+                        v + 1.2 * rho * s,
+                        u + 1.7 * rho * c,
+                        v + 1.7 * rho * s,
+                    ],
                     fill=RED,
                     width=2,
                 )
@@ -781,7 +867,9 @@ class _Scene:
 
 def _check_follow(follow: str | None) -> None:
     if follow is not None and not isinstance(follow, str):
-        raise ValueError(f"follow: expected None, 'leader' or a vehicle name, got {follow!r}")
+        raise ValueError(
+            f"follow: expected None, 'leader' or a vehicle name, got {follow!r}"
+        )
 
 
 def _indexed_frames(
@@ -797,12 +885,17 @@ def _indexed_frames(
 ) -> tuple[_Scene, Iterator[np.ndarray]]:
     _check_follow(follow)
     scene = _Scene(
-        run, size=size, zones=zones, follow=follow, trail_seconds=trail_seconds, step=speed / fps
+        run,
+        size=size,
+        zones=zones,
+        follow=follow,
+        trail_seconds=trail_seconds,
+        step=speed / fps,
     )
     return scene, (scene.draw(int(k)) for k in plan.index)
 
 
-# ---------------------------------------------------------------------------- public API
+# ------------------------------------------------------------------------- public API
 def render_frames(
     run: Run,
     *,
@@ -840,9 +933,15 @@ def render_frames(
     """
     plan = frame_plan(run, fps, speed)
     scene, frames = _indexed_frames(
-        run, plan, size=size, zones=zones, follow=follow,
-        trail_seconds=trail_seconds, speed=speed, fps=fps,
-    )  # fmt: skip
+        run,
+        plan,
+        size=size,
+        zones=zones,
+        follow=follow,
+        trail_seconds=trail_seconds,
+        speed=speed,
+        fps=fps,
+    )
     for canvas in frames:
         yield scene.to_rgb(canvas)
 
@@ -882,13 +981,21 @@ def write_gif(
         identical frames are merged), total display time [s] and the output path.
     """
     if not (0 < fps <= MAX_GIF_FPS):
-        raise ValueError(f"fps: expected 0 < fps <= {MAX_GIF_FPS:g} for a GIF, got {fps!r}")
+        raise ValueError(
+            f"fps: expected 0 < fps <= {MAX_GIF_FPS:g} for a GIF, got {fps!r}"
+        )
     path = Path(path)
     plan = frame_plan(run, fps, speed)
     scene, frames = _indexed_frames(
-        run, plan, size=size, zones=zones, follow=follow,
-        trail_seconds=trail_seconds, speed=speed, fps=fps,
-    )  # fmt: skip
+        run,
+        plan,
+        size=size,
+        zones=zones,
+        follow=follow,
+        trail_seconds=trail_seconds,
+        speed=speed,
+        fps=fps,
+    )
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
     try:
@@ -911,10 +1018,14 @@ def write_gif(
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    return {"frames": stream.frames, "duration": stream.duration_ms / 1000.0, "path": str(path)}
+    return {
+        "frames": stream.frames,
+        "duration": stream.duration_ms / 1000.0,
+        "path": str(path),
+    }
 
 
-# ---------------------------------------------------------------------------- GIF stream
+# ------------------------------------------------------------------------- GIF stream
 class _GifStream:
     """One GIF89a stream assembled from GIFs that imageio encodes a chunk at a time.
 
@@ -924,19 +1035,29 @@ class _GifStream:
     imageio receives the frames as ``L`` images of palette indices with
     ``optimize=False``, so Pillow writes the indices unchanged (it neither quantizes nor
     remaps them) and only its placeholder colour tables need replacing.
+
+    Every frame after the first codes the pixels that did not change as the transparent
+    index ``len(palette)`` (no disposal: the previous frame shows through), which about
+    halves the file size; Pillow crops each frame to the box that changed.
     """
 
     def __init__(
         self, fh: IO[bytes], width: int, height: int, palette: np.ndarray, loop: int = 0
     ) -> None:
+        if len(palette) > 255:
+            raise ValueError("the palette must leave one index free for transparency")
         self.fh = fh
         self.frames = 0
         self.duration_ms = 0
-        bits = max(1, int(math.ceil(math.log2(max(len(palette), 2)))))
+        self.clear = len(palette)  # transparent index: "unchanged since last frame"
+        self.previous: np.ndarray | None = None
+        bits = max(1, int(math.ceil(math.log2(len(palette) + 1))))
         table = np.full((1 << bits, 3), 255, dtype=np.uint8)
         table[: len(palette)] = palette
         fh.write(b"GIF89a")
-        fh.write(struct.pack("<HHBBB", width, height, 0x80 | 0x70 | (bits - 1), WHITE, 0))
+        fh.write(
+            struct.pack("<HHBBB", width, height, 0x80 | 0x70 | (bits - 1), WHITE, 0)
+        )
         fh.write(table.tobytes())
         fh.write(b"!\xff\x0bNETSCAPE2.0\x03\x01" + struct.pack("<H", loop) + b"\x00")
 
@@ -944,12 +1065,25 @@ class _GifStream:
         """Encode frames (palette indices, (H, W) uint8) with their delays [ms]."""
         if not frames:
             return
-        batch = np.stack(frames)
+        batch = np.empty((len(frames), *frames[0].shape), dtype=np.uint8)
+        for j, frame in enumerate(frames):
+            if self.previous is None:
+                batch[j] = frame
+            else:
+                _changes(frame, self.previous, self.clear, out=batch[j])
+            self.previous = frame
         duration: int | list[int] = delays_ms if len(frames) > 1 else delays_ms[0]
         data = iio.imwrite(
-            "<bytes>", batch, extension=".gif", plugin="pillow", is_batch=True,
-            duration=duration, loop=0, optimize=False,
-        )  # fmt: skip
+            "<bytes>",
+            batch,
+            extension=".gif",
+            plugin="pillow",
+            is_batch=True,
+            duration=duration,
+            loop=0,
+            optimize=False,
+            transparency=self.clear,
+        )
         self.fh.write(_frame_blocks(data))
         self.frames += len(frames)
         self.duration_ms += int(sum(delays_ms))
@@ -957,6 +1091,29 @@ class _GifStream:
     def close(self) -> None:
         """Write the trailer."""
         self.fh.write(b";")
+
+
+def _changes(
+    frame: np.ndarray, previous: np.ndarray, clear: int, out: np.ndarray
+) -> None:
+    """Copy into ``out`` the changed pixels of ``frame``, and ``clear`` elsewhere.
+
+    All arrays are (H, W) uint8. The changed box is found comparing up to 8 pixels at a
+    time, then refined pixel by pixel.
+    """
+    width = frame.shape[1]
+    word = next(b for b in (8, 4, 2, 1) if width % b == 0)
+    as_words = np.dtype(f"u{word}")
+    moved = frame.view(as_words) != previous.view(as_words)
+    out.fill(clear)
+    rows = np.flatnonzero(moved.any(axis=1))
+    if rows.size == 0:
+        return
+    r0, r1 = int(rows[0]), int(rows[-1]) + 1
+    cols = np.flatnonzero(moved[r0:r1].any(axis=0))
+    c0, c1 = int(cols[0]) * word, (int(cols[-1]) + 1) * word
+    box = frame[r0:r1, c0:c1]
+    np.copyto(out[r0:r1, c0:c1], box, where=box != previous[r0:r1, c0:c1])
 
 
 def _skip_subblocks(data: bytes, pos: int) -> int:
@@ -969,7 +1126,7 @@ def _skip_subblocks(data: bytes, pos: int) -> int:
 
 
 def _frame_blocks(data: bytes) -> bytes:
-    """The frames of a GIF stream, without header, trailer nor local colour tables."""
+    """Extract the frames of a GIF stream, without header, trailer nor colour tables."""
     if data[:6] not in (b"GIF87a", b"GIF89a"):
         raise ValueError("not a GIF stream")
     flags = data[10]
