@@ -16,7 +16,9 @@ distance (eq. (25)). Strategies differ only in the weight ``alpha(dist)``:
 
 Obstacles are the other vehicles (centre-to-centre distance) and the static obstacles
 (distance from the vehicle centre to the nearest surface point, pushing away from it).
-Pure numpy; neighbours come from a KD-tree (scipy) above a few dozen vehicles.
+Pure numpy; neighbours come from a KD-tree (scipy) above a few dozen vehicles, kept
+between control steps as a Verlet list (:class:`NeighbourList`), so the cost per step
+stays about linear in the number of vehicles.
 """
 
 from __future__ import annotations
@@ -92,6 +94,84 @@ def neighbour_pairs(pos: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndar
 
     pairs = cKDTree(pos).query_pairs(radius, output_type="ndarray")
     return pairs[:, 0], pairs[:, 1]
+
+
+class NeighbourList:
+    """Pairs of vehicles closer than ``radius``, kept from one control step to the next.
+
+    A Verlet list: the candidate pairs closer than ``radius + skin`` are found with a
+    KD-tree and reused until some vehicle has moved more than ``skin / 2`` since; each
+    call filters the candidates by their current distance. Two vehicles closer than
+    ``radius`` now, having each moved at most ``skin / 2``, were closer than
+    ``radius + skin`` when the candidates were built, so the result is exactly the set
+    of :func:`neighbour_pairs`. Candidates are sorted by ``(i, j)``, which makes the
+    order of the pairs (and so of the sums over them) independent of when the list was
+    rebuilt.
+    Up to :data:`BRUTE_FORCE_MAX` vehicles all pairs are the candidates (never rebuilt).
+
+    Parameters
+    ----------
+    radius : float [m]
+        Pairs closer than this are returned.
+    skin : float [m], optional
+        Extra search distance of the candidates; default ``radius / 2``. Larger: rarer
+        rebuilds, more candidates to filter each step.
+
+    Examples
+    --------
+    >>> pos = np.column_stack((np.arange(60.0), np.zeros(60)))
+    >>> i, j = NeighbourList(1.5).pairs(pos)
+    >>> len(i), bool(np.all(j == i + 1))
+    (59, True)
+    """
+
+    def __init__(self, radius: float, skin: float | None = None) -> None:
+        self.radius = float(radius)
+        self.skin = 0.5 * self.radius if skin is None else float(skin)
+        self.rebuilds = 0
+        self._anchor: np.ndarray | None = None
+        self._i = self._j = np.zeros(0, dtype=np.intp)
+
+    def pairs(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Sorted index pairs ``(i, j)``, ``i < j``, of vehicles closer than ``radius``.
+
+        Parameters
+        ----------
+        pos : ndarray, shape (n, 2) [m]
+            Current positions.
+        """
+        i, j, _ = self.near(pos)
+        return i, j
+
+    def near(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Like :meth:`pairs`, with the offsets ``pos[i] - pos[j]`` (m, 2) [m] too."""
+        n = len(pos)
+        anchor = self._anchor
+        if anchor is None or len(anchor) != n:
+            self._rebuild(pos)
+        elif n > BRUTE_FORCE_MAX:
+            moved = pos - anchor
+            worst = float(np.max(moved[:, 0] * moved[:, 0] + moved[:, 1] * moved[:, 1]))
+            if not worst <= 0.25 * self.skin * self.skin:  # also rebuilds on NaN
+                self._rebuild(pos)
+        # np.take on rows is several times faster than fancy indexing pos[i].
+        rel = np.take(pos, self._i, axis=0)
+        rel -= np.take(pos, self._j, axis=0)
+        d2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
+        keep = np.flatnonzero(d2 < self.radius * self.radius)
+        return self._i.take(keep), self._j.take(keep), np.take(rel, keep, axis=0)
+
+    def _rebuild(self, pos: np.ndarray) -> None:
+        n = len(pos)
+        if n <= BRUTE_FORCE_MAX:
+            i, j = np.triu_indices(n, 1)  # already in (i, j) order
+        else:
+            i, j = neighbour_pairs(pos, self.radius + self.skin)
+            order = np.lexsort((j, i))
+            i, j = i[order], j[order]
+        self._i, self._j = i.astype(np.intp), j.astype(np.intp)
+        self._anchor = pos.copy()
+        self.rebuilds += 1
 
 
 class ObstacleField:
@@ -179,6 +259,7 @@ def avoidance_shift(
     r: float | None,
     steepness: float,
     obstacles: ObstacleField,
+    neighbours: NeighbourList | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The shift ``beta * sum_i alpha_i vect_avoid_i`` of each vehicle's target.
 
@@ -200,6 +281,9 @@ def avoidance_shift(
     steepness : float
         Steepness of the ``smooth`` transition.
     obstacles : ObstacleField
+    neighbours : NeighbourList, optional
+        Reused between calls (with radius ``R``) to find the vehicle pairs; default: a
+        fresh search with :func:`neighbour_pairs`.
 
     Returns
     -------
@@ -213,16 +297,23 @@ def avoidance_shift(
     if strategy == "none" or not np.any(avoiders):
         return shift, active
     weight = STRATEGIES[strategy]
-    i, j = neighbour_pairs(pos, R)
-    if len(i):
+    if neighbours is not None:
+        i, j, rel = neighbours.near(pos)  # rel: from j to i
+    else:
+        i, j = neighbour_pairs(pos, R)
         rel = pos[i] - pos[j]  # from j to i
-        dist = np.maximum(np.linalg.norm(rel, axis=1), MIN_DIST)  # eq. (25)
+    if len(i):
+        dist2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
+        dist = np.maximum(np.sqrt(dist2), MIN_DIST)  # eq. (25)
         alpha = weight(dist, R, r, steepness)
-        vect = rel / (dist * dist)[:, None]  # eqs. (23)-(24): u / dist
-        contrib = alpha[:, None] * vect
+        dd = dist * dist
         on = alpha > 0
-        np.add.at(shift, i, contrib)
-        np.add.at(shift, j, -contrib)
+        # Sum over the pairs, +alpha u/dist on i and -alpha u/dist on j (eqs. (23)-
+        # (24)), in pair order: the same sums as np.add.at, several times faster.
+        both = np.concatenate((i, j))
+        for axis in (0, 1):
+            c = alpha * (rel[:, axis] / dd)
+            shift[:, axis] = np.bincount(both, np.concatenate((c, -c)), minlength=n)
         active[i[on]] = True
         active[j[on]] = True
     if not obstacles.empty:

@@ -1,17 +1,22 @@
 """A recorded run: the arrays a simulation produced, read by metrics and rendering.
 
 The simulation loop never draws and never computes metrics; it appends one sample every
-``record_every`` control steps to a :class:`Recorder`, and :meth:`Recorder.finish` returns a
-:class:`Run`. Everything downstream (``metrics.py``, ``render.py``, ``plot.py``, the CSV
-writer) reads a ``Run`` only, so it can also be loaded back from a run directory
-(``run.npz`` + ``scenario.yaml``) without simulating again.
+``record_every`` control steps to a :class:`Recorder`, whose :meth:`Recorder.arrays`
+become a :class:`Run` (in memory, or memory-mapped from disk for big records).
+Everything downstream (``metrics.py``, ``render.py``, ``plot.py``, the CSV writer) reads
+a ``Run`` only, so it can also be loaded back from a run directory (``run.npz`` +
+``scenario.yaml``) without simulating again.
 
 Array shapes use ``T`` for recorded samples and ``n`` for vehicles.
 """
 
 from __future__ import annotations
 
+import atexit
 import json
+import os
+import shutil
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -177,28 +182,87 @@ class Run:
         )
 
 
+#: Above this size [bytes] a run's record is streamed to files on disk (see
+#: :class:`Recorder`); smaller records stay in memory.
+SPILL_BYTES = 64 * 2**20
+#: Memory of the buffer that collects samples before they are written to disk [bytes].
+CHUNK_BYTES = 8 * 2**20
+
+#: The recorded arrays: name -> (shape of one sample given n, dtype).
+_FIELDS: dict[str, tuple[Any, Any]] = {
+    "t": (lambda n: (), np.float64),
+    "pose": (lambda n: (n, 3), np.float64),
+    "cmd": (lambda n: (n, 2), np.float64),
+    "chi": (lambda n: (n, 2), np.float64),
+    "slot": (lambda n: (n, 2), np.float64),
+    "target": (lambda n: (n, 2), np.float64),
+    "mode": (lambda n: (n,), np.int8),
+    "failed": (lambda n: (n,), np.bool_),
+    "reference": (lambda n: (2,), np.float64),
+}
+
+
 class Recorder:
-    """Preallocated storage that the simulation loop fills one sample at a time.
+    """Storage that the simulation loop fills one sample at a time.
+
+    A small record is preallocated in memory. A record larger than ``spill_bytes``
+    (thousands of vehicles, long runs) is streamed to disk instead: samples are
+    collected in a buffer of about :data:`CHUNK_BYTES`, each full buffer is appended to
+    one ``.npy`` file per array in a temporary directory, and :meth:`arrays` returns
+    read-only memory maps of those files. Memory then stays bounded whatever
+    ``n x samples``; the files are unlinked as soon as they are mapped (POSIX), so the
+    disk space is released with the last array that uses it.
 
     Parameters
     ----------
     n_samples : int
         Upper bound on the number of samples (the run may stop early).
     n_vehicles : int
+    spill_bytes : int, optional
+        Record size above which samples go to disk; default :data:`SPILL_BYTES`.
+    directory : str or Path, optional
+        Where the temporary directory is made; default the system's temporary directory.
     """
 
-    def __init__(self, n_samples: int, n_vehicles: int) -> None:
+    def __init__(
+        self,
+        n_samples: int,
+        n_vehicles: int,
+        spill_bytes: int | None = None,
+        directory: str | Path | None = None,
+    ) -> None:
         T, n = n_samples, n_vehicles
-        self.t = np.zeros(T)
-        self.pose = np.zeros((T, n, 3))
-        self.cmd = np.zeros((T, n, 2))
-        self.chi = np.zeros((T, n, 2))
-        self.slot = np.zeros((T, n, 2))
-        self.target = np.zeros((T, n, 2))
-        self.mode = np.zeros((T, n), dtype=np.int8)
-        self.failed = np.zeros((T, n), dtype=bool)
-        self.reference = np.zeros((T, 2))
+        self.capacity = T
         self.count = 0
+        shapes = {k: (f(n), np.dtype(dtype)) for k, (f, dtype) in _FIELDS.items()}
+        sample_bytes = sum(
+            int(np.prod(shape)) * dtype.itemsize for shape, dtype in shapes.values()
+        )
+        limit = SPILL_BYTES if spill_bytes is None else spill_bytes
+        self.on_disk = T * sample_bytes > limit
+        self._shapes = shapes
+        self._dir: Path | None = None
+        if not self.on_disk:
+            self._chunk = T
+            self._buffers = {
+                k: np.zeros((T, *shape), dtype) for k, (shape, dtype) in shapes.items()
+            }
+            return
+        self._chunk = int(max(1, min(T, CHUNK_BYTES // max(sample_bytes, 1))))
+        self._buffers = {
+            k: np.zeros((self._chunk, *shape), dtype)
+            for k, (shape, dtype) in shapes.items()
+        }
+        self._dir = Path(tempfile.mkdtemp(prefix="sandbox-record-", dir=directory))
+        self._files: dict[str, Any] = {}
+        self._offsets: dict[str, int] = {}
+        for k, (shape, dtype) in shapes.items():
+            path = self._dir / f"{k}.npy"
+            mm = np.lib.format.open_memmap(path, "w+", dtype=dtype, shape=(T, *shape))
+            self._offsets[k] = int(mm.offset)
+            del mm
+            self._files[k] = open(path, "r+b")  # noqa: SIM115 (closed in arrays())
+        self._flushed = 0
 
     def append(
         self,
@@ -214,30 +278,51 @@ class Recorder:
     ) -> None:
         """Copy one sample in (arrays are copied, so callers may reuse theirs)."""
         k = self.count
-        if k >= len(self.t):
+        if k >= self.capacity:
             return
-        self.t[k] = t
-        self.pose[k] = pose
-        self.cmd[k] = cmd
-        self.chi[k] = chi
-        self.slot[k] = slot
-        self.target[k] = target
-        self.mode[k] = mode
-        self.failed[k] = failed
-        self.reference[k] = reference
+        row = k - self._flushed if self.on_disk else k
+        b = self._buffers
+        b["t"][row] = t
+        b["pose"][row] = pose
+        b["cmd"][row] = cmd
+        b["chi"][row] = chi
+        b["slot"][row] = slot
+        b["target"][row] = target
+        b["mode"][row] = mode
+        b["failed"][row] = failed
+        b["reference"][row] = reference
         self.count = k + 1
+        if self.on_disk and row + 1 == self._chunk:
+            self._flush()
+
+    def _flush(self) -> None:
+        """Write the buffered samples to the files (disk-backed records only)."""
+        rows = self.count - self._flushed
+        if rows <= 0:
+            return
+        for k, fh in self._files.items():
+            data = self._buffers[k][:rows]
+            fh.seek(self._offsets[k] + self._flushed * data[0].nbytes)
+            fh.write(data.tobytes())
+        self._flushed = self.count
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The filled part of every array."""
+        """The filled part of every array (read-only memory maps if on disk).
+
+        For a disk-backed record this closes the recorder: call it once, at the end.
+        """
         k = self.count
-        return {
-            "t": self.t[:k],
-            "pose": self.pose[:k],
-            "cmd": self.cmd[:k],
-            "chi": self.chi[:k],
-            "slot": self.slot[:k],
-            "target": self.target[:k],
-            "mode": self.mode[:k],
-            "failed": self.failed[:k],
-            "reference": self.reference[:k],
-        }
+        if not self.on_disk:
+            return {name: buf[:k] for name, buf in self._buffers.items()}
+        self._flush()
+        for fh in self._files.values():
+            fh.close()
+        self._files = {}
+        out = {name: np.load(self._dir / f"{name}.npy", mmap_mode="r")[:k]
+               for name in self._shapes}
+        self._buffers = {}
+        if os.name == "posix":  # the mappings keep the data; the names can go now
+            shutil.rmtree(self._dir, ignore_errors=True)
+        else:  # pragma: no cover - files in use cannot be removed elsewhere
+            atexit.register(shutil.rmtree, self._dir, ignore_errors=True)
+        return out

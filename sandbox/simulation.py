@@ -20,10 +20,15 @@ from collections.abc import Callable
 
 import numpy as np
 
-from sandbox.control.flatness import advance_extension, extension_rate, flat_inputs
+from sandbox.control.flatness import (
+    Gains,
+    advance_extension,
+    extension_rate,
+    flat_inputs,
+)
 from sandbox.control.formation import LAWS, BackwardDifference, LawInputs
 from sandbox.failures import FailureSchedule
-from sandbox.recovery import ObstacleField, avoidance_shift
+from sandbox.recovery import NeighbourList, ObstacleField, avoidance_shift
 from sandbox.run import (
     MODE_AVOID,
     MODE_FAILED,
@@ -92,6 +97,16 @@ class Simulation:
             for i, v in enumerate(scenario.vehicles)
             if v.drive.type == "commands"
         }
+        self._track_rows = np.flatnonzero(self.tracks_reference)
+        self._commanded_rows = np.flatnonzero(self.fleet.commanded)
+        # Parameters shared by the whole fleet are used as scalars on the hot path (the
+        # same values, broadcast, without streaming (n,) arrays through every step).
+        fl = self.fleet
+        self._gains = Gains(**{k: _uniform(getattr(fl.gains, k))
+                               for k in ("k1", "k2", "k3", "k4", "kp")})
+        self._v1_max = _uniform(fl.v1_max)
+        self._v2_max = _uniform(fl.v2_max)
+        self._accel_max = _uniform(fl.accel_max)
 
     # ------------------------------------------------------------------ helpers
     def _scheduled_commands(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
@@ -110,13 +125,18 @@ class Simulation:
                 leader_theta=float(fleet.theta[lead]) if lead >= 0 else None,
                 reference=ref,
             )
-            slot, v_ref, a_ref = (np.array(a, dtype=float) for a in self.law.targets(inputs))
+            triple = self.law.targets(inputs)
         else:
-            slot, v_ref, a_ref = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
-        if ref is not None:
-            tr = self.tracks_reference
-            slot[tr], v_ref[tr], a_ref[tr] = ref[0], ref[1], ref[2]
-        slot[fleet.commanded] = np.nan
+            triple = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
+        tr, cmd = self._track_rows, self._commanded_rows
+        if (ref is not None and len(tr)) or len(cmd):
+            # Copies: the law may keep (or broadcast) what it returned.
+            slot, v_ref, a_ref = (np.array(a, dtype=float) for a in triple)
+            if ref is not None:
+                slot[tr], v_ref[tr], a_ref[tr] = ref[0], ref[1], ref[2]
+            slot[cmd] = np.nan
+        else:  # nothing to overwrite: read-only use downstream, no copies needed
+            slot, v_ref, a_ref = (np.asarray(a, dtype=float) for a in triple)
         point = ref[0] if ref is not None else np.full(2, np.nan)
         return slot, v_ref, a_ref, point
 
@@ -181,6 +201,12 @@ class Simulation:
         status, info = STATUS_OK, self._info()
         failed_at: dict[str, float] = {}
         report_every = max(1, self.steps // 100)
+        neighbours = NeighbourList(rec.R)
+        has_failures = len(self.failures.specs) > 0
+        failing = np.zeros(n, dtype=bool)
+        gains, v1_max, v2_max, accel_max = (
+            self._gains, self._v1_max, self._v2_max, self._accel_max
+        )
         wall = time.perf_counter()
         for k in range(self.steps + 1):
             t = k * h
@@ -196,17 +222,17 @@ class Simulation:
                 break
 
             slot, v_ref, a_ref, point = self._targets(t)
-            new = self.failures.start_new(t, fleet.v2)
-            for i in self.failures.immovable(new):
-                world.immobilize(i)
-            for j in new:
-                failed_at.setdefault(self.failures.specs[j].vehicle, t)
-            failing = np.zeros(n, dtype=bool)
-            if len(self.failures.specs):
+            if has_failures:
+                new = self.failures.start_new(t, fleet.v2)
+                for i in self.failures.immovable(new):
+                    world.immobilize(i)
+                for j in new:
+                    failed_at.setdefault(self.failures.specs[j].vehicle, t)
+                failing = np.zeros(n, dtype=bool)
                 failing[self.failures.vehicle[self.failures.active(t)]] = True
             shift, active = avoidance_shift(
                 fleet.pos, avoid_candidates & ~failing, rec.strategy, rec.beta, rec.R, rec.r,
-                rec.steepness, self.obstacles,
+                rec.steepness, self.obstacles, neighbours,
             )
             target = slot + shift  # eq. (22) / (26)
             if rec.target_derivatives == "estimate":
@@ -215,12 +241,12 @@ class Simulation:
                 a_ref = a_ref + dd_shift
             aim = np.where(np.isnan(target), fleet.pos, target)
 
-            chi_dot = extension_rate(fleet.pos, fleet.chi, aim, v_ref, a_ref, fleet.gains)
+            chi_dot = extension_rate(fleet.pos, fleet.chi, aim, v_ref, a_ref, gains)
             chi_next, chi_dot = advance_extension(
-                fleet.chi, chi_dot, h, fleet.v1_max, fleet.accel_max
+                fleet.chi, chi_dot, h, v1_max, accel_max
             )
-            v1, v2 = flat_inputs(fleet.theta, fleet.chi, chi_dot, fleet.gains.kp)
-            v2 = np.clip(v2, -fleet.v2_max, fleet.v2_max)
+            v1, v2 = flat_inputs(fleet.theta, fleet.chi, chi_dot, gains.kp)
+            v2 = np.clip(v2, -v2_max, v2_max)
             if self._schedules:
                 self._scheduled_commands(t, v1, v2)
             v1, v2, failed, frozen = self.failures.apply(t, v1, v2)
@@ -274,8 +300,24 @@ def _cmd(fleet: Fleet) -> np.ndarray:
     return np.stack((fleet.v1, fleet.v2), axis=1)
 
 
+def _uniform(values: np.ndarray) -> float | np.ndarray:
+    """``values[0]`` as a scalar when every entry equals it, else ``values`` itself."""
+    first = values[0]
+    return float(first) if np.all(values == first) else values
+
+
 def _diverged(fleet: Fleet) -> tuple[int, str] | None:
     """First vehicle whose state is non-finite or beyond the bounds, with the reason."""
+    # Fast path, one reduction per array: clearly healthy (NaN fails every comparison).
+    vel, chi = fleet.vel, fleet.chi
+    speed2 = (0.999 * DIVERGED_SPEED) ** 2
+    if (
+        np.max(np.abs(fleet.pos)) <= DIVERGED_POSITION
+        and np.max(np.abs(fleet.theta)) < np.inf
+        and np.max(vel[:, 0] * vel[:, 0] + vel[:, 1] * vel[:, 1]) <= speed2
+        and np.max(chi[:, 0] * chi[:, 0] + chi[:, 1] * chi[:, 1]) <= speed2
+    ):
+        return None
     finite = (
         np.isfinite(fleet.pos).all(axis=1)
         & np.isfinite(fleet.theta)

@@ -89,6 +89,14 @@ class World:
         self._write_buffer = pymunk.batch.Buffer()
         self._rows = self._row_order(self.space, self.bodies)
         self._control_rows = self._row_order(self.control_space, self.controls)
+        # Bodies are usually stored in insertion order: then no reordering is needed.
+        # With obstacles the static body holds shapes and has a row of its own too.
+        self._rows_in_order = not obstacles and np.array_equal(
+            self._rows, np.arange(len(self.bodies))
+        )
+        self._control_in_order = np.array_equal(
+            self._control_rows, np.arange(len(self.controls))
+        )
         self._write = np.zeros((len(self.controls), 3))
 
     # ------------------------------------------------------------------ construction
@@ -167,7 +175,9 @@ class World:
         buf = self._read_buffer
         buf.clear()
         pymunk.batch.get_space_bodies(self.space, _READ, buf)
-        rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 6)[self._rows]
+        rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 6)
+        if not self._rows_in_order:
+            rows = rows[self._rows]
         return PhysicalState(
             pos=rows[:, 0:2].copy(),
             theta=rows[:, 2].copy(),
@@ -183,9 +193,10 @@ class World:
         """
         heading = theta + 0.5 * v2 * dt
         out = self._write
-        out[self._control_rows, 0] = v1 * np.cos(heading)
-        out[self._control_rows, 1] = v1 * np.sin(heading)
-        out[self._control_rows, 2] = v2
+        rows = slice(None) if self._control_in_order else self._control_rows
+        out[rows, 0] = v1 * np.cos(heading)
+        out[rows, 1] = v1 * np.sin(heading)
+        out[rows, 2] = v2
         self._write_buffer.set_float_buf(out.tobytes())
         pymunk.batch.set_space_bodies(self.control_space, _WRITE, self._write_buffer)
 
