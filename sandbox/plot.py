@@ -347,7 +347,7 @@ def leader_frame_figure(run: Run) -> Figure:
                 facecolor=colors[run.leader],
                 edgecolor="k",
                 zorder=4,
-                label=f"{name} (leader)",
+                label=name if "leader" in name.lower() else f"{name} (leader)",
             )
         )
         ax.plot([0.0, radius[run.leader]], [0.0, 0.0], "k-", lw=2, zorder=5)
