@@ -250,7 +250,10 @@ class Scenario:
     def to_dict(self) -> dict[str, Any]:
         """A plain document that :func:`parse_scenario` reads back to this scenario.
 
-        Lengths are resolved to metres; generated platoon vehicles are listed.
+        Lengths are resolved to metres. A platoon is written as its ``platoon`` section
+        (with the vehicle parameters it uses under ``vehicle``), not as a list of its
+        vehicles: parsing regenerates exactly the same vehicles (same seed), and the
+        document of a 10,000-vehicle scenario stays a few lines long.
         """
         doc: dict[str, Any] = {
             "name": self.name,
@@ -270,8 +273,17 @@ class Scenario:
             doc["formation"] = {"law": self.formation.law}
             if self.formation.law in ("virtual", "leader_ref"):
                 doc["formation"]["rotate"] = self.formation.rotate
+        listed = self.vehicles
+        if self.platoon is not None:
+            listed = self.vehicles[: len(self.vehicles) - self.platoon.count]
+            made = self.vehicles[len(listed)]
+            for key in ("mass", "v1_max", "v2_max", "max_accel", "motor_accel"):
+                if getattr(made, key) is not None:
+                    doc["vehicle"][key] = getattr(made, key)
+            doc["vehicle"]["gains"] = _plain(made.gains)
+            doc["platoon"] = _plain(self.platoon, skip_none=True)
         doc["vehicles"] = []
-        for v in self.vehicles:
+        for v in listed:
             item = _plain(v, skip_none=True)
             item["gains"] = _plain(v.gains)
             if v.drive.type == "reference":
@@ -871,7 +883,14 @@ def _reference(rd: _Reader, doc: Any, path: str) -> ReferenceSpec | None:
     return ReferenceSpec(**kw)
 
 
-def _drive(rd: _Reader, doc: Any, path: str) -> DriveSpec:
+def _drive(rd: _Reader, doc: Any, path: str) -> DriveSpec | None:
+    """The drive of one vehicle, or None if it has problems (they are recorded)."""
+    before = len(rd.problems)
+    drive = _read_drive(rd, doc, path)
+    return drive if len(rd.problems) == before else None
+
+
+def _read_drive(rd: _Reader, doc: Any, path: str) -> DriveSpec:
     m = rd.mapping(doc, path)
     if m is None:
         return DriveSpec()
@@ -963,11 +982,11 @@ def _vehicles(
                 )
         offset = rd.vector(m, "offset", sub, 2, (0.0, 0.0), length=True)
         color = rd.string(m, "color", sub, PALETTE[i % len(PALETTE)])
-        drive = DriveSpec()
+        drive: DriveSpec | None = DriveSpec()
         if m.get("drive") is not None:
             drive = _drive(rd, m["drive"], f"{sub}.drive")
         p = _vehicle_params(rd, m, sub, params)
-        if pose is None or offset is None or None in pose or name is None:
+        if pose is None or offset is None or None in pose or drive is None:
             continue
         if None in (p["diameter"], p["mass"], p["motor_accel"]):
             continue
@@ -1047,42 +1066,81 @@ def platoon_offsets(spec: PlatoonSpec) -> np.ndarray:
     return np.stack((-(row + 1.0) * s, (col - (cols - 1) / 2.0) * s), -1)
 
 
+def _platoon_frame(
+    formation: FormationSpec | None,
+    leader: VehicleSpec | None,
+    reference: ReferenceSpec | None,
+) -> tuple[float, float, float, float]:
+    """Where a platoon's slots are at t = 0, as its formation law defines them.
+
+    Returns ``(x, y, angle, heading)``: the point the offsets are added to [m], the
+    angle they are turned by [rad], and the heading the vehicles start with [rad]:
+
+    - ``fixed``: the leader, offsets in the world frame (eq. (7));
+    - ``rotating``, ``own_estimate``: the leader, offsets in its frame (eqs. (10),
+      (20));
+    - ``virtual``: the reference's start, offsets in the world frame or, with
+      ``rotate``, turned by the reference's tangent (eqs. (13)-(15));
+    - ``leader_ref``: the leader, offsets like ``virtual`` (eq. (16)).
+
+    Without a leader the reference's start stands in for it (then the origin).
+    Vehicles face the leader's heading, or the reference's tangent under ``virtual``.
+    """
+    ref = reference.build().evaluate(0.0) if reference is not None else None
+    tangent = 0.0
+    if ref is not None:
+        tangent = math.atan2(float(ref[1][1]), float(ref[1][0]))  # eq. (15)
+    if leader is not None:
+        x, y, heading = (float(c) for c in leader.pose)
+    elif ref is not None:
+        x, y, heading = float(ref[0][0]), float(ref[0][1]), tangent
+    else:
+        x, y, heading = 0.0, 0.0, 0.0
+    law = formation.law if formation is not None else None
+    rotate = formation is not None and formation.rotate
+    if law == "virtual" and ref is not None:
+        x, y, heading = float(ref[0][0]), float(ref[0][1]), tangent
+        return x, y, tangent if rotate else 0.0, heading
+    if law == "fixed":
+        return x, y, 0.0, heading
+    if law == "leader_ref":
+        return x, y, tangent if rotate and ref is not None else 0.0, heading
+    return x, y, heading, heading
+
+
 def _expand_platoon(
     spec: PlatoonSpec,
     listed: list[VehicleSpec],
     params: dict[str, Any],
     seed: int,
     reference: ReferenceSpec | None,
+    formation: FormationSpec | None = None,
 ) -> list[VehicleSpec]:
-    """Create the platoon's vehicles, starting on their slots (jittered by ``seed``)."""
+    """Create the platoon's vehicles, starting on their slots (jittered by ``seed``).
+
+    The slots are those the formation law gives at t = 0 (see :func:`_platoon_frame`),
+    so that an unjittered platoon starts in formation. The jitter is uniform in
+    ``[-jitter, jitter]`` on each axis, drawn from ``numpy.random.default_rng(seed)``.
+    """
     leader = next((v for v in listed if v.leader), None)
-    if leader is not None:
-        x, y, th = leader.pose
-    elif reference is not None:
-        p, dp, _ = reference.build().evaluate(0.0)
-        x, y, th = (
-            float(p[0]),
-            float(p[1]),
-            math.atan2(dp[1], dp[0]) if np.any(dp) else 0.0,
-        )
-    else:
-        x, y, th = 0.0, 0.0, 0.0
+    x, y, angle, heading = _platoon_frame(formation, leader, reference)
     delta = platoon_offsets(spec)
-    c, s = math.cos(th), math.sin(th)
+    c, s = math.cos(angle), math.sin(angle)
     world = np.stack(
         (c * delta[:, 0] - s * delta[:, 1], s * delta[:, 0] + c * delta[:, 1]), -1
-    )
+    )  # eqs. (11), (14)
     rng = np.random.default_rng(seed)
     jitter = rng.uniform(-spec.jitter, spec.jitter, size=(spec.count, 2))
-    start = np.array([x, y]) + world + jitter
+    start = (np.array([x, y]) + world + jitter).tolist()
+    offsets = delta.tolist()
     out = []
     for i in range(spec.count):
-        pose = (float(start[i, 0]), float(start[i, 1]), th)
-        offset = (float(delta[i, 0]), float(delta[i, 1]))
+        pose = (start[i][0], start[i][1], heading)
         color = PALETTE[(len(listed) + i) % len(PALETTE)]
         out.append(
             _make_vehicle(
-                f"{spec.prefix}{i}", pose, offset, False, color, DriveSpec(), params
+                f"{spec.prefix}{i}", pose, tuple(offsets[i]), False, color, DriveSpec(),
+                params,
             )
         )
     return out
@@ -1297,7 +1355,7 @@ def parse_scenario(
     """
     rd = _Reader(lines or {})
     rd.problems.extend(problems or [])
-    first_line = 1 if lines is not None else None
+    first_line = (lines or {}).get("", 1) if lines is not None else None
     if doc is None:
         raise ScenarioError(
             [
@@ -1425,7 +1483,7 @@ def parse_scenario(
                 )
             else:
                 made = _expand_platoon(
-                    platoon, [v for _, v in listed], params, seed, reference
+                    platoon, [v for _, v in listed], params, seed, reference, formation
                 )
                 generated = [("platoon", v) for v in made]
     recovery = _recovery(rd, doc.get("recovery"), "recovery")
@@ -1903,6 +1961,9 @@ def _yaml_problem(exc: yaml.YAMLError, text: str) -> Problem:
     """One problem for a YAML syntax error, with its line and the text found there."""
     mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
     what = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+    context = getattr(exc, "context", None)
+    if context:
+        what = f"{context}, {what}"
     if isinstance(exc, yaml.reader.ReaderError):
         line = text.count("\n", 0, exc.position) + 1
         got, what = f"character {ord(exc.character):#x} at line {line}", "not text"
