@@ -121,7 +121,8 @@ def test_scenario_yaml_validates_and_reruns_identically(tmp_path: Path) -> None:
     assert main(["validate", str(resolved)]) == 0
     doc = yaml.safe_load(resolved.read_text(encoding="utf-8"))
     assert doc["duration"] == 3.0 and doc["failures"][1]["until"] == 2.5
-    assert "platoon" not in doc and len(doc["vehicles"]) == 8  # expanded and listed
+    # the listed vehicles, and the platoon that regenerates the same four (same seed)
+    assert len(doc["vehicles"]) == 4 and doc["platoon"]["count"] == 4
     assert main(["run", str(resolved), "--out", str(second)]) == 0
     for name in ("trajectory.csv", "metrics.json"):
         assert (first / name).read_bytes() == (second / name).read_bytes()
