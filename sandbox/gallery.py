@@ -1,0 +1,67 @@
+"""The gallery: every bundled scenario of given folders run and rendered to a GIF.
+
+``sandbox gallery`` (default folders ``scenarios/paper`` and ``scenarios/failures``,
+output ``renders/``) makes the GIFs committed in ``renders/`` and shown in the README.
+A GIF over the size budget is rendered again smaller (fewer pixels, then fewer frames per
+second) until it fits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from sandbox.render import write_gif
+from sandbox.scenario import load_scenario
+from sandbox.simulation import Simulation
+
+#: Largest GIF the gallery keeps [bytes].
+MAX_GIF_BYTES = 3_000_000
+#: ``(size [px], fps)`` tried in turn until a GIF fits the budget.
+ATTEMPTS = ((560, 25.0), (480, 20.0), (400, 15.0), (320, 10.0))
+
+
+def scenario_files(folders: list[Path]) -> list[Path]:
+    """The ``.yaml`` files directly in each folder, sorted by name."""
+    files: list[Path] = []
+    for folder in folders:
+        files += sorted(Path(folder).glob("*.yaml"))
+    return files
+
+
+def render_gallery(
+    folders: list[Path],
+    out_dir: Path,
+    *,
+    zones: bool = False,
+    log: Callable[[str], None] = print,
+) -> list[dict]:
+    """Run every scenario of ``folders`` and write ``out_dir/<scenario file stem>.gif``.
+
+    Returns one record per GIF: ``{"scenario", "path", "bytes", "size", "fps",
+    "frames"}``. Raises :class:`~sandbox.errors.ScenarioError` on an invalid file.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    records = []
+    for path in scenario_files(folders):
+        scenario = load_scenario(path)
+        run = Simulation(scenario).run()
+        target = out_dir / f"{path.stem}.gif"
+        for size, fps in ATTEMPTS:
+            info = write_gif(run, target, fps=fps, size=size, zones=zones)
+            nbytes = target.stat().st_size
+            if nbytes <= MAX_GIF_BYTES:
+                break
+        record = {
+            "scenario": str(path),
+            "path": str(target),
+            "bytes": nbytes,
+            "size": size,
+            "fps": fps,
+            "frames": info["frames"],
+        }
+        log(f"{target}: {nbytes / 1e6:.2f} MB, {size} px, {fps:g} fps, "
+            f"{info['frames']} frames ({run.status}, {len(run.events)} collisions)")
+        records.append(record)
+    return records
