@@ -349,20 +349,25 @@ def test_leader_ref_follows_a_drifting_leader_poorly() -> None:
     schedule = sc.vehicles[0].drive.schedule
     drift = schedule[1][0]  # the time the leader's steering goes straight [s]
     assert schedule[1][2] == 0.0 and schedule[0][1:] == (1.0, 0.2)
-    duration = drift + 12.0
-    run, metrics = run_scenario(path, duration=duration)
-    rot_run, _ = run_scenario(path, "formation={law: rotating}", duration=duration)
+    assert sc.duration >= drift + 20.0
+    run, metrics = run_scenario(path)  # the whole file: 25 s of drift
+    rot_run, _ = run_scenario(path, "formation={law: rotating}", duration=drift + 12.0)
 
     # the leader first follows the reference (within a centimetre), then leaves it
     gap = np.hypot(*(run.pose[:, 0, :2] - run.reference).T)
     assert gap[window(run, 0.0, drift)].max() < 0.01
     assert gap[-1] > 5.0
 
-    before, after = window(run, drift - 10.0, drift), window(run, drift + 5.0)
+    def rms(r: Run, i: int, start: float, stop: float) -> float:
+        return float(
+            np.sqrt(np.mean(r.formation_error[window(r, start, stop), i] ** 2))
+        )
+
     e = run.formation_error
+    after = window(run, drift + 5.0, drift + 12.0)
     for i in followers(run):
-        rms_before = float(np.sqrt(np.mean(e[before, i] ** 2)))
-        rms_after = float(np.sqrt(np.mean(e[after, i] ** 2)))
+        rms_before = rms(run, i, drift - 10.0, drift)
+        rms_after = rms(run, i, drift + 5.0, drift + 12.0)
         # on the circle: eq. (12)'s few centimetres; once the leader drifts: several
         # times more (measured about 0.30-0.35 m RMS, peaks above 0.35 m)
         assert rms_before < 0.07
@@ -370,7 +375,15 @@ def test_leader_ref_follows_a_drifting_leader_poorly() -> None:
         assert e[after, i].max() > 0.3
         # the rotating law, which estimates the leader's motion, follows the same
         # drifting leader well: leader_ref is at least ten times worse
-        rms_rot = float(np.sqrt(np.mean(rot_run.formation_error[after, i] ** 2)))
-        assert rms_after > 10.0 * rms_rot
+        assert rms_after > 10.0 * rms(rot_run, i, drift + 5.0, drift + 12.0)
+        # "the cyclic behaviors are due to the circular reference trajectory": the
+        # mismatch |x_L' - x_ref'| = 2 V sin(w tau / 2) peaks half a lap of the
+        # reference after the drift (pi Rc / V = 15.7 s), and the error with it, then
+        # falls again
+        lap = 2 * np.pi * sc.reference.radius / sc.reference.speed
+        drifting = window(run, drift)
+        peak = run.t[drifting][np.argmax(e[drifting, i])]
+        assert drift + 0.35 * lap < peak < drift + 0.65 * lap
+        assert e[-1, i] < 0.7 * e[drifting, i].max()
     # no collision: the followers stay off the leader, just not where they should
     assert metrics["collisions"]["total"] == 0
