@@ -57,3 +57,17 @@ def run_scenario(
 def window(run: Run, start: float, stop: float = np.inf) -> np.ndarray:
     """Boolean mask of the recorded samples with ``start <= t < stop`` [s]."""
     return (run.t >= start) & (run.t < stop)
+
+
+def collisions(
+    source: str | Path | Mapping[str, Any], *sets: str, **fields: Any
+) -> dict[str, Any]:
+    """Run a scenario (as :func:`run_scenario`) and return its ``collisions`` metrics.
+
+    Keys ``total``, ``vehicle_vehicle``, ``vehicle_obstacle``, ``healthy`` (episodes
+    among vehicles without an active failure) and ``events``:
+
+    >>> assert collisions(PAPER / "fig12_no_recovery.yaml")["total"] > 0
+    >>> assert collisions(PAPER / "fig14_discontinuous_beta5.yaml")["total"] == 0
+    """
+    return run_scenario(source, *sets, **fields)[1]["collisions"]

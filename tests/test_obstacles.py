@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from helpers import PAPER, collisions
 
 from sandbox import load_scenario, simulate
 from sandbox.metrics import compute_metrics
@@ -202,3 +203,8 @@ def test_nearest_matches_the_physics_for_every_type():
             if q.shape is None or q.shape.body is not world.space.static_body:
                 continue
             assert d == pytest.approx(q.distance, abs=1e-6), (spec.type, p)
+
+
+def test_the_collision_helper_asserts_a_count_in_two_lines():
+    assert collisions(PAPER / "fig12_no_recovery.yaml", duration=4)["total"] >= 2
+    assert collisions(PAPER / "fig14_discontinuous_beta5.yaml")["total"] == 0
