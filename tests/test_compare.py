@@ -1,0 +1,97 @@
+"""``sandbox compare``: one row per scenario and recovery setting, deterministic."""
+
+from __future__ import annotations
+
+import csv
+import io
+
+import pytest
+from helpers import PAPER, SCENARIOS, run_scenario
+
+from sandbox.cli import main
+from sandbox.compare import cases, compare, format_table
+
+FIG13 = PAPER / "fig13_discontinuous_beta1.yaml"
+STOP = SCENARIOS / "failures" / "follower_stop.yaml"
+SHORT = ("duration=5",)
+
+
+def test_rows_are_the_runs_metrics():
+    rows = compare([FIG13, STOP], ["none", "continuous"], ["hold"], SHORT)
+    assert [(r.scenario, r.strategy, r.derivatives) for r in rows] == [
+        ("fig13_discontinuous_beta1", "none", "hold"),
+        ("fig13_discontinuous_beta1", "continuous", "hold"),
+        ("follower_stop", "none", "hold"),
+        ("follower_stop", "continuous", "hold"),
+    ]
+    for row, path in zip(rows, [FIG13, FIG13, STOP, STOP], strict=True):
+        _, m = run_scenario(path, *SHORT, f"recovery.strategy={row.strategy}")
+        assert row.collisions_total == m["collisions"]["total"]
+        assert row.collisions_healthy == m["collisions"]["healthy"]
+        assert row.min_distance == m["min_distance"]
+        vehicles = m["vehicles"]
+        assert row.mode_switches == sum(v["mode_switches"] for v in vehicles.values())
+        assert row.control_effort == pytest.approx(
+            sum(v["control_effort"] for v in vehicles.values())
+        )
+        assert row.converged == m["converged"]
+        # the latest settling over the healthy vehicles: red, failed, is left out
+        healthy = [v for v in vehicles.values() if v["failed_at"] is None]
+        settle = [v["settling_time"] for v in healthy]
+        assert row.settling_time == (None if None in settle else max(settle))
+    # without recovery orange hits the stopped red: a collision, but not a healthy one
+    assert rows[2].collisions_total > 0 and rows[2].collisions_healthy == 0
+
+
+def test_none_runs_once_and_estimate_differs_from_hold():
+    assert cases(["none", "smooth"], ["hold", "estimate"]) == [
+        ("none", "hold"),
+        ("smooth", "hold"),
+        ("smooth", "estimate"),
+    ]
+    rows = compare([FIG13], ["discontinuous"], ["hold", "estimate"], SHORT)
+    assert [r.derivatives for r in rows] == ["hold", "estimate"]
+    assert rows[0] != rows[1]
+
+
+def test_deterministic_in_one_or_two_processes():
+    args = ([FIG13], ["none", "smooth"], ["hold"], SHORT)
+    one = format_table(compare(*args), "csv")
+    assert one == format_table(compare(*args), "csv")
+    assert one == format_table(compare(*args, jobs=2), "csv")
+
+
+def test_markdown_and_csv_tables():
+    rows = compare([FIG13], ["none", "discontinuous"], ["hold"], SHORT)
+    md = format_table(rows).splitlines()
+    assert md[0].startswith("| scenario ") and "collisions healthy" in md[0]
+    assert set(md[1]) <= {"|", "-", ":", " "}
+    assert len(md) == 2 + len(rows)
+    parsed = list(csv.DictReader(io.StringIO(format_table(rows, "csv"))))
+    assert [r["strategy"] for r in parsed] == ["none", "discontinuous"]
+    assert parsed[0]["converged"] in ("yes", "no")
+    assert int(parsed[0]["collisions_total"]) == rows[0].collisions_total
+    with pytest.raises(ValueError, match="unknown format"):
+        format_table(rows, "html")
+
+
+def test_cli(capsys):
+    argv = ["compare", str(FIG13), "--strategies", "none,continuous", "--format", "csv"]
+    assert main([*argv, "--set", "duration=3"]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert lines[0].startswith("scenario,strategy,derivatives,collisions_healthy")
+    assert len(lines) == 3
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--strategies", "none,fast"], "unknown strategy 'fast'"),
+        (["--derivatives", "guess"], "unknown target_derivatives 'guess'"),
+        (["--set", "recovery.bta=2"], "did you mean 'beta'?"),
+    ],
+)
+def test_cli_rejects_bad_input_before_running(capsys, extra, message):
+    assert main(["compare", str(FIG13), *extra]) == 2
+    assert message in capsys.readouterr().err
