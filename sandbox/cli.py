@@ -307,7 +307,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("compare", help="compare recovery strategies on scenario files")
     p.add_argument("files", nargs="+", help="scenario YAML files")
     p.add_argument("--strategies", default="none,discontinuous,continuous,smooth",
-                   help="comma-separated strategies (default: all four)")
+                   help="comma-separated strategies, or file for each file's own "
+                        "(default: all four)")
     p.add_argument("--derivatives", default="hold",
                    help="comma-separated target_derivatives modes: hold, estimate "
                         "(default hold)")

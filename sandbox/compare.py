@@ -15,9 +15,12 @@ apply to every run), and prints one row per run:
 - ``converged``: every healthy vehicle settled (``yes``/``no``), or the run's status
   when it did not finish (``diverged``).
 
-With strategy ``none`` the shift is zero, and so are its estimated derivatives: that
-strategy is run once, with ``hold``. Runs are independent and deterministic; with
-``jobs > 1`` they are spread over worker processes and the rows keep the same order.
+The strategy name ``file`` keeps each file's own recovery section (``sandbox compare
+scenarios/paper/fig1*.yaml --strategies file`` tabulates the section-4 figures as
+written). With strategy ``none`` the shift is zero, and so are its estimated
+derivatives: that strategy is run once, with ``hold``. Runs are independent and
+deterministic; with ``jobs > 1`` they are spread over worker processes and the rows keep
+the same order.
 """
 
 from __future__ import annotations
@@ -35,6 +38,8 @@ from sandbox.scenario import STRATEGIES, TARGET_DERIVATIVES, Scenario, load_scen
 from sandbox.simulation import simulate
 
 FORMATS = ("markdown", "csv")
+#: The ``strategies`` entry that keeps each scenario file's own recovery strategy.
+FILE_STRATEGY = "file"
 
 
 @dataclass(frozen=True)
@@ -125,6 +130,7 @@ def run_case(
 ) -> Row:
     """Run one scenario file under one recovery setting and summarize it."""
     scenario = _load(path, strategy, derivatives, overrides)
+    strategy = scenario.recovery.strategy
     run = simulate(scenario)
     healthy = [
         n for i, n in enumerate(run.names) if len(run.t) and not run.failed[-1, i]
@@ -137,11 +143,9 @@ def run_case(
 def _load(
     path: str, strategy: str, derivatives: str, overrides: Sequence[str]
 ) -> Scenario:
-    sets = [
-        *overrides,
-        f"recovery.strategy={strategy}",
-        f"recovery.target_derivatives={derivatives}",
-    ]
+    sets = [*overrides, f"recovery.target_derivatives={derivatives}"]
+    if strategy != FILE_STRATEGY:
+        sets.append(f"recovery.strategy={strategy}")
     return load_scenario(path, overrides=sets)
 
 
@@ -179,7 +183,7 @@ def compare(
         A file (with the overrides) is not a valid scenario; checked before any run.
     """
     for name, valid, kind in (
-        (strategies, STRATEGIES, "strategy"),
+        (strategies, (*STRATEGIES, FILE_STRATEGY), "strategy"),
         (derivatives, TARGET_DERIVATIVES, "target_derivatives"),
     ):
         bad = [s for s in name if s not in valid]
@@ -191,7 +195,10 @@ def compare(
     todo = []
     for path in paths:
         for strategy, deriv in cases(strategies, derivatives):
-            _load(str(path), strategy, deriv, overrides)  # validate everything first
+            # validate everything before the first run
+            scenario = _load(str(path), strategy, deriv, overrides)
+            if scenario.recovery.strategy == "none" and deriv != "hold":
+                continue
             todo.append((str(path), strategy, deriv, tuple(overrides)))
     if jobs <= 1 or len(todo) <= 1:
         return [_run_case_args(args) for args in todo]

@@ -95,3 +95,19 @@ def test_cli(capsys):
 def test_cli_rejects_bad_input_before_running(capsys, extra, message):
     assert main(["compare", str(FIG13), *extra]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_file_strategy_keeps_each_files_recovery():
+    fig12 = PAPER / "fig12_no_recovery.yaml"
+    fig15 = PAPER / "fig15_continuous_beta5.yaml"
+    rows = compare([fig12, fig15], ["file"], ["hold", "estimate"], SHORT)
+    # fig12 has no recovery: run once, with hold
+    assert [(r.scenario, r.strategy, r.derivatives) for r in rows] == [
+        ("fig12_no_recovery", "none", "hold"),
+        ("fig15_continuous_beta5", "continuous", "hold"),
+        ("fig15_continuous_beta5", "continuous", "estimate"),
+    ]
+    _, m = run_scenario(fig15, *SHORT)
+    assert rows[1].control_effort == pytest.approx(
+        sum(v["control_effort"] for v in m["vehicles"].values())
+    )
