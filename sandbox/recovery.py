@@ -12,7 +12,32 @@ distance (eq. (25)). Strategies differ only in the weight ``alpha(dist)``:
 - ``discontinuous`` (4.1): 1 inside R, 0 outside (a switch);
 - ``continuous`` (4.2, eq. (27)): 1 inside r, a linear ramp from 1 to 0 between r and R;
 - ``smooth`` (the conclusion's proposal): a hyperbolic-tangent transition between r and R,
-  scaled to equal exactly 1 at r and 0 at R.
+  scaled to equal exactly 1 at r and 0 at R. It is continuous, not differentiable, at r
+  and R: its slope there is ``s (1 - tanh(s)^2) / tanh(s)`` times the ramp's (0.15 for
+  the default steepness s = 2), so the mode changes more gently than with the ramp.
+
+Derivatives fed to eq. (6) with the shifted target (``recovery.target_derivatives``):
+
+- ``hold`` (section 4.1): the law's own ``x_ref'``, ``x_ref''``, unchanged ("with all
+  the other derivatives being unchanged"); only the position term sees the shift;
+- ``estimate`` (the conclusion's second proposal): the backward-Euler estimates
+  (eqs. (8)-(9)) of the shift's first and second derivatives are added to the law's.
+  The differences are linear, so for a law that estimates its slot's motion
+  (``own_estimate``, eqs. (18)-(19)) this is exactly the estimate of the shifted target
+  ``slot + shift`` itself; for ``fixed`` (a constant offset) and unrotated ``virtual``
+  it differs only in using the exact instead of the estimated motion of the slot; for
+  ``rotating``, ``leader_ref`` and rotated ``virtual`` it keeps those laws' own
+  approximation (the leader's or the reference's derivatives for every slot, eq. (12))
+  and adds what recovery changes.
+
+  Two caveats. A switch (``discontinuous``) makes the shift jump, so its estimated
+  derivatives are impulses (a 0.67 m jump reads as 67 m/s, then +-6700 m/s^2). And the
+  shift depends on the vehicle's own position x: its estimated acceleration feeds the
+  vehicle's own acceleration back, one and two periods late, with the gain
+  ``J = d shift / d x`` (``beta / dist^2`` for the switch, more with the slope of the
+  ramp or of the tanh). To leading order in h the loop's extra poles are the roots of
+  ``z^2 = J``: for ``|J| > 1`` it oscillates at the control rate, growing until the
+  limits bound it, and v2 chatters between its limits when the vehicle is slow.
 
 Obstacles are the other vehicles (centre-to-centre distance) and the static obstacles
 (distance from the vehicle centre to the nearest surface point, pushing away from it).
