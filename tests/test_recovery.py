@@ -277,3 +277,36 @@ def test_estimated_target_derivatives_act_when_avoiding():
     est = simulate(load_scenario(doc))
     assert (est.mode == MODE_AVOID).any()
     assert np.max(np.abs(hold.pose - est.pose)) > 1e-3
+
+
+def lone_vehicle_past_a_post(beta: float) -> dict:
+    """A vehicle without limits on a line, a post beside it, avoiding with estimate."""
+    return {
+        "duration": 10.0,
+        "reference": {"type": "line", "start": [0, 0], "heading": 0, "speed": 1.0},
+        "vehicles": [{"name": "car", "pose": [0, 0, 0], "leader": True}],
+        "vehicle": {"diameter": 0.5},
+        "recovery": {
+            "strategy": "continuous",
+            "beta": beta,
+            "R": "3d",
+            "leader_avoids": True,
+            "target_derivatives": "estimate",
+        },
+        "obstacles": [{"type": "circle", "center": [5, 0.8], "radius": 0.2}],
+    }
+
+
+def test_estimated_shift_derivatives_destabilize_a_steep_shift():
+    # The shift depends on the vehicle's own position: its estimated acceleration feeds
+    # the vehicle's acceleration back with the gain J = d shift / d x. A gentle push
+    # (beta = 0.3) passes the post smoothly; a steep one (beta = 2.5, |J| > 1 within
+    # the safe zone) oscillates at the control rate: without limits the extension
+    # states reach hundreds of m/s.
+    gentle = simulate(load_scenario(lone_vehicle_past_a_post(0.3)))
+    steep = simulate(load_scenario(lone_vehicle_past_a_post(2.5)))
+    assert np.abs(gentle.chi).max() < 2.0
+    assert np.abs(steep.chi).max() > 50.0
+    with_hold = lone_vehicle_past_a_post(2.5)
+    with_hold["recovery"]["target_derivatives"] = "hold"
+    assert np.abs(simulate(load_scenario(with_hold)).chi).max() < 5.0
