@@ -33,6 +33,8 @@ from sandbox.scenario import (
     MAX_SUBSTEPS,
     MAX_VEHICLES,
     METRICS_KEYS,
+    MIN_DIAMETER,
+    MIN_MASS,
     OBSTACLE_KEYS,
     OBSTACLE_TYPES,
     PLATOON_KEYS,
@@ -251,12 +253,12 @@ FIELDS: dict[str, dict[str, Field]] = {
     },
     "vehicle": {
         "diameter": Field(
-            _positive,
+            lambda: _number(MIN_DIAMETER),
             "Vehicle diameter d (vehicles are discs); the unit of '3d' lengths",
             "m",
             0.5,
         ),
-        "mass": Field(_positive, "Vehicle mass", "kg", 10.0),
+        "mass": Field(lambda: _number(MIN_MASS), "Vehicle mass", "kg", 10.0),
         "gains": Field(
             lambda: _ref("gains"),
             "Flatness controller gains, eqs. (4)-(6) (default: the report's)",
