@@ -157,7 +157,9 @@ class _Timers:
         setattr(owner, attr, timed)
 
 
-def profile_phases(n: int, steps: int) -> list[tuple[str, float, str]]:
+def profile_phases(
+    n: int, steps: int, path: str | None = None
+) -> tuple[list[tuple[str, float, str]], list[tuple[str, float, str]]]:
     """Where the time of one run goes: ``(phase, seconds, note)`` rows.
 
     Wraps the functions the simulation loop calls with timers (about 1 us per call, far
@@ -185,7 +187,11 @@ def profile_phases(n: int, steps: int) -> list[tuple[str, float, str]]:
     timers.wrap(FailureSchedule, "apply", "failures")
     timers.wrap(simulation, "_diverged", "divergence check")
     timers.wrap(Recorder, "append", f"recording (every {RECORD_EVERY} steps)")
-    scenario = load_scenario(scenario_doc(n, steps))
+    if path is None:
+        scenario = load_scenario(scenario_doc(n, steps))
+    else:
+        scenario = load_scenario(path, overrides=[f"duration={steps * DT}"])
+        n = len(scenario.vehicles)
     sim = Simulation(scenario)
     run = sim.run()
     loop = float(run.info["wall_time"])
@@ -293,6 +299,7 @@ def main(argv: list[str] | None = None) -> int:
         metavar="N",
         help="print where the time goes for N vehicles, then exit",
     )
+    parser.add_argument("--scenario", help="with --profile: profile this file instead")
     parser.add_argument("--row", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--steps", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--repeats", type=int, help=argparse.SUPPRESS)
@@ -302,7 +309,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.profile is not None:
         n = args.profile
         steps = args.steps or default_steps(n)
-        rows, after = profile_phases(n, steps)
+        rows, after = profile_phases(n, steps, args.scenario)
         loop = rows[-1][1]
         print(f"where the time goes, N = {n:,}, {steps} control steps")
         print(f"| {'phase':<40} | {'ms/step':>8} | {'% of loop':>9} |")
