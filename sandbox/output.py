@@ -2,9 +2,11 @@
 
 A run directory holds ``trajectory.csv``, ``metrics.json``, ``scenario.yaml`` (the
 resolved scenario, runnable again) and ``run.npz`` (the recorded arrays, for ``sandbox
-render`` and ``sandbox plot``). The whole directory is built under a temporary name beside
-the target and then renamed into place, so a killed run never leaves a truncated file that
-looks complete, and re-running into a directory replaces the earlier run as a whole.
+render`` and ``sandbox plot``). The whole directory is built under a temporary name
+beside the target and then takes its place (see :func:`write_run_dir`), so a killed run
+never leaves a truncated file that looks complete, and re-running into a directory
+replaces the earlier run as a whole. A directory that does not hold a run is never
+replaced.
 """
 
 from __future__ import annotations
@@ -207,7 +209,11 @@ def _swap_into_place(tmp: Path, out_dir: Path) -> None:
                                 dir=out_dir.parent))
     os.rmdir(old)
     os.replace(out_dir, old)
-    os.replace(tmp, out_dir)
+    try:
+        os.replace(tmp, out_dir)
+    except BaseException:
+        os.replace(old, out_dir)  # put the earlier run back
+        raise
     shutil.rmtree(old, ignore_errors=True)
 
 
@@ -251,6 +257,8 @@ def load_run_dir(run_dir: Path) -> Run:
     if (run_dir / "scenario.yaml").is_file():
         scenario = load_scenario(run_dir / "scenario.yaml")
     try:
-        return Run.load_npz(npz, scenario)
+        # An open file we own: numpy leaves its own file open when the zip is damaged.
+        with open(npz, "rb") as fh:
+            return Run.load_npz(fh, scenario)
     except _DAMAGED as exc:
         raise OutputError(f"{npz}: damaged, cannot be read ({exc})") from None
