@@ -5,8 +5,11 @@ really applies. Kinds:
 
 - ``stuck_steering``: v2 frozen (at its value at onset, or the given ``v2``); v1 still
   controlled;
-- ``stop``: motors stop, v1 = v2 = 0: the vehicle brakes, and can still be shoved by a
-  contact stronger than its motor;
+- ``stop``: motors stop, v1 = v2 = 0: the vehicle brakes with its motor's force
+  (mass x ``motor_accel``, not the controller's ``max_accel``), and can still be shoved
+  by a contact stronger than that (measured: a pusher with twice the motor force moves
+  it at the pusher's own speed, one with an equal force at about half of it, one with
+  half the force not at all);
 - ``spin``: v1 = 0, v2 = the given rate (default 1 rad/s);
 - ``uncontrolled``: constant commands ``v1``, ``v2`` (default 0);
 - ``crash``: the vehicle is wrecked: it stops at once and becomes immovable (permanent).
