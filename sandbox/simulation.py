@@ -99,20 +99,38 @@ class Simulation:
         }
         self._track_rows = np.flatnonzero(self.tracks_reference)
         self._commanded_rows = np.flatnonzero(self.fleet.commanded)
+        # Every time at which some schedule changes row, and the rows in force now.
+        self._schedule_rows = np.array(list(self._schedules), dtype=np.intp)
+        self._schedule_changes = np.unique(
+            np.concatenate([tab[:, 0] for tab in self._schedules.values()] or [[]])
+        )
+        self._scheduled = np.zeros((len(self._schedules), 2))
+        self._next_change = 0
         # Parameters shared by the whole fleet are used as scalars on the hot path (the
         # same values, broadcast, without streaming (n,) arrays through every step).
         fl = self.fleet
-        self._gains = Gains(**{k: _uniform(getattr(fl.gains, k))
-                               for k in ("k1", "k2", "k3", "k4", "kp")})
+        keys = ("k1", "k2", "k3", "k4", "kp")
+        self._gains = Gains(**{k: _uniform(getattr(fl.gains, k)) for k in keys})
         self._v1_max = _uniform(fl.v1_max)
         self._v2_max = _uniform(fl.v2_max)
         self._accel_max = _uniform(fl.accel_max)
 
     # ------------------------------------------------------------------ helpers
     def _scheduled_commands(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
-        for i, table in self._schedules.items():
-            row = np.searchsorted(table[:, 0], t + 1e-12, side="right") - 1
-            v1[i], v2[i] = (table[row, 1], table[row, 2]) if row >= 0 else (0.0, 0.0)
+        """Overwrite the open-loop vehicles' commands with their schedules at ``t``.
+
+        A row ``(t_k, v1, v2)`` holds from ``t_k`` until the next row (zero before the
+        first). The rows in force are looked up only when ``t`` passes a row time of
+        some schedule, so a step costs two array writes however many such vehicles.
+        """
+        changes, now = self._schedule_changes, t + 1e-12
+        if self._next_change < len(changes) and changes[self._next_change] <= now:
+            self._next_change = int(np.searchsorted(changes, now, side="right"))
+            for k, table in enumerate(self._schedules.values()):
+                row = np.searchsorted(table[:, 0], now, side="right") - 1
+                self._scheduled[k] = (table[row, 1], table[row, 2]) if row >= 0 else 0.0
+        v1[self._schedule_rows] = self._scheduled[:, 0]
+        v2[self._schedule_rows] = self._scheduled[:, 1]
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
         """Slots, reference point and the law's ``x_ref'``, ``x_ref''`` at time ``t``."""
