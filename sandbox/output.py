@@ -122,7 +122,7 @@ def write_run_dir(run: Run, metrics: dict[str, Any], out_dir: Path) -> Path:
         os.chmod(tmp, 0o777 & ~_umask())
     except OSError as exc:
         raise OutputError(
-            f"{out_dir}: cannot create the output directory ({exc})"
+            f"{out_dir}: cannot create the output directory ({exc.strerror or exc})"
         ) from None
     try:
         write_csv(run, tmp / "trajectory.csv")
@@ -134,7 +134,8 @@ def write_run_dir(run: Run, metrics: dict[str, Any], out_dir: Path) -> Path:
         _swap_into_place(tmp, out_dir)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise OutputError(f"{out_dir}: cannot write the run ({exc})") from None
+        reason = exc.strerror or exc
+        raise OutputError(f"{out_dir}: cannot write the run ({reason})") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -1939,6 +1939,10 @@ def _apply_override(rd: _Reader, doc: dict[Any, Any], item: str) -> str | None:
             target[tok] = value
         else:
             if target.get(tok) is None:
+                if tokens[k + 1].startswith("["):
+                    rd.fail(where, "names no field", f"no list at {tok}",
+                            f"an existing item of {tok}, or --set {tok}=[...]")
+                    return None
                 target[tok] = {}
             target = target[tok]
     return path
