@@ -261,6 +261,11 @@ def test_exponential_aliases_stay_cheap(tmp_path: Path) -> None:
             "PATH=VALUE, e.g. recovery.beta=2.5)",
         ),
         ("a..b=1", "--set a..b=1: names no field (got 'a..b'; expected a dotted path"),
+        (
+            "failures[0].at=1",
+            "--set failures[0].at=1: names no field (got no list at failures; expected "
+            "an existing item of failures, or --set failures=[...])",
+        ),
     ],
 )
 def test_set_naming_no_field(
