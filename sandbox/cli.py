@@ -89,7 +89,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         metrics = compute_metrics(run)
         write_run_dir(run, metrics, out_dir)
     _print_summary(scenario.name, metrics, out_dir)
-    if args.gif and run.status != STATUS_INTERRUPTED:
+    if args.gif and run.status == STATUS_INTERRUPTED:
+        print(f"gif: skipped, the run was interrupted (sandbox render {out_dir} --gif "
+              f"{args.gif} renders what was simulated)", file=sys.stderr)
+    elif args.gif:
         _gif(run, args)
     if run.status == STATUS_DIVERGED:
         d = metrics.get("diverged", {})
