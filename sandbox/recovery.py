@@ -156,6 +156,8 @@ class NeighbourList:
         self.rebuilds = 0
         self._anchor: np.ndarray | None = None
         self._i = self._j = np.zeros(0, dtype=np.intp)
+        self._obstacle_anchor: np.ndarray | None = None
+        self._rows = self._cols = np.zeros(0, dtype=np.intp)
 
     def pairs(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Sorted index pairs ``(i, j)``, ``i < j``, of vehicles closer than ``radius``.
@@ -185,6 +187,34 @@ class NeighbourList:
         d2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
         keep = np.flatnonzero(d2 < self.radius * self.radius)
         return self._i.take(keep), self._j.take(keep), np.take(rel, keep, axis=0)
+
+    def obstacle_pairs(
+        self, pos: np.ndarray, field: ObstacleField
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate ``(vehicle, obstacle)`` pairs: all obstacles closer than radius.
+
+        The pairs whose obstacle's bounding circle is within ``radius + skin``, kept
+        until some vehicle has moved more than ``skin / 2``: a vehicle now closer than
+        ``radius`` to an obstacle's surface is within ``radius`` of its bounding circle,
+        so it was within ``radius + skin / 2`` when the pairs were made. Sorted by
+        vehicle, then obstacle (the column order of :meth:`ObstacleField.nearest`).
+
+        Parameters
+        ----------
+        pos : ndarray, shape (n, 2) [m]
+        field : ObstacleField
+            The same field at every call.
+        """
+        anchor = self._obstacle_anchor
+        rebuild = anchor is None or len(anchor) != len(pos)
+        if not rebuild:
+            moved = pos - anchor
+            worst = float(np.max(moved[:, 0] * moved[:, 0] + moved[:, 1] * moved[:, 1]))
+            rebuild = not worst <= 0.25 * self.skin * self.skin
+        if rebuild:
+            self._rows, self._cols = field.candidates(pos, self.radius + self.skin)
+            self._obstacle_anchor = pos.copy()
+        return self._rows, self._cols
 
     def _rebuild(self, pos: np.ndarray) -> None:
         n = len(pos)
@@ -218,6 +248,123 @@ class ObstacleField:
             np.array(o.outline(), dtype=float) for o in obstacles if o.type in ("box", "polygon")
         ]
         self.empty = not obstacles
+        # Per column of nearest() (circles, walls, polygons): kind, index in its kind
+        # and bounding circle; polygons padded to one vertex count by repeating their
+        # last vertex (a zero-length edge changes neither the nearest point nor the
+        # inside test).
+        nc, nw = len(self.circle_radius), len(self.wall_radius)
+        npoly = len(self.polygons)
+        self.kind = np.repeat(np.arange(3), (nc, nw, npoly))
+        self.index = np.concatenate((np.arange(nc), np.arange(nw), np.arange(npoly)))
+        size = max((len(q) for q in self.polygons), default=1)
+        self.poly = np.zeros((npoly, size, 2))
+        for k, q in enumerate(self.polygons):
+            self.poly[k, : len(q)] = q
+            self.poly[k, len(q) :] = q[-1]
+        poly_center = np.array([q.mean(axis=0) for q in self.polygons]).reshape(-1, 2)
+        poly_reach = [
+            float(np.hypot(*(q - c).T).max())
+            for q, c in zip(self.polygons, poly_center, strict=True)
+        ]
+        self.bound_center = np.concatenate(
+            (self.circle_center, 0.5 * (self.wall_a + self.wall_b), poly_center)
+        )
+        self.bound_radius = np.concatenate(
+            (
+                self.circle_radius,
+                0.5 * np.hypot(*(self.wall_b - self.wall_a).T) + self.wall_radius,
+                np.array(poly_reach, dtype=float),
+            )
+        )
+
+    def candidates(
+        self, pos: np.ndarray, reach: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(vehicle, obstacle)`` pairs whose bounding circle is closer than ``reach``.
+
+        Every vehicle closer than ``reach`` to an obstacle's surface is among them.
+        Sorted by vehicle, then obstacle; vehicles are tested in blocks so that memory
+        stays small with many obstacles.
+
+        Parameters
+        ----------
+        pos : ndarray, shape (n, 2) [m]
+        reach : float [m]
+
+        Returns
+        -------
+        rows, cols : ndarray of int, shape (k,)
+            Vehicle and obstacle (column of :meth:`nearest`) of each pair.
+        """
+        m = len(self.bound_radius)
+        rows, cols = [np.zeros(0, dtype=np.intp)], [np.zeros(0, dtype=np.intp)]
+        if m:
+            limit = (self.bound_radius + reach) ** 2
+            block = max(1, 1_000_000 // m)
+            for start in range(0, len(pos), block):
+                p = pos[start : start + block]
+                dx = p[:, 0:1] - self.bound_center[:, 0]
+                dy = p[:, 1:2] - self.bound_center[:, 1]
+                r, c = np.nonzero(dx * dx + dy * dy < limit)
+                rows.append(r + start)
+                cols.append(c)
+        return (
+            np.concatenate(rows).astype(np.intp),
+            np.concatenate(cols).astype(np.intp),
+        )
+
+    def pair_distance(
+        self, pos: np.ndarray, rows: np.ndarray, cols: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Like :meth:`nearest`, for the given ``(vehicle, obstacle)`` pairs only.
+
+        Parameters
+        ----------
+        pos : ndarray, shape (n, 2) [m]
+        rows, cols : ndarray of int, shape (k,)
+            Vehicle and obstacle (column of :meth:`nearest`) of each pair.
+
+        Returns
+        -------
+        dist : ndarray, shape (k,) [m]
+            Negative inside an obstacle.
+        point : ndarray, shape (k, 2) [m]
+        """
+        p = np.take(pos, rows, axis=0)
+        dist = np.empty(len(rows))
+        point = np.empty((len(rows), 2))
+        kind, index = self.kind[cols], self.index[cols]
+        sel = np.flatnonzero(kind == 0)
+        if len(sel):
+            center = self.circle_center[index[sel]]
+            radius = self.circle_radius[index[sel]]
+            rel = p[sel] - center
+            norm = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
+            dist[sel] = norm - radius
+            point[sel] = center + rel / norm[:, None] * radius[:, None]
+        sel = np.flatnonzero(kind == 1)
+        if len(sel):
+            w = index[sel]
+            q = _closest_on_segment_pairs(p[sel], self.wall_a[w], self.wall_b[w])
+            rel = p[sel] - q
+            norm = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
+            dist[sel] = norm - self.wall_radius[w]
+            point[sel] = q + rel / norm[:, None] * self.wall_radius[w][:, None]
+        sel = np.flatnonzero(kind == 2)
+        if len(sel):
+            a = self.poly[index[sel]]  # (k, E, 2)
+            b = np.roll(a, -1, axis=1)
+            ps = p[sel][:, None, :]
+            q = _closest_on_segment_pairs(ps, a, b)  # (k, E, 2)
+            d = np.hypot(ps[..., 0] - q[..., 0], ps[..., 1] - q[..., 1])
+            k = np.argmin(d, axis=1)
+            at = np.arange(len(sel))
+            edge, rel = b - a, ps - a
+            cross = edge[..., 0] * rel[..., 1] - edge[..., 1] * rel[..., 0]
+            inside = np.all(cross >= 0, axis=1) | np.all(cross <= 0, axis=1)
+            dist[sel] = np.where(inside, -d[at, k], d[at, k])
+            point[sel] = q[at, k]
+        return dist, point
 
     def nearest(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distance to each obstacle's surface and the nearest surface point.
@@ -266,6 +413,19 @@ def _closest_on_segments(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndar
     )
     t = np.clip(t, 0.0, 1.0)
     return a[None] + t[..., None] * ab[None]
+
+
+def _closest_on_segment_pairs(
+    p: np.ndarray, a: np.ndarray, b: np.ndarray
+) -> np.ndarray:
+    """Closest point of segment ``a-b`` to ``p``, elementwise over the leading axes."""
+    ab = b - a
+    ap = p - a
+    t = (ap[..., 0] * ab[..., 0] + ap[..., 1] * ab[..., 1]) / np.maximum(
+        ab[..., 0] * ab[..., 0] + ab[..., 1] * ab[..., 1], 1e-300
+    )
+    t = np.clip(t, 0.0, 1.0)
+    return a + t[..., None] * ab
 
 
 def _inside_convex(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
@@ -341,7 +501,21 @@ def avoidance_shift(
             shift[:, axis] = np.bincount(both, np.concatenate((c, -c)), minlength=n)
         active[i[on]] = True
         active[j[on]] = True
-    if not obstacles.empty:
+    if not obstacles.empty and neighbours is not None:
+        # Only the obstacles near each vehicle (alpha is 0 beyond R for every strategy);
+        # the same terms as below, summed over the candidate pairs.
+        rows, cols = neighbours.obstacle_pairs(pos, obstacles)
+        signed, point = obstacles.pair_distance(pos, rows, cols)
+        dist = np.maximum(np.abs(signed), MIN_DIST)  # eq. (25)
+        alpha = weight(np.maximum(signed, MIN_DIST), R, r, steepness)
+        outward = np.where(signed < 0, -1.0, 1.0)[:, None]
+        rel = (np.take(pos, rows, axis=0) - point) * outward
+        dd = dist * dist
+        for axis in (0, 1):  # eqs. (23)-(24)
+            c = alpha * (rel[:, axis] / dd)
+            shift[:, axis] += np.bincount(rows, c, minlength=n)
+        active[rows[alpha > 0]] = True
+    elif not obstacles.empty:
         signed, point = obstacles.nearest(pos)
         # A centre inside an obstacle (negative distance; possible only at the start) is
         # pushed out of it with full weight: u_i points from the surface point outward.

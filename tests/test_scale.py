@@ -158,6 +158,49 @@ def test_neighbour_list_gives_the_same_avoidance_shift_as_a_fresh_search() -> No
     assert active.sum() > 50 and not np.any(shift[~avoiders])
 
 
+def obstacle_field() -> ObstacleField:
+    """Forty obstacles of every type in a 200 m x 50 m strip."""
+    obstacles = []
+    for k in range(10):
+        x = 20.0 * k
+        obstacles += [
+            {"type": "circle", "center": [x, 25], "radius": 2},
+            {"type": "box", "center": [x + 7, 30], "size": [3, 2], "angle": 0.3 * k},
+            {"type": "wall", "from": [x, 40], "to": [x + 5, 44]},
+            {
+                "type": "polygon",
+                "points": [[x, 10], [x + 4, 10], [x + 5, 13], [x + 2, 15], [x - 1, 13]],
+            },
+        ]
+    doc = {
+        "reference": {"type": "point", "position": [0, 0]},
+        "vehicles": [{"pose": [300, 300, 0]}],
+        "obstacles": obstacles,
+    }
+    return ObstacleField(load_scenario(doc).obstacles)
+
+
+@pytest.mark.parametrize("strategy", ["discontinuous", "continuous", "smooth"])
+def test_obstacle_candidates_give_the_same_shift_as_every_obstacle(
+    strategy: str,
+) -> None:
+    field = obstacle_field()
+    rng = np.random.default_rng(7)
+    pos = np.column_stack((rng.uniform(-5, 205, 3000), rng.uniform(0, 50, 3000)))
+    dist, _ = field.nearest(pos)
+    assert (dist < 0).any() and (dist < 1.5).sum() > 100  # inside, near and far
+    within = set(zip(*np.nonzero(dist < 1.5), strict=True))
+    assert within <= set(zip(*field.candidates(pos, 1.5), strict=True))
+    avoiders = rng.random(3000) < 0.9
+    nl = NeighbourList(1.5)
+    nl.obstacle_pairs(pos + 0.1, field)  # candidates made a step ago, reused
+    args = (avoiders, strategy, 1.0, 1.5, 0.75, 2.0, field)
+    shift, active = avoidance_shift(pos, *args, nl)
+    dense, dense_active = avoidance_shift(pos, *args)  # every obstacle, every vehicle
+    assert np.array_equal(active, dense_active)
+    np.testing.assert_allclose(shift, dense, rtol=1e-10, atol=1e-12)
+
+
 # ---------------------------------------------------------------------------- recording
 def test_disk_backed_record_equals_the_in_memory_record(
     monkeypatch: pytest.MonkeyPatch, tmp_path
