@@ -131,15 +131,23 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     """
     if settle_tol is None:
         settle_tol = run.scenario.metrics.settle_tol if run.scenario is not None else 0.05
-    t = run.t
-    error = run.formation_error
+    t = np.asarray(run.t)
     T = len(t)
     last_quarter = t >= t[-1] - 0.25 * (t[-1] - t[0]) if T else np.zeros(0, dtype=bool)
     failed_at = run.info.get("failed_at", {})
     vehicles: dict[str, Any] = {}
     healthy_settled = []
+    # Vehicles in blocks of about a million samples: bounded temporaries whatever the
+    # length of the run (the record may be memory-mapped from disk).
+    block = max(1, 1_000_000 // max(T, 1))
     for i, name in enumerate(run.names):
-        e = error[:, i]
+        if i % block == 0:
+            cols = slice(i, i + block)
+            pose = np.asarray(run.pose[:, cols, :2])
+            error = np.linalg.norm(pose - np.asarray(run.slot[:, cols]), axis=-1)
+            cmd = np.asarray(run.cmd[:, cols])
+            mode = np.asarray(run.mode[:, cols])
+        e = error[:, i % block]
         has_slot = T > 0 and bool(np.all(np.isfinite(e)))
         settle = settling_time(t, e, settle_tol) if has_slot else None
         failed_end = bool(run.failed[-1, i]) if T else False
@@ -152,8 +160,8 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
                 "max": _finite(np.max(e)) if has_slot else None,
             },
             "settling_time": settle,
-            "control_effort": control_effort(run.cmd[:, i], float(run.diameter[i])),
-            "mode_switches": mode_switches(run.mode[:, i]),
+            "control_effort": control_effort(cmd[:, i % block], float(run.diameter[i])),
+            "mode_switches": mode_switches(mode[:, i % block]),
             "failed_at": failed_at.get(name),
         }
         if has_slot and not failed_end:
