@@ -3,7 +3,9 @@
 ``sandbox gallery`` (default folders ``scenarios/paper`` and ``scenarios/failures``,
 output ``renders/``) makes the GIFs committed in ``renders/`` and shown in the README.
 A GIF over the size budget is rendered again smaller (fewer pixels, then fewer frames per
-second) until it fits.
+second) until it fits. A run that spreads along a line (a platoon on a straight
+reference) would be drawn tiny in a square frame that holds all of it: its camera follows
+the leader instead.
 """
 
 from __future__ import annotations
@@ -11,12 +13,17 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from sandbox.render import write_gif
+from sandbox.run import Run
 from sandbox.scenario import load_scenario
 from sandbox.simulation import Simulation
 
 #: Largest GIF the gallery keeps [bytes].
 MAX_GIF_BYTES = 3_000_000
+#: Above this ratio of the sides of the area a run covers, the camera follows the leader.
+MAX_ASPECT = 2.5
 #: ``(size [px], fps)`` tried in turn until a GIF fits the budget.
 ATTEMPTS = ((560, 25.0), (480, 20.0), (400, 15.0), (320, 10.0))
 
@@ -27,6 +34,18 @@ def scenario_files(folders: list[Path]) -> list[Path]:
     for folder in folders:
         files += sorted(Path(folder).glob("*.yaml"))
     return files
+
+
+def camera_follow(run: Run) -> str | None:
+    """``"leader"`` for a run that spreads along a line, else None (frame the whole run)."""
+    if run.leader < 0:
+        return None
+    pos = run.pose[:, :, :2].reshape(-1, 2)
+    pos = pos[np.isfinite(pos).all(axis=1)]
+    if len(pos) == 0:
+        return None
+    extent = np.ptp(pos, axis=0) + float(np.max(run.diameter))
+    return "leader" if extent.max() > MAX_ASPECT * extent.min() else None
 
 
 def render_gallery(
@@ -49,7 +68,8 @@ def render_gallery(
         run = Simulation(scenario).run()
         target = out_dir / f"{path.stem}.gif"
         for size, fps in ATTEMPTS:
-            info = write_gif(run, target, fps=fps, size=size, zones=zones)
+            info = write_gif(run, target, fps=fps, size=size, zones=zones,
+                             follow=camera_follow(run))
             nbytes = target.stat().st_size
             if nbytes <= MAX_GIF_BYTES:
                 break
@@ -60,6 +80,7 @@ def render_gallery(
             "size": size,
             "fps": fps,
             "frames": info["frames"],
+            "follow": camera_follow(run),
         }
         log(f"{target}: {nbytes / 1e6:.2f} MB, {size} px, {fps:g} fps, "
             f"{info['frames']} frames ({run.status}, {len(run.events)} collisions)")
