@@ -17,6 +17,7 @@ import json
 import os
 import shutil
 import tempfile
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -255,13 +256,16 @@ class Recorder:
         }
         self._dir = Path(tempfile.mkdtemp(prefix="sandbox-record-", dir=directory))
         self._files: dict[str, Any] = {}
+        # Closes and removes the files if the recorder is dropped before arrays() (a
+        # run that failed).
+        self._cleanup = weakref.finalize(self, _discard, self._files, self._dir)
         self._offsets: dict[str, int] = {}
         for k, (shape, dtype) in shapes.items():
             path = self._dir / f"{k}.npy"
             mm = np.lib.format.open_memmap(path, "w+", dtype=dtype, shape=(T, *shape))
             self._offsets[k] = int(mm.offset)
             del mm
-            self._files[k] = open(path, "r+b")  # noqa: SIM115 (closed in arrays())
+            self._files[k] = open(path, "r+b")  # closed by arrays() or _discard()
         self._flushed = 0
 
     def append(
@@ -317,12 +321,20 @@ class Recorder:
         self._flush()
         for fh in self._files.values():
             fh.close()
-        self._files = {}
+        self._files.clear()
         out = {name: np.load(self._dir / f"{name}.npy", mmap_mode="r")[:k]
                for name in self._shapes}
         self._buffers = {}
+        self._cleanup.detach()
         if os.name == "posix":  # the mappings keep the data; the names can go now
             shutil.rmtree(self._dir, ignore_errors=True)
         else:  # pragma: no cover - files in use cannot be removed elsewhere
             atexit.register(shutil.rmtree, self._dir, ignore_errors=True)
         return out
+
+
+def _discard(files: dict[str, Any], directory: Path) -> None:
+    """Close a disk-backed record's files and remove them."""
+    for fh in files.values():
+        fh.close()
+    shutil.rmtree(directory, ignore_errors=True)

@@ -11,6 +11,8 @@
 
 from __future__ import annotations
 
+import gc
+
 import numpy as np
 import pytest
 from helpers import SCENARIOS
@@ -260,6 +262,14 @@ def test_recorder_switches_to_disk_above_the_threshold_only(tmp_path) -> None:
         assert np.array_equal(a[name], b[name]), name
     assert b["pose"].shape == (10, 5, 3) and b["pose"][9, 0, 0] == 9
     assert list(tmp_path.iterdir()) == []  # the files are unlinked once mapped
+
+
+def test_a_dropped_disk_record_leaves_no_files(tmp_path) -> None:
+    rec = Recorder(50, 20, spill_bytes=0, directory=tmp_path)
+    assert len(list(tmp_path.rglob("*.npy"))) == len(RECORDED)
+    del rec  # a run that failed before its arrays were taken
+    gc.collect()
+    assert list(tmp_path.iterdir()) == []
 
 
 # ---------------------------------------------------------------------------- scenarios
