@@ -1,20 +1,27 @@
-"""Peer benchmark: IR-SIM (``ir-sim`` on PyPI, import ``irsim``) stepping N unicycle robots.
+"""Peer benchmark: IR-SIM (``ir-sim`` on PyPI, import ``irsim``) stepping N unicycle
+robots.
 
-Builds an IR-SIM world of ``n`` differential-drive ("diff" kinematics) circle robots from a
-temporary YAML file, headless, and times ``steps`` calls of ``env.step`` with one constant
+Builds an IR-SIM world of ``n`` differential-drive ("diff" kinematics) circle robots
+from a
+temporary YAML file, headless, and times ``steps`` calls of ``env.step`` with one
+constant
 command per robot. Only the stepping loop is timed; parsing the YAML and building the
 objects are not.
 
 World configuration (see ``_world_yaml``):
 
 * ``world.step_time = dt``; ``collision_mode: stop`` (IR-SIM's default: every step the
-  robots' shapely geometries go into an STRtree, one batched ``intersects`` query finds the
-  overlapping pairs, and colliding robots are stopped). Left on, because it is the part of
+  robots' shapely geometries go into an STRtree, one batched ``intersects`` query finds
+  the
+  overlapping pairs, and colliding robots are stopped). Left on, because it is the part
+  of
   IR-SIM comparable to our simulator's pymunk collision handling.
 * ``n`` robots, ``kinematics: {name: diff}``, ``shape: {name: circle, radius: 0.2}``, no
-  sensors, no behavior, laid out by IR-SIM's ``manual`` distribution on a square grid with
+  sensors, no behavior, laid out by IR-SIM's ``manual`` distribution on a square grid
+  with
   1 m spacing, all with heading 0 and goal far away (so no robot "arrives").
-* Every robot gets the same constant command ``[v, w] = [0.5, 0.2]`` (m/s, rad/s): the grid
+* Every robot gets the same constant command ``[v, w] = [0.5, 0.2]`` (m/s, rad/s): the
+grid
   moves as a rigid formation, so no robot ever touches another and none is stopped; the
   collision query still runs every step over all robots.
 * ``headless=True`` (no figure, no window, no keyboard/mouse), ``save_ani=False``,
@@ -137,10 +144,13 @@ def _make_env(n: int, dt: float, seed: int, path: str) -> Any:
 def measure_irsim(n: int, steps: int, dt: float = 0.01, seed: int = 0) -> dict:
     """Time ``steps`` IR-SIM steps of ``n`` diff-drive robots under constant commands.
 
-    Returns ``{"n", "steps", "seconds", "steps_per_s", "vehicle_steps_per_s"}``; ``seconds``
-    is the wall time of the stepping loop only (construction and one untimed warm-up step
+    Returns ``{"n", "steps", "seconds", "steps_per_s", "vehicle_steps_per_s"}``;
+    ``seconds``
+    is the wall time of the stepping loop only (construction and one untimed warm-up
+    step
     excluded). Also checks that
-    the robots moved and that none collided, so a silently broken run is not reported as a
+    the robots moved and that none collided, so a silently broken run is not reported
+    as a
     fast one.
     """
     import numpy as np
@@ -163,7 +173,9 @@ def measure_irsim(n: int, steps: int, dt: float = 0.01, seed: int = 0) -> dict:
             if moved <= 0.0:
                 raise RuntimeError("IR-SIM robots did not move")
             if collided:
-                raise RuntimeError(f"{collided} IR-SIM robots collided; benchmark invalid")
+                raise RuntimeError(
+                    f"{collided} IR-SIM robots collided; benchmark invalid"
+                )
         finally:
             with contextlib.suppress(Exception):
                 plt = sys.modules.get("matplotlib.pyplot")
@@ -192,8 +204,12 @@ def main(argv: list[str] | None = None) -> int:
         print("IR-SIM not installed (pip install ir-sim); skipping.")
         return 0
     ns = [10, 100, 1000]
-    print(f"IR-SIM {irsim_version()}, diff robots, dt=0.01, collision_mode=stop, headless")
-    print(f"{'N':>6} {'steps':>6} {'seconds':>9} {'steps/s':>10} {'vehicle-steps/s':>16}")
+    print(
+        f"IR-SIM {irsim_version()}, diff robots, dt=0.01, collision_mode=stop, headless"
+    )
+    print(
+        f"{'N':>6} {'steps':>6} {'seconds':>9} {'steps/s':>10} {'vehicle-steps/s':>16}"
+    )
     for n in ns:
         _print_row(measure_irsim(n, default_steps(n)))
     if "--quick" in argv:

@@ -1,7 +1,8 @@
 """Command-line interface: ``sandbox run | validate | list | render | plot | schema``.
 
 No simulation logic lives here: the commands call the same API as Python users. Every
-user mistake ends in one line per problem on stderr and a non-zero exit, never a traceback.
+user mistake ends in one line per problem on stderr and a non-zero exit, never a
+traceback.
 
 Exit status: 0 success; 1 a run diverged or a command failed; 2 invalid input;
 130 a run was interrupted (its outputs so far are written, flagged ``interrupted``).
@@ -90,19 +91,27 @@ def cmd_run(args: argparse.Namespace) -> int:
         write_run_dir(run, metrics, out_dir)
     _print_summary(scenario.name, metrics, out_dir)
     if args.gif and run.status == STATUS_INTERRUPTED:
-        print(f"gif: skipped, the run was interrupted (sandbox render {out_dir} --gif "
-              f"{args.gif} renders what was simulated)", file=sys.stderr)
+        print(
+            f"gif: skipped, the run was interrupted (sandbox render {out_dir} --gif "
+            f"{args.gif} renders what was simulated)",
+            file=sys.stderr,
+        )
     elif args.gif:
         _gif(run, args)
     if run.status == STATUS_DIVERGED:
         d = metrics.get("diverged", {})
-        print(f"error: the run diverged at t = {d.get('t', 0):.3f} s "
-              f"(vehicle {d.get('vehicle')}: {d.get('reason')}); outputs up to then are "
-              f"in {out_dir}", file=sys.stderr)
+        print(
+            f"error: the run diverged at t = {d.get('t', 0):.3f} s "
+            f"(vehicle {d.get('vehicle')}: {d.get('reason')}); outputs up to then are "
+            f"in {out_dir}",
+            file=sys.stderr,
+        )
         return EXIT_FAILED
     if run.status == STATUS_INTERRUPTED:
-        print(f"interrupted: outputs so far are in {out_dir} (status 'interrupted')",
-              file=sys.stderr)
+        print(
+            f"interrupted: outputs so far are in {out_dir} (status 'interrupted')",
+            file=sys.stderr,
+        )
         return EXIT_INTERRUPTED
     return EXIT_OK
 
@@ -112,8 +121,15 @@ def _gif(run: Run, args: argparse.Namespace) -> None:
     from sandbox.render import write_gif
 
     try:
-        info = write_gif(run, Path(args.gif), fps=args.fps, size=args.size,
-                         speed=args.speed, zones=args.zones, follow=args.follow)
+        info = write_gif(
+            run,
+            Path(args.gif),
+            fps=args.fps,
+            size=args.size,
+            speed=args.speed,
+            zones=args.zones,
+            follow=args.follow,
+        )
     except ValueError as exc:  # an option the renderer refuses (fps, size, ...)
         raise GifOptionError(f"--gif {args.gif}: {exc}") from None
     print(f"gif: {info['path']} ({info['frames']} frames, {info['duration']:.1f} s)")
@@ -126,18 +142,33 @@ class GifOptionError(SandboxError):
 def _print_summary(name: str, metrics: dict, out_dir: Path) -> None:
     col = metrics["collisions"]
     md = metrics["min_distance"]
-    print(f"{name}: status {metrics['status']}, {metrics['duration']:.2f} s simulated, "
-          f"converged: {'yes' if metrics['converged'] else 'no'}")
-    print(f"collisions: {col['total']} (vehicle-vehicle {col['vehicle_vehicle']}, "
-          f"vehicle-obstacle {col['vehicle_obstacle']}); min distance: "
-          f"{'-' if md is None else f'{md:.3f} m'}")
-    header = ("vehicle", "final err [m]", "rms last 1/4", "settle [s]", "effort", "switches")
+    print(
+        f"{name}: status {metrics['status']}, {metrics['duration']:.2f} s simulated, "
+        f"converged: {'yes' if metrics['converged'] else 'no'}"
+    )
+    print(
+        f"collisions: {col['total']} (vehicle-vehicle {col['vehicle_vehicle']}, "
+        f"vehicle-obstacle {col['vehicle_obstacle']}); min distance: "
+        f"{'-' if md is None else f'{md:.3f} m'}"
+    )
+    header = (
+        "vehicle",
+        "final err [m]",
+        "rms last 1/4",
+        "settle [s]",
+        "effort",
+        "switches",
+    )
     rows = summary_rows(metrics)
     shown = rows[:20]
     widths = [max(len(r[i]) for r in [header, *shown]) for i in range(len(header))]
     for r in [header, *shown]:
-        print("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in
-                        enumerate(zip(r, widths, strict=True))))
+        print(
+            "  ".join(
+                c.rjust(w) if i else c.ljust(w)
+                for i, (c, w) in enumerate(zip(r, widths, strict=True))
+            )
+        )
     if len(rows) > len(shown):
         print(f"... and {len(rows) - len(shown)} more vehicles (see metrics.json)")
     print(f"outputs: {out_dir}/ (trajectory.csv, metrics.json, scenario.yaml, run.npz)")
@@ -156,7 +187,9 @@ def cmd_validate(args: argparse.Namespace) -> int:
             continue
         for line in scenario.warnings:
             print(f"warning: {line}", file=sys.stderr)
-        print(f"{name}: ok ({len(scenario.vehicles)} vehicles, {scenario.duration:g} s)")
+        print(
+            f"{name}: ok ({len(scenario.vehicles)} vehicles, {scenario.duration:g} s)"
+        )
     return status
 
 
@@ -188,7 +221,9 @@ def cmd_gallery(args: argparse.Namespace) -> int:
     """``sandbox gallery``: run and render every scenario of the given folders."""
     from sandbox.gallery import render_gallery
 
-    folders = [Path(f) for f in (args.folders or ["scenarios/paper", "scenarios/failures"])]
+    folders = [
+        Path(f) for f in (args.folders or ["scenarios/paper", "scenarios/failures"])
+    ]
     missing = [str(f) for f in folders if not f.is_dir()]
     if missing:
         print(f"error: no such folder: {', '.join(missing)}", file=sys.stderr)
@@ -228,8 +263,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
         return [x.strip() for x in text.split(",") if x.strip()]
 
     try:
-        rows = compare(args.files, names(args.strategies), names(args.derivatives),
-                       args.set or [], jobs=args.jobs)
+        rows = compare(
+            args.files,
+            names(args.strategies),
+            names(args.derivatives),
+            args.set or [],
+            jobs=args.jobs,
+        )
     except ValueError as exc:
         if isinstance(exc, ScenarioError):
             raise
@@ -256,30 +296,52 @@ def _positive(kind: type) -> Callable[[str], float]:
 
 
 def _add_gif_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--fps", type=_positive(float), default=25.0,
-                   help="frames per second, at most 50 (default 25)")
-    p.add_argument("--size", type=_positive(int), default=640,
-                   help="frame size in pixels (default 640)")
-    p.add_argument("--speed", type=_positive(float), default=1.0,
-                   help="playback speed relative to simulated time (default 1)")
+    p.add_argument(
+        "--fps",
+        type=_positive(float),
+        default=25.0,
+        help="frames per second, at most 50 (default 25)",
+    )
+    p.add_argument(
+        "--size",
+        type=_positive(int),
+        default=640,
+        help="frame size in pixels (default 640)",
+    )
+    p.add_argument(
+        "--speed",
+        type=_positive(float),
+        default=1.0,
+        help="playback speed relative to simulated time (default 1)",
+    )
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
-    p.add_argument("--follow", choices=("leader",), default=None,
-                   help="camera follows the leader instead of framing the whole run")
+    p.add_argument(
+        "--follow",
+        choices=("leader",),
+        default=None,
+        help="camera follows the leader instead of framing the whole run",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``sandbox`` command."""
     parser = argparse.ArgumentParser(
         prog="sandbox",
-        description="Physics-backed 2D sandbox for collective motion of unicycle vehicles.",
+        description=(
+            "Physics-backed 2D sandbox for collective motion of unicycle vehicles."
+        ),
     )
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a scenario file")
     p.add_argument("file", help="scenario YAML file")
     p.add_argument("--out", help="output directory (default runs/<name>/)")
     p.add_argument("--duration", help="override the duration [s]")
-    p.add_argument("--set", action="append", metavar="PATH=VALUE",
-                   help="override a field, e.g. --set recovery.beta=2.5 (repeatable)")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="PATH=VALUE",
+        help="override a field, e.g. --set recovery.beta=2.5 (repeatable)",
+    )
     p.add_argument("--gif", help="also render the run to this GIF file")
     _add_gif_options(p)
     p.set_defaults(func=cmd_run)
@@ -295,8 +357,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_gif_options(p)
     p.set_defaults(func=cmd_render)
     p = sub.add_parser("gallery", help="run and render every scenario of some folders")
-    p.add_argument("folders", nargs="*",
-                   help="scenario folders (default scenarios/paper scenarios/failures)")
+    p.add_argument(
+        "folders",
+        nargs="*",
+        help="scenario folders (default scenarios/paper scenarios/failures)",
+    )
     p.add_argument("--out", default="renders", help="output folder (default renders/)")
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
     p.set_defaults(func=cmd_gallery)
@@ -309,17 +374,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_schema)
     p = sub.add_parser("compare", help="compare recovery strategies on scenario files")
     p.add_argument("files", nargs="+", help="scenario YAML files")
-    p.add_argument("--strategies", default="none,discontinuous,continuous,smooth",
-                   help="comma-separated strategies, or file for each file's own "
-                        "(default: all four)")
-    p.add_argument("--derivatives", default="hold",
-                   help="comma-separated target_derivatives modes: hold, estimate "
-                        "(default hold)")
-    p.add_argument("--set", action="append", metavar="PATH=VALUE",
-                   help="override a field in every run (repeatable)")
+    p.add_argument(
+        "--strategies",
+        default="none,discontinuous,continuous,smooth",
+        help="comma-separated strategies, or file for each file's own "
+        "(default: all four)",
+    )
+    p.add_argument(
+        "--derivatives",
+        default="hold",
+        help="comma-separated target_derivatives modes: hold, estimate (default hold)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="PATH=VALUE",
+        help="override a field in every run (repeatable)",
+    )
     p.add_argument("--format", choices=("markdown", "csv"), default="markdown")
-    p.add_argument("--jobs", type=int, default=1,
-                   help="worker processes (default 1); the table is the same")
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="worker processes (default 1); the table is the same",
+    )
     p.set_defaults(func=cmd_compare)
     return parser
 

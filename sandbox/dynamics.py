@@ -40,7 +40,9 @@ def unicycle_rates(theta: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndar
     return np.stack((v1 * np.cos(theta), v1 * np.sin(theta), v2), axis=-1)  # eq. (1)
 
 
-def unicycle_step(pose: np.ndarray, v1: np.ndarray, v2: np.ndarray, dt: float) -> np.ndarray:
+def unicycle_step(
+    pose: np.ndarray, v1: np.ndarray, v2: np.ndarray, dt: float
+) -> np.ndarray:
     """Advance poses ``(n, 3)`` by ``dt`` [s] under constant commands, exactly.
 
     Integrates eq. (1) in closed form (arcs of radius ``v1 / v2``; straight lines when
@@ -56,4 +58,6 @@ def unicycle_step(pose: np.ndarray, v1: np.ndarray, v2: np.ndarray, dt: float) -
     # Chord of the arc: length v1*dt*sinc(dth/2) along th + dth/2.
     chord = v1 * dt * np.where(small, 1.0 - dth**2 / 24.0, np.sinc(dth / (2 * np.pi)))
     mid = th + 0.5 * dth
-    return np.stack((x + chord * np.cos(mid), y + chord * np.sin(mid), th + dth), axis=-1)
+    return np.stack(
+        (x + chord * np.cos(mid), y + chord * np.sin(mid), th + dth), axis=-1
+    )

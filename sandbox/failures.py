@@ -37,7 +37,8 @@ class FailureKind:
     Attributes
     ----------
     commands : callable
-        Maps the controller's ``(v1, v2)``, the ``v2`` at onset and the spec to the applied
+        Maps the controller's ``(v1, v2)``, the ``v2`` at onset and the spec to the
+        applied
         ``(v1, v2)``.
     controlled_speed : bool
         Whether the controller still drives v1 (its extension states keep integrating).

@@ -2,9 +2,11 @@
 
 ``sandbox gallery`` (default folders ``scenarios/paper`` and ``scenarios/failures``,
 output ``renders/``) makes the GIFs committed in ``renders/`` and shown in the README.
-A GIF over the size budget is rendered again smaller (fewer pixels, then fewer frames per
+A GIF over the size budget is rendered again smaller (fewer pixels, then fewer frames
+per
 second) until it fits. A run that spreads along a line (a platoon on a straight
-reference) would be drawn tiny in a square frame that holds all of it: its camera follows
+reference) would be drawn tiny in a square frame that holds all of it: its camera
+follows
 the leader instead.
 """
 
@@ -22,7 +24,8 @@ from sandbox.simulation import Simulation
 
 #: Largest GIF the gallery keeps [bytes].
 MAX_GIF_BYTES = 3_000_000
-#: Above this ratio of the sides of the area a run covers, the camera follows the leader.
+# : Above this ratio of the sides of the area a run covers, the camera follows the
+# leader.
 MAX_ASPECT = 2.5
 #: ``(size [px], fps)`` tried in turn until a GIF fits the budget.
 ATTEMPTS = ((560, 25.0), (480, 20.0), (400, 15.0), (320, 10.0))
@@ -37,7 +40,7 @@ def scenario_files(folders: list[Path]) -> list[Path]:
 
 
 def camera_follow(run: Run) -> str | None:
-    """``"leader"`` for a run that spreads along a line, else None (frame the whole run)."""
+    """``"leader"`` for a run spread along a line, else None (frame it whole)."""
     if run.leader < 0:
         return None
     pos = run.pose[:, :, :2].reshape(-1, 2)
@@ -68,8 +71,9 @@ def render_gallery(
         run = Simulation(scenario).run()
         target = out_dir / f"{path.stem}.gif"
         for size, fps in ATTEMPTS:
-            info = write_gif(run, target, fps=fps, size=size, zones=zones,
-                             follow=camera_follow(run))
+            info = write_gif(
+                run, target, fps=fps, size=size, zones=zones, follow=camera_follow(run)
+            )
             nbytes = target.stat().st_size
             if nbytes <= MAX_GIF_BYTES:
                 break
@@ -82,7 +86,9 @@ def render_gallery(
             "frames": info["frames"],
             "follow": camera_follow(run),
         }
-        log(f"{target}: {nbytes / 1e6:.2f} MB, {size} px, {fps:g} fps, "
-            f"{info['frames']} frames ({run.status}, {len(run.events)} collisions)")
+        log(
+            f"{target}: {nbytes / 1e6:.2f} MB, {size} px, {fps:g} fps, "
+            f"{info['frames']} frames ({run.status}, {len(run.events)} collisions)"
+        )
         records.append(record)
     return records

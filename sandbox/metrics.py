@@ -2,17 +2,21 @@
 
 Definitions (the keys of ``metrics.json``):
 
-- ``collisions``: contact episodes counted from pymunk ``begin`` callbacks, one per onset of
+- ``collisions``: contact episodes counted from pymunk ``begin`` callbacks, one per
+onset of
   contact of a pair; ``vehicle_vehicle`` and ``vehicle_obstacle`` apart;
   ``healthy``: the episodes in which no vehicle involved had an active failure (two
   healthy vehicles, or a healthy vehicle and a static obstacle): what recovery is
   meant to prevent; ``events`` lists ``{t, a, b, kind, healthy}``.
 - ``min_distance``: smallest centre-to-centre distance between two vehicles over the
   recorded samples [m] (null with a single vehicle).
-- per vehicle, ``formation_error``: distance from the vehicle to its slot as its law defines
-  it (the leader's slot is the reference point) [m]: ``final`` (last sample), ``max``, and
+- per vehicle, ``formation_error``: distance from the vehicle to its slot as its law
+defines
+  it (the leader's slot is the reference point) [m]: ``final`` (last sample), ``max``,
+  and
   ``rms_last_quarter`` (RMS over the last quarter of the run);
-  ``settling_time``: first time after which the error stays below ``settle_tol`` until the
+  ``settling_time``: first time after which the error stays below ``settle_tol`` until
+  the
   end [s], null if it never does (or the vehicle has no slot);
   ``control_effort``: total variation of the commands,
   ``sum |dv1| + (d/2) sum |dv2|`` over the recorded samples [m/s]: it grows with
@@ -95,7 +99,7 @@ def control_effort(cmd: np.ndarray, diameter: float) -> float:
 
 
 def mode_switches(mode: np.ndarray) -> int:
-    """Number of changes between ``formation`` and ``avoid`` modes in a mode sequence."""
+    """Number of changes between ``formation`` and ``avoid`` in a mode sequence."""
     m = mode[(mode == MODE_FORMATION) | (mode == MODE_AVOID)]
     return int(np.count_nonzero(np.diff(m) != 0))
 
@@ -126,11 +130,14 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     ----------
     run : Run
     settle_tol : float, optional
-        Tolerance of the settling time [m]; default: the scenario's ``metrics.settle_tol``
+        Tolerance of the settling time [m]; default: the scenario's
+        ``metrics.settle_tol``
         (0.05 m).
     """
     if settle_tol is None:
-        settle_tol = run.scenario.metrics.settle_tol if run.scenario is not None else 0.05
+        settle_tol = (
+            run.scenario.metrics.settle_tol if run.scenario is not None else 0.05
+        )
     t = np.asarray(run.t)
     T = len(t)
     last_quarter = t >= t[-1] - 0.25 * (t[-1] - t[0]) if T else np.zeros(0, dtype=bool)

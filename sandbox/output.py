@@ -117,8 +117,9 @@ def write_run_dir(run: Run, metrics: dict[str, Any], out_dir: Path) -> Path:
     try:
         parent.mkdir(parents=True, exist_ok=True)
         _remove_leftovers(parent, out_dir.name)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-{os.getpid()}-",
-                                    dir=parent))
+        tmp = Path(
+            tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-{os.getpid()}-", dir=parent)
+        )
         os.chmod(tmp, 0o777 & ~_umask())
     except OSError as exc:
         raise OutputError(
@@ -158,8 +159,9 @@ def check_out_dir(out_dir: Path) -> None:
     here = Path.cwd().resolve()
     target = out_dir.resolve()
     if target == here or target in here.parents:
-        raise OutputError(f"{out_dir}: is the working directory or holds it; choose "
-                          "another --out")
+        raise OutputError(
+            f"{out_dir}: is the working directory or holds it; choose another --out"
+        )
     try:
         entries = {p.name for p in out_dir.iterdir()}
     except OSError as exc:
@@ -181,7 +183,7 @@ def _remove_leftovers(parent: Path, name: str) -> None:
     """Remove temporary directories that killed runs left beside ``parent/name``."""
     for prefix in (f".{name}.tmp-", f".{name}.old-"):
         for path in parent.glob(f"{glob.escape(prefix)}*"):
-            pid = path.name[len(prefix):].split("-", 1)[0]
+            pid = path.name[len(prefix) :].split("-", 1)[0]
             if pid.isdigit() and not _alive(int(pid)):
                 shutil.rmtree(path, ignore_errors=True)
 
@@ -206,8 +208,11 @@ def _swap_into_place(tmp: Path, out_dir: Path) -> None:
     if _exchange(tmp, out_dir):  # tmp now holds the earlier run
         shutil.rmtree(tmp, ignore_errors=True)
         return
-    old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-{os.getpid()}-",
-                                dir=out_dir.parent))
+    old = Path(
+        tempfile.mkdtemp(
+            prefix=f".{out_dir.name}.old-{os.getpid()}-", dir=out_dir.parent
+        )
+    )
     os.rmdir(old)
     os.replace(out_dir, old)
     try:
@@ -231,11 +236,20 @@ def _exchange(a: Path, b: Path) -> bool:
         renameat2 = libc.renameat2
     except (OSError, AttributeError):
         return False
-    renameat2.argtypes = (ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p,
-                          ctypes.c_uint)
+    renameat2.argtypes = (
+        ctypes.c_int,
+        ctypes.c_char_p,
+        ctypes.c_int,
+        ctypes.c_char_p,
+        ctypes.c_uint,
+    )
     renameat2.restype = ctypes.c_int
-    if renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b),
-                 _RENAME_EXCHANGE) == 0:
+    if (
+        renameat2(
+            _AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE
+        )
+        == 0
+    ):
         return True
     err = ctypes.get_errno()
     if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.EPERM):
@@ -252,8 +266,10 @@ def load_run_dir(run_dir: Path) -> Run:
     run_dir = Path(run_dir)
     npz = run_dir / "run.npz"
     if not npz.is_file():
-        raise OutputError(f"{run_dir}: not a run directory (no run.npz; run a scenario "
-                          "with 'sandbox run FILE --out DIR' first)")
+        raise OutputError(
+            f"{run_dir}: not a run directory (no run.npz; run a scenario "
+            "with 'sandbox run FILE --out DIR' first)"
+        )
     scenario = None
     if (run_dir / "scenario.yaml").is_file():
         scenario = load_scenario(run_dir / "scenario.yaml")

@@ -5,13 +5,15 @@ safe zone, eqs. (22)/(26):
 
     x_ref = slot + beta * sum_i alpha_i * vect_avoid_i,   vect_avoid_i = u_i / dist_i
 
-with ``u_i`` the unit vector from obstacle i to the vehicle (eq. (24)) and ``dist_i`` the
+with ``u_i`` the unit vector from obstacle i to the vehicle (eq. (24)) and ``dist_i``
+the
 distance (eq. (25)). Strategies differ only in the weight ``alpha(dist)``:
 
 - ``none``: 0;
 - ``discontinuous`` (4.1): 1 inside R, 0 outside (a switch);
 - ``continuous`` (4.2, eq. (27)): 1 inside r, a linear ramp from 1 to 0 between r and R;
-- ``smooth`` (the conclusion's proposal): a hyperbolic-tangent transition between r and R,
+- ``smooth`` (the conclusion's proposal): a hyperbolic-tangent transition between r and
+R,
   scaled to equal exactly 1 at r and 0 at R. It is continuous, not differentiable, at r
   and R: its slope there is ``s (1 - tanh(s)^2) / tanh(s)`` times the ramp's (0.15 for
   the default steepness s = 2), so the mode changes more gently than with the ramp.
@@ -75,20 +77,26 @@ def register_strategy(name: str) -> Callable[[Weight], Weight]:
 
 
 @register_strategy("none")
-def no_avoidance(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.ndarray:
+def no_avoidance(
+    dist: np.ndarray, R: float, r: float | None, steepness: float
+) -> np.ndarray:
     """No recovery: alpha = 0."""
     return np.zeros_like(dist)
 
 
 @register_strategy("discontinuous")
-def discontinuous(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.ndarray:
+def discontinuous(
+    dist: np.ndarray, R: float, r: float | None, steepness: float
+) -> np.ndarray:
     """Section 4.1: alpha = 1 within the safe zone R, else 0 (eq. (22))."""
     return (dist < R).astype(float)
 
 
 @register_strategy("continuous")
-def continuous(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.ndarray:
-    """Section 4.2, eq. (27): 1 below r, ``1 - (dist - r)/(R - r)`` between, 0 above R."""
+def continuous(
+    dist: np.ndarray, R: float, r: float | None, steepness: float
+) -> np.ndarray:
+    """Section 4.2, eq. (27): 1 below r, ``1 - (dist - r)/(R - r)``, 0 above R."""
     return np.clip(1.0 - (dist - r) / (R - r), 0.0, 1.0)  # eq. (27)
 
 
@@ -232,20 +240,25 @@ class NeighbourList:
 class ObstacleField:
     """Static obstacles as geometry for distance queries.
 
-    Circles are kept as centres and radii, walls as capsules (segment plus radius), boxes
+    Circles are kept as centres and radii, walls as capsules (segment plus radius),
+    boxes
     and polygons as convex polygons (pymunk hulls them too).
     """
 
     def __init__(self, obstacles: tuple[ObstacleSpec, ...]) -> None:
         circles = [o for o in obstacles if o.type == "circle"]
-        self.circle_center = np.array([o.center for o in circles], dtype=float).reshape(-1, 2)
+        self.circle_center = np.array([o.center for o in circles], dtype=float).reshape(
+            -1, 2
+        )
         self.circle_radius = np.array([o.radius for o in circles], dtype=float)
         walls = [o for o in obstacles if o.type == "wall"]
         self.wall_a = np.array([o.start for o in walls], dtype=float).reshape(-1, 2)
         self.wall_b = np.array([o.end for o in walls], dtype=float).reshape(-1, 2)
         self.wall_radius = np.array([o.thickness / 2 for o in walls], dtype=float)
         self.polygons = [
-            np.array(o.outline(), dtype=float) for o in obstacles if o.type in ("box", "polygon")
+            np.array(o.outline(), dtype=float)
+            for o in obstacles
+            if o.type in ("box", "polygon")
         ]
         self.empty = not obstacles
         # Per column of nearest() (circles, walls, polygons): kind, index in its kind
@@ -384,7 +397,9 @@ class ObstacleField:
             rel = pos[:, None, :] - self.circle_center[None]
             norm = np.maximum(np.linalg.norm(rel, axis=-1), MIN_DIST)
             dists.append(norm - self.circle_radius)
-            points.append(self.circle_center + rel / norm[..., None] * self.circle_radius[:, None])
+            points.append(
+                self.circle_center + rel / norm[..., None] * self.circle_radius[:, None]
+            )
         if len(self.wall_radius):
             q = _closest_on_segments(pos, self.wall_a, self.wall_b)
             rel = pos[:, None, :] - q

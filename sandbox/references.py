@@ -1,7 +1,9 @@
 """Reference trajectories with exact first and second time derivatives.
 
-A reference is the path the leader (or, for the ``virtual`` law, every slot) tracks with the
-flatness controller, eq. (6). Each class evaluates ``(p, dp, ddp)`` at a time ``t`` (a float
+A reference is the path the leader (or, for the ``virtual`` law, every slot) tracks
+with the
+flatness controller, eq. (6). Each class evaluates ``(p, dp, ddp)`` at a time ``t`` (a
+float
 or an array of times), each of shape ``(..., 2)`` in [m], [m/s], [m/s^2].
 
 >>> ref = CircleReference(center=(0.0, 0.0), radius=2.0, speed=1.0, phase=0.0)
@@ -50,7 +52,9 @@ class LineReference:
         """Return ``(p, dp, ddp)`` at time(s) ``t`` [s]."""
         t = np.asarray(t, dtype=float)
         c, s = math.cos(self.heading), math.sin(self.heading)
-        p = _stack(self.start[0] + self.speed * c * t, self.start[1] + self.speed * s * t)
+        p = _stack(
+            self.start[0] + self.speed * c * t, self.start[1] + self.speed * s * t
+        )
         dp = _stack(self.speed * c + 0 * t, self.speed * s + 0 * t)
         return p, dp, np.zeros_like(p)
 
@@ -59,7 +63,8 @@ class LineReference:
 class CircleReference:
     """A circle of ``radius`` [m] about ``center``, run at ``speed`` [m/s].
 
-    The sign of ``speed`` gives the direction (positive: counter-clockwise); ``phase`` [rad]
+    The sign of ``speed`` gives the direction (positive: counter-clockwise); ``phase``
+    [rad]
     is the starting angle, measured from the x1 axis.
     """
 
@@ -83,9 +88,10 @@ class CircleReference:
 
 @dataclass(frozen=True)
 class LemniscateReference:
-    """A figure-eight (lemniscate of Gerono) of half-width ``size`` [m] about ``center``.
+    """A figure-eight (lemniscate of Gerono), half-width ``size`` [m], at ``center``.
 
-    ``x1 = c1 + a sin(s)``, ``x2 = c2 + (a/2) sin(2 s)`` with ``s = w t``; ``w`` is chosen
+    ``x1 = c1 + a sin(s)``, ``x2 = c2 + (a/2) sin(2 s)`` with ``s = w t``; ``w`` is
+    chosen
     so that the mean speed over a lap equals ``speed`` [m/s] (the speed itself varies).
     """
 
@@ -106,14 +112,16 @@ class LemniscateReference:
         t = np.asarray(t, dtype=float)
         a, w = self.size, self.rate
         s = w * t
-        p = _stack(self.center[0] + a * np.sin(s), self.center[1] + 0.5 * a * np.sin(2 * s))
+        p = _stack(
+            self.center[0] + a * np.sin(s), self.center[1] + 0.5 * a * np.sin(2 * s)
+        )
         dp = _stack(a * w * np.cos(s), a * w * np.cos(2 * s))
         ddp = _stack(-a * w * w * np.sin(s), -2.0 * a * w * w * np.sin(2 * s))
         return p, dp, ddp
 
 
 def _natural_spline_second_derivatives(s: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Second derivatives at the knots of the natural cubic spline through ``(s, y)``."""
+    """Second derivatives at the knots of the natural cubic spline through (s, y)."""
     n = len(s)
     m = np.zeros((n,) + y.shape[1:])
     if n < 3:
@@ -148,7 +156,9 @@ class WaypointsReference:
         pts = np.asarray(self.points, dtype=float)
         s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))))
         object.__setattr__(self, "knots", s)
-        object.__setattr__(self, "curvature", _natural_spline_second_derivatives(s, pts))
+        object.__setattr__(
+            self, "curvature", _natural_spline_second_derivatives(s, pts)
+        )
 
     @property
     def length(self) -> float:
@@ -181,5 +191,9 @@ class WaypointsReference:
 
 
 Reference = (
-    PointReference | LineReference | CircleReference | LemniscateReference | WaypointsReference
+    PointReference
+    | LineReference
+    | CircleReference
+    | LemniscateReference
+    | WaypointsReference
 )

@@ -45,8 +45,10 @@ class CollisionEvent:
     t : float [s]
         Simulated time of the contact onset.
     a, b : str
-        Names of the two bodies: vehicle names, or obstacle names (``obstacle[k]`` unless the
-        scenario names them). For vehicle-vehicle events ``a`` precedes ``b`` in scenario order.
+        Names of the two bodies: vehicle names, or obstacle names (``obstacle[k]``
+        unless the
+        scenario names them). For vehicle-vehicle events ``a`` precedes ``b`` in
+        scenario order.
     kind : str
         ``"vehicle_vehicle"`` or ``"vehicle_obstacle"``.
     """
@@ -72,8 +74,10 @@ class Run:
     chi : ndarray, shape (T, n, 2) [m/s]
         Extension states of eqs (4)/(6).
     slot : ndarray, shape (T, n, 2) [m]
-        Each vehicle's place as its formation law defines it (the leader's: the reference
-        point); NaN where undefined (a commanded leader, a failed vehicle's unused slot is
+        Each vehicle's place as its formation law defines it (the leader's: the
+        reference
+        point); NaN where undefined (a commanded leader, a failed vehicle's unused slot
+        is
         still given).
     target : ndarray, shape (T, n, 2) [m]
         The point the controller actually tracked: the slot shifted by recovery.
@@ -91,7 +95,8 @@ class Run:
     status : str
         ``ok``, ``diverged`` or ``interrupted``.
     info : dict
-        Free-form facts about the run (``diverged`` details, failure times, wall time, ...).
+        Free-form facts about the run (``diverged`` details, failure times, wall time,
+        ...).
     scenario : Any
         The resolved :class:`sandbox.scenario.Scenario` the run came from.
     """
@@ -121,14 +126,16 @@ class Run:
 
     @property
     def formation_error(self) -> np.ndarray:
-        """Distance from each vehicle to its slot, shape (T, n) [m] (NaN where no slot)."""
+        """Distance of each vehicle to its slot, shape (T, n) [m]; NaN: no slot."""
         return np.linalg.norm(self.pose[:, :, :2] - self.slot, axis=-1)
 
     def leader_frame(self) -> np.ndarray:
         """Positions of every vehicle in the leader's frame, shape (T, n, 2) [m].
 
-        The leader frame has its origin at the leader and its first axis along the leader's
-        heading x3 (report Figs. 5 and 8). Raises ``ValueError`` when the run has no leader.
+        The leader frame has its origin at the leader and its first axis along the
+        leader's
+        heading x3 (report Figs. 5 and 8). Raises ``ValueError`` when the run has no
+        leader.
         """
         if self.leader < 0:
             raise ValueError("the run has no leader")
@@ -136,7 +143,9 @@ class Run:
         rel = self.pose[:, :, :2] - lead[:, None, :2]
         c = np.cos(lead[:, 2])[:, None]
         s = np.sin(lead[:, 2])[:, None]
-        return np.stack((c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]), -1)
+        return np.stack(
+            (c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]), -1
+        )
 
     # ------------------------------------------------------------------ persistence
     def save_npz(self, path: Path) -> None:
@@ -322,8 +331,10 @@ class Recorder:
         for fh in self._files.values():
             fh.close()
         self._files.clear()
-        out = {name: np.load(self._dir / f"{name}.npy", mmap_mode="r")[:k]
-               for name in self._shapes}
+        out = {
+            name: np.load(self._dir / f"{name}.npy", mmap_mode="r")[:k]
+            for name in self._shapes
+        }
         self._buffers = {}
         self._cleanup.detach()
         if os.name == "posix":  # the mappings keep the data; the names can go now

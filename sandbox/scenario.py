@@ -5,8 +5,10 @@ reported at once as a :class:`~sandbox.errors.Problem` with the YAML line of the
 (``FILE:LINE: path.to.field: what is wrong (got X; expected Y)``). The simulation never
 re-checks configuration.
 
-The format is documented key by key in ``scenarios/reference.yaml``. Lengths may be written
-in metres (``0.75``) or as multiples of the default vehicle diameter (``"3d"``, ``1.5d``).
+The format is documented key by key in ``scenarios/reference.yaml``. Lengths may be
+written
+in metres (``0.75``) or as multiples of the default vehicle diameter (``"3d"``,
+``1.5d``).
 """
 
 from __future__ import annotations
@@ -48,7 +50,8 @@ FAILURE_KINDS = ("stuck_steering", "stop", "spin", "uncontrolled", "crash")
 OBSTACLE_TYPES = ("circle", "box", "polygon", "wall")
 PLATOON_PATTERNS = ("grid", "line", "wedge", "ring")
 DRIVE_TYPES = ("reference", "commands")
-#: Default colours, in vehicle order (the report draws the leader blue, then red, green).
+# : Default colours, in vehicle order (the report draws the leader blue, then red,
+# green).
 PALETTE = (
     "blue",
     "red",
@@ -78,7 +81,7 @@ class DriveSpec:
 
 @dataclass(frozen=True)
 class VehicleSpec:
-    """One vehicle: identity, initial pose, slot offset and physical/controller limits."""
+    """One vehicle: identity, initial pose, slot offset, physical limits."""
 
     name: str
     pose: tuple[float, float, float]
@@ -218,7 +221,7 @@ class MetricsSpec:
 
 @dataclass(frozen=True)
 class Scenario:
-    """A validated scenario. Build it with :func:`load_scenario` or :func:`parse_scenario`."""
+    """A validated scenario (build it with :func:`load_scenario`)."""
 
     name: str
     description: str
@@ -613,8 +616,12 @@ class _Reader:
             return None
         limit = MAX_LENGTH if length else MAX_NUMBER
         if abs(value) > limit:
-            self.fail(path, "beyond the supported range", shown,
-                      f"{kind}, within +-{limit:g}{' m' if length else ''}")
+            self.fail(
+                path,
+                "beyond the supported range",
+                shown,
+                f"{kind}, within +-{limit:g}{' m' if length else ''}",
+            )
             return None
         if positive and value <= 0:
             self.fail(path, "must be greater than 0", shown, kind)
@@ -837,8 +844,9 @@ def _vehicle_params(
 ) -> dict:
     """Read the physical/controller parameters of ``vehicle:`` or of one vehicle."""
     out = dict(base)
-    out["diameter"] = rd.number(m, "diameter", path, base["diameter"],
-                                minimum=MIN_DIAMETER)
+    out["diameter"] = rd.number(
+        m, "diameter", path, base["diameter"], minimum=MIN_DIAMETER
+    )
     out["mass"] = rd.number(m, "mass", path, base["mass"], minimum=MIN_MASS)
     for key in ("max_accel", "v1_max", "v2_max"):
         out[key] = rd.number(m, key, path, base[key], positive=True)
@@ -1155,7 +1163,12 @@ def _expand_platoon(
         color = PALETTE[(len(listed) + i) % len(PALETTE)]
         out.append(
             _make_vehicle(
-                f"{spec.prefix}{i}", pose, tuple(offsets[i]), False, color, DriveSpec(),
+                f"{spec.prefix}{i}",
+                pose,
+                tuple(offsets[i]),
+                False,
+                color,
+                DriveSpec(),
                 params,
             )
         )
@@ -1701,8 +1714,11 @@ def _check_consistency(
             )
         if duration is not None and at is not None and at >= duration:
             if "duration" in rd.overridden:
-                rd.warn(f"{where}.at", f"failure at {at:g} s never starts: the run was "
-                        f"shortened to {duration:g} s")
+                rd.warn(
+                    f"{where}.at",
+                    f"failure at {at:g} s never starts: the run was "
+                    f"shortened to {duration:g} s",
+                )
                 continue
             rd.fail(
                 f"{where}.at",
@@ -1773,24 +1789,29 @@ def _check_gains(
             poles = error_poles(k_pos, k_vel)
             shown = ", ".join(_pole_text(s) for s in poles)
             if bound == 0.0:
-                rd.warn(here, f"gains {names} of {who} do not stabilise eq. (6) for "
-                        f"any control period: the error poles s = {shown} [1/s] (roots "
-                        "of s^2 - k_vel s - k_pos) need k_pos < 0 and k_vel < 0, the "
-                        "report's sign convention; expect the run to diverge")
+                rd.warn(
+                    here,
+                    f"gains {names} of {who} do not stabilise eq. (6) for "
+                    f"any control period: the error poles s = {shown} [1/s] (roots "
+                    "of s^2 - k_vel s - k_pos) need k_pos < 0 and k_vel < 0, the "
+                    "report's sign convention; expect the run to diverge",
+                )
                 continue
             if dt >= bound:
                 z = 1.0 + dt * poles
                 got_z = ", ".join(_pole_text(complex(v)) for v in z)
-                rd.fail(dt_path, f"control period too long for the gains of {who} "
-                        f"({names}): eq. (6) is advanced by forward Euler once per "
-                        f"period, so its error poles s = {shown} [1/s] become "
-                        "z = 1 + dt s; the loop needs |z| < 1 and, because a unicycle "
-                        "cannot back up (v1 = |chi| >= 0) and so cannot follow a chi "
-                        "that reverses every period, Re z > 0: dt < min(-2 Re s / "
-                        f"|s|^2, 1 / max|Re s|) = {bound:.4g} s",
-                        f"dt = {dt:g} s, z = {got_z}",
-                        f"dt < {bound:.4g} s, and well below it; the report uses "
-                        "0.01 s")
+                rd.fail(
+                    dt_path,
+                    f"control period too long for the gains of {who} "
+                    f"({names}): eq. (6) is advanced by forward Euler once per "
+                    f"period, so its error poles s = {shown} [1/s] become "
+                    "z = 1 + dt s; the loop needs |z| < 1 and, because a unicycle "
+                    "cannot back up (v1 = |chi| >= 0) and so cannot follow a chi "
+                    "that reverses every period, Re z > 0: dt < min(-2 Re s / "
+                    f"|s|^2, 1 / max|Re s|) = {bound:.4g} s",
+                    f"dt = {dt:g} s, z = {got_z}",
+                    f"dt < {bound:.4g} s, and well below it; the report uses 0.01 s",
+                )
                 return
         if g.kp <= 0:
             rd.warn(
@@ -1940,8 +1961,12 @@ def _apply_override(rd: _Reader, doc: dict[Any, Any], item: str) -> str | None:
         else:
             if target.get(tok) is None:
                 if tokens[k + 1].startswith("["):
-                    rd.fail(where, "names no field", f"no list at {tok}",
-                            f"an existing item of {tok}, or --set {tok}=[...]")
+                    rd.fail(
+                        where,
+                        "names no field",
+                        f"no list at {tok}",
+                        f"an existing item of {tok}, or --set {tok}=[...]",
+                    )
                     return None
                 target[tok] = {}
             target = target[tok]

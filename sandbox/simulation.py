@@ -1,9 +1,10 @@
-"""The fixed-step simulation loop: physics, formation law, recovery, failures, controller.
+"""The fixed-step simulation loop: physics, law, recovery, failures, controller.
 
 Every control period ``h = dt``:
 
 1. read all vehicles' poses from the physics (one bulk call);
-2. evaluate the reference and the formation law: each vehicle's slot, ``x_ref'``, ``x_ref''``;
+2. evaluate the reference and the formation law: each vehicle's slot, ``x_ref'``,
+``x_ref''``;
 3. shift the targets by the recovery strategy (eqs. (21)-(27));
 4. advance the flatness controller (eqs. (5)-(6)) for the whole fleet at once;
 5. apply failures and open-loop command schedules;
@@ -79,7 +80,9 @@ class Simulation:
         self.reference = scenario.reference.build() if scenario.reference else None
         law_spec = scenario.formation
         self.law = (
-            LAWS[law_spec.law](self.fleet.offset, self.h, law_spec.rotate) if law_spec else None
+            LAWS[law_spec.law](self.fleet.offset, self.h, law_spec.rotate)
+            if law_spec
+            else None
         )
         self.obstacles = ObstacleField(scenario.obstacles)
         self.failures = FailureSchedule(scenario.failures, self.names)
@@ -133,7 +136,7 @@ class Simulation:
         v2[self._schedule_rows] = self._scheduled[:, 1]
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
-        """Slots, reference point and the law's ``x_ref'``, ``x_ref''`` at time ``t``."""
+        """Slots, reference point, and the law's ``x_ref'``, ``x_ref''`` at ``t``."""
         fleet, n = self.fleet, self.fleet.n
         ref = self.reference.evaluate(t) if self.reference is not None else None
         if self.law is not None:
@@ -164,10 +167,17 @@ class Simulation:
         for o in sc.obstacles:
             if o.type == "circle":
                 obstacles.append(
-                    {"type": "circle", "center": list(o.center), "radius": o.radius, "name": o.name}
+                    {
+                        "type": "circle",
+                        "center": list(o.center),
+                        "radius": o.radius,
+                        "name": o.name,
+                    }
                 )
             else:
-                obstacles.append({"type": "polygon", "points": o.outline(), "name": o.name})
+                obstacles.append(
+                    {"type": "polygon", "points": o.outline(), "name": o.name}
+                )
         info = {
             "scenario_name": sc.name,
             "law": sc.formation.law if sc.formation else None,
@@ -223,7 +233,10 @@ class Simulation:
         has_failures = len(self.failures.specs) > 0
         failing = np.zeros(n, dtype=bool)
         gains, v1_max, v2_max, accel_max = (
-            self._gains, self._v1_max, self._v2_max, self._accel_max
+            self._gains,
+            self._v1_max,
+            self._v2_max,
+            self._accel_max,
         )
         wall = time.perf_counter()
         for k in range(self.steps + 1):
@@ -233,10 +246,22 @@ class Simulation:
             bad = _diverged(fleet)
             if bad is not None:
                 status = STATUS_DIVERGED
-                info["diverged"] = {"t": t, "vehicle": self.names[bad[0]], "reason": bad[1]}
-                recorder.append(t, _pose(fleet), _cmd(fleet), fleet.chi,
-                                np.full((n, 2), np.nan), np.full((n, 2), np.nan),
-                                fleet.mode, fleet.failed, np.full(2, np.nan))
+                info["diverged"] = {
+                    "t": t,
+                    "vehicle": self.names[bad[0]],
+                    "reason": bad[1],
+                }
+                recorder.append(
+                    t,
+                    _pose(fleet),
+                    _cmd(fleet),
+                    fleet.chi,
+                    np.full((n, 2), np.nan),
+                    np.full((n, 2), np.nan),
+                    fleet.mode,
+                    fleet.failed,
+                    np.full(2, np.nan),
+                )
                 break
 
             slot, v_ref, a_ref, point = self._targets(t)
@@ -249,8 +274,15 @@ class Simulation:
                 failing = np.zeros(n, dtype=bool)
                 failing[self.failures.vehicle[self.failures.active(t)]] = True
             shift, active = avoidance_shift(
-                fleet.pos, avoid_candidates & ~failing, rec.strategy, rec.beta, rec.R, rec.r,
-                rec.steepness, self.obstacles, neighbours,
+                fleet.pos,
+                avoid_candidates & ~failing,
+                rec.strategy,
+                rec.beta,
+                rec.R,
+                rec.r,
+                rec.steepness,
+                self.obstacles,
+                neighbours,
             )
             target = slot + shift  # eq. (22) / (26)
             if rec.target_derivatives == "estimate":
@@ -281,8 +313,17 @@ class Simulation:
             mode[failed] = MODE_FAILED
             fleet.mode = mode
             if k % every == 0:
-                recorder.append(t, _pose(fleet), _cmd(fleet), fleet.chi, slot, target,
-                                mode, failed, point)
+                recorder.append(
+                    t,
+                    _pose(fleet),
+                    _cmd(fleet),
+                    fleet.chi,
+                    slot,
+                    target,
+                    mode,
+                    failed,
+                    point,
+                )
             if should_stop is not None and should_stop():
                 status = STATUS_INTERRUPTED
                 info["interrupted"] = {"t": t}
@@ -353,7 +394,5 @@ def _diverged(fleet: Fleet) -> tuple[int, str] | None:
 
 
 def simulate(scenario: Scenario, **kwargs) -> Run:
-    """Run a scenario and return its :class:`~sandbox.run.Run` (see :meth:`Simulation.run`)."""
+    """Run a scenario; return its :class:`~sandbox.run.Run` (:meth:`Simulation.run`)."""
     return Simulation(scenario).run(**kwargs)
-
-

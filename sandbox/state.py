@@ -1,6 +1,7 @@
 """Fleet: the struct-of-arrays state of all vehicles.
 
-One array per quantity, indexed by vehicle; one numpy expression updates the whole fleet.
+One array per quantity, indexed by vehicle; one numpy expression updates the whole
+fleet.
 No per-vehicle Python object is touched on the hot path.
 """
 

@@ -1,14 +1,20 @@
-"""The physics: a pymunk Space of vehicles and static obstacles, stepped at a fixed rate.
+"""The physics: a pymunk Space of vehicles and static obstacles, fixed-step.
 
-The only module that imports pymunk. Each vehicle is a dynamic circle of diameter d driven
+The only module that imports pymunk. Each vehicle is a dynamic circle of diameter d
+driven
 by the unicycle kinematics through velocity constraints (pymunk's ``examples/tank.py``
-pattern): a kinematic *control body* carries the commanded velocity, and a ``PivotJoint``
-and a ``GearJoint`` with ``max_bias = 0`` and finite ``max_force`` make the vehicle follow
-it. Contacts therefore win over the motors: vehicles really collide, stop at walls and can
-be shoved. Control bodies live in a second, never-stepped Space so that the bulk reads and
+pattern): a kinematic *control body* carries the commanded velocity, and a
+``PivotJoint``
+and a ``GearJoint`` with ``max_bias = 0`` and finite ``max_force`` make the vehicle
+follow
+it. Contacts therefore win over the motors: vehicles really collide, stop at walls and
+can
+be shoved. Control bodies live in a second, never-stepped Space so that the bulk reads
+and
 writes of ``pymunk.batch`` cover exactly the vehicles.
 
-Collisions are counted with ``begin`` callbacks: one event per contact episode of a pair.
+Collisions are counted with ``begin`` callbacks: one event per contact episode of a
+pair.
 """
 
 from __future__ import annotations
@@ -25,7 +31,8 @@ from sandbox.scenario import ObstacleSpec, VehicleSpec
 
 VEHICLE = 1
 OBSTACLE = 2
-#: Contact overlap the solver tolerates [m] (pymunk's default, 0.1, is meant for pixels).
+# : Contact overlap the solver tolerates [m] (pymunk's default, 0.1, is meant for
+# pixels).
 COLLISION_SLOP = 0.002
 FRICTION = 0.3
 #: Angular motor limit as a multiple of ``motor_accel / radius`` [rad/s^2].
@@ -67,7 +74,9 @@ class World:
     obstacles : sequence of ObstacleSpec
     """
 
-    def __init__(self, vehicles: tuple[VehicleSpec, ...], obstacles: tuple[ObstacleSpec, ...]):
+    def __init__(
+        self, vehicles: tuple[VehicleSpec, ...], obstacles: tuple[ObstacleSpec, ...]
+    ):
         self.space = pymunk.Space()
         self.space.collision_slop = COLLISION_SLOP
         self.space.sleep_time_threshold = float("inf")
@@ -150,13 +159,17 @@ class World:
         return np.array([where[b.id] for b in bodies], dtype=np.intp)
 
     # ------------------------------------------------------------------ collisions
-    def _on_vehicle_vehicle(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+    def _on_vehicle_vehicle(
+        self, arbiter: pymunk.Arbiter, space: pymunk.Space, data
+    ) -> None:
         a, b = sorted(s.sandbox_index for s in arbiter.shapes)
         self.events.append(
             CollisionEvent(self.time, self.names[a], self.names[b], "vehicle_vehicle")
         )
 
-    def _on_vehicle_obstacle(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+    def _on_vehicle_obstacle(
+        self, arbiter: pymunk.Arbiter, space: pymunk.Space, data
+    ) -> None:
         first, second = arbiter.shapes
         if first.collision_type != VEHICLE:
             first, second = second, first
@@ -185,7 +198,9 @@ class World:
             omega=rows[:, 5].copy(),
         )
 
-    def write_commands(self, theta: np.ndarray, v1: np.ndarray, v2: np.ndarray, dt: float):
+    def write_commands(
+        self, theta: np.ndarray, v1: np.ndarray, v2: np.ndarray, dt: float
+    ):
         """Set the control bodies' velocities from unicycle commands (one bulk call).
 
         The velocity is directed along ``x3 + v2 dt / 2``, the mean heading over the
@@ -201,7 +216,7 @@ class World:
         pymunk.batch.set_space_bodies(self.control_space, _WRITE, self._write_buffer)
 
     def step(self, dt: float, substeps: int, t0: float) -> None:
-        """Advance the physics from time ``t0`` by one period ``dt`` [s] in ``substeps``.
+        """Advance the physics from ``t0`` by one period ``dt`` [s] in ``substeps``.
 
         Collision events are stamped with the start time of the substep they occur in.
         """
@@ -214,7 +229,8 @@ class World:
     def immobilize(self, index: int) -> None:
         """Make a vehicle an immovable wreck (the ``crash`` failure).
 
-        Its motors get unlimited force against a control body at rest, so contacts can no
+        Its motors get unlimited force against a control body at rest, so contacts can
+        no
         longer move it; it still collides (and counts) as a vehicle.
         """
         pivot, gear = self.joints[index]

@@ -1,4 +1,5 @@
-"""`sandbox gallery`: every scenario of a folder run and rendered, under the size budget."""
+"""`sandbox gallery`: every scenario of a folder run and rendered, under the size
+budget."""
 
 from __future__ import annotations
 

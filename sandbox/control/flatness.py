@@ -16,7 +16,8 @@ import numpy as np
 
 from sandbox.dynamics import wrap_angle
 
-#: Below this speed ``|chi|`` [m/s] the direction of chi is undefined (a vehicle at rest):
+# : Below this speed ``|chi|`` [m/s] the direction of chi is undefined (a vehicle at
+# rest):
 #: the vehicle holds its heading (v2 = 0) instead of dividing by zero in eq. (5), and
 #: stands still (v1 = 0): driving at ``|chi|`` along a heading unrelated to chi pushes
 #: a parked vehicle off its point (eq. (4) then ends in a millimetre orbit spinning at

@@ -1,11 +1,14 @@
 """Collective-motion (formation) laws of sections 3.2-3.5, eqs. (7)-(20).
 
-Each law turns the leader's measured state and/or the reference trajectory into, for every
-vehicle, a *slot* (the point it should occupy, [m]) and the velocity and acceleration fed
+Each law turns the leader's measured state and/or the reference trajectory into, for
+every
+vehicle, a *slot* (the point it should occupy, [m]) and the velocity and acceleration
+fed
 to eq. (6) as ``x_ref'`` and ``x_ref''``. The flatness controller then tracks them; the
 equations (7), (10), (13), (16) and (17) are eq. (6) with these three quantities.
 
-Symbols: ``delta`` (n, 2) the offsets (delta1, delta2) [m]; ``Delta`` the offsets projected
+Symbols: ``delta`` (n, 2) the offsets (delta1, delta2) [m]; ``Delta`` the offsets
+projected
 in the world frame (eqs. (11), (14), (20)); ``h`` the control period [s].
 """
 
@@ -62,7 +65,9 @@ class BackwardDifference:
             a = np.zeros_like(x)
         else:
             v = (x - self.prev_x) / self.h  # eq. (8) / (18)
-            a = (v - self.prev_v) / self.h if self.count >= 2 else np.zeros_like(x)  # (9)
+            a = (
+                (v - self.prev_v) / self.h if self.count >= 2 else np.zeros_like(x)
+            )  # (9)
         self.prev_x, self.prev_v = x, v
         self.count += 1
         return v, a
@@ -102,7 +107,8 @@ class FormationLaw:
     h : float [s]
         Control period (for the backward differences).
     rotate : bool
-        For ``virtual`` and ``leader_ref``: project the offsets on the reference's tangent.
+        For ``virtual`` and ``leader_ref``: project the offsets on the reference's
+        tangent.
     """
 
     #: Whether the law needs a real leader / the reference's derivatives.
@@ -160,7 +166,7 @@ class FixedFormation(FormationLaw):
 
 @register_law("rotating")
 class RotatingFormation(FixedFormation):
-    """Section 3.3, eqs. (10)-(11): leader-frame offsets, leader derivatives estimated."""
+    """Section 3.3, eqs. (10)-(11): leader-frame offsets, estimated leader motion."""
 
     def targets(self, inputs: LawInputs) -> Triple:
         """Slots ``x_leader + Delta(t)`` with ``Delta`` from eq. (11)."""
@@ -172,7 +178,7 @@ class RotatingFormation(FixedFormation):
 
 @register_law("virtual")
 class VirtualLeaderFormation(FormationLaw):
-    """Section 3.4, eqs. (13)-(15): every vehicle tracks the reference plus its offset."""
+    """Section 3.4, eqs. (13)-(15): each vehicle tracks the reference + its offset."""
 
     needs_leader = False
     needs_reference = True
@@ -186,7 +192,7 @@ class VirtualLeaderFormation(FormationLaw):
 
 @register_law("leader_ref")
 class LeaderReferenceFormation(FormationLaw):
-    """Section 3.4, eq. (16): around the real leader, with the reference's derivatives."""
+    """Section 3.4, eq. (16): around the real leader, reference derivatives."""
 
     needs_reference = True
 
