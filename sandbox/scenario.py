@@ -18,7 +18,7 @@ import datetime
 import difflib
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -525,6 +525,25 @@ class _Reader:
         self.warnings.append(Problem(path, message, self.line(path)))
 
     # -- structure
+    def items(
+        self, doc: Any, path: str, what: str
+    ) -> Iterator[tuple[int, str, dict[Any, Any]]]:
+        """Yield ``(index, path, mapping)`` for each mapping of a list of ``what``.
+
+        ``None`` is an empty list; a non-list, or an item that is not a mapping, is a
+        problem (and is skipped).
+        """
+        if doc is None:
+            return
+        if not isinstance(doc, list):
+            self.fail(path, "not a list", _describe(doc), f"a list of {what}")
+            return
+        for i, item in enumerate(doc):
+            sub = f"{path}[{i}]"
+            m = self.mapping(item, sub)
+            if m is not None:
+                yield i, sub, m
+
     def mapping(self, value: Any, path: str) -> dict[Any, Any] | None:
         if value is None:
             return {}
@@ -1222,17 +1241,8 @@ def _recovery(rd: _Reader, doc: Any, path: str) -> RecoverySpec:
 
 
 def _failures(rd: _Reader, doc: Any, path: str) -> list[tuple[str, FailureSpec]]:
-    if doc is None:
-        return []
-    if not isinstance(doc, list):
-        rd.fail(path, "not a list", _describe(doc), "a list of failures")
-        return []
     out = []
-    for i, item in enumerate(doc):
-        sub = f"{path}[{i}]"
-        m = rd.mapping(item, sub)
-        if m is None:
-            continue
+    for _, sub, m in rd.items(doc, path, "failures"):
         rd.keys(m, FAILURE_KEYS, sub)
         vehicle = rd.string(m, "vehicle", sub, _REQUIRED)
         at = rd.number(m, "at", sub, _REQUIRED, minimum=0.0)
@@ -1277,17 +1287,8 @@ def _failures(rd: _Reader, doc: Any, path: str) -> list[tuple[str, FailureSpec]]
 
 
 def _obstacles(rd: _Reader, doc: Any, path: str) -> list[tuple[str, ObstacleSpec]]:
-    if doc is None:
-        return []
-    if not isinstance(doc, list):
-        rd.fail(path, "not a list", _describe(doc), "a list of obstacles")
-        return []
     out = []
-    for i, item in enumerate(doc):
-        sub = f"{path}[{i}]"
-        m = rd.mapping(item, sub)
-        if m is None:
-            continue
+    for i, sub, m in rd.items(doc, path, "obstacles"):
         kind = rd.choice(m, "type", sub, _REQUIRED, OBSTACLE_TYPES, "obstacle type")
         if kind is None or kind is _REQUIRED:
             continue
