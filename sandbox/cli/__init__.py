@@ -1,0 +1,73 @@
+"""Command-line interface: ``sandbox COMMAND ...``.
+
+No simulation logic lives here: the commands call the same API as Python users. Every
+user mistake ends in one line per problem on stderr and a non-zero exit, never a
+traceback. Each command lives in a module of this package with a ``register(sub)``
+function that adds its subparser; :data:`COMMANDS` lists them in help order. A new
+command is a new module and one entry there.
+
+Exit status: 0 success; 1 a run diverged or a command failed; 2 invalid input;
+130 a run was interrupted (its outputs so far are written, flagged ``interrupted``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from sandbox.cli import compare, figures, run, validate
+from sandbox.cli.common import (
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_INVALID,
+    EXIT_OK,
+    GifOptionError,
+)
+from sandbox.errors import SandboxError, ScenarioError
+
+#: The command modules, in the order their commands appear in ``sandbox --help``.
+COMMANDS = (run, validate, figures, compare)
+
+__all__ = ["EXIT_FAILED", "EXIT_INTERRUPTED", "EXIT_INVALID", "EXIT_OK", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``sandbox`` command."""
+    parser = argparse.ArgumentParser(
+        prog="sandbox",
+        description=(
+            "Physics-backed 2D sandbox for collective motion of unicycle vehicles."
+        ),
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    for module in COMMANDS:
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ScenarioError as exc:
+        for line in exc.lines:
+            print(line, file=sys.stderr)
+        return EXIT_INVALID
+    except GifOptionError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    except SandboxError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except BrokenPipeError:
+        # The reader of our output went away (e.g. `sandbox schema | head`).
+        sys.stderr.close()
+        return EXIT_FAILED
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED

@@ -1,0 +1,130 @@
+"""What every ``sandbox`` command shares: exit codes, signals, progress, GIF options."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from types import FrameType
+
+from sandbox.errors import SandboxError
+from sandbox.run import Run
+
+EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+def bundled_scenarios_dir() -> Path:
+    """The ``scenarios/`` folder: the working directory's, else the source tree's."""
+    here = Path.cwd() / "scenarios"
+    if here.is_dir():
+        return here
+    return Path(__file__).resolve().parent.parent / "scenarios"
+
+
+def progress_printer() -> Callable[[int, int], None] | None:
+    """A progress line on an interactive terminal; nothing under CI or into a pipe."""
+    if os.environ.get("CI") or not sys.stderr.isatty():
+        return None
+
+    def show(step: int, steps: int) -> None:
+        sys.stderr.write(f"\r  simulating: {100 * step // max(steps, 1):3d}%")
+        sys.stderr.flush()
+        if step + max(1, steps // 100) > steps:
+            sys.stderr.write("\r" + " " * 24 + "\r")
+
+    return show
+
+
+class StopFlag:
+    """SIGINT/SIGTERM handler that asks the running simulation to stop cleanly."""
+
+    def __init__(self) -> None:
+        self.raised = False
+        self._old: dict[int, object] = {}
+
+    def __call__(self) -> bool:
+        """Whether a stop was asked for."""
+        return self.raised
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self.raised = True
+
+    def __enter__(self) -> StopFlag:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._old[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+
+def render_gif(run: Run, args: argparse.Namespace) -> None:
+    """Render ``run`` to ``args.gif`` (atomically: temporary file, then rename)."""
+    from sandbox.render import write_gif
+
+    try:
+        info = write_gif(
+            run,
+            Path(args.gif),
+            fps=args.fps,
+            size=args.size,
+            speed=args.speed,
+            zones=args.zones,
+            follow=args.follow,
+        )
+    except ValueError as exc:  # an option the renderer refuses (fps, size, ...)
+        raise GifOptionError(f"--gif {args.gif}: {exc}") from None
+    print(f"gif: {info['path']} ({info['frames']} frames, {info['duration']:.1f} s)")
+
+
+class GifOptionError(SandboxError):
+    """A GIF option the renderer refuses."""
+
+
+def positive(kind: type) -> Callable[[str], float]:
+    """An argparse type: a finite number greater than 0."""
+
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            message = f"expected a number, got {text!r}"
+            raise argparse.ArgumentTypeError(message) from None
+        if not (0 < value < float("inf")):
+            raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+        return value
+
+    return parse
+
+
+def add_gif_options(p: argparse.ArgumentParser) -> None:
+    """Add the options of GIF rendering to a command's parser."""
+    p.add_argument(
+        "--fps",
+        type=positive(float),
+        default=25.0,
+        help="frames per second, at most 50 (default 25)",
+    )
+    p.add_argument(
+        "--size",
+        type=positive(int),
+        default=640,
+        help="frame size in pixels (default 640)",
+    )
+    p.add_argument(
+        "--speed",
+        type=positive(float),
+        default=1.0,
+        help="playback speed relative to simulated time (default 1)",
+    )
+    p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
+    p.add_argument(
+        "--follow",
+        choices=("leader",),
+        default=None,
+        help="camera follows the leader instead of framing the whole run",
+    )

@@ -1,0 +1,64 @@
+"""``sandbox compare FILE...``: a table of recovery strategies against metrics."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from sandbox.cli.common import EXIT_INVALID, EXIT_OK
+from sandbox.errors import ScenarioError
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    """``sandbox compare FILE...``: a table of metrics per scenario and strategy."""
+    from sandbox.compare import compare, format_table
+
+    def names(text: str) -> list[str]:
+        return [x.strip() for x in text.split(",") if x.strip()]
+
+    try:
+        rows = compare(
+            args.files,
+            names(args.strategies),
+            names(args.derivatives),
+            args.set or [],
+            jobs=args.jobs,
+        )
+    except ValueError as exc:
+        if isinstance(exc, ScenarioError):
+            raise
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    sys.stdout.write(format_table(rows, args.format))
+    return EXIT_OK
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``compare`` command."""
+    p = sub.add_parser("compare", help="compare recovery strategies on scenario files")
+    p.add_argument("files", nargs="+", help="scenario YAML files")
+    p.add_argument(
+        "--strategies",
+        default="none,discontinuous,continuous,smooth",
+        help="comma-separated strategies, or file for each file's own "
+        "(default: all four)",
+    )
+    p.add_argument(
+        "--derivatives",
+        default="hold",
+        help="comma-separated target_derivatives modes: hold, estimate (default hold)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="PATH=VALUE",
+        help="override a field in every run (repeatable)",
+    )
+    p.add_argument("--format", choices=("markdown", "csv"), default="markdown")
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="worker processes (default 1); the table is the same",
+    )
+    p.set_defaults(func=cmd_compare)
