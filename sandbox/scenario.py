@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 from scipy.spatial import cKDTree
 
+from sandbox import randomize
 from sandbox.control.flatness import (
     Gains,
     error_poles,
@@ -809,6 +810,7 @@ TOP_KEYS = (
     "failures",
     "obstacles",
     "metrics",
+    "randomize",
 )
 VEHICLE_PARAM_KEYS = (
     "diameter",
@@ -1438,6 +1440,11 @@ def parse_scenario(
         if where is not None:
             overridden.append((where, item))
             rd.overridden.add(where)
+    if doc.get("randomize") is not None:  # draws into the document (randomize.py)
+        doc, found = randomize.resolve(
+            doc, skip=rd.overridden, line=rd.line, check=parse_scenario
+        )
+        rd.problems.extend(found)
     rd.keys(doc, TOP_KEYS, "")
 
     default_name = Path(source).stem if source else "scenario"

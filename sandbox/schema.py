@@ -113,6 +113,39 @@ def _ref(name: str) -> dict[str, Any]:
     return {"$ref": f"#/$defs/{name}"}
 
 
+def _randomize() -> dict[str, Any]:
+    bound = {
+        "anyOf": [
+            {"type": "number"},
+            {"type": "array", "items": {"type": "number"}, "minItems": 1},
+        ]
+    }
+    pair = {"type": "array", "items": bound, "minItems": 2, "maxItems": 2}
+    dist = {
+        "oneOf": [
+            {
+                "type": "object",
+                "properties": {"uniform": pair},
+                "required": ["uniform"],
+                "additionalProperties": False,
+            },
+            {
+                "type": "object",
+                "properties": {"normal": pair},
+                "required": ["normal"],
+                "additionalProperties": False,
+            },
+            {
+                "type": "object",
+                "properties": {"choice": {"type": "array", "minItems": 1}},
+                "required": ["choice"],
+                "additionalProperties": False,
+            },
+        ]
+    }
+    return {"type": "object", "additionalProperties": dist}
+
+
 _NONE = object()
 
 
@@ -250,6 +283,13 @@ FIELDS: dict[str, dict[str, Field]] = {
             lambda: {"type": "array", "items": _ref("obstacle")}, "Static obstacles"
         ),
         "metrics": Field(lambda: _ref("metrics"), "Parameters of metrics.json"),
+        "randomize": Field(
+            _randomize,
+            "Random draws from the seed: field paths (the --set syntax, e.g. "
+            "vehicles[1].pose) mapped to {uniform: [low, high]}, {normal: [mean, "
+            "std]} (numbers or equal-length lists, elementwise) or {choice: [a, b, "
+            "...]}; overlapping starts are redrawn (see sandbox/randomize.py)",
+        ),
     },
     "vehicle": {
         "diameter": Field(
