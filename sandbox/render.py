@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from PIL import Image, ImageColor, ImageDraw, ImageFont
 
-from sandbox.run import MODE_AVOID, MODE_FAILED, Run
+from sandbox.run import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, Run
 
 __all__ = [
     "Camera",
@@ -81,7 +81,7 @@ _DASH_PX = (8.0, 6.0)  # reference path: dash and gap lengths [px]
 _MIN_DETAIL_PX = 3.0  # bodies smaller than this radius [px] get no edge nor heading
 
 # Fixed palette entries (indices); vehicle colours follow.
-WHITE, BLACK, OBSTACLE, OBSTACLE_EDGE, PATH, ORANGE, RED, ZONE = range(8)
+WHITE, BLACK, OBSTACLE, OBSTACLE_EDGE, PATH, ORANGE, RED, ZONE, BLUE = range(9)
 _BASE_COLORS = (
     (255, 255, 255),  # WHITE: background
     (0, 0, 0),  # BLACK: heading lines, edges, failure marks, text
@@ -91,6 +91,7 @@ _BASE_COLORS = (
     (255, 140, 0),  # ORANGE: avoidance mode
     (225, 0, 0),  # RED: collision flashes
     (200, 200, 200),  # ZONE: avoidance radii of vehicles not avoiding
+    (0, 120, 255),  # BLUE: external mode (driven through Simulation.step)
 )
 _FALLBACK_COLORS = (
     "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd",
@@ -488,6 +489,7 @@ def _stamp_discs(
     detail: np.ndarray | None = None,
     halo: np.ndarray | None = None,
     halo_width: float = 0.0,
+    halo_color: np.ndarray | None = None,
 ) -> None:
     """Paint discs onto a canvas of palette indices, vectorized over discs.
 
@@ -512,6 +514,8 @@ def _stamp_discs(
         Which discs get their edge and heading line (default: all).
     halo : ndarray, shape (m,), bool, optional
         Discs that get an orange ring of ``halo_width`` [px] outside the radius.
+    halo_color : ndarray, shape (m,), int, optional
+        Palette index of each disc's ring instead of orange.
     """
     h, w = canvas.shape
     ok = np.isfinite(centers).all(axis=1) & np.isfinite(radius)
@@ -538,7 +542,11 @@ def _stamp_discs(
         val = np.full(d2.shape, -1, dtype=np.int16)
         if halo is not None:
             ring = halo[i][:, None, None] & ~inside & (d2 <= (r + halo_width) ** 2)
-            val[ring] = ORANGE
+            if halo_color is None:
+                val[ring] = ORANGE
+            else:
+                color = np.broadcast_to(halo_color[i][:, None, None], ring.shape)
+                val[ring] = color[ring]
         if fill is not None:
             val = np.where(inside, fill[i][:, None, None], val)
         fine = (
@@ -699,6 +707,8 @@ class _Scene:
             img = self.background.copy()
         failed = self.failed_raw[k] | (self.mode[k] == MODE_FAILED)
         avoid = (self.mode[k] == MODE_AVOID) & ~failed
+        external = (self.mode[k] == MODE_EXTERNAL) & ~failed
+        ring = np.where(external, BLUE, ORANGE)
         draw = ImageDraw.Draw(img)
         draw.fontmode = "1"
         if self.trails:
@@ -724,15 +734,18 @@ class _Scene:
                 heading=self.theta[k],
                 heading_width=np.maximum(2.0, 0.2 * radius),
                 detail=radius >= _MIN_DETAIL_PX,
-                halo=avoid,
+                halo=avoid | external,
                 halo_width=halo,
+                halo_color=ring,
             )
             img = Image.fromarray(canvas)
             draw = ImageDraw.Draw(img)
             draw.fontmode = "1"
         else:
             self._draw_slots(draw, cam.world_to_pixel(self.slot[k]))
-            self._draw_bodies(draw, centers, radius, self.theta[k], avoid, halo)
+            self._draw_bodies(
+                draw, centers, radius, self.theta[k], avoid | external, halo, ring
+            )
         self._draw_failures(draw, centers[failed], radius[failed])
         self._draw_flashes(draw, cam, self.t[k])
         self._draw_hud(draw, self.t[k])
@@ -756,15 +769,21 @@ class _Scene:
         theta: np.ndarray,
         avoid: np.ndarray,
         halo: float,
+        ring: np.ndarray | None = None,
     ) -> None:
-        """Bodies (fill, black edge, heading line) and orange rings of avoiders."""
+        """Bodies (fill, black edge, heading line) and rings of avoiders.
+
+        The ring is orange, or the palette index ``ring[i]`` (blue for vehicles in
+        external mode).
+        """
         ok = np.isfinite(centers).all(axis=1) & np.isfinite(theta)
         for i in np.flatnonzero(ok):
             u, v = centers[i] - 0.5
             r = float(radius[i])
             if avoid[i]:
                 h = r + halo
-                draw.ellipse([u - h, v - h, u + h, v + h], fill=ORANGE)
+                color = ORANGE if ring is None else int(ring[i])
+                draw.ellipse([u - h, v - h, u + h, v + h], fill=color)
             box = [u - r, v - r, u + r, v + r]
             if r < _MIN_DETAIL_PX:
                 draw.ellipse(box, fill=int(self.body[i]))

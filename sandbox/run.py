@@ -28,7 +28,9 @@ import numpy as np
 MODE_FORMATION = 0
 MODE_AVOID = 1
 MODE_FAILED = 2
-MODE_NAMES = ("formation", "avoid", "failed")
+#: Driven this period by commands or targets given to ``Simulation.step``.
+MODE_EXTERNAL = 3
+MODE_NAMES = ("formation", "avoid", "failed", "external")
 
 #: Status values of a run (``metrics.json`` key ``status``).
 STATUS_OK = "ok"
@@ -82,7 +84,8 @@ class Run:
     target : ndarray, shape (T, n, 2) [m]
         The point the controller actually tracked: the slot shifted by recovery.
     mode : ndarray, shape (T, n), int8
-        ``MODE_FORMATION``, ``MODE_AVOID`` or ``MODE_FAILED``.
+        ``MODE_FORMATION``, ``MODE_AVOID``, ``MODE_FAILED`` or ``MODE_EXTERNAL``
+        (overridden through :meth:`sandbox.simulation.Simulation.step`).
     failed : ndarray, shape (T, n), bool
         Whether a failure is active on the vehicle.
     reference : ndarray, shape (T, 2) [m]

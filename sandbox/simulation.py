@@ -1,23 +1,30 @@
-"""The fixed-step simulation loop: physics, law, recovery, failures, controller.
+"""The fixed-step simulation loop, step-wise: sense, plan, act, record, advance.
 
-Every control period ``h = dt``:
+Every control period ``h = dt`` runs these stages over whole-fleet arrays:
 
-1. read all vehicles' poses from the physics (one bulk call);
-2. evaluate the reference and the formation law: each vehicle's slot, ``x_ref'``,
-``x_ref''``;
-3. shift the targets by the recovery strategy (eqs. (21)-(27));
-4. advance the flatness controller (eqs. (5)-(6)) for the whole fleet at once;
-5. apply failures and open-loop command schedules;
-6. record a sample every ``record_every`` periods;
-7. write the commands to the control bodies and step the physics ``substeps`` times.
+1. **sense** (:meth:`Simulation._sense`): read all vehicles' poses from the physics in
+   one bulk call; a non-finite or runaway state ends the run as ``diverged``;
+2. **plan** (:meth:`Simulation._plan`): evaluate the reference and the formation law
+   (each vehicle's slot, ``x_ref'``, ``x_ref''``), start the failures due now, shift
+   the targets by the recovery strategy (eqs. (21)-(27));
+3. **act** (:meth:`Simulation._act`): advance the flatness controller (eqs. (5)-(6))
+   for the whole fleet, then apply open-loop schedules, the user's overrides and the
+   failures;
+4. **record** a sample every ``record_every`` periods;
+5. **advance**: write the commands to the physics and step it ``substeps`` times.
 
-A run returns a :class:`~sandbox.run.Run`; nothing here draws or computes metrics.
+:meth:`Simulation.step` runs one period with optional overrides and returns an
+:class:`~sandbox.observation.Observation`; :meth:`Simulation.run` is the loop of steps
+without overrides, and :meth:`Simulation.result` the recorded
+:class:`~sandbox.run.Run`. The physics is reached only through the
+:class:`~sandbox.physics.Physics` interface. Nothing here draws or computes metrics.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -29,9 +36,12 @@ from sandbox.control.flatness import (
 )
 from sandbox.control.formation import LAWS, BackwardDifference, LawInputs
 from sandbox.failures import FailureSchedule
+from sandbox.observation import Observation, Overrides, override_rows
+from sandbox.physics import Physics
 from sandbox.recovery import NeighbourList, ObstacleField, avoidance_shift
 from sandbox.run import (
     MODE_AVOID,
+    MODE_EXTERNAL,
     MODE_FAILED,
     MODE_FORMATION,
     STATUS_DIVERGED,
@@ -58,23 +68,37 @@ class Simulation:
     ----------
     scenario : Scenario
         A validated scenario (see :func:`sandbox.load_scenario`).
+    world : Physics, optional
+        The physics back-end; default a pymunk :class:`~sandbox.world.World` of the
+        scenario's vehicles and obstacles.
 
     Examples
     --------
     >>> from sandbox import load_scenario
-    >>> sim = Simulation(load_scenario({"duration": 1.0, "reference": {"type": "point",
-    ...     "position": [1, 0]}, "vehicles": [{"pose": [0, 0, 0]}]}))
-    >>> run = sim.run()
+    >>> doc = {"duration": 1.0, "reference": {"type": "point", "position": [1, 0]},
+    ...        "vehicles": [{"name": "red", "pose": [0, 0, 0]}]}
+    >>> run = Simulation(load_scenario(doc)).run()
     >>> run.pose.shape
     (101, 1, 3)
+
+    The same run, one step at a time, with the speed held at 0.2 m/s for 0.5 s:
+
+    >>> sim = Simulation(load_scenario(doc))
+    >>> obs = sim.observe()
+    >>> while not sim.done:
+    ...     obs = sim.step(commands={"red": (0.2, 0.0)} if obs.t < 0.5 else None)
+    >>> sim.result().mode[:3, 0].tolist()  # 3: external
+    [3, 3, 3]
     """
 
-    def __init__(self, scenario: Scenario) -> None:
+    def __init__(self, scenario: Scenario, world: Physics | None = None) -> None:
         self.scenario = scenario
         self.h = scenario.dt
         self.steps = int(round(scenario.duration / scenario.dt))
         self.fleet = Fleet.from_scenario(scenario)
-        self.world = World(scenario.vehicles, scenario.obstacles)
+        self.world: Physics = (
+            world if world is not None else World(scenario.vehicles, scenario.obstacles)
+        )
         self.names = [v.name for v in scenario.vehicles]
         self.leader = scenario.leader_index
         self.reference = scenario.reference.build() if scenario.reference else None
@@ -117,6 +141,26 @@ class Simulation:
         self._v1_max = _uniform(fl.v1_max)
         self._v2_max = _uniform(fl.v2_max)
         self._accel_max = _uniform(fl.accel_max)
+        # The loop's state: step index, record, status, and what recovery needs.
+        self.rec = scenario.recovery
+        self._avoid_candidates = ~fl.commanded
+        if not self.rec.leader_avoids and self.leader >= 0:
+            self._avoid_candidates[self.leader] = False
+        self._neighbours = NeighbourList(self.rec.R)
+        self._has_failures = len(self.failures.specs) > 0
+        self._failing = np.zeros(n, dtype=bool)
+        self.k = 0
+        self.status = STATUS_OK
+        self.info = self._info()
+        self.failed_at: dict[str, float] = {}
+        self.recorder = Recorder(self.steps // scenario.record_every + 1, n)
+        self.plan: Plan | None = None
+        self._recorded_target: np.ndarray | None = None
+        self._closed = False
+        self._run: Run | None = None
+        self._wall = time.perf_counter()
+        if self._sense():
+            self._plan()
 
     # ------------------------------------------------------------------ helpers
     def _scheduled_commands(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
@@ -202,13 +246,296 @@ class Simulation:
             info["reference_path"] = self.reference.evaluate(times)[0].round(6).tolist()
         return info
 
-    # ------------------------------------------------------------------ the loop
+    # ------------------------------------------------------------------ stages
+    def _sense(self) -> bool:
+        """Read the fleet state from the physics at ``t_k``; False if it diverged.
+
+        A diverged state ends the run: its sample is recorded as it is (slots and
+        targets NaN, the last commands and modes) and the status becomes ``diverged``.
+        """
+        fleet, t = self.fleet, self.k * self.h
+        state = self.world.read_state()
+        fleet.pos, fleet.theta, fleet.vel = state.pos, state.theta, state.vel
+        bad = _diverged(fleet)
+        if bad is None:
+            return True
+        n = fleet.n
+        self.status = STATUS_DIVERGED
+        self.info["diverged"] = {
+            "t": t,
+            "vehicle": self.names[bad[0]],
+            "reason": bad[1],
+        }
+        self.plan = Plan.undefined(n, failed=fleet.failed)
+        self._record(self.plan, fleet.mode, fleet.failed, always=True)
+        self._finish()
+        return False
+
+    def _plan(self) -> None:
+        """What the built-in stack would do at ``t_k``: slots, failures, recovery.
+
+        Evaluates the reference and the formation law (slots and the law's
+        ``x_ref'``, ``x_ref''``), starts the failures due now, and shifts the targets
+        by the recovery strategy (eqs. (21)-(27)). The result is :attr:`plan`, which
+        :meth:`observe` shows and :meth:`_act` consumes (with any overrides).
+        """
+        fleet, t, n, rec = self.fleet, self.k * self.h, self.fleet.n, self.rec
+        slot, v_ref, a_ref, point = self._targets(t)
+        failing = self._failing
+        if self._has_failures:
+            new = self.failures.start_new(t, fleet.v2)
+            for i in self.failures.immovable(new):
+                self.world.immobilize(i)
+            for j in new:
+                self.failed_at.setdefault(self.failures.specs[j].vehicle, t)
+            failing = np.zeros(n, dtype=bool)
+            failing[self.failures.vehicle[self.failures.active(t)]] = True
+        shift, active = avoidance_shift(
+            fleet.pos,
+            self._avoid_candidates & ~failing,
+            rec.strategy,
+            rec.beta,
+            rec.R,
+            rec.r,
+            rec.steepness,
+            self.obstacles,
+            self._neighbours,
+        )
+        target = slot + shift  # eq. (22) / (26)
+        if rec.target_derivatives == "estimate":
+            d_shift, dd_shift = self.shift_motion.update(shift)
+            v_ref = v_ref + d_shift
+            a_ref = a_ref + dd_shift
+        self._failing = failing
+        self.plan = Plan(slot, target, v_ref, a_ref, point, active, failing)
+
+    def _act(
+        self,
+        commands: tuple[np.ndarray, np.ndarray] | None,
+        targets: tuple[np.ndarray, np.ndarray] | None,
+    ) -> np.ndarray:
+        """Commands for the period from ``t_k``: controller, overrides, failures.
+
+        Advances the flatness controller (eqs. (5)-(6)) for the whole fleet towards
+        the planned targets (or the overridden ones), applies the open-loop schedules,
+        the user's command overrides (within the vehicle's limits) and the failures, in
+        that order. Sets ``fleet.v1, v2, failed, mode``; returns ``chi`` for ``t_k+1``.
+        """
+        fleet, plan, h, t = self.fleet, self.plan, self.h, self.k * self.h
+        target, v_ref, a_ref = plan.target, plan.v_ref, plan.a_ref
+        external = None
+        if targets is not None:
+            # A set-point: the given point, with no feed-forward motion.
+            rows, external = targets
+            target = np.where(external[:, None], rows, target)
+            v_ref = np.where(external[:, None], 0.0, v_ref)
+            a_ref = np.where(external[:, None], 0.0, a_ref)
+        aim = np.where(np.isnan(target), fleet.pos, target)
+
+        gains = self._gains
+        chi_dot = extension_rate(fleet.pos, fleet.chi, aim, v_ref, a_ref, gains)
+        chi_next, chi_dot = advance_extension(
+            fleet.chi, chi_dot, h, self._v1_max, self._accel_max
+        )
+        v1, v2 = flat_inputs(fleet.theta, fleet.chi, chi_dot, gains.kp)
+        v2 = np.clip(v2, -self._v2_max, self._v2_max)
+        # Vehicles not driven by the controller this period.
+        passive = fleet.commanded
+        if self._schedules:
+            if external is not None:  # a target override drives a scheduled vehicle
+                v1c, v2c = v1.copy(), v2.copy()
+                self._scheduled_commands(t, v1, v2)
+                v1[external], v2[external] = v1c[external], v2c[external]
+                passive = passive & ~external
+            else:
+                self._scheduled_commands(t, v1, v2)
+        if commands is not None:
+            rows, mask = commands
+            v1 = np.where(mask, self._command_limits(rows[:, 0]), v1)
+            v2 = np.where(mask, np.clip(rows[:, 1], -self._v2_max, self._v2_max), v2)
+            passive = passive | mask
+            external = mask if external is None else external | mask
+        v1, v2, failed, frozen = self.failures.apply(t, v1, v2)
+        # chi follows the applied velocity of passive vehicles, so that the law resumes
+        # without a jump when the failure or the override ends.
+        passive = frozen | passive
+        if np.any(passive):
+            heading = np.stack((np.cos(fleet.theta), np.sin(fleet.theta)), -1)
+            chi_next[passive] = v1[passive, None] * heading[passive]
+
+        fleet.v1, fleet.v2, fleet.failed = v1, v2, failed
+        mode = np.full(fleet.n, MODE_FORMATION, dtype=np.int8)
+        mode[plan.active] = MODE_AVOID
+        if external is not None:
+            mode[external] = MODE_EXTERNAL
+        mode[failed] = MODE_FAILED
+        fleet.mode = mode
+        if targets is not None:
+            self._recorded_target = target
+        return chi_next
+
+    def _command_limits(self, v1: np.ndarray) -> np.ndarray:
+        """User speeds within ``v1_max`` and, from the last speed, ``max_accel``."""
+        v1 = np.clip(v1, -self._v1_max, self._v1_max)
+        step = self._accel_max * self.h
+        return np.clip(v1, self.fleet.v1 - step, self.fleet.v1 + step)
+
+    def _record(
+        self, plan: Plan, mode: np.ndarray, failed: np.ndarray, always: bool = False
+    ) -> None:
+        """Append the sample of ``t_k`` (every ``record_every`` steps, or now)."""
+        if self.k % self.scenario.record_every and not always:
+            return
+        fleet = self.fleet
+        target = self._recorded_target
+        self.recorder.append(
+            self.k * self.h,
+            _pose(fleet),
+            _cmd(fleet),
+            fleet.chi,
+            plan.slot,
+            plan.target if target is None else target,
+            mode,
+            failed,
+            plan.point,
+        )
+
+    def _advance(self, chi_next: np.ndarray) -> None:
+        """Write the commands to the physics and step it to ``t_k+1``."""
+        fleet, h = self.fleet, self.h
+        fleet.chi = chi_next
+        self.world.write_commands(fleet.theta, fleet.v1, fleet.v2, h)
+        self.world.step(h, self.scenario.substeps, self.k * h)
+        self.k += 1
+
+    def _step(
+        self,
+        commands: tuple[np.ndarray, np.ndarray] | None = None,
+        targets: tuple[np.ndarray, np.ndarray] | None = None,
+        should_stop: Callable[[], bool] | None = None,
+    ) -> None:
+        """One control period: act, record, advance, sense and plan the next."""
+        self._recorded_target = None
+        chi_next = self._act(commands, targets)
+        self._record(self.plan, self.fleet.mode, self.fleet.failed)
+        if should_stop is not None and should_stop():
+            self.status = STATUS_INTERRUPTED
+            self.info["interrupted"] = {"t": self.k * self.h}
+            self._finish()
+            return
+        self._advance(chi_next)
+        if self._sense():
+            self._plan()
+
+    def _finish(self) -> None:
+        self._closed = True
+
+    # ------------------------------------------------------------------ the API
+    @property
+    def t(self) -> float:
+        """Current simulated time ``t_k = k h`` [s]."""
+        return self.k * self.h
+
+    @property
+    def done(self) -> bool:
+        """Whether the run has reached its duration, diverged or been stopped."""
+        return self._closed or self.k >= self.steps
+
+    def observe(self) -> Observation:
+        """The fleet now, and what the built-in stack plans for this period (copies)."""
+        fleet, plan = self.fleet, self.plan
+        return Observation(
+            t=self.k * self.h,
+            names=tuple(self.names),
+            pose=_pose(fleet),
+            vel=fleet.vel.copy(),
+            chi=fleet.chi.copy(),
+            slot=np.array(plan.slot, dtype=float),
+            target=np.array(plan.target, dtype=float),
+            mode=plan.mode(fleet.n) if not self._closed else fleet.mode.copy(),
+            failed=plan.failing.copy(),
+        )
+
+    def step(
+        self, commands: Overrides = None, targets: Overrides = None
+    ) -> Observation:
+        """Advance one control period ``h = dt``, with optional overrides.
+
+        Parameters
+        ----------
+        commands : mapping of str to (v1, v2), or ndarray (n, 2), optional
+            Commands [m/s, rad/s] replacing the controller's for the named vehicles
+            this period, within the vehicle's ``v1_max``, ``v2_max`` and (on v1)
+            ``max_accel``. Failures still act on top of them.
+        targets : mapping of str to (x1, x2), or ndarray (n, 2), optional
+            Points [m] the controller tracks this period instead of the planned
+            target, as set-points (no feed-forward velocity); recovery does not shift
+            them. An array takes NaN rows for "no override".
+
+        Returns
+        -------
+        Observation
+            At the next step ``t_k+1``.
+
+        Raises
+        ------
+        RuntimeError
+            When the run is :attr:`done`.
+        ValueError
+            An unknown vehicle name or a malformed value.
+        """
+        if self.done:
+            raise RuntimeError(
+                f"the run is over (status {self.status!r} at t = {self.t:g} s); "
+                "call result()"
+            )
+        cmd = override_rows(commands, self.names, "commands")
+        tgt = override_rows(targets, self.names, "targets")
+        self._step(cmd, tgt)
+        return self.observe()
+
+    def result(self) -> Run:
+        """The recorded run so far (the whole run once :attr:`done`).
+
+        The sample of the last time is recorded with the controller's own commands.
+        Called before the run is done, the run ends here with status ``interrupted``.
+        Further calls return the same :class:`~sandbox.run.Run`.
+        """
+        if self._run is not None:
+            return self._run
+        if not self._closed:
+            if self.k < self.steps:
+                self.status = STATUS_INTERRUPTED
+                self.info["interrupted"] = {"t": self.k * self.h}
+            self._recorded_target = None
+            self._act(None, None)
+            self._record(self.plan, self.fleet.mode, self.fleet.failed)
+            self._finish()
+        sc, info = self.scenario, self.info
+        info["failed_at"] = self.failed_at
+        info["wall_time"] = time.perf_counter() - self._wall
+        info["steps"] = self.k
+        self._run = Run(
+            names=list(self.names),
+            colors=[v.color for v in sc.vehicles],
+            diameter=self.fleet.diameter.copy(),
+            leader=self.leader,
+            events=list(self.world.events),
+            status=self.status,
+            info=info,
+            scenario=sc,
+            **self.recorder.arrays(),
+        )
+        return self._run
+
     def run(
         self,
         progress: Callable[[int, int], None] | None = None,
         should_stop: Callable[[], bool] | None = None,
     ) -> Run:
         """Simulate the whole scenario and return the recorded run.
+
+        The loop of :meth:`step` without overrides, then :meth:`result`.
 
         Parameters
         ----------
@@ -218,137 +545,55 @@ class Simulation:
             Polled every step; when it returns True the run stops with status
             ``interrupted`` (the samples so far are kept).
         """
-        sc, fleet, world, h = self.scenario, self.fleet, self.world, self.h
-        n = fleet.n
-        every = sc.record_every
-        recorder = Recorder(self.steps // every + 1, n)
-        rec = sc.recovery
-        avoid_candidates = ~fleet.commanded
-        if not rec.leader_avoids and self.leader >= 0:
-            avoid_candidates[self.leader] = False
-        status, info = STATUS_OK, self._info()
-        failed_at: dict[str, float] = {}
         report_every = max(1, self.steps // 100)
-        neighbours = NeighbourList(rec.R)
-        has_failures = len(self.failures.specs) > 0
-        failing = np.zeros(n, dtype=bool)
-        gains, v1_max, v2_max, accel_max = (
-            self._gains,
-            self._v1_max,
-            self._v2_max,
-            self._accel_max,
-        )
-        wall = time.perf_counter()
-        for k in range(self.steps + 1):
-            t = k * h
-            state = world.read_state()
-            fleet.pos, fleet.theta, fleet.vel = state.pos, state.theta, state.vel
-            bad = _diverged(fleet)
-            if bad is not None:
-                status = STATUS_DIVERGED
-                info["diverged"] = {
-                    "t": t,
-                    "vehicle": self.names[bad[0]],
-                    "reason": bad[1],
-                }
-                recorder.append(
-                    t,
-                    _pose(fleet),
-                    _cmd(fleet),
-                    fleet.chi,
-                    np.full((n, 2), np.nan),
-                    np.full((n, 2), np.nan),
-                    fleet.mode,
-                    fleet.failed,
-                    np.full(2, np.nan),
-                )
-                break
-
-            slot, v_ref, a_ref, point = self._targets(t)
-            if has_failures:
-                new = self.failures.start_new(t, fleet.v2)
-                for i in self.failures.immovable(new):
-                    world.immobilize(i)
-                for j in new:
-                    failed_at.setdefault(self.failures.specs[j].vehicle, t)
-                failing = np.zeros(n, dtype=bool)
-                failing[self.failures.vehicle[self.failures.active(t)]] = True
-            shift, active = avoidance_shift(
-                fleet.pos,
-                avoid_candidates & ~failing,
-                rec.strategy,
-                rec.beta,
-                rec.R,
-                rec.r,
-                rec.steepness,
-                self.obstacles,
-                neighbours,
-            )
-            target = slot + shift  # eq. (22) / (26)
-            if rec.target_derivatives == "estimate":
-                d_shift, dd_shift = self.shift_motion.update(shift)
-                v_ref = v_ref + d_shift
-                a_ref = a_ref + dd_shift
-            aim = np.where(np.isnan(target), fleet.pos, target)
-
-            chi_dot = extension_rate(fleet.pos, fleet.chi, aim, v_ref, a_ref, gains)
-            chi_next, chi_dot = advance_extension(
-                fleet.chi, chi_dot, h, v1_max, accel_max
-            )
-            v1, v2 = flat_inputs(fleet.theta, fleet.chi, chi_dot, gains.kp)
-            v2 = np.clip(v2, -v2_max, v2_max)
-            if self._schedules:
-                self._scheduled_commands(t, v1, v2)
-            v1, v2, failed, frozen = self.failures.apply(t, v1, v2)
-            # Vehicles not driven by the controller: chi follows the applied velocity so
-            # that the law resumes without a jump when the failure clears.
-            passive = frozen | fleet.commanded
-            if np.any(passive):
-                heading = np.stack((np.cos(fleet.theta), np.sin(fleet.theta)), -1)
-                chi_next[passive] = v1[passive, None] * heading[passive]
-
-            fleet.v1, fleet.v2, fleet.failed = v1, v2, failed
-            mode = np.full(n, MODE_FORMATION, dtype=np.int8)
-            mode[active] = MODE_AVOID
-            mode[failed] = MODE_FAILED
-            fleet.mode = mode
-            if k % every == 0:
-                recorder.append(
-                    t,
-                    _pose(fleet),
-                    _cmd(fleet),
-                    fleet.chi,
-                    slot,
-                    target,
-                    mode,
-                    failed,
-                    point,
-                )
-            if should_stop is not None and should_stop():
-                status = STATUS_INTERRUPTED
-                info["interrupted"] = {"t": t}
-                break
-            if k == self.steps:
-                break
-            fleet.chi = chi_next
-            world.write_commands(fleet.theta, v1, v2, h)
-            world.step(h, sc.substeps, t)
-            if progress is not None and k % report_every == 0:
+        while not self.done:
+            k = self.k
+            self._step(should_stop=should_stop)
+            if progress is not None and k % report_every == 0 and k < self.k:
                 progress(k, self.steps)
-        info["failed_at"] = failed_at
-        info["wall_time"] = time.perf_counter() - wall
-        info["steps"] = k
-        return Run(
-            names=list(self.names),
-            colors=[v.color for v in sc.vehicles],
-            diameter=fleet.diameter.copy(),
-            leader=self.leader,
-            events=list(world.events),
-            status=status,
-            info=info,
-            scenario=sc,
-            **recorder.arrays(),
+        return self.result()
+
+
+@dataclass
+class Plan:
+    """What the built-in stack plans for one period, arrays indexed by vehicle.
+
+    Attributes
+    ----------
+    slot, target : ndarray, shape (n, 2) [m]
+        Formation slots, and the slots shifted by recovery; NaN where undefined.
+    v_ref, a_ref : ndarray, shape (n, 2) [m/s], [m/s^2]
+        The law's ``x_ref'``, ``x_ref''`` (plus the shift's, when estimated).
+    point : ndarray, shape (2,) [m]
+        The reference point (NaN without a reference).
+    active : ndarray, shape (n,), bool
+        Vehicles whose target recovery shifts.
+    failing : ndarray, shape (n,), bool
+        Vehicles with an active failure.
+    """
+
+    slot: np.ndarray
+    target: np.ndarray
+    v_ref: np.ndarray
+    a_ref: np.ndarray
+    point: np.ndarray
+    active: np.ndarray
+    failing: np.ndarray
+
+    @classmethod
+    def undefined(cls, n: int, failed: np.ndarray) -> Plan:
+        """The plan of a diverged state: nothing defined."""
+        nan = np.full((n, 2), np.nan)
+        return cls(
+            nan, nan, nan, nan, np.full(2, np.nan), np.zeros(n, bool), failed.copy()
         )
+
+    def mode(self, n: int) -> np.ndarray:
+        """Planned ``run.MODE_*`` codes, shape (n,), int8."""
+        mode = np.full(n, MODE_FORMATION, dtype=np.int8)
+        mode[self.active] = MODE_AVOID
+        mode[self.failing] = MODE_FAILED
+        return mode
 
 
 def _pose(fleet: Fleet) -> np.ndarray:
