@@ -1,10 +1,8 @@
 """Reference trajectories with exact first and second time derivatives.
 
-A reference is the path the leader (or, for the ``virtual`` law, every slot) tracks
-with the
-flatness controller, eq. (6). Each class evaluates ``(p, dp, ddp)`` at a time ``t`` (a
-float
-or an array of times), each of shape ``(..., 2)`` in [m], [m/s], [m/s^2].
+A reference is the path the leader (or, for the ``virtual`` law, every slot) tracks with
+the flatness controller, eq. (6). Each class evaluates ``(p, dp, ddp)`` at a time ``t``
+(a float or an array of times), each of shape ``(..., 2)`` in [m], [m/s], [m/s^2].
 
 >>> ref = CircleReference(center=(0.0, 0.0), radius=2.0, speed=1.0, phase=0.0)
 >>> p, dp, ddp = ref.evaluate(0.0)
@@ -16,8 +14,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from scipy.interpolate import CubicSpline
 
 Triple = tuple[np.ndarray, np.ndarray, np.ndarray]
 
@@ -64,8 +66,7 @@ class CircleReference:
     """A circle of ``radius`` [m] about ``center``, run at ``speed`` [m/s].
 
     The sign of ``speed`` gives the direction (positive: counter-clockwise); ``phase``
-    [rad]
-    is the starting angle, measured from the x1 axis.
+    [rad] is the starting angle, measured from the x1 axis.
     """
 
     center: tuple[float, float]
@@ -90,9 +91,19 @@ class CircleReference:
 class LemniscateReference:
     """A figure-eight (lemniscate of Gerono), half-width ``size`` [m], at ``center``.
 
-    ``x1 = c1 + a sin(s)``, ``x2 = c2 + (a/2) sin(2 s)`` with ``s = w t``; ``w`` is
-    chosen
-    so that the mean speed over a lap equals ``speed`` [m/s] (the speed itself varies).
+    ``x1 = c1 + a sin(s)``, ``x2 = c2 + (a/2) sin(2 s)`` with ``s = w t``; ``w`` [rad/s]
+    is chosen so that the mean speed over a lap equals ``speed`` [m/s] (the speed itself
+    varies, fastest at the crossing).
+
+    Where it starts and which way it runs: at ``t = 0`` the reference is at ``center``
+    (the crossing point), heading up and to the right (+45 degrees from the x1 axis). It
+    first runs the right lobe (``x1 > c1``) clockwise, reaching ``(c1 + a, c2)`` heading
+    straight down at a quarter lap, crosses the centre again at half a lap heading up
+    and to the left (+135 degrees), then runs the left lobe counter-clockwise, through
+    ``(c1 - a, c2)`` heading down at three quarters, and is back at the centre heading
+    +45 degrees after one lap of
+    ``2 pi / w`` seconds. The figure spans ``[c1 - a, c1 + a]`` along x1 and ``[c2 -
+    a/2, c2 + a/2]`` along x2.
     """
 
     center: tuple[float, float]
@@ -120,45 +131,29 @@ class LemniscateReference:
         return p, dp, ddp
 
 
-def _natural_spline_second_derivatives(s: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Second derivatives at the knots of the natural cubic spline through (s, y)."""
-    n = len(s)
-    m = np.zeros((n,) + y.shape[1:])
-    if n < 3:
-        return m
-    h = np.diff(s)
-    a = np.zeros((n, n))
-    rhs = np.zeros((n,) + y.shape[1:])
-    a[0, 0] = a[-1, -1] = 1.0
-    for i in range(1, n - 1):
-        a[i, i - 1] = h[i - 1]
-        a[i, i] = 2.0 * (h[i - 1] + h[i])
-        a[i, i + 1] = h[i]
-        rhs[i] = 6.0 * ((y[i + 1] - y[i]) / h[i] - (y[i] - y[i - 1]) / h[i - 1])
-    return np.linalg.solve(a, rhs)
-
-
 @dataclass(frozen=True)
 class WaypointsReference:
     """A C2 curve through ``points`` (a natural cubic spline), run at ``speed`` [m/s].
 
-    The spline is parameterized by cumulative chord length ``s`` and run at
-    ``ds/dt = speed``, so the speed along the path is close to ``speed`` (exactly so on
-    straight segments). After the last point the reference holds still there.
+    The spline is parameterized by cumulative chord length ``s`` [m] and run at ``ds/dt
+    = speed``, so the speed along the path is close to ``speed`` (exactly so on straight
+    segments). After the last point the reference holds still there. The spline is
+    scipy's :class:`~scipy.interpolate.CubicSpline` with natural end conditions (zero
+    second derivative at both ends), built in O(n) time and memory for ``n`` points.
     """
 
     points: tuple[tuple[float, float], ...]
     speed: float
     knots: np.ndarray = field(init=False, repr=False, compare=False)
-    curvature: np.ndarray = field(init=False, repr=False, compare=False)
+    spline: CubicSpline = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        from scipy.interpolate import CubicSpline  # imported here: off the start path
+
         pts = np.asarray(self.points, dtype=float)
         s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))))
         object.__setattr__(self, "knots", s)
-        object.__setattr__(
-            self, "curvature", _natural_spline_second_derivatives(s, pts)
-        )
+        object.__setattr__(self, "spline", CubicSpline(s, pts, bc_type="natural"))
 
     @property
     def length(self) -> float:
@@ -168,26 +163,11 @@ class WaypointsReference:
     def evaluate(self, t: float | np.ndarray) -> Triple:
         """Return ``(p, dp, ddp)`` at time(s) ``t`` [s]."""
         t = np.asarray(t, dtype=float)
-        pts = np.asarray(self.points, dtype=float)
-        s_all, m = self.knots, self.curvature
-        s = np.clip(self.speed * t, 0.0, s_all[-1])
-        moving = (self.speed * t < s_all[-1]) & (t >= 0.0)
-        i = np.clip(np.searchsorted(s_all, s, side="right") - 1, 0, len(s_all) - 2)
-        h = (s_all[i + 1] - s_all[i])[..., None]
-        a = (s_all[i + 1] - s)[..., None]
-        b = (s - s_all[i])[..., None]
-        y0, y1, m0, m1 = pts[i], pts[i + 1], m[i], m[i + 1]
-        p = (
-            m0 * a**3 / (6 * h)
-            + m1 * b**3 / (6 * h)
-            + (y0 / h - m0 * h / 6) * a
-            + (y1 / h - m1 * h / 6) * b
-        )
-        dpds = -m0 * a**2 / (2 * h) + m1 * b**2 / (2 * h) - y0 / h + m0 * h / 6 + y1 / h
-        dpds = dpds - m1 * h / 6
-        d2pds2 = m0 * a / h + m1 * b / h
-        v = self.speed * moving[..., None]
-        return p, dpds * v, d2pds2 * v * v
+        s = np.clip(self.speed * t, 0.0, self.knots[-1])  # [m] arc parameter
+        moving = (self.speed * t < self.knots[-1]) & (t >= 0.0)
+        p = self.spline(s)
+        v = self.speed * moving[..., None]  # [m/s] ds/dt
+        return p, self.spline(s, 1) * v, self.spline(s, 2) * v * v
 
 
 Reference = (

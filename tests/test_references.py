@@ -95,3 +95,73 @@ def test_waypoints_speed_close_to_nominal() -> None:
     _, dp, ddp = ref.evaluate(np.linspace(0.1, 4.9, 9))
     np.testing.assert_allclose(dp, [[2.0, 0.0]] * 9, atol=1e-12)
     np.testing.assert_allclose(ddp, 0.0, atol=1e-12)
+
+
+def test_lemniscate_start_and_direction() -> None:
+    # As documented: starts at the centre heading +45 deg, the right lobe first and
+    # clockwise (up, right, down: at a quarter lap it is at (c1 + a, c2) heading
+    # straight down, dp = (a w cos(pi/2), a w cos(pi)) = (0, -a w)), back at the centre
+    # at half a lap heading +135 deg, then the left lobe counter-clockwise, through
+    # (c1 - a, c2) at three quarters, again heading straight down.
+    ref = REFERENCES["lemniscate"]  # centre (0, 1), a = 6
+    period = 2 * math.pi / ref.rate
+    p, dp, _ = ref.evaluate(np.array([0.0, 0.25, 0.5, 0.75]) * period)
+    np.testing.assert_allclose(p, [[0, 1], [6, 1], [0, 1], [-6, 1]], atol=1e-12)
+    heading = np.degrees(np.arctan2(dp[:, 1], dp[:, 0]))
+    np.testing.assert_allclose(heading, [45.0, -90.0, 135.0, -90.0], atol=1e-9)
+    # the right lobe is run clockwise: the signed area swept about the centre is < 0
+    # (the left lobe, the second half lap, counter-clockwise: > 0)
+    for half, sign in ((0.0, -1.0), (0.5, 1.0)):
+        t = np.linspace(half * period, (half + 0.5) * period, 2001)
+        q, dq, _ = ref.evaluate(t)
+        cross = q[:, 0] * dq[:, 1] - (q[:, 1] - 1) * dq[:, 0]  # about the centre (0, 1)
+        assert sign * np.sum(cross[:-1] * np.diff(t)) > 0
+
+
+def _dense_natural_spline(s: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The former dense n x n solve for the knots' second derivatives (reference)."""
+    n = len(s)
+    h = np.diff(s)
+    a = np.zeros((n, n))
+    rhs = np.zeros((n, 2))
+    a[0, 0] = a[-1, -1] = 1.0
+    for i in range(1, n - 1):
+        a[i, i - 1] = h[i - 1]
+        a[i, i] = 2.0 * (h[i - 1] + h[i])
+        a[i, i + 1] = h[i]
+        rhs[i] = 6.0 * ((y[i + 1] - y[i]) / h[i] - (y[i] - y[i - 1]) / h[i - 1])
+    return np.linalg.solve(a, rhs)
+
+
+def _dense_evaluate(s_all: np.ndarray, pts: np.ndarray, s: np.ndarray) -> tuple:
+    """Position, d/ds and d2/ds2 of the dense-solve spline at arc positions ``s``."""
+    m = _dense_natural_spline(s_all, pts)
+    i = np.clip(np.searchsorted(s_all, s, side="right") - 1, 0, len(s_all) - 2)
+    h = (s_all[i + 1] - s_all[i])[:, None]
+    a = (s_all[i + 1] - s)[:, None]
+    b = (s - s_all[i])[:, None]
+    y0, y1, m0, m1 = pts[i], pts[i + 1], m[i], m[i + 1]
+    p = (
+        m0 * a**3 / (6 * h)
+        + m1 * b**3 / (6 * h)
+        + (y0 / h - m0 * h / 6) * a
+        + (y1 / h - m1 * h / 6) * b
+    )
+    d1 = -m0 * a**2 / (2 * h) + m1 * b**2 / (2 * h) + (y1 - y0) / h - (m1 - m0) * h / 6
+    d2 = m0 * a / h + m1 * b / h
+    return p, d1, d2
+
+
+@pytest.mark.parametrize("count", [3, 4, 40, 300])
+def test_waypoints_spline_matches_the_dense_solve(count: int) -> None:
+    rng = np.random.default_rng(count)
+    pts = np.cumsum(rng.uniform(-1.0, 2.0, size=(count, 2)), axis=0)  # [m]
+    speed = 1.5  # [m/s]
+    ref = WaypointsReference(tuple(map(tuple, pts)), speed)
+    t = np.linspace(0.0, 0.999 * ref.length / speed, 5001)
+    p, dp, ddp = ref.evaluate(t)
+    p0, d1, d2 = _dense_evaluate(ref.knots, pts, speed * t)
+    scale = max(1.0, float(np.abs(pts).max()))
+    np.testing.assert_allclose(p, p0, rtol=0, atol=1e-13 * scale)
+    np.testing.assert_allclose(dp, d1 * speed, rtol=0, atol=1e-11 * scale)
+    np.testing.assert_allclose(ddp, d2 * speed**2, rtol=0, atol=1e-9 * scale)
