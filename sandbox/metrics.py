@@ -2,12 +2,14 @@
 
 Definitions (the keys of ``metrics.json``):
 
-- ``collisions``: contact episodes counted from pymunk ``begin`` callbacks, one per
-onset of
-  contact of a pair; ``vehicle_vehicle`` and ``vehicle_obstacle`` apart;
-  ``healthy``: the episodes in which no vehicle involved had an active failure (two
-  healthy vehicles, or a healthy vehicle and a static obstacle): what recovery is
-  meant to prevent; ``events`` lists ``{t, a, b, kind, healthy}``.
+- ``collisions``: contact episodes counted from the physics (see
+  :class:`~sandbox.run.CollisionEvent`): an episode of a pair starts at its first
+  contact and ends once the gap between the surfaces has exceeded
+  ``metrics.contact_release``; ``vehicle_vehicle`` and ``vehicle_obstacle`` apart;
+  ``healthy``: the episodes in which no vehicle involved had an active failure at the
+  first contact (two healthy vehicles, or a healthy vehicle and a static obstacle): what
+  recovery is meant to prevent; ``events`` lists ``{t, end, a, b, kind, healthy,
+  penetration}``.
 - ``min_distance``: smallest centre-to-centre distance between two vehicles over the
   recorded samples [m] (null with a single vehicle).
 - per vehicle, ``formation_error``: distance from the vehicle to its slot as its law
@@ -113,6 +115,9 @@ def healthy_events(run: Run) -> list[bool]:
     index = {name: i for i, name in enumerate(run.names)}
     out = []
     for e in run.events:
+        if e.healthy is not None:  # stamped by the physics at the first contact
+            out.append(bool(e.healthy))
+            continue
         k = max(int(np.searchsorted(run.t, e.t + 1e-9, side="right")) - 1, 0)
         ids = [index[x] for x in (e.a, e.b) if x in index]
         out.append(len(run.t) == 0 or not any(bool(run.failed[k, i]) for i in ids))
@@ -184,7 +189,15 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
             "vehicle_obstacle": len(vo),
             "healthy": int(sum(healthy)),
             "events": [
-                {"t": round(e.t, 6), "a": e.a, "b": e.b, "kind": e.kind, "healthy": h}
+                {
+                    "t": round(e.t, 6),
+                    "end": None if e.end is None else round(e.end, 6),
+                    "a": e.a,
+                    "b": e.b,
+                    "kind": e.kind,
+                    "healthy": h,
+                    "penetration": round(e.penetration, 6),
+                }
                 for e, h in zip(run.events, healthy, strict=True)
             ],
         },

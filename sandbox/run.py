@@ -38,27 +38,43 @@ STATUS_DIVERGED = "diverged"
 STATUS_INTERRUPTED = "interrupted"
 
 
-@dataclass(frozen=True)
+@dataclass
 class CollisionEvent:
-    """One contact episode between two bodies (a pymunk ``begin`` callback).
+    """One contact episode between two bodies.
+
+    An episode starts at the pair's first contact (a pymunk ``begin`` callback) and
+    ends once the pair has really separated: pymunk's ``separate`` has fired and the
+    gap between the two surfaces has grown beyond ``metrics.contact_release``. A pair
+    pressed together, grinding or bouncing back within that gap is one episode.
 
     Attributes
     ----------
     t : float [s]
-        Simulated time of the contact onset.
+        Simulated time of the first contact (start of the physics substep it occurs in).
     a, b : str
         Names of the two bodies: vehicle names, or obstacle names (``obstacle[k]``
-        unless the
-        scenario names them). For vehicle-vehicle events ``a`` precedes ``b`` in
-        scenario order.
+        unless the scenario names them). For vehicle-vehicle events ``a`` precedes ``b``
+        in scenario order.
     kind : str
         ``"vehicle_vehicle"`` or ``"vehicle_obstacle"``.
+    end : float or None [s]
+        Simulated time at which the gap first exceeded the release distance (end of
+        that substep); None while the pair was still within it when the run ended.
+    healthy : bool or None
+        Whether no vehicle involved had an active failure at the first contact; None
+        when not known (an event built by hand).
+    penetration : float [m]
+        Largest overlap of the two shapes during the episode, checked every physics
+        substep (0 when they only touched).
     """
 
     t: float
     a: str
     b: str
     kind: str
+    end: float | None = None
+    healthy: bool | None = None
+    penetration: float = 0.0
 
 
 @dataclass
@@ -159,7 +175,10 @@ class Run:
             "leader": self.leader,
             "status": self.status,
             "info": self.info,
-            "events": [[e.t, e.a, e.b, e.kind] for e in self.events],
+            "events": [
+                [e.t, e.a, e.b, e.kind, e.end, e.healthy, e.penetration]
+                for e in self.events
+            ],
         }
         with open(path, "wb") as fh:
             np.savez_compressed(
@@ -189,7 +208,7 @@ class Run:
             leader=int(meta["leader"]),
             status=meta["status"],
             info=meta["info"],
-            events=[CollisionEvent(float(t), a, b, k) for t, a, b, k in meta["events"]],
+            events=[CollisionEvent(*row) for row in meta["events"]],
             scenario=scenario,
             **arrays,
         )

@@ -215,9 +215,16 @@ class PlatoonSpec:
 
 @dataclass(frozen=True)
 class MetricsSpec:
-    """Parameters of the metrics (``metrics.json``)."""
+    """Parameters of the metrics (``metrics.json``).
+
+    ``settle_tol`` [m]: formation error of a settled vehicle; ``settle_dwell`` [s]: how
+    long the run must go on in band after the settling time; ``contact_release`` [m]:
+    gap between two surfaces that ends a contact episode.
+    """
 
     settle_tol: float = 0.05
+    settle_dwell: float = 1.0
+    contact_release: float = 0.01
 
 
 @dataclass(frozen=True)
@@ -857,7 +864,7 @@ FAILURE_KEYS = ("vehicle", "at", "kind", "until", "v1", "v2")
 PLATOON_KEYS = ("count", "pattern", "spacing", "jitter", "columns", "prefix")
 FORMATION_KEYS = ("law", "rotate")
 DRIVE_KEYS = ("type", "schedule")
-METRICS_KEYS = ("settle_tol",)
+METRICS_KEYS = ("settle_tol", "settle_dwell", "contact_release")
 
 
 def _vehicle_params(
@@ -1529,7 +1536,9 @@ def parse_scenario(
     mdoc = rd.mapping(doc.get("metrics"), "metrics") or {}
     rd.keys(mdoc, METRICS_KEYS, "metrics")
     metrics = MetricsSpec(
-        rd.number(mdoc, "settle_tol", "metrics", 0.05, positive=True) or 0.05
+        rd.number(mdoc, "settle_tol", "metrics", 0.05, positive=True) or 0.05,
+        rd.number(mdoc, "settle_dwell", "metrics", 1.0, minimum=0.0) or 0.0,
+        rd.number(mdoc, "contact_release", "metrics", 0.01, positive=True) or 0.01,
     )
 
     _check_consistency(

@@ -548,6 +548,20 @@ FIELDS: dict[str, dict[str, Field]] = {
             "m",
             0.05,
         ),
+        "settle_dwell": Field(
+            lambda: _number(minimum=0.0),
+            "How long the run must go on with the error in band after the settling "
+            "time, else the settling time is null",
+            "s",
+            1.0,
+        ),
+        "contact_release": Field(
+            _positive,
+            "Gap between two surfaces beyond which a contact episode ends (closer "
+            "returns are the same collision)",
+            "m",
+            0.01,
+        ),
     },
 }
 

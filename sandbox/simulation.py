@@ -97,7 +97,11 @@ class Simulation:
         self.steps = int(round(scenario.duration / scenario.dt))
         self.fleet = Fleet.from_scenario(scenario)
         self.world: Physics = (
-            world if world is not None else World(scenario.vehicles, scenario.obstacles)
+            world
+            if world is not None
+            else World(
+                scenario.vehicles, scenario.obstacles, scenario.metrics.contact_release
+            )
         )
         self.names = [v.name for v in scenario.vehicles]
         self.leader = scenario.leader_index
@@ -364,6 +368,7 @@ class Simulation:
             chi_next[passive] = v1[passive, None] * heading[passive]
 
         fleet.v1, fleet.v2, fleet.failed = v1, v2, failed
+        self.world.failed = failed  # an episode starting now is not healthy
         mode = np.full(fleet.n, MODE_FORMATION, dtype=np.int8)
         mode[plan.active] = MODE_AVOID
         if external is not None:

@@ -13,8 +13,11 @@ be shoved. Control bodies live in a second, never-stepped Space so that the bulk
 and
 writes of ``pymunk.batch`` cover exactly the vehicles.
 
-Collisions are counted with ``begin`` callbacks: one event per contact episode of a
-pair.
+Collisions are counted as contact *episodes* (:class:`ContactEpisodes`): a pair's
+``begin`` callback opens one, and it closes only once ``separate`` has fired and the
+gap between the two surfaces has exceeded the release distance
+(``metrics.contact_release``, default 1 cm). A pair pressed together, grinding, or
+bouncing back within that gap stays one episode.
 """
 
 from __future__ import annotations
@@ -44,6 +47,10 @@ _READ = (
     | pymunk.batch.BodyFields.VELOCITY
     | pymunk.batch.BodyFields.ANGULAR_VELOCITY
 )
+#: Default gap [m] the surfaces of a pair must exceed to end a contact episode
+#: (``metrics.contact_release``).
+CONTACT_RELEASE = 0.01
+
 _WRITE = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY
 
 
@@ -65,6 +72,14 @@ class PhysicalState:
     omega: np.ndarray
 
 
+@dataclass
+class _Open:
+    """An open contact episode: its event and whether the pair touches right now."""
+
+    event: CollisionEvent
+    touching: bool = True
+
+
 class World:
     """The pymunk world of one run.
 
@@ -75,7 +90,10 @@ class World:
     """
 
     def __init__(
-        self, vehicles: tuple[VehicleSpec, ...], obstacles: tuple[ObstacleSpec, ...]
+        self,
+        vehicles: tuple[VehicleSpec, ...],
+        obstacles: tuple[ObstacleSpec, ...],
+        contact_release: float = CONTACT_RELEASE,
     ):
         self.space = pymunk.Space()
         self.space.collision_slop = COLLISION_SLOP
@@ -84,7 +102,15 @@ class World:
         self.names = [v.name for v in vehicles]
         self.obstacle_names = [o.name for o in obstacles]
         self.time = 0.0
+        self.contact_release = contact_release
         self.events: list[CollisionEvent] = []
+        #: Failure state of each vehicle in the current control period (set by the
+        #: simulation loop): an episode that starts while one is set is not healthy.
+        self.failed: np.ndarray | None = None
+        #: Open episodes by pair: ``(kind, index a, index b) -> _Open``.
+        self._open: dict[tuple[str, int, int], _Open] = {}
+        self.obstacle_shapes: list[pymunk.Shape] = []
+        self.radii: list[float] = []
         self.bodies: list[pymunk.Body] = []
         self.controls: list[pymunk.Body] = []
         self.joints: list[tuple[pymunk.PivotJoint, pymunk.GearJoint]] = []
@@ -92,8 +118,12 @@ class World:
             self._add_vehicle(i, v)
         for k, o in enumerate(obstacles):
             self._add_obstacle(k, o)
-        self.space.on_collision(VEHICLE, VEHICLE, begin=self._on_vehicle_vehicle)
-        self.space.on_collision(VEHICLE, OBSTACLE, begin=self._on_vehicle_obstacle)
+        self.space.on_collision(
+            VEHICLE, VEHICLE, begin=self._on_begin, separate=self._on_separate
+        )
+        self.space.on_collision(
+            VEHICLE, OBSTACLE, begin=self._on_begin, separate=self._on_separate
+        )
         self._read_buffer = pymunk.batch.Buffer()
         self._write_buffer = pymunk.batch.Buffer()
         self._rows = self._row_order(self.space, self.bodies)
@@ -132,6 +162,7 @@ class World:
         gear.max_force = moment * ANGULAR_MOTOR_FACTOR * v.motor_accel / radius
         self.space.add(body, shape, pivot, gear)
         self.bodies.append(body)
+        self.radii.append(radius)
         self.controls.append(control)
         self.joints.append((pivot, gear))
 
@@ -148,6 +179,7 @@ class World:
         shape.elasticity = 0.0
         shape.sandbox_index = index
         self.space.add(shape)
+        self.obstacle_shapes.append(shape)
 
     @staticmethod
     def _row_order(space: pymunk.Space, bodies: list[pymunk.Body]) -> np.ndarray:
@@ -159,28 +191,72 @@ class World:
         return np.array([where[b.id] for b in bodies], dtype=np.intp)
 
     # ------------------------------------------------------------------ collisions
-    def _on_vehicle_vehicle(
-        self, arbiter: pymunk.Arbiter, space: pymunk.Space, data
-    ) -> None:
-        a, b = sorted(s.sandbox_index for s in arbiter.shapes)
-        self.events.append(
-            CollisionEvent(self.time, self.names[a], self.names[b], "vehicle_vehicle")
-        )
-
-    def _on_vehicle_obstacle(
-        self, arbiter: pymunk.Arbiter, space: pymunk.Space, data
-    ) -> None:
+    @staticmethod
+    def _pair(arbiter: pymunk.Arbiter) -> tuple[str, int, int]:
+        """``(kind, a, b)`` of an arbiter: vehicle indices, or vehicle and obstacle."""
         first, second = arbiter.shapes
+        if first.collision_type == VEHICLE and second.collision_type == VEHICLE:
+            a, b = sorted((first.sandbox_index, second.sandbox_index))
+            return "vehicle_vehicle", a, b
         if first.collision_type != VEHICLE:
             first, second = second, first
-        self.events.append(
-            CollisionEvent(
-                self.time,
-                self.names[first.sandbox_index],
-                self.obstacle_names[second.sandbox_index],
-                "vehicle_obstacle",
-            )
-        )
+        return "vehicle_obstacle", first.sandbox_index, second.sandbox_index
+
+    def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+        key = self._pair(arbiter)
+        episode = self._open.get(key)
+        if episode is not None:  # back in contact within the release gap
+            episode.touching = True
+            return
+        kind, a, b = key
+        vehicles = (a, b) if kind == "vehicle_vehicle" else (a,)
+        healthy = self.failed is None or not any(bool(self.failed[i]) for i in vehicles)
+        other = self.names[b] if kind == "vehicle_vehicle" else self.obstacle_names[b]
+        event = CollisionEvent(self.time, self.names[a], other, kind, None, healthy)
+        self.events.append(event)
+        self._open[key] = _Open(event)
+
+    def _on_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+        episode = self._open.get(self._pair(arbiter))
+        if episode is not None:
+            episode.touching = False
+
+    def _gap(self, key: tuple[str, int, int]) -> float:
+        """Distance between the two surfaces of a pair [m] (negative: overlap)."""
+        kind, a, b = key
+        pa = self.bodies[a].position
+        if kind == "vehicle_vehicle":
+            pb = self.bodies[b].position
+            dist = math.hypot(pa.x - pb.x, pa.y - pb.y)
+            return dist - self.radii[a] - self.radii[b]
+        return self.obstacle_shapes[b].point_query(pa).distance - self.radii[a]
+
+    def _update_episodes(self, t_end: float) -> None:
+        """After a substep: deepest overlap of each open episode; close the released.
+
+        An episode closes when its pair no longer touches (``separate`` fired) and
+        the gap exceeds :attr:`contact_release`; ``end`` is the end of this substep.
+        """
+        released = []
+        for key, episode in self._open.items():
+            gap = self._gap(key)
+            event = episode.event
+            if -gap > event.penetration:
+                event.penetration = -gap
+            if not episode.touching and gap > self.contact_release:
+                event.end = t_end
+                released.append(key)
+        for key in released:
+            del self._open[key]
+
+    def in_contact(self) -> np.ndarray:
+        """Whether each vehicle is in an open contact episode, shape (n,) bool."""
+        out = np.zeros(len(self.bodies), dtype=bool)
+        for kind, a, b in self._open:
+            out[a] = True
+            if kind == "vehicle_vehicle":
+                out[b] = True
+        return out
 
     # ------------------------------------------------------------------ bulk I/O
     def read_state(self) -> PhysicalState:
@@ -218,12 +294,15 @@ class World:
     def step(self, dt: float, substeps: int, t0: float) -> None:
         """Advance the physics from ``t0`` by one period ``dt`` [s] in ``substeps``.
 
-        Collision events are stamped with the start time of the substep they occur in.
+        Collision events are stamped with the start time of the substep they occur in;
+        open contact episodes are updated after every substep.
         """
         h = dt / substeps
         for s in range(substeps):
             self.time = t0 + s * h
             self.space.step(h)
+            if self._open:
+                self._update_episodes(t0 + (s + 1) * h)
 
     # ------------------------------------------------------------------ failures
     def immobilize(self, index: int) -> None:

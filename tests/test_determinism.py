@@ -48,7 +48,7 @@ def test_two_cli_runs_write_identical_files(tmp_path: Path) -> None:
 
 def test_crossing_case_really_collides() -> None:
     _, metrics = run_scenario(PAPER / "rotating_circle.yaml", *CROSSING_SETS)
-    assert metrics["collisions"]["vehicle_vehicle"] >= 2
+    assert metrics["collisions"]["vehicle_vehicle"] >= 1
 
 
 def test_identical_across_processes(tmp_path: Path) -> None:
