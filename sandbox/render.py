@@ -965,6 +965,37 @@ def render_frames(
         yield scene.to_rgb(canvas)
 
 
+def render_frame(
+    run: Run,
+    k: int = -1,
+    *,
+    size: int = 640,
+    zones: bool = False,
+    follow: str | None = None,
+    trail_seconds: float = 3.0,
+) -> np.ndarray:
+    """One RGB frame of recorded sample ``k`` (default the last), as drawn in a GIF.
+
+    Parameters are those of :func:`render_frames`; the camera frames the samples of
+    ``run`` (or follows ``follow``). Used for the ``rgb_array`` render mode of the
+    environments in :mod:`sandbox.envs`, which pass the episode so far.
+
+    Returns
+    -------
+    ndarray, shape (size, size, 3), uint8
+    """
+    _check_follow(follow)
+    scene = _Scene(
+        run,
+        size=size,
+        zones=zones,
+        follow=follow,
+        trail_seconds=trail_seconds,
+        step=1.0 / 25.0,
+    )
+    return scene.to_rgb(scene.draw(int(k) % len(run.t)))
+
+
 def write_gif(
     run: Run,
     path: str | os.PathLike[str],

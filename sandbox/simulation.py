@@ -317,6 +317,7 @@ class Simulation:
         self,
         commands: tuple[np.ndarray, np.ndarray] | None,
         targets: tuple[np.ndarray, np.ndarray] | None,
+        shifts: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> np.ndarray:
         """Commands for the period from ``t_k``: controller, overrides, failures.
 
@@ -328,12 +329,17 @@ class Simulation:
         fleet, plan, h, t = self.fleet, self.plan, self.h, self.k * self.h
         target, v_ref, a_ref = plan.target, plan.v_ref, plan.a_ref
         external = None
+        if shifts is not None:
+            # Moves the planned target; the law's feed-forward motion is kept.
+            rows, external = shifts
+            target = np.where(external[:, None], target + rows, target)
         if targets is not None:
             # A set-point: the given point, with no feed-forward motion.
-            rows, external = targets
-            target = np.where(external[:, None], rows, target)
-            v_ref = np.where(external[:, None], 0.0, v_ref)
-            a_ref = np.where(external[:, None], 0.0, a_ref)
+            rows, mask = targets
+            external = mask if external is None else external | mask
+            target = np.where(mask[:, None], rows, target)
+            v_ref = np.where(mask[:, None], 0.0, v_ref)
+            a_ref = np.where(mask[:, None], 0.0, a_ref)
         aim = np.where(np.isnan(target), fleet.pos, target)
 
         gains = self._gains
@@ -346,7 +352,7 @@ class Simulation:
         # Vehicles not driven by the controller this period.
         passive = fleet.commanded
         if self._schedules:
-            if external is not None:  # a target override drives a scheduled vehicle
+            if external is not None:  # an override of the target drives the vehicle
                 v1c, v2c = v1.copy(), v2.copy()
                 self._scheduled_commands(t, v1, v2)
                 v1[external], v2[external] = v1c[external], v2c[external]
@@ -375,7 +381,7 @@ class Simulation:
             mode[external] = MODE_EXTERNAL
         mode[failed] = MODE_FAILED
         fleet.mode = mode
-        if targets is not None:
+        if external is not None:
             self._recorded_target = target
         return chi_next
 
@@ -418,10 +424,11 @@ class Simulation:
         commands: tuple[np.ndarray, np.ndarray] | None = None,
         targets: tuple[np.ndarray, np.ndarray] | None = None,
         should_stop: Callable[[], bool] | None = None,
+        shifts: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
         """One control period: act, record, advance, sense and plan the next."""
         self._recorded_target = None
-        chi_next = self._act(commands, targets)
+        chi_next = self._act(commands, targets, shifts)
         self._record(self.plan, self.fleet.mode, self.fleet.failed)
         if should_stop is not None and should_stop():
             self.status = STATUS_INTERRUPTED
@@ -462,7 +469,10 @@ class Simulation:
         )
 
     def step(
-        self, commands: Overrides = None, targets: Overrides = None
+        self,
+        commands: Overrides = None,
+        targets: Overrides = None,
+        shifts: Overrides = None,
     ) -> Observation:
         """Advance one control period ``h = dt``, with optional overrides.
 
@@ -476,6 +486,10 @@ class Simulation:
             Points [m] the controller tracks this period instead of the planned
             target, as set-points (no feed-forward velocity); recovery does not shift
             them. An array takes NaN rows for "no override".
+        shifts : mapping of str to (dx1, dx2), or ndarray (n, 2), optional
+            Displacements [m] added to the planned target (slot plus recovery) this
+            period, the law's feed-forward motion kept: a zero shift drives as the
+            built-in stack does. ``targets`` win where both are given.
 
         Returns
         -------
@@ -496,7 +510,8 @@ class Simulation:
             )
         cmd = override_rows(commands, self.names, "commands")
         tgt = override_rows(targets, self.names, "targets")
-        self._step(cmd, tgt)
+        shf = override_rows(shifts, self.names, "shifts")
+        self._step(cmd, tgt, shifts=shf)
         return self.observe()
 
     def result(self) -> Run:

@@ -321,3 +321,23 @@ def test_another_physics_back_end_runs_under_the_same_loop() -> None:
     assert obs.pose[1, 2] == pytest.approx(np.pi + 1.0)  # turned 1 rad in place
     assert np.all(sim.result().mode[:-1] == MODE_EXTERNAL)
     assert MODE_AVOID not in sim.result().mode
+
+
+def test_a_zero_shift_drives_as_the_built_in_stack_and_a_shift_moves_the_slot() -> None:
+    sc = platoon(2.0)
+    ref = Simulation(sc).run()
+    zero, moved = Simulation(sc), Simulation(sc)
+    while not zero.done:
+        zero.step(shifts={"green": (0.0, 0.0)})
+        moved.step(shifts={"green": (0.0, -0.5)})  # 0.5 m to the right of the slot
+    a, b = zero.result(), moved.result()
+    np.testing.assert_array_equal(a.pose, ref.pose)  # the feed-forward is kept
+    assert np.all(a.mode[:-1, 2] == MODE_EXTERNAL)
+    green = b.names.index("green")
+    offset = b.pose[-1, green, :2] - b.slot[-1, green]
+    assert offset == pytest.approx((0.0, -0.5), abs=0.1)
+    np.testing.assert_allclose(
+        b.target[:-1, green] - b.slot[:-1, green],
+        [[0, -0.5]] * (len(b.t) - 1),
+        atol=1e-9,
+    )

@@ -1,0 +1,384 @@
+"""What both environments share: episodes, observations, actions, rewards, frames.
+
+Pure numpy over the step-wise API of :class:`~sandbox.simulation.Simulation`; the
+Gymnasium and PettingZoo classes (``vehicle.py``, ``formation.py``) only wrap it in
+their interfaces.
+
+Observation of an agent (vehicle ``i``), a float32 vector of ``7 + 6 k`` entries, all
+in the world frame:
+
+- ``[0:2]`` the pose error to its slot, ``slot_i - pos_i`` [m] (zero without a slot);
+- ``[2:4]`` its heading, ``(cos x3, sin x3)``;
+- ``[4:6]`` its velocity [m/s];
+- ``[6]`` its failed flag (1 while a failure is active);
+- then for each of the ``k`` nearest other vehicles, nearest first: relative position
+  ``pos_j - pos_i`` [m] (2), relative velocity ``vel_j - vel_i`` [m/s] (2), failed flag
+  (1), present flag (1; zeros pad the list when there are fewer than ``k`` others).
+
+Positions are clipped to ``[-max_distance, max_distance]`` and velocities to
+``[-max_speed, max_speed]``, the bounds of the observation space.
+
+Action of an agent, two numbers in ``[-1, 1]``:
+
+- ``action="commands"``: ``(v1, v2) = (a0 v1_max, a1 v2_max)`` [m/s, rad/s], the
+  vehicle's own limits (or ``max_command``), given to
+  :meth:`~sandbox.simulation.Simulation.step` as ``commands``;
+- ``action="shift"``: a displacement ``max_shift (a0, a1)`` [m] of the target the
+  built-in law and recovery computed, given as ``shifts`` (the law's feed-forward is
+  kept, so the zero action drives exactly as the scenario's own controller).
+
+Reward of an agent for one environment step (``repeat`` control periods of ``h``):
+
+``r_i = -w_error sum_periods h ||slot_i - pos_i|| - w_collision c_i - w_effort u_i``
+
+with the distance to the slot after each period [m], ``c_i`` the contact onsets that
+vehicle ``i`` took part in (each vehicle-vehicle contact counts for both vehicles) and
+``u_i = sum |dv1| + (d/2) |dv2|`` the total variation of its applied commands [m/s].
+Over an episode the return is therefore minus the weighted sum of the time integral of
+the formation error [m s], the collisions and the ``control_effort`` of
+``metrics.json``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sandbox.observation import Observation
+from sandbox.render import render_frame
+from sandbox.run import MODE_EXTERNAL, MODE_FAILED, Run
+from sandbox.scenario import Scenario, load_scenario
+from sandbox.simulation import Simulation
+
+#: Action kinds, the ``action`` argument of both environments.
+ACTIONS = ("commands", "shift")
+#: Entries of an agent's own part of the observation, and per neighbour.
+OWN_FEATURES = 7
+NEIGHBOUR_FEATURES = 6
+#: Largest scenario seed drawn for an unseeded reset.
+SEED_RANGE = 2**31
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Reward weights (see the module docstring).
+
+    Attributes
+    ----------
+    error : float [1/(m s)]
+        Per metre of distance to the slot and second.
+    collision : float
+        Per contact onset.
+    effort : float [s/m]
+        Per m/s of total variation of the commands.
+    """
+
+    error: float = 1.0
+    collision: float = 10.0
+    effort: float = 0.1
+
+
+class ScenarioSource:
+    """A scenario that can be loaded again with another seed.
+
+    Parameters
+    ----------
+    scenario : str, Path, mapping or Scenario
+        A YAML file or a document: reloaded with ``seed`` set, so that the
+        ``randomize:`` section draws again. A loaded :class:`Scenario` is reloaded
+        from its :meth:`~sandbox.scenario.Scenario.to_dict` (its draws are already
+        made; the seed still moves a platoon's jitter).
+    """
+
+    def __init__(self, scenario: str | Path | Mapping[str, Any] | Scenario) -> None:
+        if isinstance(scenario, Scenario):
+            self.doc: Mapping[str, Any] | None = scenario.to_dict()
+            self.path: Path | None = None
+            self.scenario = scenario
+        elif isinstance(scenario, Mapping):
+            self.doc, self.path = dict(scenario), None
+            self.scenario = load_scenario(self.doc)
+        else:
+            self.doc, self.path = None, Path(scenario)
+            self.scenario = load_scenario(self.path)
+
+    def load(self, seed: int | None) -> Scenario:
+        """The scenario with ``seed`` (its own seed when None)."""
+        if seed is None:
+            return self.scenario
+        if self.path is not None:
+            return load_scenario(self.path, overrides=[f"seed={int(seed)}"])
+        return load_scenario({**self.doc, "seed": int(seed)})
+
+
+class Task:
+    """One episode after another of a scenario, seen by a set of agents.
+
+    Parameters
+    ----------
+    scenario : str, Path, mapping or Scenario
+        See :class:`ScenarioSource`.
+    agents : sequence of str, optional
+        Vehicles driven by actions; default every vehicle that is neither the leader
+        nor open-loop (``drive: commands``).
+    action : {"commands", "shift"}
+    neighbours : int
+        ``k``, the nearest other vehicles in each observation.
+    repeat : int
+        Control periods per environment step (the action is held).
+    weights : Weights
+    max_distance : float [m]
+        Bound of the relative positions in observations.
+    max_speed : float [m/s], optional
+        Bound of the velocities; default twice the largest finite ``v1_max`` (5 m/s
+        without one).
+    max_shift : float [m], optional
+        Shift of a full action with ``action="shift"``; default twice the diameter.
+    max_command : (float, float), optional
+        ``(v1, v2)`` [m/s, rad/s] of a full action with ``action="commands"``;
+        default each vehicle's ``v1_max`` and ``v2_max``.
+    render_size : int [px]
+        Width and height of ``rgb_array`` frames.
+
+    Raises
+    ------
+    ValueError
+        An unknown agent or action kind, a bad number, or commands without limits.
+    """
+
+    def __init__(
+        self,
+        scenario: str | Path | Mapping[str, Any] | Scenario,
+        *,
+        agents: Sequence[str] | None = None,
+        action: str = "commands",
+        neighbours: int = 3,
+        repeat: int = 1,
+        weights: Weights | None = None,
+        max_distance: float = 10.0,
+        max_speed: float | None = None,
+        max_shift: float | None = None,
+        max_command: tuple[float, float] | None = None,
+        render_size: int = 400,
+    ) -> None:
+        self.source = ScenarioSource(scenario)
+        sc = self.source.scenario
+        names = [v.name for v in sc.vehicles]
+        self.names = names
+        if agents is None:
+            agents = [
+                v.name
+                for v in sc.vehicles
+                if not v.leader and v.drive.type != "commands"
+            ]
+        for a in agents:
+            if a not in names:
+                raise ValueError(
+                    f"agent: unknown vehicle {a!r} (vehicles: {', '.join(names)})"
+                )
+        if not agents:
+            raise ValueError("agents: the scenario has no vehicle to drive")
+        if action not in ACTIONS:
+            raise ValueError(f"action: expected one of {ACTIONS}, got {action!r}")
+        if int(neighbours) != neighbours or neighbours < 0:
+            raise ValueError(
+                f"neighbours: expected an integer >= 0, got {neighbours!r}"
+            )
+        if int(repeat) != repeat or repeat < 1:
+            raise ValueError(f"repeat: expected an integer >= 1, got {repeat!r}")
+        self.agents = list(agents)
+        self.rows = np.array([names.index(a) for a in self.agents], dtype=np.intp)
+        self.action = action
+        self.k = int(neighbours)
+        self.repeat = int(repeat)
+        self.weights = weights if weights is not None else Weights()
+        self.max_distance = _positive(max_distance, "max_distance")
+        v1_limits = [v.v1_max for v in sc.vehicles if v.v1_max is not None]
+        self.max_speed = _positive(
+            max_speed if max_speed is not None else 2.0 * max(v1_limits, default=2.5),
+            "max_speed",
+        )
+        self.max_shift = _positive(
+            max_shift if max_shift is not None else 2.0 * sc.diameter, "max_shift"
+        )
+        self.scale = self._command_scale(sc, max_command)
+        self.render_size = int(render_size)
+        self.size = OWN_FEATURES + NEIGHBOUR_FEATURES * self.k
+        self.diameter = np.array([v.diameter for v in sc.vehicles], dtype=float)
+        self.sim: Simulation | None = None
+        self.obs: Observation | None = None
+        self.history: list[tuple[Observation, np.ndarray]] = []
+
+    def _command_scale(
+        self, sc: Scenario, max_command: tuple[float, float] | None
+    ) -> np.ndarray | None:
+        """``(v1, v2)`` of a full action for each agent, shape (m, 2)."""
+        if self.action != "commands":
+            return None
+        if max_command is not None:
+            v1, v2 = (_positive(x, "max_command") for x in max_command)
+            return np.tile([v1, v2], (len(self.agents), 1))
+        scale = []
+        for a in self.agents:
+            v = sc.vehicles[self.names.index(a)]
+            if v.v1_max is None or v.v2_max is None:
+                raise ValueError(
+                    f"action='commands': vehicle {a!r} has no v1_max or v2_max to "
+                    "scale actions by; set them in the scenario or pass max_command"
+                )
+            scale.append((v.v1_max, v.v2_max))
+        return np.array(scale, dtype=float)
+
+    # ------------------------------------------------------------------ episodes
+    def start(self, seed: int | None) -> Observation:
+        """Begin an episode of the scenario with ``seed`` (its own when None)."""
+        self.sim = Simulation(self.source.load(seed))
+        self.obs = self.sim.observe()
+        self.history = [(self.obs, self.sim.plan.point.copy())]
+        return self.obs
+
+    def advance(self, actions: np.ndarray) -> np.ndarray:
+        """Apply the agents' actions, (m, 2) in [-1, 1], NaN rows for none.
+
+        Returns the agents' rewards, shape (m,).
+        """
+        sim, w = self.sim, self.weights
+        a = np.clip(
+            np.asarray(actions, dtype=float).reshape(len(self.agents), 2), -1, 1
+        )
+        rows = np.full((len(self.names), 2), np.nan)
+        if self.action == "commands":
+            rows[self.rows] = a * self.scale
+            kwargs = {"commands": rows}
+        else:
+            rows[self.rows] = a * self.max_shift
+            kwargs = {"shifts": rows}
+        reward = np.zeros(len(self.agents))
+        for _ in range(self.repeat):
+            if sim.done:
+                break
+            before = len(sim.world.events)
+            last = np.stack((sim.fleet.v1, sim.fleet.v2), -1)
+            started = sim.k
+            self.obs = sim.step(**kwargs)
+            applied = np.stack((sim.fleet.v1, sim.fleet.v2), -1)
+            error = np.linalg.norm(self.obs.slot - self.obs.pose[:, :2], axis=-1)
+            error = np.where(np.isfinite(error), error, 0.0)
+            hits = np.zeros(len(self.names))
+            index = {name: i for i, name in enumerate(self.names)}
+            for e in sim.world.events[before:]:
+                for who in (e.a, e.b):
+                    if who in index:
+                        hits[index[who]] += 1
+            change = np.abs(applied - last) if started > 0 else np.zeros_like(last)
+            effort = change[:, 0] + 0.5 * self.diameter * change[:, 1]
+            r = -w.error * sim.h * error - w.collision * hits - w.effort * effort
+            reward += r[self.rows]
+            self.history.append((self.obs, sim.plan.point.copy()))
+        return reward
+
+    @property
+    def over(self) -> bool:
+        """Whether the episode has ended (duration, divergence)."""
+        return self.sim is None or self.sim.done
+
+    @property
+    def diverged(self) -> bool:
+        """Whether the episode ended because the state diverged."""
+        return self.sim is not None and self.sim.status == "diverged"
+
+    # ------------------------------------------------------------------ features
+    def features(self) -> np.ndarray:
+        """Observations of every agent, shape (m, 7 + 6 k), float32."""
+        obs, m, k = self.obs, len(self.agents), self.k
+        pos, vel = obs.pose[:, :2], obs.vel
+        out = np.zeros((m, self.size))
+        i = self.rows
+        error = obs.slot[i] - pos[i]
+        out[:, 0:2] = np.where(np.isfinite(error), error, 0.0)
+        out[:, 2] = np.cos(obs.pose[i, 2])
+        out[:, 3] = np.sin(obs.pose[i, 2])
+        out[:, 4:6] = vel[i]
+        out[:, 6] = obs.failed[i]
+        n = obs.n
+        if k and n > 1:
+            rel = pos[None, :, :] - pos[i, None, :]  # (m, n, 2)
+            dist = np.hypot(rel[..., 0], rel[..., 1])
+            dist[np.arange(m), i] = np.inf  # not one's own neighbour
+            take = min(k, n - 1)
+            near = np.argsort(dist, axis=1, kind="stable")[:, :take]  # (m, take)
+            rows = np.arange(m)[:, None]
+            block = np.zeros((m, take, NEIGHBOUR_FEATURES))
+            block[..., 0:2] = rel[rows, near]
+            block[..., 2:4] = vel[near] - vel[i, None, :]
+            block[..., 4] = obs.failed[near]
+            block[..., 5] = 1.0
+            out[:, OWN_FEATURES : OWN_FEATURES + NEIGHBOUR_FEATURES * take] = (
+                block.reshape(m, -1)
+            )
+        low, high = self.bounds()
+        out = np.where(np.isfinite(out), out, 0.0)
+        return np.clip(out, low, high).astype(np.float32)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds of an observation, shape (7 + 6 k,) each."""
+        d, v = self.max_distance, self.max_speed
+        own = [d, d, 1, 1, v, v, 1]
+        per = [d, d, 2 * v, 2 * v, 1, 1]
+        high = np.array(own + per * self.k, dtype=float)
+        low = -high
+        low[6] = 0.0
+        for j in range(self.k):
+            base = OWN_FEATURES + NEIGHBOUR_FEATURES * j
+            low[base + 4 : base + 6] = 0.0
+        return low, high
+
+    # ------------------------------------------------------------------ frames
+    def frame(self) -> np.ndarray:
+        """The current state drawn by the renderer, shape (size, size, 3), uint8."""
+        run = self.episode_run()
+        follow = "leader" if run.leader >= 0 else None
+        return render_frame(run, size=self.render_size, follow=follow)
+
+    def episode_run(self) -> Run:
+        """The episode so far as a :class:`~sandbox.run.Run` of its observations."""
+        sim = self.sim
+        obs = [o for o, _ in self.history]
+        n = len(self.names)
+        # Agents are driven by their actions after the first sample (external mode).
+        mode = np.stack([o.mode for o in obs])
+        driven = mode[1:, self.rows]
+        driven[driven != MODE_FAILED] = MODE_EXTERNAL
+        mode[1:, self.rows] = driven
+        return Run(
+            t=np.array([o.t for o in obs]),
+            pose=np.stack([o.pose for o in obs]),
+            cmd=np.zeros((len(obs), n, 2)),
+            chi=np.stack([o.chi for o in obs]),
+            slot=np.stack([o.slot for o in obs]),
+            target=np.stack([o.target for o in obs]),
+            mode=mode,
+            failed=np.stack([o.failed for o in obs]),
+            reference=np.stack([p for _, p in self.history]),
+            names=list(self.names),
+            colors=[v.color for v in sim.scenario.vehicles],
+            diameter=self.diameter.copy(),
+            leader=sim.leader,
+            events=list(sim.world.events),
+            info=dict(sim.info),
+            scenario=sim.scenario,
+        )
+
+
+def _positive(value: Any, what: str) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what}: expected a positive number, got {value!r}") from None
+    if not (np.isfinite(x) and x > 0):
+        raise ValueError(f"{what}: expected a positive number, got {value!r}")
+    return x
