@@ -1,33 +1,39 @@
-"""Report-style figures of a recorded run, as PNG files.
+"""Report-style figures of a recorded run, as PNG, PDF or SVG files.
 
 Figures are built on :class:`matplotlib.figure.Figure` with an explicit Agg canvas, so
-this module never imports ``pyplot``, never touches matplotlib's global state and works
-without a display. It reads a :class:`sandbox.run.Run` only.
+this module never imports ``pyplot`` and works without a display (SVG files are written
+inside a :func:`matplotlib.rc_context` that fixes their element ids, so that they are
+deterministic). It reads a :class:`sandbox.run.Run` only.
 
 :func:`plot_run` writes four figures; each also has its own builder returning the
 ``Figure`` (for notebooks or tests):
 
-- ``trajectories.png`` (:func:`trajectories_figure`): paths in the world frame, with
+- ``trajectories`` (:func:`trajectories_figure`): paths in the world frame, with
   snapshots of the vehicles (circles of their real diameter, heading line) at regular
-  intervals, the reference path dashed, obstacles, failures and collisions;
-- ``leader_frame.png`` (:func:`leader_frame_figure`): every follower's position in the
+  intervals, each snapshot labelled with its time (labels that would overlap are merged,
+  ``"9, 12, 15 s"`` on a vehicle that stopped), the reference path dashed, obstacles,
+  failures and collisions. The figure's shape follows the content: a run along a line
+  gives a wide, low figure rather than a mostly empty square;
+- ``leader_frame`` (:func:`leader_frame_figure`): every follower's position in the
   leader's frame over time (report Figs. 5 and 8). A run without a leader is drawn
   relative to the centroid of the fleet, with world-aligned axes, and says so in its
   title;
-- ``formation_error.png`` (:func:`formation_error_figure`): distance of each vehicle to
+- ``formation_error`` (:func:`formation_error_figure`): distance of each vehicle to
   its slot against time, failures as vertical dashed lines (dotted where they end),
-  collisions as red stars;
-- ``commands.png`` (:func:`commands_figure`): ``v1`` and ``v2`` against time.
+  collisions as red stars. A failed vehicle's error while it is failed (it grows
+  without bound for a stopped vehicle) is drawn apart, on a lower panel with its own
+  scale, so that it does not flatten the healthy curves;
+- ``commands`` (:func:`commands_figure`): ``v1`` and ``v2`` against time.
 
-Fleets of more than :data:`LEGEND_MAX` vehicles are drawn with line collections and
-without a per-vehicle legend.
+Fleets of more than :data:`LEGEND_MAX` vehicles have no per-vehicle legend; their time
+series (formation error, commands) are drawn as the median over the vehicles with 25-75
+and 5-95 percentile bands and the maximum, instead of one line per vehicle.
 """
 
 from __future__ import annotations
 
 import os
-import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -38,10 +44,18 @@ from matplotlib.colors import is_color_like
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 
+from sandbox.plot_parts import (
+    draw_bands,
+    fit_box,
+    place_time_labels,
+    save_figure,
+)
 from sandbox.run import Run
 
 __all__ = [
+    "DPI_RANGE",
     "FIGURES",
+    "FORMATS",
     "LEGEND_MAX",
     "commands_figure",
     "formation_error_figure",
@@ -56,6 +70,10 @@ LEGEND_MAX = 12
 SNAPSHOTS = 6
 #: Lines are drawn through at most about this many samples (evenly spaced, last kept).
 MAX_LINE_SAMPLES = 4000
+#: File formats :func:`plot_run` writes.
+FORMATS = ("png", "pdf", "svg")
+#: Resolutions :func:`plot_run` accepts, inclusive [dots per inch].
+DPI_RANGE = (10, 1200)
 
 _OBSTACLE_FACE = "0.72"
 _OBSTACLE_EDGE = "0.4"
@@ -206,22 +224,77 @@ def _event_samples(run: Run) -> list[tuple[float, int, list[int]]]:
     return out
 
 
-def _save(fig: Figure, path: Path, dpi: int) -> None:
-    """Write ``fig`` as a PNG, atomically (temporary file, then ``os.replace``)."""
-    FigureCanvasAgg(fig)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    try:
-        with open(tmp, "xb") as fh:
-            fig.savefig(fh, format="png", dpi=dpi, metadata={"Software": None})
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+def _series(
+    ax: Axes,
+    x: np.ndarray,
+    ys: np.ndarray,
+    run: Run,
+    colors: list[str],
+    who: Sequence[int] | None = None,
+    lw: float = 1.2,
+) -> None:
+    """One line per vehicle of ``who`` (default all), or bands for a large fleet.
+
+    Parameters
+    ----------
+    ax : Axes
+    x : ndarray, shape (T,)
+    ys : ndarray, shape (T, n)
+        NaN breaks a vehicle's line.
+    run : Run
+    colors : list of str
+    who : sequence of int, optional
+        Vehicles drawn; the others are ignored.
+    lw : float [pt]
+    """
+    who = list(range(run.n_vehicles)) if who is None else list(who)
+    if len(who) <= LEGEND_MAX and run.n_vehicles <= LEGEND_MAX:
+        for i in who:
+            ax.plot(x, ys[:, i], color=colors[i], label=run.names[i], lw=lw)
+    elif who:
+        draw_bands(ax, x, ys[:, who], "C0", lw)
 
 
 # ------------------------------------------------------------------------- figures
+def _content_bounds(
+    run: Run, pos: np.ndarray, path: np.ndarray | None, reach: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """World box ``(lo, hi)`` [m] of the paths, reference and obstacles, padded.
+
+    Parameters
+    ----------
+    run : Run
+    pos : ndarray, shape (T, n, 2) [m]
+        Positions drawn.
+    path : ndarray, shape (m, 2) [m], or None
+        Reference path.
+    reach : float [m]
+        Largest vehicle radius; the box is padded by it and by 4 % of its size.
+    """
+    pts = [pos.reshape(-1, 2)]
+    if path is not None:
+        pts.append(path)
+    for ob in _info(run, "obstacles") or []:
+        if ob.get("type") == "circle":
+            c, r = np.asarray(ob["center"], dtype=float), float(ob["radius"])
+            pts.append(np.array([c - r, c + r]))
+        elif ob.get("type") == "polygon":
+            pts.append(np.asarray(ob["points"], dtype=float).reshape(-1, 2))
+    allp = np.concatenate(pts)
+    allp = allp[np.isfinite(allp).all(axis=1)]
+    if len(allp) == 0:
+        return np.full(2, -1.0), np.full(2, 1.0)
+    lo, hi = allp.min(axis=0) - reach, allp.max(axis=0) + reach
+    pad = 0.04 * float(np.max(hi - lo)) + 1e-3
+    return lo - pad, hi + pad
+
+
 def trajectories_figure(run: Run) -> Figure:
     """Draw the paths and snapshots of every vehicle in the world frame.
+
+    The axes box takes the aspect ratio of the content (within the bounds of
+    :data:`~sandbox.plot_parts.TRAJECTORY_HEIGHT`), so the content fills it; the legend
+    stands outside the axes, below a wide figure and to the right of a tall one.
 
     Parameters
     ----------
@@ -232,14 +305,20 @@ def trajectories_figure(run: Run) -> Figure:
     Figure
         One axes, equal aspect, ``x1 [m]`` against ``x2 [m]``.
     """
-    fig = Figure(figsize=(7.0, 7.0), layout="constrained")
-    ax = fig.add_subplot()
     colors = _colors(run)
     pose = run.pose  # may be memory-mapped: read only the samples drawn
     pos = np.asarray(pose[_thin(run), :, :2], dtype=float)
     radius = np.asarray(run.diameter, dtype=float) / 2.0
-    _draw_obstacles(ax, run)
     path = _reference_path(run)
+    lo, hi = _content_bounds(run, pos, path, float(np.max(radius, initial=0.0)))
+    width, height, lo, hi = fit_box(lo, hi)
+    wide = width >= 1.3 * height
+    fig = Figure(
+        figsize=(width + 1.2, height + 1.5) if wide else (width + 2.6, height + 1.0),
+        layout="constrained",
+    )
+    ax = fig.add_subplot()
+    _draw_obstacles(ax, run)
     if path is not None:
         ax.plot(
             path[:, 0], path[:, 1], "--", color=_REFERENCE, lw=1.2, label="reference"
@@ -254,29 +333,19 @@ def trajectories_figure(run: Run) -> Figure:
     # Snapshots: circles of the real diameter and a heading line, at regular times.
     snaps = np.unique(np.linspace(0, len(run.t) - 1, SNAPSHOTS).round().astype(int))
     circles, faces, heads = [], [], []
+    anchors: list[tuple[float, np.ndarray]] = []
     for k in snaps:
         snap = np.asarray(pose[k], dtype=float)  # (n, 3)
-        for i in range(run.n_vehicles):
-            if not np.isfinite(snap[i]).all():
-                continue
+        ok = np.isfinite(snap).all(axis=1)
+        for i in np.flatnonzero(ok):
             circles.append(Circle(tuple(snap[i, :2]), radius[i]))
             faces.append(colors[i])
             tip = snap[i, :2] + radius[i] * np.array(
                 [np.cos(snap[i, 2]), np.sin(snap[i, 2])]
             )
             heads.append([snap[i, :2], tip])
-        first = snap[:, :2][np.isfinite(snap[:, :2]).all(axis=1)]
-        if len(first):
-            top = first[np.argmax(first[:, 1])]
-            ax.annotate(
-                f"{run.t[k]:.3g} s",
-                top,
-                xytext=(0, 6),
-                textcoords="offset points",
-                ha="center",
-                fontsize=7,
-                color="0.25",
-            )
+        tops = snap[ok, :2] + np.column_stack((np.zeros(ok.sum()), radius[ok]))
+        anchors.append((float(run.t[k]), tops[np.argsort(-tops[:, 1], kind="stable")]))
     ax.add_collection(
         PatchCollection(
             circles,
@@ -302,13 +371,31 @@ def trajectories_figure(run: Run) -> Figure:
     if hits:
         h = np.array(hits)
         ax.plot(h[:, 0], h[:, 1], "r*", ms=11, zorder=5, label="collision")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.autoscale_view()
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal", adjustable="box")  # the box was sized for these limits
     ax.set_xlabel("x1 [m]")
     ax.set_ylabel("x2 [m]")
     ax.grid(True, lw=0.4, alpha=0.5)
-    ax.set_title(_title(run, "Trajectories"))
-    _legend(ax, run, loc="best")
+    what = "Trajectories"
+    if run.n_vehicles > LEGEND_MAX:
+        what += f" of {run.n_vehicles} vehicles"
+    ax.set_title(_title(run, what))
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        if wide:
+            fig.legend(
+                handles,
+                labels,
+                loc="outside lower center",
+                ncols=min(len(handles), 6),
+                fontsize="small",
+            )
+        else:
+            fig.legend(handles, labels, loc="outside right upper", fontsize="small")
+    FigureCanvasAgg(fig)
+    fig.draw_without_rendering()  # lay out: the labels are placed on the final axes
+    place_time_labels(fig, ax, anchors)
     return fig
 
 
@@ -402,8 +489,32 @@ def leader_frame_figure(run: Run) -> Figure:
     return fig
 
 
+def _failed_mask(run: Run, idx: np.ndarray) -> np.ndarray:
+    """Whether each vehicle is failed at each drawn sample, shape (T', n), bool.
+
+    The recorded flag, or the spans of :func:`_failure_spans` (a failure listed in
+    ``info["failures"]`` counts from its ``at`` until its ``until``).
+    """
+    failed = np.asarray(run.failed[idx], dtype=bool).copy()
+    t = np.asarray(run.t, dtype=float)[idx]
+    for i, start, end, _ in _failure_spans(run):
+        failed[:, i] |= (t >= start) & (t < (np.inf if end is None else end))
+    return failed
+
+
+def _side_legend(fig: Figure, ax: Axes, run: Run) -> None:
+    """Legend outside the axes on the right (one entry per vehicle, or the bands)."""
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="outside right upper", fontsize="small")
+
+
 def formation_error_figure(run: Run) -> Figure:
     """Draw each vehicle's distance to its slot against time.
+
+    While a vehicle is failed its error is not a formation error (a stopped vehicle's
+    grows with the distance the fleet travels): it is drawn apart, on a lower panel
+    with its own scale, and the upper panel's scale is set by the vehicles that work.
 
     Parameters
     ----------
@@ -412,20 +523,30 @@ def formation_error_figure(run: Run) -> Figure:
     Returns
     -------
     Figure
-        One axes: ``t [s]`` against ``formation error [m]``; failures are vertical
-        dashed lines in the vehicle's colour (dotted at their end), collisions are red
-        stars.
+        ``t [s]`` against ``formation error [m]`` of the working vehicles; below it,
+        when a vehicle fails, a second axes with the error of failed vehicles while
+        they are failed. Failures are vertical dashed lines in the vehicle's colour
+        (dotted at their end), collisions are red stars.
     """
-    fig = Figure(figsize=(8.0, 4.5), layout="constrained")
-    ax = fig.add_subplot()
     colors = _colors(run)
     idx = _thin(run)
     t = np.asarray(run.t, dtype=float)
     err = np.linalg.norm(run.pose[idx, :, :2] - run.slot[idx], axis=-1)  # (T', n) [m]
-    _lines(ax, t[idx], err, run, colors, lw=1.2)
+    failed = _failed_mask(run, idx)
+    who_failed = np.flatnonzero(failed.any(axis=0)).tolist()
+    if who_failed:
+        fig = Figure(figsize=(9.0, 6.0), layout="constrained")
+        ax, low = fig.subplots(2, 1, sharex=True, height_ratios=(2.2, 1.0))
+    else:
+        fig = Figure(figsize=(9.0, 4.5), layout="constrained")
+        ax, low = fig.add_subplot(), None
+    _series(ax, t[idx], np.where(failed, np.nan, err), run, colors)
     for n_f, (i, start, end, kind) in enumerate(_failure_spans(run)):
-        label = "failure" if n_f == 0 else None
-        ax.axvline(start, color=colors[i], ls="--", lw=1.2, label=label)
+        for target in (ax, low) if low is not None else (ax,):
+            label = "failure" if n_f == 0 and target is ax else None
+            target.axvline(start, color=colors[i], ls="--", lw=1.2, label=label)
+            if end is not None:
+                target.axvline(end, color=colors[i], ls=":", lw=1.2)
         ax.annotate(
             f"{run.names[i]} {kind}".strip(),
             (start, 1.0),
@@ -436,24 +557,45 @@ def formation_error_figure(run: Run) -> Figure:
             fontsize=7,
             rotation=90,
         )
-        if end is not None:
-            ax.axvline(end, color=colors[i], ls=":", lw=1.2)
-    marks = [
-        (te, float(np.linalg.norm(run.pose[k, i, :2] - run.slot[k, i])))
-        for te, k, who in _event_samples(run)
-        for i in who
-    ]
-    marks = [m for m in marks if np.isfinite(m[1])]
-    if marks:
-        m = np.array(marks)
-        ax.plot(m[:, 0], m[:, 1], "r*", ms=10, zorder=5, label="collision")
-    ax.set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0)
+    if low is not None:
+        after = np.where(failed, err, np.nan)
+        if len(who_failed) <= LEGEND_MAX:
+            for i in who_failed:
+                low.plot(t[idx], after[:, i], color=colors[i], lw=1.2)
+        else:
+            draw_bands(low, t[idx], after[:, who_failed], "C3", 1.2)
+        low.set_ylim(bottom=0.0)
+        low.set_ylabel("while failed [m]")
+        low.grid(True, lw=0.4, alpha=0.5)
+        low.set_title(
+            f"{len(who_failed)} failed vehicle{'s' * (len(who_failed) > 1)}: distance"
+            " to slot while failed (own scale)",
+            fontsize="medium",
+        )
+    marks: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
+    for te, k, who in _event_samples(run):
+        for i in who:
+            e = float(np.linalg.norm(run.pose[k, i, :2] - run.slot[k, i]))
+            if np.isfinite(e):
+                j = int(np.clip(np.searchsorted(t[idx], te), 0, len(idx) - 1))
+                marks[bool(failed[j, i]) and low is not None].append((te, e))
+    for down, pts in marks.items():
+        if pts:
+            m = np.array(sorted(pts))
+            label = None if down else "collision"
+            (low if down else ax).plot(
+                m[:, 0], m[:, 1], "r*", ls="none", ms=10, zorder=5, label=label
+            )
+    if marks[True] and not marks[False]:
+        ax.plot([], [], "r*", ls="none", ms=10, label="collision")
+    bottom = low if low is not None else ax
+    bottom.set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0)
+    bottom.set_xlabel("t [s]")
     ax.set_ylim(bottom=0.0)
-    ax.set_xlabel("t [s]")
     ax.set_ylabel("formation error [m]")
     ax.grid(True, lw=0.4, alpha=0.5)
     ax.set_title(_title(run, "Distance to slot"))
-    _legend(ax, run, loc="upper right", ncols=2)
+    _side_legend(fig, ax, run)
     return fig
 
 
@@ -469,14 +611,14 @@ def commands_figure(run: Run) -> Figure:
     Figure
         Top: ``v1 [m/s]``; bottom: ``v2 [rad/s]``; shared ``t [s]`` axis.
     """
-    fig = Figure(figsize=(8.0, 6.0), layout="constrained")
+    fig = Figure(figsize=(9.0, 6.0), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True)
     colors = _colors(run)
     idx = _thin(run)
     t = np.asarray(run.t, dtype=float)
     cmd = np.asarray(run.cmd[idx], dtype=float)
-    _lines(top, t[idx], cmd[:, :, 0], run, colors, lw=1.0)
-    _lines(bottom, t[idx], cmd[:, :, 1], run, colors, lw=1.0)
+    _series(top, t[idx], cmd[:, :, 0], run, colors, lw=1.0)
+    _series(bottom, t[idx], cmd[:, :, 1], run, colors, lw=1.0)
     for i, start, end, _ in _failure_spans(run):
         for ax in (top, bottom):
             ax.axvline(start, color=colors[i], ls="--", lw=1.0)
@@ -489,42 +631,63 @@ def commands_figure(run: Run) -> Figure:
     for ax in (top, bottom):
         ax.grid(True, lw=0.4, alpha=0.5)
     top.set_title(_title(run, "Commands"))
-    _legend(top, run, loc="upper right", ncols=2)
+    _side_legend(fig, top, run)
     return fig
 
 
-#: File names written by :func:`plot_run`, and their builders.
+#: Figures written by :func:`plot_run`: file name stem and builder, in order.
 FIGURES: dict[str, Callable[[Run], Figure]] = {
-    "trajectories.png": trajectories_figure,
-    "leader_frame.png": leader_frame_figure,
-    "formation_error.png": formation_error_figure,
-    "commands.png": commands_figure,
+    "trajectories": trajectories_figure,
+    "leader_frame": leader_frame_figure,
+    "formation_error": formation_error_figure,
+    "commands": commands_figure,
 }
 
 
 def plot_run(
-    run: Run, out_dir: str | os.PathLike[str], *, dpi: int = 120
+    run: Run,
+    out_dir: str | os.PathLike[str],
+    *,
+    dpi: int = 120,
+    fmt: str = "png",
 ) -> list[Path]:
-    """Write the four report figures of ``run`` as PNG files.
+    """Write the four report figures of ``run``.
 
     Parameters
     ----------
     run : Run
     out_dir : str or os.PathLike
-        Directory, created if needed. Each file is written atomically.
+        Directory, created if needed. Each file is written atomically; files of the
+        same names are replaced, nothing else in the directory is touched.
     dpi : int [1/in]
+        Resolution of PNG files (and of the few raster parts of PDF and SVG files),
+        within :data:`DPI_RANGE`.
+    fmt : {"png", "pdf", "svg"}
+        File format (PDF and SVG are vector formats).
 
     Returns
     -------
     list of Path
-        ``trajectories.png``, ``leader_frame.png``, ``formation_error.png``,
-        ``commands.png``, in that order.
+        ``trajectories.FMT``, ``leader_frame.FMT``, ``formation_error.FMT``,
+        ``commands.FMT``, in that order.
+
+    Raises
+    ------
+    ValueError
+        On a format not in :data:`FORMATS` or a resolution outside :data:`DPI_RANGE`.
     """
+    if fmt not in FORMATS:
+        raise ValueError(f"format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
+    if not (isinstance(dpi, int | np.integer) and DPI_RANGE[0] <= dpi <= DPI_RANGE[1]):
+        raise ValueError(
+            f"dpi: expected a whole number from {DPI_RANGE[0]} to {DPI_RANGE[1]}, "
+            f"got {dpi!r}"
+        )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, build in FIGURES.items():
-        path = out / name
-        _save(build(run), path, dpi)
+    for stem, build in FIGURES.items():
+        path = out / f"{stem}.{fmt}"
+        save_figure(build(run), path, int(dpi), fmt)
         paths.append(path)
     return paths

@@ -33,13 +33,30 @@ def cmd_gallery(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    """``sandbox plot RUN_DIR``: the four report-style figures."""
+    """``sandbox plot RUN_DIR``: the four report figures, in ``RUN_DIR/figures/``."""
     from sandbox.plot import plot_run
 
     run = load_run_dir(Path(args.run_dir))
-    for path in plot_run(run, Path(args.out) if args.out else Path(args.run_dir)):
+    out = Path(args.out) if args.out else Path(args.run_dir) / "figures"
+    for path in plot_run(run, out, dpi=args.dpi, fmt=args.format):
         print(path)
     return EXIT_OK
+
+
+def _dpi(text: str) -> int:
+    """An argparse type: a whole number of dots per inch within the plot's bounds."""
+    low, high = 10, 1200  # sandbox.plot.DPI_RANGE (not imported: matplotlib is slow)
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a whole number, got {text!r}"
+        ) from None
+    if not low <= value <= high:
+        raise argparse.ArgumentTypeError(
+            f"expected a whole number from {low} to {high}, got {text!r}"
+        )
+    return value
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -59,6 +76,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
     p.set_defaults(func=cmd_gallery)
     p = sub.add_parser("plot", help="write report-style figures of a saved run")
-    p.add_argument("run_dir")
-    p.add_argument("--out", help="directory for the PNGs (default: the run directory)")
+    p.add_argument("run_dir", help="a run directory written by sandbox run")
+    p.add_argument(
+        "--out", help="directory for the figures (default: RUN_DIR/figures/)"
+    )
+    p.add_argument(
+        "--format",
+        choices=("png", "pdf", "svg"),
+        default="png",
+        help="file format: png, or pdf or svg (vector) for a paper (default png)",
+    )
+    p.add_argument(
+        "--dpi",
+        type=_dpi,
+        default=120,
+        help="resolution of PNG figures, 10 to 1200 dots per inch (default 120)",
+    )
     p.set_defaults(func=cmd_plot)
