@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sandbox.cli import compare, figures, run, validate
+from sandbox.cli import compare, figures, run, sweep, validate
 from sandbox.cli.common import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
@@ -26,7 +26,7 @@ from sandbox.cli.common import (
 from sandbox.errors import SandboxError, ScenarioError
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
-COMMANDS = (run, validate, figures, compare)
+COMMANDS = (run, validate, figures, compare, sweep)
 
 __all__ = ["EXIT_FAILED", "EXIT_INTERRUPTED", "EXIT_INVALID", "EXIT_OK", "main"]
 

@@ -1,0 +1,224 @@
+"""``sandbox sweep FILE ...`` runs a study; ``sandbox sweep plot|table DIR`` shows it.
+
+``FILE`` is a scenario or a sweep file (``base:`` plus ``grid``, ``zip``, ``seeds``);
+see :mod:`sandbox.study.spec`. A file literally named ``plot`` or ``table`` is given as
+``./plot``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from sandbox.cli.common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK
+from sandbox.errors import SandboxError
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    """Dispatch ``sandbox sweep FILE`` / ``plot DIR`` / ``table DIR``."""
+    target = args.target
+    if target[0] in ("plot", "table"):
+        if len(target) != 2:
+            print(
+                f"error: sandbox sweep {target[0]} DIR: expected one DIR",
+                file=sys.stderr,
+            )
+            return EXIT_INVALID
+        return (
+            _plot(args, Path(target[1]))
+            if target[0] == "plot"
+            else _table(args, Path(target[1]))
+        )
+    if len(target) != 1:
+        print(
+            "error: sandbox sweep FILE: expected one scenario or sweep file (or "
+            "plot DIR, table DIR)",
+            file=sys.stderr,
+        )
+        return EXIT_INVALID
+    return _run(args, target[0])
+
+
+def _run(args: argparse.Namespace, file: str) -> int:
+    from sandbox.study import engine
+    from sandbox.study.spec import SweepError, build_spec
+    from sandbox.study.sweep import Progress, describe_dry_run, run_sweep
+
+    if args.out is None:
+        print("error: sandbox sweep FILE: --out DIR is required", file=sys.stderr)
+        return EXIT_INVALID
+    if args.scheduler and args.scheduler_file:
+        print("error: give --scheduler or --scheduler-file, not both", file=sys.stderr)
+        return EXIT_INVALID
+    try:
+        spec = build_spec(file, args.grid, args.zip, args.seeds, args.set)
+    except SweepError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    out = Path(args.out)
+    if args.dry_run:
+        for line in describe_dry_run(spec, out, args.retry_failed):
+            print(line)
+        return EXIT_OK
+    jobs = args.jobs
+    if jobs < 1:
+        print(f"error: --jobs {jobs}: expected at least 1", file=sys.stderr)
+        return EXIT_INVALID
+    cores = engine.usable_cores()
+    if jobs > cores:
+        print(
+            f"warning: --jobs {jobs} capped at the {cores} usable cores",
+            file=sys.stderr,
+        )
+        jobs = cores
+    progress = Progress() if sys.stderr.isatty() else None
+    try:
+        report = run_sweep(
+            spec,
+            out,
+            jobs=jobs,
+            scheduler=args.scheduler,
+            scheduler_file=args.scheduler_file,
+            retry_failed=args.retry_failed,
+            progress=progress,
+        )
+    except SweepError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    except engine.EngineError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    if report.interrupted:
+        print(
+            f"interrupted: {report.already + report.computed} of {report.total} runs "
+            f"stored in {out}; run the same command again to compute the rest",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+    if report.computed == 0:
+        print(f"{out}: all {report.total} runs already done; nothing to compute")
+    else:
+        print(
+            f"{out}: {report.computed} runs computed, {report.already} already stored, "
+            f"{report.total} in all"
+        )
+    if report.failed:
+        print(
+            f"{report.failed} runs failed or diverged (rows with their status; "
+            "--retry-failed reruns them)"
+        )
+    print(f"results: {out / 'results.csv'}")
+    return EXIT_OK
+
+
+def _table(args: argparse.Namespace, root: Path) -> int:
+    from sandbox.study.spec import SweepError
+    from sandbox.study.store import read_results, varied_paths
+    from sandbox.study.summary import format_table, group_rows
+
+    try:
+        _, rows = read_results(root)
+        paths = varied_paths(root)
+    except (SweepError, OSError) as exc:
+        print(f"error: {root}: not a sweep directory ({exc})", file=sys.stderr)
+        return EXIT_FAILED
+    by = args.by or paths
+    unknown = [p for p in by if p not in paths]
+    if unknown:
+        print(
+            f"error: --by {unknown[0]}: not a varied path of {root} (one of: "
+            f"{', '.join(paths) or 'none'})",
+            file=sys.stderr,
+        )
+        return EXIT_INVALID
+    sys.stdout.write(format_table(group_rows(rows, by), by, args.format))
+    return EXIT_OK
+
+
+def _plot(args: argparse.Namespace, root: Path) -> int:
+    from sandbox.study.figures import plot_sweep
+    from sandbox.study.spec import SweepError
+
+    try:
+        written = plot_sweep(
+            root, Path(args.out) if args.out else root / "figures", args.by
+        )
+    except (SweepError, SandboxError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    for path in written:
+        print(f"figure: {path}")
+    return EXIT_OK
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``sweep`` command."""
+    p = sub.add_parser(
+        "sweep",
+        help="run a study (grid x seeds) into a results directory; plot or tabulate it",
+        description=(
+            "sandbox sweep FILE --out DIR [...] runs a study; sandbox sweep plot DIR "
+            "and sandbox sweep table DIR look at one."
+        ),
+    )
+    p.add_argument(
+        "target",
+        nargs="+",
+        metavar="FILE | plot DIR | table DIR",
+        help="a scenario or sweep file; or 'plot DIR' / 'table DIR'",
+    )
+    p.add_argument(
+        "--grid",
+        action="append",
+        metavar="PATH=v1,v2,...",
+        help="vary a field over these values (Cartesian product; repeatable)",
+    )
+    p.add_argument(
+        "--zip",
+        action="append",
+        metavar="PATH=v1,v2,...",
+        help="vary fields together (equal-length lists; repeatable)",
+    )
+    p.add_argument("--seeds", metavar="A:B", help="seeds A to B-1 (default 0:1)")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="PATH=VALUE",
+        help="a fixed override (repeatable)",
+    )
+    p.add_argument(
+        "--out",
+        help="results directory (sweep); figures directory (plot, default DIR/figures)",
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="local processes (default 1: in-process; at most the cores)",
+    )
+    p.add_argument(
+        "--scheduler", metavar="ADDR", help="Dask scheduler, tcp://host:port"
+    )
+    p.add_argument("--scheduler-file", metavar="F", help="Dask scheduler file")
+    p.add_argument(
+        "--dry-run", action="store_true", help="say what would run, run nothing"
+    )
+    p.add_argument(
+        "--retry-failed",
+        action="store_true",
+        help="rerun the stored runs that failed or diverged",
+    )
+    p.add_argument(
+        "--by",
+        action="append",
+        metavar="PATH",
+        help="plot/table: group by these varied paths (default: all of them)",
+    )
+    p.add_argument(
+        "--format",
+        choices=("md", "csv"),
+        default="md",
+        help="table: Markdown (default) or CSV",
+    )
+    p.set_defaults(func=cmd_sweep)

@@ -1,0 +1,220 @@
+"""Running the tasks of a sweep: in-process, on a local process pool, or on Dask.
+
+Every engine calls :func:`run_task` for each run, which simulates exactly what ``sandbox
+run BASE --set ...`` simulates (the same loader, loop and metrics) and returns the run's
+row and metrics. Results come back to the calling process, which alone writes the store
+(:mod:`sandbox.study.store`): a worker that dies, or a task that some scheduler runs
+twice, can never leave a run twice or half-written in it.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import traceback
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from sandbox.errors import SandboxError, ScenarioError
+
+#: Statuses of a row besides the run's own (ok, diverged): the scenario of the run
+#: is invalid (e.g. no non-overlapping draw), or the run raised an error.
+STATUS_INVALID = "invalid"
+STATUS_ERROR = "error"
+#: Statuses ``--retry-failed`` runs again.
+FAILED_STATUSES = ("diverged", STATUS_INVALID, STATUS_ERROR)
+
+
+class EngineError(SandboxError):
+    """The engine that runs the tasks failed (lost scheduler, missing extra)."""
+
+
+def worst_settling(run: Any, metrics: dict[str, Any]) -> float | None:
+    """The largest settling time of the healthy vehicles with a slot [s].
+
+    Healthy: no failure active at the end of the run (as for ``converged``). None when
+    one of them never settles, or there is none.
+    """
+    worst = None
+    for i, name in enumerate(run.names):
+        m = metrics["vehicles"][name]
+        if m["formation_error"]["final"] is None:
+            continue
+        if len(run.t) and bool(run.failed[-1, i]):
+            continue
+        if m["settling_time"] is None:
+            return None
+        worst = m["settling_time"] if worst is None else max(worst, m["settling_time"])
+    return worst
+
+
+def row_of(run: Any, metrics: dict[str, Any]) -> dict[str, Any]:
+    """The measured columns of a run's row in ``results.csv``."""
+    col = metrics["collisions"]
+    return {
+        "status": metrics["status"],
+        "collisions.total": col["total"],
+        "collisions.vehicle_vehicle": col["vehicle_vehicle"],
+        "collisions.healthy": col["healthy"],
+        "min_distance": metrics["min_distance"],
+        "converged": metrics["converged"],
+        "settling_time": worst_settling(run, metrics),
+        "effort": sum(m["control_effort"] for m in metrics["vehicles"].values()),
+    }
+
+
+def run_task(
+    base_doc: dict[str, Any],
+    source: str,
+    overrides: list[str],
+    should_stop: Callable[[], bool] | None = None,
+) -> dict[str, Any] | None:
+    """Simulate one run of a sweep; return ``{"row": ..., "metrics": ...}``.
+
+    Parameters
+    ----------
+    base_doc : dict
+        The base scenario document (as loaded from its YAML file).
+    source : str
+        The base file's name (for messages and the default scenario name).
+    overrides : list of str
+        The run's ``--set`` assignments (fixed ones, its values, its seed).
+    should_stop : callable, optional
+        Polled every step; a run it stops returns None (nothing to store).
+    """
+    from sandbox.metrics import compute_metrics
+    from sandbox.scenario import parse_scenario
+    from sandbox.simulation import Simulation
+
+    try:
+        scenario = parse_scenario(base_doc, source=source, overrides=overrides)
+    except ScenarioError as exc:
+        return {"row": {"status": STATUS_INVALID}, "error": "; ".join(exc.lines)}
+    try:
+        run = Simulation(scenario).run(should_stop=should_stop)
+        if run.status == "interrupted":
+            return None
+        metrics = compute_metrics(run)
+    except Exception as exc:  # a row with its status, never a missing row
+        text = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+        return {"row": {"status": STATUS_ERROR}, "error": text}
+    return {"row": row_of(run, metrics), "metrics": metrics}
+
+
+def _call(job: tuple[dict[str, Any], str, list[str]]) -> dict[str, Any] | None:
+    return run_task(*job)
+
+
+def _ignore_interrupts() -> None:
+    """Pool workers leave Ctrl-C to the parent, which stops the sweep cleanly."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+Job = tuple[str, tuple[dict[str, Any], str, list[str]]]
+
+
+def usable_cores() -> int:
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def run_local(
+    jobs: list[Job], workers: int, should_stop: Callable[[], bool] | None = None
+) -> Iterator[tuple[str, dict[str, Any] | None]]:
+    """Yield ``(run id, result)`` as runs finish: in-process, or on a process pool.
+
+    In-process, ``should_stop`` also stops the run under way (its result is None).
+    """
+    if workers <= 1 or len(jobs) <= 1:
+        for run_id, job in jobs:
+            yield run_id, run_task(*job, should_stop=should_stop)
+        return
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    ctx = mp.get_context(
+        "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
+    )
+    with cf.ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=_ignore_interrupts
+    ) as pool:
+        futures = {pool.submit(_call, job): run_id for run_id, job in jobs}
+        try:
+            for fut in cf.as_completed(futures):
+                yield futures[fut], fut.result()
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def dask_client(address: str | None, scheduler_file: str | None) -> Any:
+    """A ``distributed.Client`` connected to the scheduler, or a clear error."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise EngineError(
+            "--scheduler needs Dask: pip install 'sandbox[dask]' (dask and distributed)"
+        ) from None
+    where = address or f"the scheduler of {scheduler_file}"
+    try:
+        if scheduler_file is not None:
+            if not os.path.isfile(scheduler_file):
+                raise EngineError(f"--scheduler-file {scheduler_file}: no such file")
+            return Client(scheduler_file=scheduler_file, timeout="10s")
+        return Client(address, timeout="10s")
+    except EngineError:
+        raise
+    except (OSError, TimeoutError) as exc:
+        raise EngineError(
+            f"cannot reach the Dask scheduler at {where}: {exc}"
+        ) from None
+
+
+def run_dask(
+    jobs: list[Job], client: Any, on_lost: Callable[[], str]
+) -> Iterator[tuple[str, dict[str, Any]]]:
+    """Yield ``(run id, result)`` as runs finish on a Dask cluster.
+
+    Each task's key is its run id, so the scheduler never computes a run twice for one
+    submission; a worker that dies has its tasks rescheduled on the others. A lost
+    scheduler raises :class:`EngineError` with ``on_lost()``'s advice.
+    """
+    from distributed import as_completed
+
+    futures = []
+    for run_id, job in jobs:
+        futures.append(
+            client.submit(_call, job, key=f"sandbox-run-{run_id}", pure=False)
+        )
+    by_key = {f.key: run_id for f, (run_id, _) in zip(futures, jobs, strict=True)}
+    try:
+        for fut in as_completed(futures):
+            yield by_key[fut.key], fut.result()
+    except (OSError, TimeoutError, _comm_errors()) as exc:
+        raise EngineError(
+            f"lost the Dask scheduler ({type(exc).__name__}): {on_lost()}"
+        ) from None
+    finally:
+        try:
+            client.close(timeout=2)
+        except Exception:  # the scheduler is gone: nothing left to close
+            pass
+
+
+def _comm_errors() -> tuple[type[BaseException], ...]:
+    from distributed.comm.core import CommClosedError
+
+    errors: list[type[BaseException]] = [CommClosedError]
+    try:
+        from distributed.client import FutureCancelledError
+
+        errors.append(FutureCancelledError)
+    except ImportError:
+        pass
+    from concurrent.futures import CancelledError
+
+    errors.append(CancelledError)
+    return tuple(errors)

@@ -1,0 +1,194 @@
+"""Figures of a sweep (matplotlib, Agg): rates against a varied path, heatmaps over two.
+
+- ``rates_<x>.png``: left, the rate of runs with a healthy collision, with its Wilson
+  95 % interval; right, the worst healthy settling time (median, and the quartiles as
+  a band) of the settled runs; both against the varied path ``x``, one line per value
+  of the other varied paths;
+- ``heatmap_<x>_<y>.png`` (two or more varied paths): the collision rate and the
+  unsettled rate over ``x`` and ``y``, one pair of panels per value of the other paths.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from sandbox.study.spec import SweepError
+from sandbox.study.store import read_results, varied_paths
+from sandbox.study.summary import group_rows
+
+#: At most this many heatmap pairs (values of the other paths) are drawn.
+MAX_PANELS = 6
+
+
+def _numeric(values: list[str]) -> list[float] | None:
+    try:
+        return [float(v) for v in values]
+    except ValueError:
+        return None
+
+
+def _slug(path: str) -> str:
+    return re.sub(r"[^A-Za-z0-9]+", "_", path).strip("_")
+
+
+def _order(values: list[str]) -> list[str]:
+    nums = _numeric(values)
+    if nums is None:
+        return values
+    return [v for _, v in sorted(zip(nums, values, strict=True))]
+
+
+def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]:
+    """Draw the figures of the sweep in ``root`` into ``out``; return their paths.
+
+    Parameters
+    ----------
+    root : Path
+        The sweep's results directory.
+    out : Path
+        Where the PNG files go (created).
+    by : list of str, optional
+        The varied paths to draw against: the first is the x axis, the second the
+        heatmap's y axis (default: the sweep's varied paths, in order).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    try:
+        _, rows = read_results(root)
+        paths = varied_paths(root)
+    except OSError as exc:
+        raise SweepError(f"{root}: not a sweep directory ({exc})") from None
+    if not paths:
+        raise SweepError(f"{root}: the sweep varies no path: nothing to plot against")
+    by = list(by or paths)
+    for p in by:
+        if p not in paths:
+            raise SweepError(f"--by {p}: not a varied path of {root}")
+    rest = [p for p in paths if p not in by]
+    by = by + rest
+    x, others = by[0], by[1:]
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+
+    summary = dict(group_rows(rows, [x, *others]))
+    xs = _order(list(dict.fromkeys(r[x] for r in rows)))
+    xnum = _numeric(xs)
+    xpos = xnum if xnum is not None else list(range(len(xs)))
+    combos = list(dict.fromkeys(tuple(r[p] for p in others) for r in rows))
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    for k, combo in enumerate(combos):
+        label = ", ".join(f"{p}={v}" for p, v in zip(others, combo, strict=True))
+        color = f"C{k % 10}"
+        pts = [(xp, summary.get((xv, *combo))) for xp, xv in zip(xpos, xs, strict=True)]
+        pts = [(xp, s) for xp, s in pts if s is not None and s["runs"] > 0]
+        if not pts:
+            continue
+        px = np.array([p for p, _ in pts], dtype=float)
+        rate = np.array([s["collision_rate"] for _, s in pts])
+        lo = np.array([s["collision_low"] for _, s in pts])
+        hi = np.array([s["collision_high"] for _, s in pts])
+        ax1.errorbar(
+            px,
+            100 * rate,
+            yerr=100 * np.clip(np.vstack((rate - lo, hi - rate)), 0, None),
+            marker="o",
+            capsize=3,
+            color=color,
+            label=label or None,
+        )
+        med = np.array([s["settling_median"] for _, s in pts])
+        q1 = np.array([s["settling_q1"] for _, s in pts])
+        q3 = np.array([s["settling_q3"] for _, s in pts])
+        ax2.plot(px, med, marker="o", color=color, label=label or None)
+        ax2.fill_between(px, q1, q3, color=color, alpha=0.2, linewidth=0)
+    n_runs = [s["runs"] for s in summary.values()]
+    lo_n, hi_n = min(n_runs), max(n_runs)
+    each = f"{lo_n}" if lo_n == hi_n else f"{lo_n}-{hi_n}"
+    ax1.set_title(
+        f"runs with a healthy collision (Wilson 95 %; {each} runs per point)",
+        fontsize=9,
+    )
+    ax1.set_ylabel("collision rate [%]")
+    ax1.set_ylim(-2, 102)
+    ax2.set_title(
+        "worst healthy settling time of the settled runs (median, quartiles)",
+        fontsize=9,
+    )
+    ax2.set_ylabel("settling time [s]")
+    for ax in (ax1, ax2):
+        ax.set_xlabel(x)
+        ax.grid(alpha=0.3)
+        if xnum is None:
+            ax.set_xticks(xpos, xs)
+        if combos != [()]:
+            ax.legend(fontsize=7)
+    path = out / f"rates_{_slug(x)}.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    written.append(path)
+
+    if others:
+        y, more = others[0], others[1:]
+        ys = _order(list(dict.fromkeys(r[y] for r in rows)))
+        panels = list(dict.fromkeys(tuple(r[p] for p in more) for r in rows))[
+            :MAX_PANELS
+        ]
+        fig, axes = plt.subplots(
+            len(panels),
+            2,
+            figsize=(10, 0.6 + 3.4 * len(panels)),
+            squeeze=False,
+            constrained_layout=True,
+        )
+        for row_axes, combo in zip(axes, panels, strict=True):
+            for ax, key, title in zip(
+                row_axes,
+                ("collision_rate", "unsettled_rate"),
+                ("runs with a healthy collision [%]", "runs not settled [%]"),
+                strict=True,
+            ):
+                grid = np.full((len(ys), len(xs)), math.nan)
+                for (i, yv), (j, xv) in itertools.product(enumerate(ys), enumerate(xs)):
+                    s = summary.get((xv, yv, *combo))
+                    if s is not None and s["runs"] > 0:
+                        grid[i, j] = 100 * s[key]
+                im = ax.imshow(
+                    grid,
+                    origin="lower",
+                    cmap="viridis",
+                    vmin=0,
+                    vmax=100,
+                    aspect="auto",
+                )
+                for (i, j), v in np.ndenumerate(grid):
+                    if not math.isnan(v):
+                        ax.text(
+                            j,
+                            i,
+                            f"{v:.1f}",
+                            ha="center",
+                            va="center",
+                            color="white" if v < 60 else "black",
+                            fontsize=8,
+                        )
+                ax.set_xticks(range(len(xs)), xs, fontsize=7)
+                ax.set_yticks(range(len(ys)), ys, fontsize=7)
+                ax.set_xlabel(x)
+                ax.set_ylabel(y)
+                extra = ", ".join(f"{p}={v}" for p, v in zip(more, combo, strict=True))
+                ax.set_title(title + (f"\n{extra}" if extra else ""), fontsize=9)
+                fig.colorbar(im, ax=ax, shrink=0.8)
+        path = out / f"heatmap_{_slug(x)}_{_slug(y)}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        written.append(path)
+    return written

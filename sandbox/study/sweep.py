@@ -1,0 +1,258 @@
+"""Running a sweep into its store: what is missing, on the chosen engine, with progress.
+
+:func:`run_sweep` is what ``sandbox sweep`` calls: it validates every grid point, opens
+the store (refusing a changed base), computes the runs without a stored result (and,
+with ``retry_failed``, those whose status is a failure), stores each as it finishes,
+and rebuilds ``results.csv`` at the end, also when interrupted.
+"""
+
+from __future__ import annotations
+
+import shlex
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from sandbox.errors import ScenarioError
+from sandbox.study import engine
+from sandbox.study.spec import SweepError, SweepSpec, Task
+from sandbox.study.store import Store, digest
+
+
+@dataclass
+class SweepReport:
+    """What an invocation did."""
+
+    total: int
+    already: int
+    computed: int
+    failed: int
+    rows: int
+    interrupted: bool = False
+
+
+def read_base(spec: SweepSpec) -> dict[str, Any]:
+    """The base scenario document, read exactly as ``sandbox run`` reads it."""
+    from sandbox.scenario import _YAMLLoader, load_scenario
+
+    load_scenario(spec.base, overrides=list(spec.fixed))  # its problems, with lines
+    text = Path(spec.base).read_text(encoding="utf-8")
+    return yaml.load(text, Loader=_YAMLLoader)  # noqa: S506 (a SafeLoader)
+
+
+def check_points(spec: SweepSpec, base_doc: dict[str, Any]) -> None:
+    """Validate every grid point on the first seed (before anything runs).
+
+    Raises
+    ------
+    ScenarioError
+        The first grid point whose scenario is invalid, its problems marked with the
+        ``--set`` that caused them.
+    """
+    from sandbox.scenario import parse_scenario
+
+    first = spec.seeds.start
+    seen: set[int] = set()
+    for task in spec.tasks():
+        if task.point in seen or task.seed != first:
+            continue
+        seen.add(task.point)
+        try:
+            parse_scenario(
+                base_doc, source=str(spec.base), overrides=task.overrides(spec.fixed)
+            )
+        except ScenarioError as exc:
+            if any(p.path == "randomize" for p in exc.problems):
+                continue  # a draw of one seed: that run's row says so
+            raise
+
+
+def to_compute(
+    tasks: list[Task], done: dict[str, str], retry_failed: bool
+) -> list[Task]:
+    """The tasks without a stored run (and the failed ones with ``retry_failed``)."""
+    out = []
+    for t in tasks:
+        status = done.get(t.run_id)
+        if status is None or (retry_failed and status in engine.FAILED_STATUSES):
+            out.append(t)
+    return out
+
+
+def run_sweep(
+    spec: SweepSpec,
+    out: Path,
+    *,
+    jobs: int = 1,
+    scheduler: str | None = None,
+    scheduler_file: str | None = None,
+    retry_failed: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+) -> SweepReport:
+    """Compute the missing runs of ``spec`` into the store ``out``.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+    out : Path
+        The results directory.
+    jobs : int
+        Local processes (1: in-process).
+    scheduler, scheduler_file : str, optional
+        A Dask scheduler's address, or its scheduler file: run on that cluster.
+    retry_failed : bool
+        Also rerun the stored runs whose status is a failure.
+    progress : callable, optional
+        Called as ``progress(done, total)`` after each run.
+
+    Returns
+    -------
+    SweepReport
+        An interrupted sweep (SIGINT, SIGTERM) returns with ``interrupted`` set, its
+        finished runs stored and ``results.csv`` written.
+    """
+    with StopOnSignal() as stop:
+        return _run_sweep(
+            spec, out, jobs, scheduler, scheduler_file, retry_failed, progress, stop
+        )
+
+
+def _run_sweep(
+    spec: SweepSpec,
+    out: Path,
+    jobs: int,
+    scheduler: str | None,
+    scheduler_file: str | None,
+    retry_failed: bool,
+    progress: Callable[[int, int], None] | None,
+    stop: StopOnSignal,
+) -> SweepReport:
+    base_doc = read_base(spec)
+    check_points(spec, base_doc)
+    tasks = spec.tasks()
+    store = Store(out)
+    store.open(spec, digest(base_doc, spec.fixed))
+    done = store.done()
+    todo = to_compute(tasks, done, retry_failed)
+    report = SweepReport(len(tasks), len(tasks) - len(todo), 0, 0, 0)
+    if todo:
+        by_id = {t.run_id: t for t in todo}
+        jobs_list = [
+            (t.run_id, (base_doc, str(spec.base), t.overrides(spec.fixed)))
+            for t in todo
+        ]
+        if scheduler or scheduler_file:
+            client = engine.dask_client(scheduler, scheduler_file)
+            results = engine.run_dask(
+                jobs_list,
+                client,
+                lambda: (
+                    f"the finished runs are kept in {out}; run the same command "
+                    "again once the scheduler is back to compute only the missing ones"
+                ),
+            )
+        else:
+            results = engine.run_local(jobs_list, jobs, should_stop=stop)
+        try:
+            for run_id, result in results:
+                if result is not None:
+                    store.put(by_id[run_id], result)
+                    report.computed += 1
+                    if progress is not None:
+                        progress(report.computed, len(todo))
+                if stop():
+                    break
+        except KeyboardInterrupt:
+            stop.raised = True
+        finally:
+            results.close()
+            report.rows = store.write_results(spec, tasks)
+        report.interrupted = stop.raised
+    else:
+        report.rows = store.write_results(spec, tasks)
+    report.failed = sum(1 for s in store.done().values() if s in engine.FAILED_STATUSES)
+    return report
+
+
+class StopOnSignal:
+    """SIGINT/SIGTERM ask the sweep to stop after storing what has finished.
+
+    Only in the main thread (elsewhere signals cannot be caught; the flag stays down).
+    """
+
+    def __init__(self) -> None:
+        self.raised = False
+        self._old: dict[int, Any] = {}
+
+    def __call__(self) -> bool:
+        """Whether a stop was asked for."""
+        return self.raised
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        self.raised = True
+
+    def __enter__(self) -> StopOnSignal:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+
+class Progress:
+    """A progress line with rate and ETA on an interactive terminal (else silent)."""
+
+    def __init__(self, stream: Any = None) -> None:
+        self.stream = stream or sys.stderr
+        self.start = time.perf_counter()
+        self.last = 0.0
+
+    def __call__(self, done: int, total: int) -> None:
+        """Show ``done`` of ``total`` runs, their rate and the time left."""
+        now = time.perf_counter()
+        if now - self.last < 0.2 and done < total:
+            return
+        self.last = now
+        rate = done / max(now - self.start, 1e-9)
+        left = (total - done) / rate if rate > 0 else float("inf")
+        eta = f"{int(left // 60)}m{int(left % 60):02d}s" if left < 1e6 else "?"
+        self.stream.write(
+            f"\r  sweep: {done}/{total} runs, {rate:.1f} runs/s, ETA {eta}   "
+        )
+        if done >= total:
+            self.stream.write("\n")
+        self.stream.flush()
+
+
+def describe_dry_run(spec: SweepSpec, out: Path, retry_failed: bool) -> list[str]:
+    """The lines ``--dry-run`` prints: sizes, what is stored, what would run."""
+    tasks = spec.tasks()
+    store = Store(out)
+    done = store.done() if store.runs.is_dir() else {}
+    todo = to_compute(tasks, done, retry_failed)
+    points = len(spec.points())
+    lines = [
+        f"{spec.source}: {points} grid point{'s' if points != 1 else ''} x "
+        f"{len(spec.seeds)} seed{'s' if len(spec.seeds) != 1 else ''} "
+        f"({spec.seeds.start}:{spec.seeds.stop}) = {len(tasks)} runs; "
+        f"{len(tasks) - len(todo)} stored in {out}, {len(todo)} to compute",
+    ]
+    for t in todo[:5]:
+        sets = " ".join(f"--set {shlex.quote(o)}" for o in t.overrides(spec.fixed))
+        lines.append(f"  {t.run_id}: sandbox run {shlex.quote(str(spec.base))} {sets}")
+    if len(todo) > 5:
+        lines.append(f"  ... and {len(todo) - 5} more")
+    return lines
+
+
+__all__ = ["SweepError", "SweepReport", "run_sweep"]
