@@ -212,6 +212,7 @@ class Task:
         self.sim: Simulation | None = None
         self.obs: Observation | None = None
         self.history: list[tuple[Observation, np.ndarray]] = []
+        self.terms = np.zeros((len(self.agents), 3))
 
     def _command_scale(
         self, sc: Scenario, max_command: tuple[float, float] | None
@@ -237,6 +238,7 @@ class Task:
     def start(self, seed: int | None) -> Observation:
         """Begin an episode of the scenario with ``seed`` (its own when None)."""
         self.sim = Simulation(self.source.load(seed))
+        self.terms = np.zeros((len(self.agents), 3))
         self.obs = self.sim.observe()
         self.history = [(self.obs, self.sim.plan.point.copy())]
         return self.obs
@@ -257,7 +259,7 @@ class Task:
         else:
             rows[self.rows] = a * self.max_shift
             kwargs = {"shifts": rows}
-        reward = np.zeros(len(self.agents))
+        terms = np.zeros((len(self.agents), 3))
         for _ in range(self.repeat):
             if sim.done:
                 break
@@ -276,10 +278,25 @@ class Task:
                         hits[index[who]] += 1
             change = np.abs(applied - last) if started > 0 else np.zeros_like(last)
             effort = change[:, 0] + 0.5 * self.diameter * change[:, 1]
-            r = -w.error * sim.h * error - w.collision * hits - w.effort * effort
-            reward += r[self.rows]
+            step_terms = np.stack((sim.h * error, hits, effort), -1)
+            terms += step_terms[self.rows]
             self.history.append((self.obs, sim.plan.point.copy()))
-        return reward
+        self.terms = terms
+        return -terms @ np.array([w.error, w.collision, w.effort])
+
+    def info(self, j: int) -> dict[str, float]:
+        """The last step's reward terms of agent ``j``, unweighted, and the time.
+
+        ``error`` [m s]: the formation error integrated over the step; ``collisions``:
+        contact onsets; ``effort`` [m/s]: total variation of the commands.
+        """
+        error, hits, effort = self.terms[j]
+        return {
+            "t": self.obs.t,
+            "error": float(error),
+            "collisions": int(hits),
+            "effort": float(effort),
+        }
 
     @property
     def over(self) -> bool:

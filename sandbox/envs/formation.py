@@ -3,7 +3,8 @@
 Every vehicle that is neither the leader nor open-loop is an agent; the leader (and
 any open-loop vehicle) runs as the scenario says. Observation, action and reward are
 those of :mod:`sandbox.envs.core`. An agent missing from the actions of a step runs
-its own law for that step.
+its own law for that step. Each agent's ``info`` holds the step's unweighted reward
+terms (``error``, ``collisions``, ``effort``) and the time ``t``.
 """
 
 from __future__ import annotations
@@ -148,13 +149,12 @@ class FormationEnv(ParallelEnv):
         live = list(self.agents)
         terminated = self.task.diverged
         truncated = self.task.over and not terminated
-        t = self.task.obs.t
         out = (
             {a: features[self.possible_agents.index(a)] for a in live},
             {a: float(reward[self.possible_agents.index(a)]) for a in live},
             {a: bool(terminated) for a in live},
             {a: bool(truncated) for a in live},
-            {a: {"t": t} for a in live},
+            {a: self.task.info(self.possible_agents.index(a)) for a in live},
         )
         if terminated or truncated:
             self.agents = []

@@ -2,7 +2,8 @@
 
 The chosen vehicle follows the agent's actions; every other vehicle runs its own law,
 recovery strategy and failures as the scenario says. Observation, action and reward
-are those of :mod:`sandbox.envs.core`.
+are those of :mod:`sandbox.envs.core`; ``info`` holds the step's unweighted reward
+terms (``error``, ``collisions``, ``effort``) and the time ``t``.
 """
 
 from __future__ import annotations
@@ -128,7 +129,7 @@ class VehicleEnv(gym.Env):
         reward = self.task.advance(np.asarray(action, dtype=float)[None, :])
         terminated = self.task.diverged
         truncated = self.task.over and not terminated
-        info = {"t": self.task.obs.t}
+        info = self.task.info(0)
         return (
             self.task.features()[0],
             float(reward[0]),
