@@ -17,7 +17,9 @@ import copy
 import datetime
 import difflib
 import math
+import os
 import re
+import stat
 from collections.abc import Iterator, Mapping
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
@@ -366,13 +368,26 @@ MAX_RECORD_BYTES = 1e12
 _BYTES_PER_SAMPLE = (
     8 * 13 + 2 + 16
 )  # pose, cmd, chi, slot, target; mode, failed; t, ref
+#: Largest ``seed`` (numpy's generators take any 64-bit seed; it is stored as int64).
+MAX_SEED = 2**63 - 1
+#: Largest ``record_every`` (a run has at most MAX_STEPS steps).
+MAX_RECORD_EVERY = int(MAX_STEPS)
+#: Longest name of a scenario, vehicle or obstacle [characters]; a scenario's name is
+#: also the name of its run directory.
+MAX_NAME = 100
+#: Largest scenario file [bytes]; larger files (and anything that is not a regular
+#: file, like /dev/zero or a pipe) are refused before they are read.
+MAX_FILE_BYTES = 4_000_000
 
 
-class _YAMLLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that also reads exponent floats like ``1e-3`` as numbers.
+class _YAMLLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+    """Safe YAML loader that also reads exponent floats like ``1e-3`` as numbers.
 
     YAML 1.1 (PyYAML's default) reads ``1e-3`` and ``2.5e3`` as text; YAML 1.2, JSON and
-    the editors that check files against the JSON Schema read them as numbers.
+    the editors that check files against the JSON Schema read them as numbers. It is
+    libyaml's C parser (``yaml.CSafeLoader``, about 20 times faster) when PyYAML was
+    built with it, else the pure-Python ``yaml.SafeLoader``; both give the nodes with
+    their lines, from which line numbers and duplicate keys are found.
     """
 
 
@@ -666,20 +681,21 @@ class _Reader:
         default: Any,
         *,
         minimum: int,
-        maximum: int | None = None,
+        maximum: int,
     ) -> Any:
-        kind = f"a whole number >= {minimum}"
-        if maximum is not None:
-            kind = f"a whole number from {minimum} to {maximum}"
+        kind = f"a whole number from {minimum} to {maximum}"
         value, sub = self.get(m, key, path, default, kind)
         if value is default:
             return default
-        if isinstance(value, float) and value.is_integer() and abs(value) < 2**53:
+        if isinstance(value, float) and value.is_integer():
+            if abs(value) >= 2**53:
+                self.fail(sub, "out of range", _describe(value), kind)
+                return None
             value = int(value)
         if isinstance(value, bool) or not isinstance(value, int):
             self.fail(sub, "not a whole number", _describe(value), kind)
             return None
-        if value < minimum or (maximum is not None and value > maximum):
+        if value < minimum or value > maximum:
             self.fail(sub, "out of range", _describe(value), kind)
             return None
         return value
@@ -702,17 +718,24 @@ class _Reader:
             return None if default is _REQUIRED else default
         return value
 
-    def name(self, m: dict[Any, Any], key: str, path: str, default: Any) -> Any:
-        """A name that is written into CSV rows and file names: one plain line."""
+    def name(
+        self, m: dict[Any, Any], key: str, path: str, default: Any, *, run: bool = False
+    ) -> Any:
+        """A name that is written into CSV rows and file names: one plain line.
+
+        With ``run``, the name is also a run directory's name: one path component.
+        """
         value = self.string(m, key, path, default)
-        if isinstance(value, str) and value is not default and _BAD_NAME.search(value):
-            self.fail(
-                f"{path}.{key}" if path else key,
-                "unusable name",
-                _describe(value),
-                "one line without commas, quotes, slashes or backslashes",
-            )
-            return None if default is _REQUIRED else default
+        if isinstance(value, str) and value is not default:
+            why = name_problem(value, run=run)
+            if why is not None:
+                self.fail(
+                    f"{path}.{key}" if path else key,
+                    "unusable name",
+                    f"{_describe(value)}, which {why}",
+                    NAME_RULE + (" or ." if run else ""),
+                )
+                return None if default is _REQUIRED else default
         return value
 
     def choice(
@@ -792,7 +815,45 @@ class _Reader:
         return tuple(pts)
 
 
-_BAD_NAME = re.compile(r"""[,"'/\\\n\r\x00]""")
+#: Characters no name may hold: CSV separators and quotes, path separators, control
+#: characters (C0, DEL, C1 such as U+0085), line and paragraph separators,
+#: bidirectional overrides and the byte-order mark (they split lines or rewrite what a
+#: terminal shows).
+_BAD_NAME = re.compile(
+    "[,\"'/\\\\\x00-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069\ufeff]"
+)
+#: Control characters a description may not hold (all but tab and line feed).
+_BAD_TEXT = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
+#: A leading character a spreadsheet reads as the start of a formula (CSV injection).
+_FORMULA_START = ("=", "+", "-", "@")
+NAME_RULE = (
+    f"at most {MAX_NAME} characters on one line, without commas, quotes, slashes, "
+    "backslashes or control characters, not starting with = + - @"
+)
+
+
+def name_problem(value: str, *, run: bool = False) -> str | None:
+    """Why ``value`` cannot be a name, or None if it can.
+
+    Names end up in CSV cells, on the terminal and (the scenario's name) as a directory
+    name under ``runs/``, so they are single plain lines of at most :data:`MAX_NAME`
+    characters. A leading ``=``, ``+``, ``-`` or ``@`` is refused (a spreadsheet opening
+    ``trajectory.csv`` would run it as a formula), and so, for a run name, is a leading
+    ``.`` (``.`` and ``..`` name a directory and its parent; other dot names are
+    hidden).
+    """
+    bad = _BAD_NAME.search(value)
+    if bad is not None:
+        return f"holds the character {bad.group()!r}"
+    if len(value) > MAX_NAME:
+        return f"has {len(value)} characters"
+    if value.startswith(_FORMULA_START):
+        return f"starts with {value[0]!r}"
+    if run and value.startswith("."):
+        return "starts with '.'"
+    if value != value.strip():
+        return "starts or ends with a space"
+    return None
 
 
 def _vector_kind(size: int, length: bool) -> str:
@@ -1085,7 +1146,7 @@ def _platoon(rd: _Reader, doc: Any, path: str) -> PlatoonSpec | None:
         m, "spacing", path, 2.0 * rd.diameter, positive=True, length=True
     )
     jitter = rd.number(m, "jitter", path, 0.0, minimum=0.0, length=True)
-    columns = rd.integer(m, "columns", path, None, minimum=1)
+    columns = rd.integer(m, "columns", path, None, minimum=1, maximum=MAX_VEHICLES)
     prefix = rd.name(m, "prefix", path, "v")
     if None in (pattern, spacing, jitter, prefix) or count in (None, _REQUIRED):
         return None
@@ -1326,9 +1387,10 @@ def _obstacles(rd: _Reader, doc: Any, path: str) -> list[tuple[str, ObstacleSpec
             if kw["points"] is not None and not _is_convex(kw["points"]):
                 rd.fail(
                     f"{sub}.points",
-                    "not a convex polygon with non-zero area",
+                    "not a simple convex polygon with non-zero area",
                     f"{len(kw['points'])} points",
-                    "a convex outline (split a concave obstacle into several polygons)",
+                    "a convex outline that goes round once (split a concave "
+                    "obstacle into several polygons)",
                 )
                 kw["points"] = None
         else:
@@ -1352,13 +1414,28 @@ def _obstacles(rd: _Reader, doc: Any, path: str) -> list[tuple[str, ObstacleSpec
 
 
 def _is_convex(points: tuple[tuple[float, float], ...]) -> bool:
+    """Whether the outline is a simple convex polygon of non-zero area.
+
+    Every turn must go the same way, and the turns must add up to one full turn: a
+    pentagram or a square listed twice turns the same way at every corner but winds
+    twice around its inside (it is not simple, and pymunk would use its hull).
+    Repeated consecutive points are ignored.
+    """
     p = np.asarray(points, dtype=float)
+    keep = np.any(np.abs(p - np.roll(p, 1, axis=0)) > 1e-12, axis=1)
+    p = p[keep]
+    if len(p) < 3:
+        return False
     d1 = np.roll(p, -1, axis=0) - p
     d2 = np.roll(d1, -1, axis=0)
     cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    dot = d1[:, 0] * d2[:, 0] + d1[:, 1] * d2[:, 1]
     area = 0.5 * np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
-    return abs(area) > 1e-12 and (
-        bool(np.all(cross >= -1e-12)) or bool(np.all(cross <= 1e-12))
+    turning = float(np.sum(np.arctan2(cross, dot)))  # [rad], +-2 pi when simple
+    return (
+        abs(area) > 1e-12
+        and (bool(np.all(cross >= -1e-12)) or bool(np.all(cross <= 1e-12)))
+        and abs(abs(turning) - 2 * math.pi) < 1e-6
     )
 
 
@@ -1455,17 +1532,35 @@ def parse_scenario(
     rd.keys(doc, TOP_KEYS, "")
 
     default_name = Path(source).stem if source else "scenario"
-    name = rd.name(doc, "name", "", default_name) or default_name
+    if doc.get("name") is None and name_problem(default_name, run=True):
+        rd.fail(
+            "name",
+            "the file name gives an unusable run name",
+            f"{_describe(default_name)}, which {name_problem(default_name, run=True)}",
+            f"a 'name:' key: {NAME_RULE} or .",
+        )
+        default_name = "scenario"
+    name = rd.name(doc, "name", "", default_name, run=True) or default_name
     description = doc.get("description")
     description = "" if description is None else description
     if not isinstance(description, str):
         rd.fail("description", "not a string", _describe(description), "a text")
         description = ""
+    elif bad := _BAD_TEXT.search(description):
+        rd.fail(
+            "description",
+            f"holds the control character {bad.group()!r}",
+            _describe(description),
+            "plain text (line breaks and tabs allowed)",
+        )
+        description = ""
     duration = rd.number(doc, "duration", "", 20.0, positive=True)
     dt = rd.number(doc, "dt", "", 0.01, positive=True)
     substeps = rd.integer(doc, "substeps", "", 4, minimum=1, maximum=MAX_SUBSTEPS)
-    seed = rd.integer(doc, "seed", "", 0, minimum=0)
-    record_every = rd.integer(doc, "record_every", "", 1, minimum=1)
+    seed = rd.integer(doc, "seed", "", 0, minimum=0, maximum=MAX_SEED)
+    record_every = rd.integer(
+        doc, "record_every", "", 1, minimum=1, maximum=MAX_RECORD_EVERY
+    )
 
     vehicle_doc = rd.mapping(doc.get("vehicle"), "vehicle") or {}
     rd.keys(vehicle_doc, VEHICLE_PARAM_KEYS, "vehicle")
@@ -1553,6 +1648,7 @@ def parse_scenario(
         failures,
         obstacles,
         platoon,
+        recovery,
     )
     if rd.problems:
         found = _mark_overrides(rd.problems, overridden)
@@ -1587,10 +1683,14 @@ def parse_scenario(
 def _mark_overrides(
     problems: list[Problem], overridden: list[tuple[str, str]]
 ) -> list[Problem]:
-    """Point problems in fields set on the command line at their ``--set``."""
+    """Point problems in fields set on the command line at their ``--set``.
+
+    The last ``--set`` that wrote the field (or a mapping holding it) is the one that
+    gave it its value.
+    """
     out = []
     for p in problems:
-        for where, item in overridden:
+        for where, item in reversed(overridden):
             if p.path == where or p.path.startswith((f"{where}.", f"{where}[")):
                 p = Problem(p.path, f"{p.message} [from --set {item}]", None)
                 break
@@ -1610,6 +1710,7 @@ def _check_consistency(
     failures: list[tuple[str, FailureSpec]],
     obstacles: list[tuple[str, ObstacleSpec]],
     platoon: PlatoonSpec | None,
+    recovery: RecoverySpec | None = None,
 ) -> None:
     """Checks that involve several sections.
 
@@ -1719,7 +1820,8 @@ def _check_consistency(
             "a reference trajectory, or drive: {type: commands, schedule: "
             "...} for the leader",
         )
-    _check_geometry(rd, vehicles, law)
+    _check_geometry(rd, vehicles, law, recovery)
+    _check_obstacle_starts(rd, vehicles, obstacles)
     for where, vehicle, at in rd.timed:
         if vehicle is not None and vehicle not in names:
             rd.fail(
@@ -1854,57 +1956,214 @@ def _pole_text(s: complex) -> str:
     return f"{s.real:.4g}{s.imag:+.4g}j"
 
 
+def _overlapping_pairs(
+    pos: np.ndarray, rad: np.ndarray, limit: int
+) -> Iterator[tuple[int, int, float]]:
+    """Yield up to ``limit`` pairs ``(a, b, distance)`` of discs that overlap.
+
+    Discs overlap when their centres are closer than the sum of their radii. The work
+    is near-linear in the number of discs however many overlap: discs are grouped by
+    radius in octaves, and each disc of a group looks for overlaps in each group of
+    radii at least as large, within the sum of its radius and that group's largest. In
+    that neighbourhood at most about 36 discs of the larger group fit without
+    overlapping each other, so a query that returns more candidates holds an
+    overlapping pair among its first 37, which is reported instead of reading on.
+    """
+    if len(pos) < 2:
+        return
+    octave = np.floor(np.log2(rad)).astype(int)
+    groups = [np.flatnonzero(octave == o) for o in np.unique(octave)]
+    trees = [cKDTree(pos[g]) for g in groups]
+    reported: set[tuple[int, int]] = set()
+
+    def overlap(a: int, b: int) -> float | None:
+        if a == b or (min(a, b), max(a, b)) in reported:
+            return None
+        dist = float(np.hypot(*(pos[a] - pos[b])))
+        if dist < rad[a] + rad[b] - 1e-9:
+            reported.add((min(a, b), max(a, b)))
+            return dist
+        return None
+
+    for gi, small in enumerate(groups):
+        for gj in range(gi, len(groups)):
+            big, tree = groups[gj], trees[gj]
+            reach = float(rad[big].max())
+            for a in small:
+                found = tree.query_ball_point(pos[a], rad[a] + reach)
+                found = [int(big[k]) for k in found[:37]]
+                if len(found) == 37:
+                    pairs = [(a, b) for b in found]
+                    pairs += [(c, b) for i, c in enumerate(found) for b in found[i:]]
+                else:
+                    pairs = [(a, b) for b in found]
+                for c, b in pairs:
+                    dist = overlap(c, b)
+                    if dist is not None:
+                        yield (min(c, b), max(c, b), dist)
+                        limit -= 1
+                        if limit <= 0:
+                            return
+
+
 def _check_geometry(
-    rd: _Reader, vehicles: list[tuple[str, VehicleSpec]], law: str | None
+    rd: _Reader,
+    vehicles: list[tuple[str, VehicleSpec]],
+    law: str | None,
+    recovery: RecoverySpec | None = None,
 ) -> None:
-    """Report vehicles that start overlapping, warn of slots closer than a diameter."""
+    """Report vehicles that start overlapping, warn of slots too close together.
+
+    Slots closer than a diameter cannot both be reached; with a recovery strategy on,
+    slots closer than its radius R keep avoidance active for good, so the formation
+    never settles (report section 3.3: avoidance acts inside R).
+    """
     if len(vehicles) < 2:
         return
     pos = np.array([v.pose[:2] for _, v in vehicles])
     rad = np.array([v.diameter / 2 for _, v in vehicles])
-    reach = 2.0 * float(rad.max())
-    pairs = np.array(sorted(cKDTree(pos).query_pairs(reach)), dtype=int).reshape(-1, 2)
-    shown = 0
-    for a, b in pairs:
-        dist = float(np.hypot(*(pos[a] - pos[b])))
-        if dist < rad[a] + rad[b] - 1e-9:
-            shown += 1
-            if shown > 5:
-                rd.fail(
-                    f"{vehicles[b][0]}.pose",
-                    "more vehicles start overlapping",
-                    f"{len(pairs)} close pairs",
-                    "no overlap (first 5 shown)",
-                )
-                break
-            where, vb = vehicles[b]
-            path = f"{where}.pose" if where != "platoon" else "platoon.spacing"
+    for shown, (a, b, dist) in enumerate(_overlapping_pairs(pos, rad, 6)):
+        if shown == 5:
             rd.fail(
-                path,
-                f"{vb.name} starts overlapping {vehicles[a][1].name}",
-                f"centres {dist:.3g} m apart",
-                f"at least {rad[a] + rad[b]:g} m, the sum of their radii",
+                f"{vehicles[b][0]}.pose",
+                "more vehicles start overlapping",
+                "more than 5 overlapping pairs",
+                "no overlap (first 5 shown)",
             )
+            break
+        where, vb = vehicles[b]
+        path = f"{where}.pose" if where != "platoon" else "platoon.spacing"
+        rd.fail(
+            path,
+            f"{vb.name} starts overlapping {vehicles[a][1].name}",
+            f"centres {dist:.3g} m apart",
+            f"at least {rad[a] + rad[b]:g} m, the sum of their radii",
+        )
     if law is None:
         return
-    off = np.array([v.offset for _, v in vehicles])
-    pairs = np.array(sorted(cKDTree(off).query_pairs(reach)), dtype=int).reshape(-1, 2)
+    # Slots of the vehicles a law drives; a leader the law follows sits at the origin
+    # of the formation frame, whatever its offset.
+    slotted = [i for i, (_, v) in enumerate(vehicles) if v.drive.type == "reference"]
+    if len(slotted) < 2:
+        return
+    vehicles = [vehicles[i] for i in slotted]
+    rad = rad[slotted]
+    off = np.array([v.offset for _, v in vehicles], dtype=float)
+    leads = np.array([v.leader for _, v in vehicles])
+    if LAWS[law].needs_leader:
+        off[leads] = 0.0
+    idx = np.flatnonzero(~leads)
+    close = set()
+    for a, b, gap in _overlapping_pairs(off[idx], rad[idx], 3):
+        a, b = int(idx[a]), int(idx[b])
+        close.add((a, b))
+        where = vehicles[b][0]
+        rd.warn(
+            f"{where}.offset" if where != "platoon" else "platoon.spacing",
+            f"slots of {vehicles[a][1].name} and {vehicles[b][1].name} are "
+            f"{gap:.3g} m apart, closer than a diameter: they cannot both reach "
+            "them",
+        )
+    if recovery is None or recovery.strategy == "none":
+        return
+    # The leader's slot is its own offset (the origin of the formation frame).
+    half = np.full(len(vehicles), recovery.R / 2.0)
     shown = 0
-    for a, b in pairs:
-        if vehicles[a][1].leader or vehicles[b][1].leader:
+    for a, b, gap in _overlapping_pairs(off, half, 6):
+        if (a, b) in close:
             continue
-        gap = float(np.hypot(*(off[a] - off[b])))
-        if gap < 2 * max(rad[a], rad[b]) - 1e-9:
-            shown += 1
-            if shown > 3:
-                break
-            where = vehicles[b][0]
-            rd.warn(
-                f"{where}.offset" if where != "platoon" else "platoon.spacing",
-                f"slots of {vehicles[a][1].name} and {vehicles[b][1].name} are "
-                f"{gap:.3g} m apart, closer than a diameter: they cannot both reach "
-                "them",
-            )
+        shown += 1
+        if shown > 3:
+            break
+        where = vehicles[b][0]
+        rd.warn(
+            f"{where}.offset" if where != "platoon" else "platoon.spacing",
+            f"slots of {vehicles[a][1].name} and {vehicles[b][1].name} are "
+            f"{gap:.3g} m apart, within recovery.R = {recovery.R:g} m: avoidance "
+            f"({recovery.strategy}) stays active between them and the formation "
+            f"never settles (slots at least R apart, or a smaller R)",
+        )
+
+
+def _distance_to_obstacle(o: ObstacleSpec, p: np.ndarray) -> np.ndarray:
+    """Distance [m] from points ``p`` (k, 2) to an obstacle's shape; 0 inside it.
+
+    Circles and walls are measured as pymunk builds them (a wall is a segment with
+    rounded ends, radius half its thickness); boxes and polygons by their outline.
+    """
+    if o.type == "circle":
+        return np.maximum(np.hypot(*(p - np.asarray(o.center)).T) - o.radius, 0.0)
+    if o.type == "wall":
+        a, b = np.asarray(o.start), np.asarray(o.end)
+        ab = b - a
+        t = np.clip((p - a) @ ab / float(ab @ ab), 0.0, 1.0)
+        near = a + t[:, None] * ab
+        return np.maximum(np.hypot(*(p - near).T) - o.thickness / 2.0, 0.0)
+    poly = np.asarray(o.outline(), dtype=float)
+    a, b = poly, np.roll(poly, -1, axis=0)
+    ab = b - a  # (m, 2)
+    ap = p[:, None, :] - a[None]  # (k, m, 2)
+    t = np.clip(np.einsum("kmi,mi->km", ap, ab) / np.einsum("mi,mi->m", ab, ab), 0, 1)
+    edge = np.hypot(*(ap - t[..., None] * ab[None]).transpose(2, 0, 1)).min(axis=1)
+    cross = ab[None, :, 0] * ap[..., 1] - ab[None, :, 1] * ap[..., 0]
+    inside = np.all(cross >= 0, axis=1) | np.all(cross <= 0, axis=1)
+    return np.where(inside, 0.0, edge)
+
+
+def _check_obstacle_starts(
+    rd: _Reader,
+    vehicles: list[tuple[str, VehicleSpec]],
+    obstacles: list[tuple[str, ObstacleSpec]],
+) -> None:
+    """Report vehicles that start inside or touching into an obstacle (first 5).
+
+    Only the vehicles near each obstacle's bounding circle are measured, found with a
+    k-d tree, and the search stops at the fifth problem.
+    """
+    if not vehicles or not obstacles:
+        return
+    pos = np.array([v.pose[:2] for _, v in vehicles])
+    rad = np.array([v.diameter / 2 for _, v in vehicles])
+    tree = cKDTree(pos)
+    shown = 0
+    for where, o in obstacles:
+        if o.type == "circle":
+            centre, bound = np.asarray(o.center), o.radius
+        elif o.type == "wall":
+            a, b = np.asarray(o.start), np.asarray(o.end)
+            centre = (a + b) / 2
+            bound = float(np.hypot(*(b - a))) / 2 + o.thickness / 2
+        else:
+            pts = np.asarray(o.outline(), dtype=float)
+            centre = pts.mean(axis=0)
+            bound = float(np.hypot(*(pts - centre).T).max())
+        near = np.array(tree.query_ball_point(centre, bound + rad.max()), dtype=int)
+        for lo in range(0, len(near), 4096):
+            chunk = near[lo : lo + 4096]
+            gap = _distance_to_obstacle(o, pos[chunk])
+            for k in np.flatnonzero(gap < rad[chunk] - 1e-9):
+                i = int(chunk[k])
+                shown += 1
+                if shown > 5:
+                    rd.fail(
+                        f"{where}",
+                        "more vehicles start inside obstacles",
+                        "more than 5",
+                        "vehicles clear of every obstacle (first 5 shown)",
+                    )
+                    return
+                vw, v = vehicles[i]
+                got = (
+                    f"its centre {gap[k]:.3g} m from it, radius {rad[i]:g} m"
+                    if gap[k] > 0
+                    else "its centre inside it"
+                )
+                rd.fail(
+                    f"{vw}.pose" if vw != "platoon" else "platoon",
+                    f"{v.name} starts inside obstacle {o.name} ({o.type}, {where})",
+                    got,
+                    "a start clear of every obstacle",
+                )
 
 
 def _apply_override(rd: _Reader, doc: dict[Any, Any], item: str) -> str | None:
@@ -1922,7 +2181,7 @@ def _apply_override(rd: _Reader, doc: dict[Any, Any], item: str) -> str | None:
         return None
     try:
         value = yaml.load(raw, Loader=_YAMLLoader)
-    except (yaml.YAMLError, RecursionError):
+    except (yaml.YAMLError, RecursionError, ValueError):
         value = raw
     tokens = re.findall(r"[^.\[\]]+|\[\d+\]", path)
     if "".join(t if t.startswith("[") else f".{t}" for t in tokens).lstrip(".") != path:
@@ -2042,6 +2301,8 @@ def _yaml_problem(exc: yaml.YAMLError, text: str) -> Problem:
         line = mark.line + 1
         rows = text.splitlines()
         row = rows[mark.line] if mark.line < len(rows) else ""
+        if "\t" in row[: len(row) - len(row.lstrip())]:
+            what += " (a tab, '\\t', in the indentation)"
         got = (
             f"{row.strip()[:40]!r} at column {mark.column + 1}"
             if row.strip()
@@ -2053,6 +2314,67 @@ def _yaml_problem(exc: yaml.YAMLError, text: str) -> Problem:
         (hint for key, hint in _YAML_HINTS if key in what), "well-formed YAML"
     )
     return Problem("", _says(f"malformed YAML: {what}", got, expected), line)
+
+
+class _NotAFile(OSError):
+    """A scenario path that is not a regular file of a readable size."""
+
+
+def _read_limited(path: Path) -> bytes:
+    """The bytes of a regular file of at most :data:`MAX_FILE_BYTES` bytes.
+
+    Devices, pipes and sockets are refused before they are opened (opening a pipe
+    could block, reading /dev/zero would never end), and at most one byte beyond the
+    limit is read, so a file that grows while it is read is refused too.
+    """
+    mode = path.stat().st_mode
+    if stat.S_ISDIR(mode):
+        raise IsADirectoryError(path)
+    if not stat.S_ISREG(mode):
+        raise _NotAFile("not a regular file (a device, pipe or socket)")
+    too_big = f"larger than {MAX_FILE_BYTES // 1_000_000} MB"
+    if path.stat().st_size > MAX_FILE_BYTES:
+        raise _NotAFile(f"{path.stat().st_size:,} bytes, {too_big}")
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+            raise _NotAFile("not a regular file (a device, pipe or socket)")
+        data = f.read(MAX_FILE_BYTES + 1)
+    if len(data) > MAX_FILE_BYTES:
+        raise _NotAFile(f"more than {MAX_FILE_BYTES:,} bytes, {too_big}")
+    return data
+
+
+def _long_integer_problem(node: yaml.Node | None, exc: ValueError) -> Problem:
+    """The problem of a value YAML cannot construct, like an over-long integer."""
+    stack, seen = [node], set()
+    while stack:
+        n = stack.pop()
+        if n is None or id(n) in seen:
+            continue
+        seen.add(id(n))
+        if isinstance(n, yaml.ScalarNode):
+            if n.tag.endswith(":int") and len(n.value) > 4000:
+                return Problem(
+                    "",
+                    _says(
+                        "number too large",
+                        "an integer of more than 4000 digits",
+                        f"a number within +-{MAX_NUMBER:g}",
+                    ),
+                    n.start_mark.line + 1,
+                )
+        elif isinstance(n, yaml.MappingNode):
+            stack.extend(v for kv in n.value for v in kv)
+        elif isinstance(n, yaml.SequenceNode):
+            stack.extend(n.value)
+    return Problem(
+        "",
+        _says(
+            "a value YAML cannot read", _describe(str(exc)), "valid numbers and dates"
+        ),
+        None,
+    )
 
 
 def load_scenario(
@@ -2079,7 +2401,12 @@ def load_scenario(
     name = str(source)
     expected = "a readable YAML scenario file"
     try:
-        data = path.read_bytes()
+        data = _read_limited(path)
+    except _NotAFile as exc:
+        raise ScenarioError(
+            [Problem("", _says("cannot read the scenario", str(exc), expected))],
+            name,
+        ) from None
     except FileNotFoundError:
         raise ScenarioError(
             [Problem("", _says("cannot read the scenario", "no such file", expected))],
@@ -2122,14 +2449,19 @@ def load_scenario(
         ) from None
     try:
         loader = _YAMLLoader(text)
+        node = None
         try:
             node = loader.get_single_node()
+            # Lines and duplicate keys come from the nodes as written: constructing
+            # the document expands merge keys (<<: *anchor) into the nodes in place.
+            lines: dict[str, int] = {}
+            _line_map(node, "", lines)
+            duplicates = _duplicate_keys(node)
             doc = loader.construct_document(node) if node is not None else None
         finally:
             loader.dispose()
-        lines: dict[str, int] = {}
-        _line_map(node, "", lines)
-        duplicates = _duplicate_keys(node)
+    except ValueError as exc:  # an integer beyond Python's digit limit
+        raise ScenarioError([_long_integer_problem(node, exc)], name) from None
     except yaml.YAMLError as exc:
         raise ScenarioError([_yaml_problem(exc, text)], name) from None
     except RecursionError:
