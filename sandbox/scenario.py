@@ -2147,7 +2147,7 @@ def _check_obstacle_starts(
                 if shown > 5:
                     rd.fail(
                         f"{where}",
-                        "more vehicles start inside obstacles",
+                        "more vehicles start overlapping obstacles",
                         "more than 5",
                         "vehicles clear of every obstacle (first 5 shown)",
                     )
@@ -2160,7 +2160,8 @@ def _check_obstacle_starts(
                 )
                 rd.fail(
                     f"{vw}.pose" if vw != "platoon" else "platoon",
-                    f"{v.name} starts inside obstacle {o.name} ({o.type}, {where})",
+                    f"{v.name} starts overlapping obstacle {o.name} "
+                    f"({o.type}, {where})",
                     got,
                     "a start clear of every obstacle",
                 )

@@ -291,10 +291,13 @@ def test_a_platoon_inside_a_huge_wall_is_reported_once_per_vehicle_up_to_5() -> 
         parse_scenario(doc)
     lines = info.value.lines
     assert (
-        sum("starts inside obstacle slab (wall, obstacles[0])" in ln for ln in lines)
+        sum(
+            "starts overlapping obstacle slab (wall, obstacles[0])" in ln
+            for ln in lines
+        )
         == 5
     )
-    assert any("more vehicles start inside obstacles" in ln for ln in lines)
+    assert any("more vehicles start overlapping obstacles" in ln for ln in lines)
 
 
 def test_a_vehicle_touching_an_obstacle_from_outside_is_accepted() -> None:
