@@ -97,7 +97,7 @@ class VehicleSpec:
     v1_max: float | None = None
     v2_max: float | None = None
     max_accel: float | None = None
-    motor_accel: float = 200.0
+    motor_accel: float | None = None
     drive: DriveSpec = field(default_factory=DriveSpec)
 
 
@@ -1101,7 +1101,7 @@ def _vehicles(
         p = _vehicle_params(rd, m, sub, params)
         if pose is None or offset is None or None in pose or drive is None:
             continue
-        if None in (p["diameter"], p["mass"], p["motor_accel"]):
+        if None in (p["diameter"], p["mass"]):
             continue
         if any(v is None for v in p["gains"].values()):
             continue
@@ -1570,7 +1570,7 @@ def parse_scenario(
         "max_accel": None,
         "v1_max": None,
         "v2_max": None,
-        "motor_accel": 200.0,
+        "motor_accel": None,
         "gains": asdict(Gains()),
     }
     params = _vehicle_params(rd, vehicle_doc, "vehicle", base)

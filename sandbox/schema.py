@@ -316,10 +316,11 @@ FIELDS: dict[str, dict[str, Field]] = {
         ),
         "motor_accel": Field(
             _positive,
-            "Strength of the physical motor (joint force = "
-            "mass * motor_accel): how hard a vehicle pushes or is pushed",
+            "A fixed strength of the physical motor (joint force = mass * "
+            "motor_accel), which may be too weak to follow the commands (the run "
+            "reports how often); default: a motor that follows every command while "
+            "free and pushes with 200 m/s^2 in contact",
             "m/s^2",
-            200.0,
         ),
     },
     "gains": {

@@ -36,6 +36,7 @@ from sandbox.control.flatness import (
 )
 from sandbox.control.formation import LAWS, BackwardDifference, LawInputs
 from sandbox.failures import FailureSchedule
+from sandbox.metrics import LoopMetrics
 from sandbox.observation import Observation, Overrides, override_rows
 from sandbox.physics import Physics
 from sandbox.recovery import NeighbourList, ObstacleField, avoidance_shift
@@ -100,7 +101,10 @@ class Simulation:
             world
             if world is not None
             else World(
-                scenario.vehicles, scenario.obstacles, scenario.metrics.contact_release
+                scenario.vehicles,
+                scenario.obstacles,
+                scenario.metrics.contact_release,
+                scenario.substeps,
             )
         )
         self.names = [v.name for v in scenario.vehicles]
@@ -158,6 +162,7 @@ class Simulation:
         self.info = self._info()
         self.failed_at: dict[str, float] = {}
         self.recorder = Recorder(self.steps // scenario.record_every + 1, n)
+        self.tally = LoopMetrics(n, self.h)  # effort, closest approach, motor check
         self.plan: Plan | None = None
         self._recorded_target: np.ndarray | None = None
         self._closed = False
@@ -395,9 +400,18 @@ class Simulation:
         self, plan: Plan, mode: np.ndarray, failed: np.ndarray, always: bool = False
     ) -> None:
         """Append the sample of ``t_k`` (every ``record_every`` steps, or now)."""
+        fleet = self.fleet
+        contact = getattr(self.world, "in_contact", None)
+        self.tally.update(
+            fleet.pos,
+            fleet.theta,
+            fleet.vel,
+            fleet.v1,
+            fleet.v2,
+            None if contact is None else contact(),
+        )
         if self.k % self.scenario.record_every and not always:
             return
-        fleet = self.fleet
         target = self._recorded_target
         self.recorder.append(
             self.k * self.h,
@@ -533,6 +547,7 @@ class Simulation:
             self._finish()
         sc, info = self.scenario, self.info
         info["failed_at"] = self.failed_at
+        info["loop_metrics"] = self.tally.result()
         info["wall_time"] = time.perf_counter() - self._wall
         info["steps"] = self.k
         self._run = Run(

@@ -40,6 +40,12 @@ COLLISION_SLOP = 0.002
 FRICTION = 0.3
 #: Angular motor limit as a multiple of ``motor_accel / radius`` [rad/s^2].
 ANGULAR_MOTOR_FACTOR = 4.0
+#: Strength of the tracking motor (``motor_accel`` left out) in contact, and its least
+#: strength when free [m/s^2]: how hard a vehicle pushes and resists a shove.
+CONTACT_MOTOR_ACCEL = 200.0
+#: Headroom of the tracking motor over the force a command needs (a free body then
+#: reaches its commanded velocity within one substep).
+MOTOR_HEADROOM = 1.05
 
 _READ = (
     pymunk.batch.BodyFields.POSITION
@@ -94,6 +100,7 @@ class World:
         vehicles: tuple[VehicleSpec, ...],
         obstacles: tuple[ObstacleSpec, ...],
         contact_release: float = CONTACT_RELEASE,
+        substeps: int = 4,
     ):
         self.space = pymunk.Space()
         self.space.collision_slop = COLLISION_SLOP
@@ -103,6 +110,7 @@ class World:
         self.obstacle_names = [o.name for o in obstacles]
         self.time = 0.0
         self.contact_release = contact_release
+        self._substeps = substeps
         self.events: list[CollisionEvent] = []
         #: Failure state of each vehicle in the current control period (set by the
         #: simulation loop): an episode that starts while one is set is not healthy.
@@ -137,6 +145,16 @@ class World:
             self._control_rows, np.arange(len(self.controls))
         )
         self._write = np.zeros((len(self.controls), 3))
+        n = len(self.bodies)
+        # The motors: per vehicle, the joints' current force limits [N], [N m], and
+        # the tracking motor's least ones; the velocities last read.
+        self._mass = np.array([v.mass for v in vehicles], dtype=float)
+        self._moment = np.array([b.moment for b in self.bodies], dtype=float)
+        self._tracking = np.array([v.motor_accel is None for v in vehicles], bool)
+        self._force = np.array([j[0].max_force for j in self.joints], dtype=float)
+        self._torque = np.array([j[1].max_force for j in self.joints], dtype=float)
+        self._least_force, self._least_torque = self._force.copy(), self._torque.copy()
+        self._measured = np.zeros((n, 3))
 
     # ------------------------------------------------------------------ construction
     def _add_vehicle(self, index: int, v: VehicleSpec) -> None:
@@ -156,10 +174,11 @@ class World:
         self.control_space.add(control)
         pivot = pymunk.PivotJoint(control, body, (0, 0), (0, 0))
         pivot.max_bias = 0.0
-        pivot.max_force = v.mass * v.motor_accel
+        accel = CONTACT_MOTOR_ACCEL if v.motor_accel is None else v.motor_accel
+        pivot.max_force = v.mass * accel
         gear = pymunk.GearJoint(control, body, 0.0, 1.0)
         gear.max_bias = 0.0
-        gear.max_force = moment * ANGULAR_MOTOR_FACTOR * v.motor_accel / radius
+        gear.max_force = moment * ANGULAR_MOTOR_FACTOR * accel / radius
         self.space.add(body, shape, pivot, gear)
         self.bodies.append(body)
         self.radii.append(radius)
@@ -267,6 +286,8 @@ class World:
         rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 6)
         if not self._rows_in_order:
             rows = rows[self._rows]
+        self._measured[:, :2] = rows[:, 3:5]
+        self._measured[:, 2] = rows[:, 5]
         return PhysicalState(
             pos=rows[:, 0:2].copy(),
             theta=rows[:, 2].copy(),
@@ -280,16 +301,45 @@ class World:
         """Set the control bodies' velocities from unicycle commands (one bulk call).
 
         The velocity is directed along ``x3 + v2 dt / 2``, the mean heading over the
-        period, so that a constant ``(v1, v2)`` traces the arc of eq. (1).
+        period, so that a constant ``(v1, v2)`` traces the arc of eq. (1). The tracking
+        motors are then sized for the period (:meth:`_size_motors`).
         """
         heading = theta + 0.5 * v2 * dt
-        out = self._write
+        out = np.empty((len(self.controls), 3))
+        out[:, 0] = v1 * np.cos(heading)
+        out[:, 1] = v1 * np.sin(heading)
+        out[:, 2] = v2
+        if self._tracking.any():
+            self._size_motors(out, dt)
         rows = slice(None) if self._control_in_order else self._control_rows
-        out[rows, 0] = v1 * np.cos(heading)
-        out[rows, 1] = v1 * np.sin(heading)
-        out[rows, 2] = v2
-        self._write_buffer.set_float_buf(out.tobytes())
+        self._write[rows] = out
+        self._write_buffer.set_float_buf(self._write.tobytes())
         pymunk.batch.set_space_bodies(self.control_space, _WRITE, self._write_buffer)
+
+    def _size_motors(self, command: np.ndarray, dt: float) -> None:
+        """Force limits of the tracking motors for the period about to start.
+
+        A free vehicle (in no open contact episode) gets the force that takes its body
+        from the velocity just read to the commanded one within one substep (the
+        first of the period), with :data:`MOTOR_HEADROOM`: eq. (1) then holds whatever
+        the command. A vehicle in contact gets the contact motor
+        (:data:`CONTACT_MOTOR_ACCEL`), so that contacts still win over a vehicle
+        pushing into them. Joints are touched only where the limit must grow, or can
+        shrink by half.
+        """
+        substep = dt / self._substeps
+        delta = command - self._measured
+        free = ~self.in_contact()
+        linear = np.where(free, np.hypot(delta[:, 0], delta[:, 1]), 0.0) / substep
+        angular = np.where(free, np.abs(delta[:, 2]), 0.0) / substep
+        force = np.maximum(self._least_force, MOTOR_HEADROOM * self._mass * linear)
+        torque = np.maximum(self._least_torque, MOTOR_HEADROOM * self._moment * angular)
+        grow = (force > self._force) | (torque > self._torque)
+        shrink = (force < 0.5 * self._force) | (torque < 0.5 * self._torque)
+        for i in np.flatnonzero(self._tracking & (grow | shrink)):
+            pivot, gear = self.joints[i]
+            pivot.max_force = self._force[i] = force[i]
+            gear.max_force = self._torque[i] = torque[i]
 
     def step(self, dt: float, substeps: int, t0: float) -> None:
         """Advance the physics from ``t0`` by one period ``dt`` [s] in ``substeps``.
@@ -298,6 +348,7 @@ class World:
         open contact episodes are updated after every substep.
         """
         h = dt / substeps
+        self._substeps = substeps
         for s in range(substeps):
             self.time = t0 + s * h
             self.space.step(h)
@@ -313,6 +364,7 @@ class World:
         longer move it; it still collides (and counts) as a vehicle.
         """
         pivot, gear = self.joints[index]
+        self._tracking[index] = False
         pivot.max_force = math.inf
         gear.max_force = math.inf
         self.controls[index].velocity = (0.0, 0.0)

@@ -39,6 +39,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         metrics = compute_metrics(run)
         write_run_dir(run, metrics, out_dir)
     _print_summary(scenario.name, metrics, out_dir)
+    for line in metrics.get("warnings", []):
+        print(f"warning: {line}", file=sys.stderr)
     if args.gif and run.status == STATUS_INTERRUPTED:
         print(
             f"gif: skipped, the run was interrupted (sandbox render {out_dir} --gif "
