@@ -9,6 +9,7 @@ twice, can never leave a run twice or half-written in it.
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import traceback
@@ -23,6 +24,8 @@ STATUS_INVALID = "invalid"
 STATUS_ERROR = "error"
 #: Statuses ``--retry-failed`` runs again.
 FAILED_STATUSES = ("diverged", STATUS_INVALID, STATUS_ERROR)
+#: How long to wait for a Dask scheduler to answer.
+CONNECT_TIMEOUT = "5s"
 
 
 class EngineError(SandboxError):
@@ -158,13 +161,17 @@ def dask_client(address: str | None, scheduler_file: str | None) -> Any:
         raise EngineError(
             "--scheduler needs Dask: pip install 'sandbox[dask]' (dask and distributed)"
         ) from None
+    # Our one-line messages replace distributed's own logging of a lost connection.
+    for name in ["distributed", *logging.root.manager.loggerDict]:
+        if name.startswith("distributed"):
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
     where = address or f"the scheduler of {scheduler_file}"
     try:
         if scheduler_file is not None:
             if not os.path.isfile(scheduler_file):
                 raise EngineError(f"--scheduler-file {scheduler_file}: no such file")
-            return Client(scheduler_file=scheduler_file, timeout="10s")
-        return Client(address, timeout="10s")
+            return Client(scheduler_file=scheduler_file, timeout=CONNECT_TIMEOUT)
+        return Client(address, timeout=CONNECT_TIMEOUT)
     except EngineError:
         raise
     except (OSError, TimeoutError) as exc:
@@ -190,10 +197,11 @@ def run_dask(
             client.submit(_call, job, key=f"sandbox-run-{run_id}", pure=False)
         )
     by_key = {f.key: run_id for f, (run_id, _) in zip(futures, jobs, strict=True)}
+    lost = (OSError, TimeoutError, *_comm_errors())
     try:
         for fut in as_completed(futures):
             yield by_key[fut.key], fut.result()
-    except (OSError, TimeoutError, _comm_errors()) as exc:
+    except lost as exc:
         raise EngineError(
             f"lost the Dask scheduler ({type(exc).__name__}): {on_lost()}"
         ) from None
