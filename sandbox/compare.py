@@ -32,9 +32,10 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import astuple, dataclass, fields
 from pathlib import Path
 
+from sandbox import plugins
 from sandbox.metrics import compute_metrics
 from sandbox.run import STATUS_OK
-from sandbox.scenario import STRATEGIES, TARGET_DERIVATIVES, Scenario, load_scenario
+from sandbox.scenario import RECOVERY, Scenario, load_scenario
 from sandbox.simulation import simulate
 
 FORMATS = ("markdown", "csv")
@@ -149,16 +150,18 @@ def _load(
     return load_scenario(path, overrides=sets)
 
 
-def _run_case_args(args: tuple[str, str, str, tuple[str, ...]]) -> Row:
-    return run_case(*args)
+def _run_case_args(args: tuple[str, str, str, tuple[str, ...], tuple[str, ...]]) -> Row:
+    plugins.load_plugins(args[4])  # in a worker process too
+    return run_case(*args[:4])
 
 
 def compare(
     paths: Sequence[str | Path],
-    strategies: Sequence[str] = STRATEGIES,
+    strategies: Sequence[str] | None = None,
     derivatives: Sequence[str] = ("hold",),
     overrides: Sequence[str] = (),
     jobs: int = 1,
+    plugin_specs: Sequence[str] = (),
 ) -> list[Row]:
     """Run every scenario under every recovery setting; rows in (file, case) order.
 
@@ -166,14 +169,17 @@ def compare(
     ----------
     paths : sequence of path
         Scenario files.
-    strategies : sequence of str
-        Names of :data:`sandbox.scenario.STRATEGIES`.
+    strategies : sequence of str, optional
+        Registered recovery strategies (``sandbox plugins``), or ``file``; default:
+        every registered strategy, after loading the files' plug-ins.
     derivatives : sequence of str
         ``hold`` and/or ``estimate`` (``recovery.target_derivatives``).
     overrides : sequence of str
         ``path=value`` assignments applied to every run (before the strategy's).
     jobs : int
         Worker processes (1: run in this process).
+    plugin_specs : sequence of str
+        Plug-in files or modules to load first (also in the worker processes).
 
     Raises
     ------
@@ -182,9 +188,14 @@ def compare(
     ScenarioError
         A file (with the overrides) is not a valid scenario; checked before any run.
     """
+    plugins.load_plugins(tuple(plugin_specs))
+    for path in paths:  # loads the plug-ins each file lists
+        _load(str(path), FILE_STRATEGY, "hold", overrides)
+    if strategies is None:
+        strategies = plugins.names("strategy")
     for name, valid, kind in (
-        (strategies, (*STRATEGIES, FILE_STRATEGY), "strategy"),
-        (derivatives, TARGET_DERIVATIVES, "target_derivatives"),
+        (strategies, (*plugins.names("strategy"), FILE_STRATEGY), "strategy"),
+        (derivatives, RECOVERY["target_derivatives"].choices, "target_derivatives"),
     ):
         bad = [s for s in name if s not in valid]
         if bad or not name:
@@ -199,7 +210,9 @@ def compare(
             scenario = _load(str(path), strategy, deriv, overrides)
             if scenario.recovery.strategy == "none" and deriv != "hold":
                 continue
-            todo.append((str(path), strategy, deriv, tuple(overrides)))
+            todo.append(
+                (str(path), strategy, deriv, tuple(overrides), tuple(plugin_specs))
+            )
     if jobs <= 1 or len(todo) <= 1:
         return [_run_case_args(args) for args in todo]
     with ProcessPoolExecutor(max_workers=jobs) as pool:

@@ -19,81 +19,52 @@ When a failure clears (``until``), the vehicle resumes its law from where it is.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sandbox.scenario import FailureSpec
+from sandbox.plugins import FailureContext, Param, get, register_failure
 
-#: ``commands(v1_ctrl, v2_ctrl, v2_onset, spec) -> (v1, v2)``, scalars for one vehicle.
-Commands = Callable[[float, float, float, FailureSpec], tuple[float, float]]
+if TYPE_CHECKING:
+    from sandbox.scenario import FailureSpec
 
-
-@dataclass(frozen=True)
-class FailureKind:
-    """How a failure kind acts on a vehicle.
-
-    Attributes
-    ----------
-    commands : callable
-        Maps the controller's ``(v1, v2)``, the ``v2`` at onset and the spec to the
-        applied
-        ``(v1, v2)``.
-    controlled_speed : bool
-        Whether the controller still drives v1 (its extension states keep integrating).
-    immovable : bool
-        Whether the vehicle becomes a fixed obstacle.
-    """
-
-    commands: Commands
-    controlled_speed: bool = False
-    immovable: bool = False
+#: ``v2`` of stuck_steering: the frozen turn rate (default: its value at onset).
+_V2 = Param("number", None, unit="rad/s", doc="Frozen turn rate (default: at onset)")
 
 
-FAILURE_KINDS: dict[str, FailureKind] = {}
-
-
-def register_failure(
-    name: str, *, controlled_speed: bool = False, immovable: bool = False
-) -> Callable[[Commands], Commands]:
-    """Decorator adding a failure kind by name."""
-
-    def add(func: Commands) -> Commands:
-        if name in FAILURE_KINDS:
-            raise ValueError(f"failure kind {name!r} is already registered")
-        FAILURE_KINDS[name] = FailureKind(func, controlled_speed, immovable)
-        return func
-
-    return add
-
-
-@register_failure("stuck_steering", controlled_speed=True)
-def stuck_steering(v1: float, v2: float, v2_onset: float, spec: FailureSpec):
-    """Steering frozen: v2 held at its onset value (or ``spec.v2``); v1 controlled."""
-    return v1, (spec.v2 if spec.v2 is not None else v2_onset)
+@register_failure("stuck_steering", {"v2": _V2}, controlled_speed=True)
+def stuck_steering(ctx: FailureContext) -> tuple[float, float]:
+    """Steering frozen: v2 held at its onset value (or ``v2``); v1 controlled."""
+    v2 = ctx.params.get("v2")
+    return ctx.v1, (v2 if v2 is not None else ctx.v2_onset)
 
 
 @register_failure("stop")
-def stop(v1: float, v2: float, v2_onset: float, spec: FailureSpec):
+def stop(ctx: FailureContext) -> tuple[float, float]:
     """Motors stopped: the vehicle brakes to rest."""
     return 0.0, 0.0
 
 
-@register_failure("spin")
-def spin(v1: float, v2: float, v2_onset: float, spec: FailureSpec):
-    """Spinning in place at ``spec.v2`` [rad/s]."""
-    return 0.0, spec.v2 if spec.v2 is not None else 1.0
+@register_failure("spin", {"v2": Param("number", 1.0, unit="rad/s", doc="Turn rate")})
+def spin(ctx: FailureContext) -> tuple[float, float]:
+    """Spinning in place at ``v2`` [rad/s] (default 1)."""
+    return 0.0, ctx.params["v2"]
 
 
-@register_failure("uncontrolled")
-def uncontrolled(v1: float, v2: float, v2_onset: float, spec: FailureSpec):
-    """Running away with constant commands ``spec.v1``, ``spec.v2``."""
-    return spec.v1 or 0.0, spec.v2 or 0.0
+@register_failure(
+    "uncontrolled",
+    {
+        "v1": Param("number", unit="m/s", doc="Constant speed"),
+        "v2": Param("number", 0.0, unit="rad/s", doc="Turn rate"),
+    },
+)
+def uncontrolled(ctx: FailureContext) -> tuple[float, float]:
+    """Running away with constant commands ``v1`` (required), ``v2`` (default 0)."""
+    return ctx.params["v1"] or 0.0, ctx.params["v2"] or 0.0
 
 
-@register_failure("crash", immovable=True)
-def crash(v1: float, v2: float, v2_onset: float, spec: FailureSpec):
+@register_failure("crash", immovable=True, permanent=True)
+def crash(ctx: FailureContext) -> tuple[float, float]:
     """Wrecked: at rest for good."""
     return 0.0, 0.0
 
@@ -116,7 +87,8 @@ class FailureSchedule:
         self.end = np.array(
             [s.until if s.until is not None else np.inf for s in specs], dtype=float
         )
-        self.kinds = [FAILURE_KINDS[s.kind] for s in specs]
+        self.kinds = [get("failure", s.kind) for s in specs]
+        self.names = list(names)
         self.v2_onset = np.zeros(len(specs))
         self.started = np.zeros(len(specs), dtype=bool)
         self.n = len(names)
@@ -162,12 +134,24 @@ class FailureSchedule:
         v1, v2 = v1.copy(), v2.copy()
         for k in np.flatnonzero(self.active(t)):
             i = self.vehicle[k]
-            kind = self.kinds[k]
-            v1[i], v2[i] = kind.commands(v1[i], v2[i], self.v2_onset[k], self.specs[k])
+            kind, spec = self.kinds[k], self.specs[k]
+            ctx = FailureContext(
+                t=t,
+                since=t - spec.at,
+                vehicle=spec.vehicle,
+                index=int(i),
+                v1=float(v1[i]),
+                v2=float(v2[i]),
+                v2_onset=float(self.v2_onset[k]),
+                params=dict(spec.params),
+            )
+            v1[i], v2[i] = kind.obj(ctx)
             failed[i] = True
-            frozen[i] |= not kind.controlled_speed
+            frozen[i] |= not kind.options["controlled_speed"]
         return v1, v2, failed, frozen
 
     def immovable(self, onsets: np.ndarray) -> list[int]:
         """Vehicles that become immovable among the given failure indices."""
-        return [int(self.vehicle[k]) for k in onsets if self.kinds[k].immovable]
+        return [
+            int(self.vehicle[k]) for k in onsets if self.kinds[k].options["immovable"]
+        ]

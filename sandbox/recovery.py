@@ -51,32 +51,85 @@ stays about linear in the number of vehicles.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sandbox.scenario import ObstacleSpec
+from sandbox.plugins import Param, StrategyContext, get, register_strategy
 
+if TYPE_CHECKING:
+    from sandbox.obstacles import ObstacleSpec
+
+#: A weight ``alpha(dist, R, r, steepness)`` of the built-in strategies, eq. (22).
 Weight = Callable[[np.ndarray, float, float | None, float], np.ndarray]
-STRATEGIES: dict[str, Weight] = {}
+#: The weights of the built-in strategies by name.
+WEIGHTS: dict[str, Weight] = {}
 #: Below this many vehicles all pairs are checked directly (cheaper than a tree).
 BRUTE_FORCE_MAX = 48
 #: Distances are floored here [m] so that eq. (23) stays finite.
 MIN_DIST = 1e-6
 
+#: The parameters of the built-in strategies.
+BETA = Param(
+    "number",
+    1.0,
+    unit="m^2",
+    doc="Weight of the avoidance vectors, eq. (22)",
+    minimum=0.0,
+)
+SMALL_R = Param(
+    "length",
+    None,
+    unit="m",
+    doc="Inner radius, < R (default: R / 2)",
+    minimum=0.0,
+    exclusive=True,
+)
+STEEPNESS = Param(
+    "number",
+    2.0,
+    doc="Steepness s of the tanh transition",
+    minimum=0.0,
+    exclusive=True,
+)
 
-def register_strategy(name: str) -> Callable[[Weight], Weight]:
-    """Decorator adding a weight function ``alpha(dist, R, r, steepness)`` by name."""
 
-    def add(func: Weight) -> Weight:
-        if name in STRATEGIES:
-            raise ValueError(f"recovery strategy {name!r} is already registered")
-        STRATEGIES[name] = func
-        return func
+def _inner_radius(values: dict[str, Any], section: dict[str, Any]) -> list[tuple]:
+    """Default ``r = R / 2``; ``r < R`` (the ramp runs from R in to r)."""
+    big_r = section.get("R")
+    if big_r is None:
+        return []
+    if values.get("r") is None:
+        values["r"] = big_r / 2.0
+        return []
+    if values["r"] >= big_r:
+        return [
+            (
+                "r",
+                "r must be smaller than R",
+                f"r = {values['r']:g} m, R = {big_r:g} m",
+                "r < R: avoidance ramps up between R and r, eqs. (26)-(27)",
+            )
+        ]
+    return []
 
-    return add
+
+def _weighted(name: str, weight: Weight) -> Callable[[StrategyContext], Any]:
+    """The strategy of eqs. (22)-(27) with the weight ``alpha`` of ``name``."""
+    WEIGHTS[name] = weight
+
+    def strategy(ctx: StrategyContext) -> tuple[np.ndarray, np.ndarray]:
+        p = ctx.params
+        return weighted_shift(
+            ctx, weight, p["beta"], p.get("r"), p.get("steepness", 2.0)
+        )
+
+    strategy.__doc__ = weight.__doc__
+    strategy.__name__ = strategy.__qualname__ = name
+    strategy.__module__ = weight.__module__
+    return strategy
 
 
-@register_strategy("none")
 def no_avoidance(
     dist: np.ndarray, R: float, r: float | None, steepness: float
 ) -> np.ndarray:
@@ -84,7 +137,6 @@ def no_avoidance(
     return np.zeros_like(dist)
 
 
-@register_strategy("discontinuous")
 def discontinuous(
     dist: np.ndarray, R: float, r: float | None, steepness: float
 ) -> np.ndarray:
@@ -92,7 +144,6 @@ def discontinuous(
     return (dist < R).astype(float)
 
 
-@register_strategy("continuous")
 def continuous(
     dist: np.ndarray, R: float, r: float | None, steepness: float
 ) -> np.ndarray:
@@ -100,7 +151,6 @@ def continuous(
     return np.clip(1.0 - (dist - r) / (R - r), 0.0, 1.0)  # eq. (27)
 
 
-@register_strategy("smooth")
 def smooth(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.ndarray:
     """Conclusion: a tanh transition centred between r and R, 1 at r and 0 at R.
 
@@ -110,6 +160,26 @@ def smooth(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.
     c, w = 0.5 * (R + r), 0.5 * (R - r)
     t = np.tanh(steepness)
     return np.clip((np.tanh(steepness * (c - dist) / w) + t) / (2.0 * t), 0.0, 1.0)
+
+
+@register_strategy("none")
+def no_recovery(ctx: StrategyContext) -> tuple[np.ndarray, np.ndarray]:
+    """No recovery: targets are never shifted."""
+    return np.zeros((ctx.n, 2)), np.zeros(ctx.n, dtype=bool)
+
+
+WEIGHTS["none"] = no_avoidance
+register_strategy("discontinuous", {"beta": BETA})(
+    _weighted("discontinuous", discontinuous)
+)
+register_strategy("continuous", {"beta": BETA, "r": SMALL_R}, check=_inner_radius)(
+    _weighted("continuous", continuous)
+)
+register_strategy(
+    "smooth",
+    {"beta": BETA, "r": SMALL_R, "steepness": STEEPNESS},
+    check=_inner_radius,
+)(_weighted("smooth", smooth))
 
 
 def neighbour_pairs(pos: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -247,6 +317,12 @@ class ObstacleField:
 
     def __init__(self, obstacles: tuple[ObstacleSpec, ...]) -> None:
         circles = [o for o in obstacles if o.type == "circle"]
+        group = {"circle": 0, "wall": 1, "box": 2, "polygon": 2}
+        #: The index in ``obstacles`` of each column of :meth:`nearest`.
+        self.order = np.array(
+            sorted(range(len(obstacles)), key=lambda k: group[obstacles[k].type]),
+            dtype=np.intp,
+        )
         self.circle_center = np.array([o.center for o in circles], dtype=float).reshape(
             -1, 2
         )
@@ -461,9 +537,11 @@ def avoidance_shift(
     obstacles: ObstacleField,
     neighbours: NeighbourList | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The shift ``beta * sum_i alpha_i vect_avoid_i`` of each vehicle's target.
+    """The shift ``beta * sum_i alpha_i vect_avoid_i`` of a built-in strategy.
 
-    Implements eqs. (22)-(27) for all vehicles at once.
+    Implements eqs. (22)-(27) for all vehicles at once: the registered strategy
+    ``strategy`` called with a :class:`~sandbox.plugins.StrategyContext` of these
+    positions (the simulation builds the full context).
 
     Parameters
     ----------
@@ -473,7 +551,7 @@ def avoidance_shift(
         Vehicles that apply the strategy (others get a zero shift, but are still
         obstacles for the rest).
     strategy : str
-        A key of :data:`STRATEGIES`.
+        A registered strategy of :data:`WEIGHTS` (``none``, ``discontinuous``, ...).
     beta : float
         Aggressiveness of the avoidance [m^2].
     R, r : float [m]
@@ -492,11 +570,43 @@ def avoidance_shift(
         Vehicles with at least one obstacle weighted above zero (mode ``avoid``).
     """
     n = len(pos)
+    ctx = StrategyContext(
+        t=0.0,
+        dt=0.0,
+        pos=pos,
+        theta=np.zeros(n),
+        vel=np.zeros((n, 2)),
+        slot=np.full((n, 2), np.nan),
+        diameter=np.zeros(n),
+        may_avoid=avoiders,
+        failed=np.zeros(n, dtype=bool),
+        params={"beta": beta, "r": r, "steepness": steepness},
+        R=R,
+        obstacle_field=obstacles,
+        neighbours=neighbours,
+    )
+    return get("strategy", strategy).obj(ctx)
+
+
+def weighted_shift(
+    ctx: StrategyContext,
+    weight: Weight,
+    beta: float,
+    r: float | None,
+    steepness: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Eqs. (22)-(27): ``beta * sum_i alpha(dist_i) u_i / dist_i`` for each vehicle.
+
+    The obstacles are the other vehicles within ``ctx.R`` and the static obstacles;
+    ``weight`` is ``alpha(dist, R, r, steepness)``, zero beyond ``R``.
+    """
+    pos, avoiders, R = ctx.pos, ctx.may_avoid, ctx.R
+    obstacles, neighbours = ctx.obstacle_field, ctx.neighbours
+    n = len(pos)
     shift = np.zeros((n, 2))
     active = np.zeros(n, dtype=bool)
-    if strategy == "none" or not np.any(avoiders):
+    if not np.any(avoiders):
         return shift, active
-    weight = STRATEGIES[strategy]
     if neighbours is not None:
         i, j, rel = neighbours.near(pos)  # rel: from j to i
     else:

@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from sandbox.plugins import Param, register_reference
+
 if TYPE_CHECKING:
     from scipy.interpolate import CubicSpline
 
@@ -177,3 +179,90 @@ Reference = (
     | LemniscateReference
     | WaypointsReference
 )
+
+
+# --------------------------------------------------------------- the built-in types
+# Each reference type is a plug-in: the class is built once with its YAML values.
+_CENTER = Param("point", (0.0, 0.0), unit="m", doc="Centre")
+
+
+def _check_waypoints(values: dict, section: dict) -> list[tuple]:
+    """Consecutive waypoints must differ (the chord parameterization needs it)."""
+    pts = values.get("points") or ()
+    for i, (a, b) in enumerate(zip(pts, pts[1:], strict=False)):
+        if a == b:
+            return [
+                (
+                    f"points[{i + 1}]",
+                    "repeats the previous point",
+                    f"points[{i}] = points[{i + 1}] = {list(a)}",
+                    "distinct consecutive points",
+                )
+            ]
+    return []
+
+
+register_reference(
+    "point",
+    {"position": Param("point", unit="m", doc="The point to stabilize at, eq. (4)")},
+)(PointReference)
+register_reference(
+    "line",
+    {
+        "start": Param("point", (0.0, 0.0), unit="m", doc="Starting point"),
+        "heading": Param("number", 0.0, unit="rad", doc="Direction of travel"),
+        "speed": Param(
+            "number", 1.0, unit="m/s", doc="Speed along the line", minimum=0.0
+        ),
+    },
+)(LineReference)
+register_reference(
+    "circle",
+    {
+        "center": _CENTER,
+        "radius": Param("length", unit="m", doc="Radius", minimum=0.0, exclusive=True),
+        "speed": Param(
+            "number", 1.0, unit="m/s", doc="Speed along the circle; negative: clockwise"
+        ),
+        "phase": Param("number", 0.0, unit="rad", doc="Starting angle on the circle"),
+    },
+)(CircleReference)
+register_reference(
+    "lemniscate",
+    {
+        "center": Param(
+            "point", (0.0, 0.0), unit="m", doc="Centre of the figure-eight"
+        ),
+        "size": Param(
+            "length", unit="m", doc="Half-width", minimum=0.0, exclusive=True
+        ),
+        "speed": Param(
+            "number",
+            1.0,
+            unit="m/s",
+            doc="Mean speed over a lap",
+            minimum=0.0,
+            exclusive=True,
+        ),
+    },
+)(LemniscateReference)
+register_reference(
+    "waypoints",
+    {
+        "points": Param(
+            "points",
+            min_items=2,
+            unit="m",
+            doc="Points joined by a C2 spline, no two consecutive equal",
+        ),
+        "speed": Param(
+            "number",
+            1.0,
+            unit="m/s",
+            doc="Speed along the path",
+            minimum=0.0,
+            exclusive=True,
+        ),
+    },
+    check=_check_waypoints,
+)(WaypointsReference)

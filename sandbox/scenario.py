@@ -14,6 +14,7 @@ in metres (``0.75``) or as multiples of the default vehicle diameter (``"3d"``,
 from __future__ import annotations
 
 import copy
+import dataclasses
 import datetime
 import difflib
 import math
@@ -21,7 +22,7 @@ import os
 import re
 import stat
 from collections.abc import Iterator, Mapping
-from dataclasses import asdict, dataclass, field, fields, is_dataclass
+from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,28 +30,23 @@ import numpy as np
 import yaml
 from scipy.spatial import cKDTree
 
-from sandbox import randomize
+from sandbox import plugins, randomize
 from sandbox.control.flatness import (
     Gains,
     error_poles,
     max_control_period,
 )
-from sandbox.control.formation import LAWS
 from sandbox.errors import Problem, ScenarioError
-from sandbox.references import (
-    CircleReference,
-    LemniscateReference,
-    LineReference,
-    PointReference,
-    Reference,
-    WaypointsReference,
+from sandbox.obstacles import SHAPES, ObstacleSpec
+from sandbox.plugins import (
+    KINDS,
+    REQUIRED,
+    ObstacleContext,
+    Param,
+    PluginError,
+    ReferenceContext,
 )
 
-REFERENCE_TYPES = ("point", "line", "circle", "lemniscate", "waypoints")
-STRATEGIES = ("none", "discontinuous", "continuous", "smooth")
-TARGET_DERIVATIVES = ("hold", "estimate")
-FAILURE_KINDS = ("stuck_steering", "stop", "spin", "uncontrolled", "crash")
-OBSTACLE_TYPES = ("circle", "box", "polygon", "wall")
 PLATOON_PATTERNS = ("grid", "line", "wedge", "ring")
 DRIVE_TYPES = ("reference", "commands")
 # : Default colours, in vehicle order (the report draws the leader blue, then red,
@@ -103,51 +99,83 @@ class VehicleSpec:
 
 @dataclass(frozen=True)
 class ReferenceSpec:
-    """The reference trajectory; which fields matter depends on ``type``."""
+    """The reference trajectory: a registered reference ``type`` and its values.
+
+    The values are also readable as attributes (``spec.radius``).
+    """
 
     type: str
-    position: tuple[float, float] | None = None
-    start: tuple[float, float] | None = None
-    heading: float = 0.0
-    speed: float = 1.0
-    center: tuple[float, float] | None = None
-    radius: float | None = None
-    phase: float = 0.0
-    size: float | None = None
-    points: tuple[tuple[float, float], ...] | None = None
+    params: dict[str, Any] = field(default_factory=dict)
 
-    def build(self) -> Reference:
+    def __getattr__(self, name: str) -> Any:
+        params = self.__dict__.get("params", {})
+        if name in params:
+            return params[name]
+        raise AttributeError(name)
+
+    def build(self) -> Any:
         """Return the reference object that evaluates ``(p, p', p'')``."""
-        if self.type == "point":
-            return PointReference(self.position)
-        if self.type == "line":
-            return LineReference(self.start, self.heading, self.speed)
-        if self.type == "circle":
-            return CircleReference(self.center, self.radius, self.speed, self.phase)
-        if self.type == "lemniscate":
-            return LemniscateReference(self.center, self.size, self.speed)
-        return WaypointsReference(self.points, self.speed)
+        plugin = plugins.get("reference", self.type)
+        if isinstance(plugin.obj, type):
+            return plugin.obj(**self.params)
+        return FunctionReference(plugin.obj, dict(self.params))
+
+
+@dataclass(frozen=True)
+class FunctionReference:
+    """A reference registered as a function ``f(ctx) -> (p, dp, ddp)``."""
+
+    func: Any
+    params: dict[str, Any]
+
+    def evaluate(self, t: float | np.ndarray) -> tuple[np.ndarray, ...]:
+        """Return ``(p, dp, ddp)`` at time(s) ``t`` [s], each ``t.shape + (2,)``."""
+        t = np.asarray(t, dtype=float)
+        p, dp, ddp = self.func(ReferenceContext(t, self.params))
+        shape = t.shape + (2,)
+        return tuple(
+            np.broadcast_to(np.asarray(a, dtype=float), shape).copy()
+            for a in (p, dp, ddp)
+        )
 
 
 @dataclass(frozen=True)
 class FormationSpec:
-    """Which formation law of section 3 the followers use."""
+    """Which formation law the followers use, and its values."""
 
     law: str = "rotating"
-    rotate: bool = False
+    params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def rotate(self) -> bool:
+        """The ``rotate`` value of the laws that have one (else False)."""
+        return bool(self.params.get("rotate", False))
 
 
 @dataclass(frozen=True)
 class RecoverySpec:
-    """Collision-avoidance strategy of section 4 (lengths resolved to metres)."""
+    """Collision avoidance of section 4: the strategy and its values [m]."""
 
     strategy: str = "none"
-    beta: float = 1.0
     R: float = 1.5
-    r: float | None = None
     leader_avoids: bool = False
     target_derivatives: str = "hold"
-    steepness: float = 2.0
+    params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def beta(self) -> float | None:
+        """``beta`` of the strategy (the built-in weighted ones have it)."""
+        return self.params.get("beta")
+
+    @property
+    def r(self) -> float | None:
+        """Inner radius ``r`` of the strategy (continuous and smooth)."""
+        return self.params.get("r")
+
+    @property
+    def steepness(self) -> float | None:
+        """``steepness`` of the strategy (smooth)."""
+        return self.params.get("steepness")
 
 
 @dataclass(frozen=True)
@@ -158,49 +186,17 @@ class FailureSpec:
     at: float
     kind: str
     until: float | None = None
-    v1: float | None = None
-    v2: float | None = None
+    params: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def v1(self) -> float | None:
+        """The ``v1`` value of the kinds that have one."""
+        return self.params.get("v1")
 
-@dataclass(frozen=True)
-class ObstacleSpec:
-    """A static obstacle; which fields matter depends on ``type``."""
-
-    type: str
-    name: str
-    center: tuple[float, float] | None = None
-    radius: float | None = None
-    size: tuple[float, float] | None = None
-    angle: float = 0.0
-    points: tuple[tuple[float, float], ...] | None = None
-    start: tuple[float, float] | None = None
-    end: tuple[float, float] | None = None
-    thickness: float = 0.1
-
-    def outline(self) -> list[list[float]]:
-        """Polygon outline of a ``box``, ``polygon`` or ``wall`` [m] (for drawing)."""
-        if self.type == "box":
-            w, h = self.size[0] / 2, self.size[1] / 2
-            c, s = math.cos(self.angle), math.sin(self.angle)
-            corners = [(-w, -h), (w, -h), (w, h), (-w, h)]
-            return [
-                [self.center[0] + c * x - s * y, self.center[1] + s * x + c * y]
-                for x, y in corners
-            ]
-        if self.type == "polygon":
-            return [list(p) for p in self.points]
-        if self.type == "wall":
-            (x0, y0), (x1, y1) = self.start, self.end
-            length = math.hypot(x1 - x0, y1 - y0) or 1.0
-            nx, ny = -(y1 - y0) / length, (x1 - x0) / length
-            t = self.thickness / 2
-            return [
-                [x0 + nx * t, y0 + ny * t],
-                [x1 + nx * t, y1 + ny * t],
-                [x1 - nx * t, y1 - ny * t],
-                [x0 - nx * t, y0 - ny * t],
-            ]
-        raise ValueError(f"a {self.type} obstacle has no polygon outline")
+    @property
+    def v2(self) -> float | None:
+        """The ``v2`` value of the kinds that have one."""
+        return self.params.get("v2")
 
 
 @dataclass(frozen=True)
@@ -251,6 +247,7 @@ class Scenario:
     diameter: float
     source: str | None = None
     warnings: tuple[str, ...] = ()
+    plugins: tuple[str, ...] = ()
 
     @property
     def leader_index(self) -> int:
@@ -278,14 +275,14 @@ class Scenario:
             "record_every": self.record_every,
             "vehicle": {"diameter": self.diameter},
         }
+        if self.plugins:
+            doc["plugins"] = list(self.plugins)
         if self.reference is not None:
-            ref = _plain(self.reference)
-            doc["reference"] = {"type": ref["type"]}
-            doc["reference"].update({k: ref[k] for k in REFERENCE_KEYS[ref["type"]]})
+            doc["reference"] = {"type": self.reference.type}
+            doc["reference"].update(_plain(self.reference.params, skip_none=True))
         if self.formation is not None:
             doc["formation"] = {"law": self.formation.law}
-            if self.formation.law in ("virtual", "leader_ref"):
-                doc["formation"]["rotate"] = self.formation.rotate
+            doc["formation"].update(_plain(self.formation.params, skip_none=True))
         listed = self.vehicles
         if self.platoon is not None:
             listed = self.vehicles[: len(self.vehicles) - self.platoon.count]
@@ -303,17 +300,28 @@ class Scenario:
                 del item["drive"]
             doc["vehicles"].append(item)
         doc["recovery"] = _plain(self.recovery, skip_none=True)
+        doc["recovery"].update(doc["recovery"].pop("params"))
         # A failure that never starts (a run shortened by --duration) is left out.
         failures = [f for f in self.failures if f.at < self.duration]
         if failures:
-            doc["failures"] = [_plain(f, skip_none=True) for f in failures]
+            doc["failures"] = []
+            for f in failures:
+                item = _plain(f, skip_none=True)
+                item.update(item.pop("params"))
+                doc["failures"].append(item)
         if self.obstacles:
-            doc["obstacles"] = [_obstacle_doc(o) for o in self.obstacles]
+            doc["obstacles"] = [o.document() for o in self.obstacles]
         doc["metrics"] = _plain(self.metrics)
         return doc
 
 
 def _plain(obj: Any, skip_none: bool = False) -> Any:
+    if isinstance(obj, Mapping):
+        return {
+            k: _plain(v, skip_none)
+            for k, v in obj.items()
+            if not (skip_none and v is None)
+        }
     if is_dataclass(obj):
         out = {}
         for f in fields(obj):
@@ -329,21 +337,8 @@ def _plain(obj: Any, skip_none: bool = False) -> Any:
     return obj
 
 
-def _obstacle_doc(o: ObstacleSpec) -> dict[str, Any]:
-    keys = {
-        "circle": ("center", "radius"),
-        "box": ("center", "size", "angle"),
-        "polygon": ("points",),
-        "wall": ("start", "end", "thickness"),
-    }[o.type]
-    doc: dict[str, Any] = {"type": o.type, "name": o.name}
-    for k in keys:
-        doc[{"start": "from", "end": "to"}.get(k, k)] = _plain(getattr(o, k))
-    return doc
-
-
 # --------------------------------------------------------------------------- the reader
-_REQUIRED = object()
+_REQUIRED = REQUIRED
 _LENGTH = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*d\s*$")
 #: Longest rendering of a value in a message (longer ones are cut with "...").
 _SHOW_MAX = 60
@@ -861,139 +856,586 @@ def _vector_kind(size: int, length: bool) -> str:
 
 
 # ----------------------------------------------------------------------------- sections
-TOP_KEYS = (
-    "name",
-    "description",
-    "duration",
-    "dt",
-    "substeps",
-    "seed",
-    "record_every",
-    "vehicle",
-    "reference",
-    "formation",
-    "vehicles",
-    "platoon",
-    "recovery",
-    "failures",
-    "obstacles",
-    "metrics",
-    "randomize",
-)
-VEHICLE_PARAM_KEYS = (
-    "diameter",
-    "mass",
-    "gains",
-    "max_accel",
-    "v1_max",
-    "v2_max",
-    "motor_accel",
-)
-VEHICLE_KEYS = (
-    "name",
-    "pose",
-    "offset",
-    "leader",
-    "color",
-    "drive",
-    *VEHICLE_PARAM_KEYS,
-)
-GAIN_KEYS = ("k1", "k2", "k3", "k4", "kp")
-REFERENCE_KEYS = {
-    "point": ("position",),
-    "line": ("start", "heading", "speed"),
-    "circle": ("center", "radius", "speed", "phase"),
-    "lemniscate": ("center", "size", "speed"),
-    "waypoints": ("points", "speed"),
+# Every key of the format is declared once, here or in the plug-in that uses it: the
+# reader below, the JSON Schema (sandbox.schema) and the documentation checks of
+# scenarios/reference.yaml (tests/test_reference_doc.py) are derived from these tables.
+def _section(name: str) -> dict[str, Any]:
+    return {"type": "custom", "default": None, "schema": {"$ref": f"#/$defs/{name}"}}
+
+
+def _list_of(name: str) -> dict[str, Any]:
+    return {
+        "type": "custom",
+        "default": None,
+        "schema": {"type": "array", "items": {"$ref": f"#/$defs/{name}"}},
+    }
+
+
+_BOUND = {
+    "anyOf": [
+        {"type": "number"},
+        {"type": "array", "items": {"type": "number"}, "minItems": 1},
+    ]
 }
-OBSTACLE_KEYS = {
-    "circle": ("center", "radius"),
-    "box": ("center", "size", "angle"),
-    "polygon": ("points",),
-    "wall": ("from", "to", "thickness"),
+_PAIR = {"type": "array", "items": _BOUND, "minItems": 2, "maxItems": 2}
+#: The schema of ``randomize:`` (read by :mod:`sandbox.randomize`).
+_RANDOMIZE_SCHEMA = {
+    "type": "object",
+    "additionalProperties": {
+        "oneOf": [
+            {
+                "type": "object",
+                "properties": {key: value},
+                "required": [key],
+                "additionalProperties": False,
+            }
+            for key, value in (
+                ("uniform", _PAIR),
+                ("normal", _PAIR),
+                ("choice", {"type": "array", "minItems": 1}),
+            )
+        ]
+    },
 }
-RECOVERY_KEYS = (
-    "strategy",
-    "beta",
-    "R",
-    "r",
-    "leader_avoids",
-    "target_derivatives",
-    "steepness",
-)
-FAILURE_KEYS = ("vehicle", "at", "kind", "until", "v1", "v2")
-PLATOON_KEYS = ("count", "pattern", "spacing", "jitter", "columns", "prefix")
-FORMATION_KEYS = ("law", "rotate")
-DRIVE_KEYS = ("type", "schedule")
-METRICS_KEYS = ("settle_tol", "settle_dwell", "contact_release")
+
+#: The control-period bound of eq. (6) with the report's gains [s].
+REPORT_DT_BOUND = max_control_period(Gains().k1, Gains().k2)
+
+TOP: dict[str, Param] = {
+    "name": Param(
+        "name",
+        None,
+        doc="Name of the scenario; runs go to runs/<name>/ by default (default: the "
+        "file name without .yaml)",
+    ),
+    "description": Param("text", "", doc="Free text shown by 'sandbox list'"),
+    "duration": Param(
+        "number", 20.0, "s", "Simulated time", minimum=0.0, exclusive=True
+    ),
+    "dt": Param(
+        "number",
+        0.01,
+        "s",
+        "Control period h; also the period of the backward differences of eqs. "
+        "(8)-(9), (18)-(19). The forward-Euler update of eq. (6) needs dt < "
+        f"{REPORT_DT_BOUND:g} s with the report's gains (checked by the loader)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "substeps": Param(
+        "integer",
+        4,
+        doc="Physics steps per control period; keep v1 dt / substeps well below the "
+        "vehicle radius",
+        minimum=1,
+        maximum=MAX_SUBSTEPS,
+    ),
+    "seed": Param(
+        "integer",
+        0,
+        doc="Seed of the platoon jitter; same scenario and seed give identical outputs",
+        minimum=0,
+        maximum=MAX_SEED,
+    ),
+    "record_every": Param(
+        "integer",
+        1,
+        doc="Record one sample every N control periods (trajectory.csv and metrics "
+        "use the samples)",
+        minimum=1,
+        maximum=MAX_RECORD_EVERY,
+    ),
+    "plugins": Param(
+        "custom",
+        None,
+        doc="Plug-in files (relative to this file) or modules to import first",
+        schema={"type": "array", "items": {"type": "string", "minLength": 1}},
+    ),
+    "vehicle": Param(
+        **_section("vehicleParams"),
+        doc="Defaults for every vehicle (each vehicle may override them)",
+    ),
+    "reference": Param(
+        **_section("reference"),
+        doc="The reference trajectory tracked by the leader (or by every slot with "
+        "law virtual)",
+    ),
+    "formation": Param(
+        **_section("formation"),
+        doc="The formation law; required with more than one vehicle",
+    ),
+    "vehicles": Param(**_list_of("vehicle"), doc="The listed vehicles"),
+    "platoon": Param(
+        **_section("platoon"),
+        doc="Followers generated on a pattern, named <prefix>0, <prefix>1, ...",
+    ),
+    "recovery": Param(**_section("recovery"), doc="Collision avoidance, section 4"),
+    "failures": Param(**_list_of("failure"), doc="Failures injected into vehicles"),
+    "obstacles": Param(**_list_of("obstacle"), doc="Static obstacles"),
+    "metrics": Param(**_section("metrics"), doc="Parameters of metrics.json"),
+    "randomize": Param(
+        "custom",
+        None,
+        doc="Random draws from the seed: field paths (the --set syntax, e.g. "
+        "vehicles[1].pose) mapped to {uniform: [low, high]}, {normal: [mean, std]} "
+        "(numbers or equal-length lists, elementwise) or {choice: [a, b, ...]}; "
+        "overlapping starts are redrawn (see sandbox/randomize.py)",
+        schema=_RANDOMIZE_SCHEMA,
+    ),
+}
+VEHICLE_PARAMS: dict[str, Param] = {
+    "diameter": Param(
+        "number",
+        0.5,
+        "m",
+        "Vehicle diameter d (vehicles are discs); the unit of '3d' lengths",
+        minimum=MIN_DIAMETER,
+    ),
+    "mass": Param("number", 10.0, "kg", "Vehicle mass", minimum=MIN_MASS),
+    "gains": Param(
+        **_section("gains"),
+        doc="Flatness controller gains, eqs. (4)-(6) (default: the report's)",
+    ),
+    "max_accel": Param(
+        "number",
+        None,
+        "m/s^2",
+        "Limit on |d chi / dt| (chi is clamped: no wind-up); default: unlimited",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "v1_max": Param(
+        "number",
+        None,
+        "m/s",
+        "Limit on the speed v1 = |chi|; default: unlimited",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "v2_max": Param(
+        "number",
+        None,
+        "rad/s",
+        "Limit on the turn rate |v2|; default: unlimited",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "motor_accel": Param(
+        "number",
+        None,
+        "m/s^2",
+        "A fixed strength of the physical motor (joint force = mass * motor_accel), "
+        "which may be too weak to follow the commands (the run reports how often); "
+        "default: a motor that follows every command while free and pushes with 200 "
+        "m/s^2 in contact",
+        minimum=0.0,
+        exclusive=True,
+    ),
+}
+GAINS: dict[str, Param] = {
+    "k1": Param("number", Gains().k1, "1/s^2", "Position gain on x1 of eq. (6)"),
+    "k2": Param("number", Gains().k2, "1/s", "Velocity gain on x1 of eq. (6)"),
+    "k3": Param("number", Gains().k3, "1/s^2", "Position gain on x2 of eq. (6)"),
+    "k4": Param("number", Gains().k4, "1/s", "Velocity gain on x2 of eq. (6)"),
+    "kp": Param("number", Gains().kp, "1/s", "Heading gain of eq. (5)"),
+}
+VEHICLE: dict[str, Param] = {
+    "name": Param(
+        "name", None, doc="Unique among vehicles and obstacles (default: vehicle<i>)"
+    ),
+    "pose": Param(
+        "custom",
+        doc="Initial pose [x1 [m], x2 [m], x3 heading [rad]]; vehicles start at rest "
+        "and must not overlap",
+        schema={
+            "type": "array",
+            "prefixItems": [
+                {"$ref": "#/$defs/length"},
+                {"$ref": "#/$defs/length"},
+                {"type": "number"},
+            ],
+            "minItems": 3,
+            "maxItems": 3,
+        },
+    ),
+    "offset": Param(
+        "point",
+        (0.0, 0.0),
+        "m",
+        "Slot offset (delta1, delta2); its frame depends on the law",
+    ),
+    "leader": Param(
+        "boolean", False, doc="The vehicle the others follow (at most one)"
+    ),
+    "color": Param(
+        "string",
+        None,
+        doc="Colour name or #rrggbb (default: blue, red, green, ... in order)",
+    ),
+    "drive": Param(
+        **_section("drive"), doc="How the vehicle is driven (default: by its law)"
+    ),
+}
+DRIVE: dict[str, Param] = {
+    "type": Param(
+        "choice",
+        "reference",
+        doc="reference: driven by its law; commands: open loop by 'schedule'",
+        choices=DRIVE_TYPES,
+    ),
+    "schedule": Param(
+        "custom",
+        None,
+        doc="Rows [t [s], v1 [m/s], v2 [rad/s]] with increasing t, each held until the "
+        "next (zero before the first); required with type commands",
+        schema={
+            "type": "array",
+            "minItems": 1,
+            "items": {
+                "type": "array",
+                "items": {"type": "number"},
+                "minItems": 3,
+                "maxItems": 3,
+            },
+        },
+    ),
+}
+PLATOON: dict[str, Param] = {
+    "count": Param(
+        "integer",
+        doc="Number of generated vehicles",
+        minimum=1,
+        maximum=MAX_VEHICLES,
+    ),
+    "pattern": Param(
+        "choice",
+        "grid",
+        doc="grid: rows behind the leader; line: single file; wedge: a V; ring: a "
+        "circle around the leader",
+        choices=PLATOON_PATTERNS,
+    ),
+    "spacing": Param(
+        "length",
+        "2d",
+        "m",
+        "Distance between neighbours",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "jitter": Param(
+        "length",
+        0.0,
+        "m",
+        "Uniform random shift of each start position on each axis (seeded by 'seed')",
+        minimum=0.0,
+    ),
+    "columns": Param(
+        "integer",
+        None,
+        doc="grid only: vehicles per row (default: about sqrt(count))",
+        minimum=1,
+        maximum=MAX_VEHICLES,
+    ),
+    "prefix": Param("name", "v", doc="Name prefix of the generated vehicles"),
+}
+METRICS: dict[str, Param] = {
+    "settle_tol": Param(
+        "number",
+        0.05,
+        "m",
+        "Formation error below which a vehicle counts as settled",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "settle_dwell": Param(
+        "number",
+        1.0,
+        "s",
+        "How long the run must go on with the error in band after the settling "
+        "time, else the settling time is null",
+        minimum=0.0,
+    ),
+    "contact_release": Param(
+        "number",
+        0.01,
+        "m",
+        "Gap between two surfaces beyond which a contact episode ends (closer "
+        "returns are the same collision)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+}
+#: The own keys of the sections that select a plug-in (the plug-in's parameters are
+#: declared by its registration).
+FORMATION: dict[str, Param] = {
+    "law": Param("custom", doc="The formation law (registered name)"),
+}
+RECOVERY: dict[str, Param] = {
+    "strategy": Param("custom", "none", doc="The recovery strategy (registered name)"),
+    "R": Param(
+        "length",
+        "3d",
+        "m",
+        "Safe-zone radius: obstacles within R are avoided",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "leader_avoids": Param(
+        "boolean", False, doc="Whether the leader avoids too (section 4.3.3)"
+    ),
+    "target_derivatives": Param(
+        "choice",
+        "hold",
+        doc="hold: the shifted target keeps the law's derivatives; estimate: the "
+        "shift's derivatives are estimated and added",
+        choices=("hold", "estimate"),
+    ),
+}
+FAILURE: dict[str, Param] = {
+    "vehicle": Param("string", doc="Name of the failing vehicle"),
+    "at": Param("number", unit="s", doc="Onset, within the run", minimum=0.0),
+    "kind": Param("custom", doc="The failure kind (registered name)"),
+    "until": Param(
+        "number",
+        None,
+        "s",
+        "End, later than 'at' (default: the end of the run)",
+        minimum=0.0,
+    ),
+}
+REFERENCE: dict[str, Param] = {
+    "type": Param("custom", doc="The reference type (registered name)"),
+}
+OBSTACLE: dict[str, Param] = {
+    "type": Param("custom", doc="The obstacle type (registered name)"),
+    "name": Param(
+        "name",
+        None,
+        doc="Names the obstacle in collision events (default: obstacle[<i>])",
+    ),
+}
+#: The sections by kind of plug-in they select.
+PLUGIN_SECTIONS: dict[str, dict[str, Param]] = {
+    "law": FORMATION,
+    "strategy": RECOVERY,
+    "failure": FAILURE,
+    "reference": REFERENCE,
+    "obstacle": OBSTACLE,
+}
+for _kind, _own in PLUGIN_SECTIONS.items():
+    plugins.reserve_section_keys(_kind, tuple(_own))
+
+TOP_KEYS = tuple(TOP)
+VEHICLE_PARAM_KEYS = tuple(VEHICLE_PARAMS)
+VEHICLE_KEYS = (*VEHICLE, *VEHICLE_PARAMS)
+GAIN_KEYS = tuple(GAINS)
+PLATOON_KEYS = tuple(PLATOON)
+DRIVE_KEYS = tuple(DRIVE)
+METRICS_KEYS = tuple(METRICS)
+
+
+def _length_default(rd: _Reader, value: Any) -> Any:
+    """A default written ``"3d"`` resolved to metres with the default diameter."""
+    if isinstance(value, str):
+        match = _LENGTH.match(value)
+        if match:
+            return float(match.group(1)) * rd.diameter
+    return value
+
+
+def read_param(
+    rd: _Reader, m: dict[Any, Any], key: str, path: str, p: Param
+) -> tuple[Any, bool]:
+    """Read one declared key: ``(value, ok)``; problems are recorded in ``rd``.
+
+    A missing optional key gives its default (lengths like ``"3d"`` in metres); a
+    missing required key, or a value of the wrong type or out of bounds, gives
+    ``(None, False)``.
+    """
+    before = len(rd.problems)
+    default = _REQUIRED if p.required else p.default
+    if p.type == "length":
+        default = _length_default(rd, default)
+    t = p.type
+    if t in ("number", "length"):
+        positive = p.exclusive and p.minimum == 0
+        minimum = None if positive else p.minimum
+        value = rd.number(
+            m,
+            key,
+            path,
+            default,
+            positive=positive,
+            minimum=minimum,
+            length=t == "length",
+        )
+        if value is not None and len(rd.problems) == before:
+            sub = f"{path}.{key}" if path else key
+            kind = _number_kind(positive, minimum, t == "length")
+            if p.exclusive and not positive and value <= p.minimum:
+                rd.fail(sub, f"must be greater than {p.minimum:g}", f"{value:g}", kind)
+            elif p.maximum is not None and value > p.maximum:
+                rd.fail(sub, f"must be at most {p.maximum:g}", f"{value:g}", kind)
+    elif t == "integer":
+        lo = int(p.minimum) if p.minimum is not None else -(2**63)
+        hi = int(p.maximum) if p.maximum is not None else MAX_SEED
+        value = rd.integer(m, key, path, default, minimum=lo, maximum=hi)
+        if value is _REQUIRED:
+            value = None
+    elif t == "boolean":
+        value = rd.boolean(m, key, path, False if default is _REQUIRED else default)
+    elif t == "string":
+        value = rd.string(m, key, path, default)
+    elif t == "name":
+        value = rd.name(m, key, path, default)
+    elif t == "text":
+        value = m.get(key)
+        value = default if value is None else value
+        if not isinstance(value, str):
+            rd.fail(
+                f"{path}.{key}" if path else key,
+                "not a string",
+                _describe(value),
+                "a text",
+            )
+    elif t == "choice":
+        value = rd.choice(m, key, path, default, p.choices, f"{key} value")
+    elif t == "point":
+        value = rd.vector(m, key, path, 2, default, length=True)
+    elif t == "points":
+        if key not in m or m[key] is None:
+            if p.required:
+                value = rd.points(m, key, path, p.min_items)
+            else:
+                value = default
+        else:
+            value = rd.points(m, key, path, p.min_items)
+    else:
+        raise ValueError(f"{path}.{key}: a {t} key is read by its section's code")
+    if value is _REQUIRED:
+        value = None
+    return value, len(rd.problems) == before
+
+
+def read_params(
+    rd: _Reader, m: dict[Any, Any], path: str, params: dict[str, Param]
+) -> tuple[dict[str, Any], bool]:
+    """Read every declared key of a mapping (not ``custom`` ones): ``(values, ok)``."""
+    values, ok = {}, True
+    for key, p in params.items():
+        if p.type == "custom":
+            continue
+        values[key], good = read_param(rd, m, key, path, p)
+        ok = ok and good
+    return values, ok
+
+
+def _and(names: list[str]) -> str:
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
+def read_plugin_section(
+    rd: _Reader,
+    m: dict[Any, Any],
+    path: str,
+    kind: str,
+) -> tuple[plugins.Plugin | None, dict[str, Any], dict[str, Any], bool]:
+    """Read a section that selects a plug-in of ``kind`` by name.
+
+    Returns ``(plugin, own, values, ok)``: the selected plug-in (None if the name is
+    missing or unknown), the section's own keys, the plug-in's parameters (checked
+    by its ``check``), and whether all were valid. Keys are checked against the
+    section's own keys and the plug-in's parameters; a key another plug-in of the
+    kind declares is an error naming them, or ignored for a lenient kind.
+    """
+    info = KINDS[kind]
+    own = PLUGIN_SECTIONS[kind]
+    registered = plugins.names(kind)
+    default = own[info.selector].default
+    name = rd.choice(m, info.selector, path, default, registered, info.title)
+    own_values, ok = read_params(rd, m, path, own)
+    everyone = plugins.all_params(kind)
+    if name is None or name is _REQUIRED:
+        rd.keys(m, (*own, *everyone), path)
+        return None, own_values, {}, False
+    plugin = plugins.get(kind, name)
+    allowed = (*own, *plugin.params)
+    for key in m:
+        if isinstance(key, str) and key in allowed:
+            continue
+        if isinstance(key, str) and key in everyone:
+            if not info.lenient:
+                users = everyone[key]
+                rd.fail(
+                    f"{path}.{key}",
+                    f"applies only to the {_and(users)} {info.title}"
+                    f"{'s' if len(users) > 1 else ''}",
+                    f"{key} with {info.selector} {name}",
+                    f"no '{key}' ({info.title} {name} does not take it)",
+                )
+            continue
+        rd.keys({key: None}, allowed, path)
+    values, good = read_params(rd, m, path, plugin.params)
+    ok = ok and good
+    if good and plugin.check is not None:
+        section = {**own_values, info.selector: name}
+        for key, what, got, expected in plugin.check(values, section) or ():
+            rd.fail(f"{path}.{key}", what, got, expected)
+            ok = False
+    return plugin, own_values, values, ok
 
 
 def _vehicle_params(
     rd: _Reader, m: dict[Any, Any], path: str, base: dict[str, Any]
 ) -> dict:
-    """Read the physical/controller parameters of ``vehicle:`` or of one vehicle."""
+    """Read the physical/controller parameters of ``vehicle:`` or of one vehicle.
+
+    ``base`` holds the values used for keys left out (the shared ``vehicle:`` ones
+    for a listed vehicle).
+    """
     out = dict(base)
-    out["diameter"] = rd.number(
-        m, "diameter", path, base["diameter"], minimum=MIN_DIAMETER
-    )
-    out["mass"] = rd.number(m, "mass", path, base["mass"], minimum=MIN_MASS)
-    for key in ("max_accel", "v1_max", "v2_max"):
-        out[key] = rd.number(m, key, path, base[key], positive=True)
-    out["motor_accel"] = rd.number(
-        m, "motor_accel", path, base["motor_accel"], positive=True
-    )
+    for key, p in VEHICLE_PARAMS.items():
+        if p.type != "custom":
+            p = dataclasses.replace(p, default=base[key])
+            out[key], _ = read_param(rd, m, key, path, p)
     gains_doc, gains_path = rd.get(m, "gains", path, None)
     gains = dict(base["gains"])
     if gains_doc is not None:
         g = rd.mapping(gains_doc, gains_path)
         if g is not None:
             rd.keys(g, GAIN_KEYS, gains_path)
-            for key in GAIN_KEYS:
-                gains[key] = rd.number(g, key, gains_path, gains[key])
+            for key, p in GAINS.items():
+                p = dataclasses.replace(p, default=gains[key])
+                gains[key], _ = read_param(rd, g, key, gains_path, p)
     out["gains"] = gains
     return out
+
+
+def _vehicle_defaults() -> dict[str, Any]:
+    """The declared defaults of ``vehicle:``, gains included."""
+    base = {k: p.default for k, p in VEHICLE_PARAMS.items() if p.type != "custom"}
+    base["gains"] = {k: p.default for k, p in GAINS.items()}
+    return base
 
 
 def _reference(rd: _Reader, doc: Any, path: str) -> ReferenceSpec | None:
     m = rd.mapping(doc, path)
     if m is None:
         return None
-    kind = rd.choice(m, "type", path, _REQUIRED, REFERENCE_TYPES, "reference type")
-    if kind is None or kind is _REQUIRED:
+    plugin, _, values, ok = read_plugin_section(rd, m, path, "reference")
+    if plugin is None or not ok:
         return None
-    rd.keys(m, ("type", *REFERENCE_KEYS[kind]), path)
-    kw: dict[str, Any] = {"type": kind}
-    if kind == "point":
-        kw["position"] = rd.vector(m, "position", path, 2, length=True)
-    elif kind == "line":
-        kw["start"] = rd.vector(m, "start", path, 2, (0.0, 0.0), length=True)
-        kw["heading"] = rd.number(m, "heading", path, 0.0)
-        kw["speed"] = rd.number(m, "speed", path, 1.0, minimum=0.0)
-    elif kind == "circle":
-        kw["center"] = rd.vector(m, "center", path, 2, (0.0, 0.0), length=True)
-        kw["radius"] = rd.number(m, "radius", path, positive=True, length=True)
-        kw["speed"] = rd.number(m, "speed", path, 1.0)
-        kw["phase"] = rd.number(m, "phase", path, 0.0)
-    elif kind == "lemniscate":
-        kw["center"] = rd.vector(m, "center", path, 2, (0.0, 0.0), length=True)
-        kw["size"] = rd.number(m, "size", path, positive=True, length=True)
-        kw["speed"] = rd.number(m, "speed", path, 1.0, positive=True)
-    else:
-        kw["points"] = rd.points(m, "points", path, 2)
-        kw["speed"] = rd.number(m, "speed", path, 1.0, positive=True)
-        pts = kw["points"] or ()
-        for i, (a, b) in enumerate(zip(pts, pts[1:], strict=False)):
-            if a == b:
-                rd.fail(
-                    f"{path}.points[{i + 1}]",
-                    "repeats the previous point",
-                    f"points[{i}] = points[{i + 1}] = {list(a)}",
-                    "distinct consecutive points",
-                )
-                return None
-    if any(v is None for v in kw.values()):
+    return ReferenceSpec(plugin.name, values)
+
+
+def _formation(rd: _Reader, doc: Any, path: str) -> FormationSpec | None:
+    m = rd.mapping(doc, path)
+    if m is None:
         return None
-    return ReferenceSpec(**kw)
+    plugin, _, values, ok = read_plugin_section(rd, m, path, "law")
+    if plugin is None or not ok:
+        return None
+    return FormationSpec(plugin.name, values)
 
 
 def _drive(rd: _Reader, doc: Any, path: str) -> DriveSpec | None:
@@ -1140,19 +1582,8 @@ def _platoon(rd: _Reader, doc: Any, path: str) -> PlatoonSpec | None:
     if m is None:
         return None
     rd.keys(m, PLATOON_KEYS, path)
-    count = rd.integer(m, "count", path, _REQUIRED, minimum=1, maximum=MAX_VEHICLES)
-    pattern = rd.choice(m, "pattern", path, "grid", PLATOON_PATTERNS, "platoon pattern")
-    spacing = rd.number(
-        m, "spacing", path, 2.0 * rd.diameter, positive=True, length=True
-    )
-    jitter = rd.number(m, "jitter", path, 0.0, minimum=0.0, length=True)
-    columns = rd.integer(m, "columns", path, None, minimum=1, maximum=MAX_VEHICLES)
-    prefix = rd.name(m, "prefix", path, "v")
-    if None in (pattern, spacing, jitter, prefix) or count in (None, _REQUIRED):
-        return None
-    if columns is None and "columns" in m and m["columns"] is not None:
-        return None
-    return PlatoonSpec(count, pattern, spacing, jitter, columns, prefix)
+    values, ok = read_params(rd, m, path, PLATOON)
+    return PlatoonSpec(**values) if ok else None
 
 
 def platoon_offsets(spec: PlatoonSpec) -> np.ndarray:
@@ -1266,76 +1697,41 @@ def _expand_platoon(
 
 def _recovery(rd: _Reader, doc: Any, path: str) -> RecoverySpec:
     m = rd.mapping(doc, path)
+    fallback = RecoverySpec(R=3.0 * rd.diameter)
     if m is None:
-        return RecoverySpec(R=3.0 * rd.diameter)
-    rd.keys(m, RECOVERY_KEYS, path)
-    strategy = rd.choice(m, "strategy", path, "none", STRATEGIES, "recovery strategy")
-    beta = rd.number(m, "beta", path, 1.0, minimum=0.0)
-    big_r = rd.number(m, "R", path, 3.0 * rd.diameter, positive=True, length=True)
-    small_r = rd.number(m, "r", path, None, positive=True, length=True)
-    leader_avoids = rd.boolean(m, "leader_avoids", path, False)
-    derivs = rd.choice(
-        m,
-        "target_derivatives",
-        path,
-        "hold",
-        TARGET_DERIVATIVES,
-        "target_derivatives value",
-    )
-    steep = rd.number(m, "steepness", path, 2.0, positive=True)
-    if big_r is not None:
-        if small_r is None and strategy in ("continuous", "smooth"):
-            small_r = big_r / 2.0
-        if small_r is not None and small_r >= big_r:
-            rd.fail(
-                f"{path}.r" if "r" in m else f"{path}.R",
-                "r must be smaller than R",
-                f"r = {small_r:g} m, R = {big_r:g} m",
-                "r < R: avoidance ramps up between R and r, eqs. (26)-(27)",
-            )
-        if big_r < rd.diameter:
-            rd.warn(
-                f"{path}.R",
-                f"R = {big_r:g} m is smaller than the vehicle diameter "
-                f"{rd.diameter:g} m: avoidance starts only after contact",
-            )
+        return fallback
+    plugin, own, values, _ = read_plugin_section(rd, m, path, "strategy")
+    big_r = own.get("R")
+    if big_r is not None and big_r < rd.diameter:
+        rd.warn(
+            f"{path}.R",
+            f"R = {big_r:g} m is smaller than the vehicle diameter "
+            f"{rd.diameter:g} m: avoidance starts only after contact",
+        )
+    if plugin is None:
+        return fallback
     return RecoverySpec(
-        strategy=strategy or "none",
-        beta=beta if beta is not None else 1.0,
-        R=big_r if big_r is not None else 3.0 * rd.diameter,
-        r=small_r,
-        leader_avoids=leader_avoids,
-        target_derivatives=derivs or "hold",
-        steepness=steep or 2.0,
+        strategy=plugin.name,
+        R=big_r if big_r is not None else fallback.R,
+        leader_avoids=bool(own.get("leader_avoids")),
+        target_derivatives=own.get("target_derivatives") or "hold",
+        params=values,
     )
 
 
 def _failures(rd: _Reader, doc: Any, path: str) -> list[tuple[str, FailureSpec]]:
     out = []
     for _, sub, m in rd.items(doc, path, "failures"):
-        rd.keys(m, FAILURE_KEYS, sub)
-        vehicle = rd.string(m, "vehicle", sub, _REQUIRED)
-        at = rd.number(m, "at", sub, _REQUIRED, minimum=0.0)
-        kind = rd.choice(m, "kind", sub, _REQUIRED, FAILURE_KINDS, "failure kind")
-        until = rd.number(m, "until", sub, None, minimum=0.0)
-        v1 = rd.number(m, "v1", sub, None)
-        v2 = rd.number(m, "v2", sub, None)
-        if kind == "spin" and v2 is None:
-            v2 = 1.0
-        if kind == "uncontrolled" and v1 is None and m.get("v1") is None:
-            rd.fail(
-                f"{sub}.v1",
-                "required key is missing",
-                "nothing",
-                "the constant speed v1 [m/s] of an uncontrolled vehicle",
-            )
-        if kind == "crash" and until is not None:
+        plugin, own, values, ok = read_plugin_section(rd, m, sub, "failure")
+        vehicle, at, until = own.get("vehicle"), own.get("at"), own.get("until")
+        if plugin is not None and plugin.options.get("permanent") and until is not None:
             rd.fail(
                 f"{sub}.until",
-                "a crash is permanent",
+                f"a {plugin.name} is permanent",
                 f"until = {until:g} s",
                 "no 'until' (use kind: stop for a temporary halt)",
             )
+            ok = False
         if at is not None and until is not None and until <= at:
             rd.fail(
                 f"{sub}.until",
@@ -1343,6 +1739,7 @@ def _failures(rd: _Reader, doc: Any, path: str) -> list[tuple[str, FailureSpec]]
                 f"until = {until:g} s, at = {at:g} s",
                 "until > at",
             )
+            ok = False
         rd.timed.append(
             (
                 sub,
@@ -1350,93 +1747,42 @@ def _failures(rd: _Reader, doc: Any, path: str) -> list[tuple[str, FailureSpec]]
                 at if isinstance(at, float) else None,
             )
         )
-        if None in (vehicle, at, kind) or _REQUIRED in (vehicle, at, kind):
+        if plugin is None or vehicle is None or at is None:
             continue
-        out.append((sub, FailureSpec(vehicle, at, kind, until, v1, v2)))
+        if ok:
+            out.append((sub, FailureSpec(vehicle, at, plugin.name, until, values)))
     return out
 
 
 def _obstacles(rd: _Reader, doc: Any, path: str) -> list[tuple[str, ObstacleSpec]]:
     out = []
     for i, sub, m in rd.items(doc, path, "obstacles"):
-        kind = rd.choice(m, "type", sub, _REQUIRED, OBSTACLE_TYPES, "obstacle type")
-        if kind is None or kind is _REQUIRED:
+        plugin, own, values, ok = read_plugin_section(rd, m, sub, "obstacle")
+        if plugin is None or not ok:
             continue
-        rd.keys(m, ("type", "name", *OBSTACLE_KEYS[kind]), sub)
-        kw: dict[str, Any] = {
-            "type": kind,
-            "name": rd.name(m, "name", sub, f"obstacle[{i}]"),
-        }
-        if kind == "circle":
-            kw["center"] = rd.vector(m, "center", sub, 2, length=True)
-            kw["radius"] = rd.number(m, "radius", sub, positive=True, length=True)
-        elif kind == "box":
-            kw["center"] = rd.vector(m, "center", sub, 2, length=True)
-            kw["size"] = rd.vector(m, "size", sub, 2, length=True)
-            kw["angle"] = rd.number(m, "angle", sub, 0.0)
-            if kw["size"] is not None and min(kw["size"]) <= 0:
-                rd.fail(
-                    f"{sub}.size",
-                    "both sides must be greater than 0",
-                    f"{list(kw['size'])}",
-                    "two lengths > 0 [m]",
-                )
-                kw["size"] = None
-        elif kind == "polygon":
-            kw["points"] = rd.points(m, "points", sub, 3)
-            if kw["points"] is not None and not _is_convex(kw["points"]):
-                rd.fail(
-                    f"{sub}.points",
-                    "not a simple convex polygon with non-zero area",
-                    f"{len(kw['points'])} points",
-                    "a convex outline that goes round once (split a concave "
-                    "obstacle into several polygons)",
-                )
-                kw["points"] = None
-        else:
-            kw["start"] = rd.vector(m, "from", sub, 2, length=True)
-            kw["end"] = rd.vector(m, "to", sub, 2, length=True)
-            kw["thickness"] = rd.number(
-                m, "thickness", sub, 0.1, positive=True, length=True
+        name = own.get("name") or f"obstacle[{i}]"
+        try:
+            spec = plugin.obj(ObstacleContext(name, values))
+        except Exception as exc:  # a plug-in's error is the user's problem, reported
+            rd.fail(
+                sub,
+                f"obstacle type {plugin.name} failed",
+                f"{type(exc).__name__}: {exc}",
+                f"values {plugin.name} accepts ({plugin.origin})",
             )
-            if kw["start"] is not None and kw["start"] == kw["end"]:
-                rd.fail(
-                    f"{sub}.to",
-                    "a wall needs a length",
-                    f"from = to = {list(kw['start'])}",
-                    "two different end points",
-                )
-                kw["end"] = None
-        if any(v is None for v in kw.values()):
             continue
-        out.append((sub, ObstacleSpec(**kw)))
+        if not isinstance(spec, ObstacleSpec) or spec.type not in SHAPES:
+            rd.fail(
+                sub,
+                f"obstacle type {plugin.name} returned no shape",
+                _describe(spec),
+                f"an ObstacleSpec of type {', '.join(SHAPES)}",
+            )
+            continue
+        if spec.name != name:
+            spec = dataclasses.replace(spec, name=name)
+        out.append((sub, spec))
     return out
-
-
-def _is_convex(points: tuple[tuple[float, float], ...]) -> bool:
-    """Whether the outline is a simple convex polygon of non-zero area.
-
-    Every turn must go the same way, and the turns must add up to one full turn: a
-    pentagram or a square listed twice turns the same way at every corner but winds
-    twice around its inside (it is not simple, and pymunk would use its hull).
-    Repeated consecutive points are ignored.
-    """
-    p = np.asarray(points, dtype=float)
-    keep = np.any(np.abs(p - np.roll(p, 1, axis=0)) > 1e-12, axis=1)
-    p = p[keep]
-    if len(p) < 3:
-        return False
-    d1 = np.roll(p, -1, axis=0) - p
-    d2 = np.roll(d1, -1, axis=0)
-    cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
-    dot = d1[:, 0] * d2[:, 0] + d1[:, 1] * d2[:, 1]
-    area = 0.5 * np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
-    turning = float(np.sum(np.arctan2(cross, dot)))  # [rad], +-2 pi when simple
-    return (
-        abs(area) > 1e-12
-        and (bool(np.all(cross >= -1e-12)) or bool(np.all(cross <= 1e-12)))
-        and abs(abs(turning) - 2 * math.pi) < 1e-6
-    )
 
 
 # ------------------------------------------------------------------------- entry points
@@ -1524,6 +1870,7 @@ def parse_scenario(
         if where is not None:
             overridden.append((where, item))
             rd.overridden.add(where)
+    loaded = _load_plugins(rd, doc.get("plugins"), source)
     if doc.get("randomize") is not None:  # draws into the document (randomize.py)
         doc, found = randomize.resolve(
             doc, skip=rd.overridden, line=rd.line, check=parse_scenario
@@ -1554,25 +1901,15 @@ def parse_scenario(
             "plain text (line breaks and tabs allowed)",
         )
         description = ""
-    duration = rd.number(doc, "duration", "", 20.0, positive=True)
-    dt = rd.number(doc, "dt", "", 0.01, positive=True)
-    substeps = rd.integer(doc, "substeps", "", 4, minimum=1, maximum=MAX_SUBSTEPS)
-    seed = rd.integer(doc, "seed", "", 0, minimum=0, maximum=MAX_SEED)
-    record_every = rd.integer(
-        doc, "record_every", "", 1, minimum=1, maximum=MAX_RECORD_EVERY
-    )
+    duration = read_param(rd, doc, "duration", "", TOP["duration"])[0]
+    dt = read_param(rd, doc, "dt", "", TOP["dt"])[0]
+    substeps = read_param(rd, doc, "substeps", "", TOP["substeps"])[0]
+    seed = read_param(rd, doc, "seed", "", TOP["seed"])[0]
+    record_every = read_param(rd, doc, "record_every", "", TOP["record_every"])[0]
 
     vehicle_doc = rd.mapping(doc.get("vehicle"), "vehicle") or {}
     rd.keys(vehicle_doc, VEHICLE_PARAM_KEYS, "vehicle")
-    base = {
-        "diameter": 0.5,
-        "mass": 10.0,
-        "max_accel": None,
-        "v1_max": None,
-        "v2_max": None,
-        "motor_accel": None,
-        "gains": asdict(Gains()),
-    }
+    base = _vehicle_defaults()
     params = _vehicle_params(rd, vehicle_doc, "vehicle", base)
     rd.diameter = params["diameter"] or 0.5
     # An invalid shared parameter is reported once; vehicles then use the default.
@@ -1586,26 +1923,7 @@ def parse_scenario(
         reference = _reference(rd, doc["reference"], "reference")
     formation = None
     if doc.get("formation") is not None:
-        fm = rd.mapping(doc["formation"], "formation")
-        if fm is not None:
-            rd.keys(fm, FORMATION_KEYS, "formation")
-            law = rd.choice(
-                fm, "law", "formation", _REQUIRED, tuple(LAWS), "formation law"
-            )
-            rotate = rd.boolean(fm, "rotate", "formation", False)
-            if fm.get("rotate") is not None and law in (
-                "fixed",
-                "rotating",
-                "own_estimate",
-            ):
-                rd.fail(
-                    "formation.rotate",
-                    "applies only to the virtual and leader_ref laws",
-                    f"rotate with law {law}",
-                    f"no 'rotate' (law {law} fixes the frame of its offsets)",
-                )
-            if law not in (None, _REQUIRED):
-                formation = FormationSpec(law, rotate)
+        formation = _formation(rd, doc["formation"], "formation")
 
     listed = _vehicles(rd, doc.get("vehicles"), "vehicles", params)
     platoon = None
@@ -1630,10 +1948,9 @@ def parse_scenario(
     obstacles = _obstacles(rd, doc.get("obstacles"), "obstacles")
     mdoc = rd.mapping(doc.get("metrics"), "metrics") or {}
     rd.keys(mdoc, METRICS_KEYS, "metrics")
+    read, _ = read_params(rd, mdoc, "metrics", METRICS)
     metrics = MetricsSpec(
-        rd.number(mdoc, "settle_tol", "metrics", 0.05, positive=True) or 0.05,
-        rd.number(mdoc, "settle_dwell", "metrics", 1.0, minimum=0.0) or 0.0,
-        rd.number(mdoc, "contact_release", "metrics", 0.01, positive=True) or 0.01,
+        **{k: METRICS[k].default if v is None else v for k, v in read.items()}
     )
 
     _check_consistency(
@@ -1674,10 +1991,57 @@ def parse_scenario(
         metrics=metrics,
         diameter=rd.diameter,
         source=source,
+        plugins=tuple(loaded),
         warnings=tuple(
             w.format(source) for w in _mark_overrides(rd.warnings, overridden)
         ),
     )
+
+
+def _load_plugins(rd: _Reader, listed: Any, source: str | None) -> list[str]:
+    """Import the plug-ins a scenario lists; return them as they reload from anywhere.
+
+    Files are relative to the scenario's directory and returned as absolute paths;
+    module names are returned as they are. A plug-in that fails is a problem of its
+    ``plugins[i]`` entry.
+    """
+    if listed is None:
+        return []
+    if not isinstance(listed, list):
+        listed = [listed] if isinstance(listed, str) else listed
+        if not isinstance(listed, list):
+            rd.fail(
+                "plugins",
+                "not a list",
+                _describe(listed),
+                "a list of plug-in files (.py) or module names",
+            )
+            return []
+    base = Path(source).resolve().parent if source else None
+    out = []
+    try:
+        plugins.load_entry_points()
+    except PluginError as exc:
+        rd.fail("plugins", str(exc), "a broken entry point", "plug-ins that import")
+    for i, spec in enumerate(listed):
+        where = f"plugins[{i}]"
+        if not isinstance(spec, str) or not spec.strip():
+            rd.fail(
+                where, "not a plug-in name", _describe(spec), "a .py file or a module"
+            )
+            continue
+        try:
+            plugins.load_plugin(spec, base)
+        except PluginError as exc:
+            rd.fail(
+                where, "plug-in cannot be loaded", str(exc), "a plug-in that imports"
+            )
+            continue
+        if plugins.looks_like_file(spec):
+            out.append(str(plugins.resolve_file(spec, base)))
+        else:
+            out.append(spec.strip())
+    return out
 
 
 def _mark_overrides(
@@ -1796,9 +2160,10 @@ def _check_consistency(
             "formation",
             "required key is missing (several vehicles need a formation law)",
             "nothing",
-            f"formation: {{law: one of {', '.join(LAWS)}}}",
+            f"formation: {{law: one of {', '.join(plugins.names('law'))}}}",
         )
-    if law is not None and LAWS[law].needs_leader and not leaders:
+    law_options = plugins.get("law", law).options if law is not None else {}
+    if law is not None and law_options["needs_leader"] and not leaders:
         rd.fail(
             "vehicles",
             f"the {law} law needs a leader",
@@ -1810,7 +2175,7 @@ def _check_consistency(
         tracks = v.drive.type == "reference"
         if tracks and (len(declared) == 1 or v.leader or law == "virtual"):
             needs_ref.append((where, v))
-    needed = needs_ref or (law is not None and LAWS[law].needs_reference)
+    needed = needs_ref or (law is not None and law_options["needs_reference"])
     if needed and doc.get("reference") is None:
         who = f"vehicle {needs_ref[0][1].name}" if needs_ref else f"the {law} law"
         rd.fail(
@@ -2050,7 +2415,7 @@ def _check_geometry(
     rad = rad[slotted]
     off = np.array([v.offset for _, v in vehicles], dtype=float)
     leads = np.array([v.leader for _, v in vehicles])
-    if LAWS[law].needs_leader:
+    if plugins.get("law", law).options["needs_leader"]:
         off[leads] = 0.0
     idx = np.flatnonzero(~leads)
     close = set()
@@ -2258,21 +2623,24 @@ def _allowed_keys(parents: list[str], node: dict[Any, Any]) -> tuple[str, ...]:
     head = names[-1]
     if head == "gains":
         return GAIN_KEYS
-    kind = node.get("type")
-    kind = kind if isinstance(kind, str) else ""
     table: dict[str, tuple[str, ...]] = {
         "vehicle": VEHICLE_PARAM_KEYS,
         "vehicles": VEHICLE_KEYS,
-        "recovery": RECOVERY_KEYS,
-        "failures": FAILURE_KEYS,
         "platoon": PLATOON_KEYS,
         "metrics": METRICS_KEYS,
-        "formation": FORMATION_KEYS,
         "drive": DRIVE_KEYS,
-        "reference": ("type", *REFERENCE_KEYS.get(kind, ())),
-        "obstacles": ("type", "name", *OBSTACLE_KEYS.get(kind, ())),
     }
-    return table.get(head, tuple(str(k) for k in node))
+    if head in table:
+        return table[head]
+    for kind, own in PLUGIN_SECTIONS.items():
+        if KINDS[kind].section != head:
+            continue
+        name = node.get(KINDS[kind].selector, own[KINDS[kind].selector].default)
+        registered = plugins.registry(kind)
+        if isinstance(name, str) and name in registered and not KINDS[kind].lenient:
+            return (*own, *registered[name].params)
+        return (*own, *plugins.all_params(kind))
+    return tuple(str(k) for k in node)
 
 
 _YAML_HINTS = (

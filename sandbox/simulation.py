@@ -34,12 +34,13 @@ from sandbox.control.flatness import (
     extension_rate,
     flat_inputs,
 )
-from sandbox.control.formation import LAWS, BackwardDifference, LawInputs
+from sandbox.control.formation import BackwardDifference
 from sandbox.failures import FailureSchedule
 from sandbox.metrics import LoopMetrics
 from sandbox.observation import Observation, Overrides, override_rows
 from sandbox.physics import Physics
-from sandbox.recovery import NeighbourList, ObstacleField, avoidance_shift
+from sandbox.plugins import LawContext, StrategyContext, get, make_law
+from sandbox.recovery import NeighbourList, ObstacleField
 from sandbox.run import (
     MODE_AVOID,
     MODE_EXTERNAL,
@@ -112,10 +113,14 @@ class Simulation:
         self.reference = scenario.reference.build() if scenario.reference else None
         law_spec = scenario.formation
         self.law = (
-            LAWS[law_spec.law](self.fleet.offset, self.h, law_spec.rotate)
+            make_law(law_spec.law, law_spec.params, self.fleet.offset, self.h)
             if law_spec
             else None
         )
+        self.law_params = dict(law_spec.params) if law_spec else {}
+        self.law_memory: dict = {}
+        self.strategy = get("strategy", scenario.recovery.strategy).obj
+        self.strategy_params = dict(scenario.recovery.params)
         self.obstacles = ObstacleField(scenario.obstacles)
         self.failures = FailureSchedule(scenario.failures, self.names)
         self.shift_motion = BackwardDifference(self.h)
@@ -194,10 +199,19 @@ class Simulation:
         ref = self.reference.evaluate(t) if self.reference is not None else None
         if self.law is not None:
             lead = self.leader
-            inputs = LawInputs(
+            inputs = LawContext(
+                t=t,
+                dt=self.h,
+                pos=fleet.pos,
+                theta=fleet.theta,
+                vel=fleet.vel,
+                offset=fleet.offset,
+                leader=lead,
                 leader_pos=fleet.pos[lead] if lead >= 0 else None,
                 leader_theta=float(fleet.theta[lead]) if lead >= 0 else None,
                 reference=ref,
+                params=self.law_params,
+                memory=self.law_memory,
             )
             triple = self.law.targets(inputs)
         else:
@@ -299,17 +313,27 @@ class Simulation:
                 self.failed_at.setdefault(self.failures.specs[j].vehicle, t)
             failing = np.zeros(n, dtype=bool)
             failing[self.failures.vehicle[self.failures.active(t)]] = True
-        shift, active = avoidance_shift(
-            fleet.pos,
-            self._avoid_candidates & ~failing,
-            rec.strategy,
-            rec.beta,
-            rec.R,
-            rec.r,
-            rec.steepness,
-            self.obstacles,
-            self._neighbours,
+        may_avoid = self._avoid_candidates & ~failing
+        shift, active = self.strategy(
+            StrategyContext(
+                t=t,
+                dt=self.h,
+                pos=fleet.pos,
+                theta=fleet.theta,
+                vel=fleet.vel,
+                slot=slot,
+                diameter=fleet.diameter,
+                may_avoid=may_avoid,
+                failed=failing,
+                params=self.strategy_params,
+                R=rec.R,
+                obstacle_field=self.obstacles,
+                neighbours=self._neighbours,
+            )
         )
+        # a strategy never moves a vehicle that may not avoid
+        shift = np.where(may_avoid[:, None], shift, 0.0)
+        active = np.asarray(active, dtype=bool) & may_avoid
         target = slot + shift  # eq. (22) / (26)
         if rec.target_derivatives == "estimate":
             d_shift, dd_shift = self.shift_motion.update(shift)

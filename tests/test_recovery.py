@@ -14,12 +14,8 @@ import pytest
 from sandbox import load_scenario, simulate
 from sandbox.control.formation import LAWS, BackwardDifference
 from sandbox.metrics import compute_metrics
-from sandbox.recovery import (
-    STRATEGIES,
-    ObstacleField,
-    avoidance_shift,
-    register_strategy,
-)
+from sandbox.plugins import register_strategy
+from sandbox.recovery import WEIGHTS, ObstacleField, avoidance_shift
 from sandbox.run import MODE_AVOID
 from sandbox.scenario import ObstacleSpec
 
@@ -58,19 +54,19 @@ NO_OBSTACLES = ObstacleField(())
     ],
 )
 def test_alpha_hand_values(strategy, dist, alpha):
-    got = STRATEGIES[strategy](np.array([dist]), R, r, 2.0)
+    got = WEIGHTS[strategy](np.array([dist]), R, r, 2.0)
     assert got[0] == pytest.approx(alpha, abs=1e-12)
 
 
 @pytest.mark.parametrize("strategy", ["continuous", "smooth"])
 def test_alpha_is_continuous_monotone_and_symmetric(strategy):
     d = np.linspace(0.0, 3.0, 3001)
-    a = STRATEGIES[strategy](d, R, r, 2.0)
+    a = WEIGHTS[strategy](d, R, r, 2.0)
     assert np.all(np.diff(a) <= 1e-15)  # never increases with the distance
     assert np.max(np.abs(np.diff(a))) < 0.01  # no jump on a 1 mm grid
     # Point symmetry about the middle of [r, R]: alpha(c + x) = 1 - alpha(c - x).
     x = np.linspace(0.0, 0.375, 50)
-    w = STRATEGIES[strategy]
+    w = WEIGHTS[strategy]
     np.testing.assert_allclose(
         w(1.125 + x, R, r, 2.0), 1 - w(1.125 - x, R, r, 2.0), atol=1e-12
     )
@@ -81,12 +77,12 @@ def test_smooth_is_flatter_than_the_ramp_at_both_ends():
     eps = 1e-4
     for edge, sign in ((r, +1), (R, -1)):
         ramp = abs(
-            STRATEGIES["continuous"](np.array([edge + sign * eps]), R, r, 2.0)[0]
-            - STRATEGIES["continuous"](np.array([edge]), R, r, 2.0)[0]
+            WEIGHTS["continuous"](np.array([edge + sign * eps]), R, r, 2.0)[0]
+            - WEIGHTS["continuous"](np.array([edge]), R, r, 2.0)[0]
         )
         tanh = abs(
-            STRATEGIES["smooth"](np.array([edge + sign * eps]), R, r, 2.0)[0]
-            - STRATEGIES["smooth"](np.array([edge]), R, r, 2.0)[0]
+            WEIGHTS["smooth"](np.array([edge + sign * eps]), R, r, 2.0)[0]
+            - WEIGHTS["smooth"](np.array([edge]), R, r, 2.0)[0]
         )
         # slope ratio s (1 - tanh(s)^2) / tanh(s) = 0.147 for s = 2
         assert tanh / ramp == pytest.approx(
@@ -96,7 +92,7 @@ def test_smooth_is_flatter_than_the_ramp_at_both_ends():
 
 def test_registering_a_strategy_twice_is_refused():
     with pytest.raises(ValueError, match="already registered"):
-        register_strategy("continuous")(lambda d, R, r, s: d)
+        register_strategy("continuous")(lambda ctx: (ctx.pos * 0, ctx.failed))
 
 
 # ------------------------------------------------------------- the avoidance vector sum

@@ -15,18 +15,20 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sandbox.cli import compare, figures, run, sweep, validate
+from sandbox.cli import compare, figures, plugins, run, sweep, validate
 from sandbox.cli.common import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
     EXIT_INVALID,
     EXIT_OK,
     GifOptionError,
+    load_cli_plugins,
 )
 from sandbox.errors import SandboxError, ScenarioError
+from sandbox.plugins import PluginError
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
-COMMANDS = (run, validate, figures, compare, sweep)
+COMMANDS = (run, validate, figures, compare, sweep, plugins)
 
 __all__ = ["EXIT_FAILED", "EXIT_INTERRUPTED", "EXIT_INVALID", "EXIT_OK", "main"]
 
@@ -49,10 +51,14 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status."""
     args = build_parser().parse_args(argv)
     try:
+        load_cli_plugins(args)
         return args.func(args)
     except ScenarioError as exc:
         for line in exc.lines:
             print(line, file=sys.stderr)
+        return EXIT_INVALID
+    except PluginError as exc:
+        print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     except GifOptionError as exc:
         print(f"error: {exc}", file=sys.stderr)

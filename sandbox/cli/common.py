@@ -128,3 +128,27 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
         default=None,
         help="camera follows the leader instead of framing the whole run",
     )
+
+
+def add_plugin_option(p: argparse.ArgumentParser) -> None:
+    """Add ``--plugin PATH_OR_MODULE`` (repeatable) to a command reading scenarios."""
+    p.add_argument(
+        "--plugin",
+        action="append",
+        metavar="PATH_OR_MODULE",
+        help="import a plug-in file (.py) or module first (repeatable); scenarios "
+        "can also list theirs under plugins:",
+    )
+
+
+def load_cli_plugins(args: argparse.Namespace) -> None:
+    """Import the ``--plugin`` plug-ins and the installed entry points.
+
+    Raises
+    ------
+    PluginError
+        One fails to import (``main`` prints it and exits 2).
+    """
+    from sandbox.plugins import load_plugins
+
+    load_plugins(tuple(getattr(args, "plugin", None) or ()))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sandbox.cli.common import EXIT_INVALID, EXIT_OK
+from sandbox.cli.common import EXIT_INVALID, EXIT_OK, add_plugin_option
 from sandbox.errors import ScenarioError
 
 
@@ -19,10 +19,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
     try:
         rows = compare(
             args.files,
-            names(args.strategies),
+            names(args.strategies) if args.strategies is not None else None,
             names(args.derivatives),
             args.set or [],
             jobs=args.jobs,
+            plugin_specs=args.plugin or [],
         )
     except ValueError as exc:
         if isinstance(exc, ScenarioError):
@@ -39,9 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("files", nargs="+", help="scenario YAML files")
     p.add_argument(
         "--strategies",
-        default="none,discontinuous,continuous,smooth",
+        default=None,
         help="comma-separated strategies, or file for each file's own "
-        "(default: all four)",
+        "(default: every registered strategy, see sandbox plugins)",
     )
     p.add_argument(
         "--derivatives",
@@ -61,4 +62,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1,
         help="worker processes (default 1); the table is the same",
     )
+    add_plugin_option(p)
     p.set_defaults(func=cmd_compare)

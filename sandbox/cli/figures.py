@@ -6,7 +6,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from sandbox.cli.common import EXIT_FAILED, EXIT_OK, add_gif_options, render_gif
+from sandbox.cli.common import (
+    EXIT_FAILED,
+    EXIT_OK,
+    add_gif_options,
+    add_plugin_option,
+    render_gif,
+)
 from sandbox.output import load_run_dir
 
 
@@ -65,6 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("run_dir")
     p.add_argument("--gif", required=True, help="output GIF file")
     add_gif_options(p)
+    add_plugin_option(p)
     p.set_defaults(func=cmd_render)
     p = sub.add_parser("gallery", help="run and render every scenario of some folders")
     p.add_argument(
@@ -74,6 +81,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", default="renders", help="output folder (default renders/)")
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
+    add_plugin_option(p)
     p.set_defaults(func=cmd_gallery)
     p = sub.add_parser("plot", help="write report-style figures of a saved run")
     p.add_argument("run_dir", help="a run directory written by sandbox run")
@@ -92,4 +100,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=120,
         help="resolution of PNG figures, 10 to 1200 dots per inch (default 120)",
     )
+    add_plugin_option(p)
     p.set_defaults(func=cmd_plot)

@@ -12,6 +12,7 @@ from sandbox.cli.common import (
     EXIT_OK,
     StopFlag,
     add_gif_options,
+    add_plugin_option,
     progress_printer,
     render_gif,
 )
@@ -116,4 +117,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--gif", help="also render the run to this GIF file")
     add_gif_options(p)
+    add_plugin_option(p)
     p.set_defaults(func=cmd_run)

@@ -10,6 +10,7 @@ from sandbox.cli.common import (
     EXIT_FAILED,
     EXIT_INVALID,
     EXIT_OK,
+    add_plugin_option,
     bundled_scenarios_dir,
 )
 from sandbox.errors import ScenarioError
@@ -71,9 +72,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("validate", help="check scenario files without running them")
     p.add_argument("files", nargs="+")
     p.add_argument("--set", action="append", metavar="PATH=VALUE")
+    add_plugin_option(p)
     p.set_defaults(func=cmd_validate)
     p = sub.add_parser("list", help="list the bundled scenarios")
+    add_plugin_option(p)
     p.set_defaults(func=cmd_list)
     p = sub.add_parser("schema", help="print the JSON Schema of scenario files")
     p.add_argument("--out", help="write it to this file instead of printing it")
+    add_plugin_option(p)
     p.set_defaults(func=cmd_schema)

@@ -14,10 +14,11 @@ in the world frame (eqs. (11), (14), (20)); ``h`` the control period [s].
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from sandbox.plugins import Param, RegistryView, register_law
 
 Triple = tuple[np.ndarray, np.ndarray, np.ndarray]
 
@@ -133,20 +134,14 @@ class FormationLaw:
         return rotate_offsets(self.delta, theta)  # eq. (14)
 
 
-LAWS: dict[str, type[FormationLaw]] = {}
-
-
-def register_law(name: str) -> Callable[[type[FormationLaw]], type[FormationLaw]]:
-    """Class decorator adding a formation law to :data:`LAWS` under ``name``."""
-
-    def add(cls: type[FormationLaw]) -> type[FormationLaw]:
-        if name in LAWS:
-            raise ValueError(f"formation law {name!r} is already registered")
-        LAWS[name] = cls
-        cls.name = name
-        return cls
-
-    return add
+#: The registered laws by name (a live view of the plug-in registry).
+LAWS = RegistryView("law")
+#: The ``rotate`` key of the laws that place offsets along the reference.
+ROTATE = Param(
+    "boolean",
+    False,
+    doc="Turn the offsets with the reference's tangent, eqs. (14)-(15)",
+)
 
 
 @register_law("fixed")
@@ -176,7 +171,7 @@ class RotatingFormation(FixedFormation):
         return slot, np.broadcast_to(v, slot.shape), np.broadcast_to(a, slot.shape)
 
 
-@register_law("virtual")
+@register_law("virtual", {"rotate": ROTATE})
 class VirtualLeaderFormation(FormationLaw):
     """Section 3.4, eqs. (13)-(15): each vehicle tracks the reference + its offset."""
 
@@ -190,7 +185,7 @@ class VirtualLeaderFormation(FormationLaw):
         return slot, np.broadcast_to(dp, slot.shape), np.broadcast_to(ddp, slot.shape)
 
 
-@register_law("leader_ref")
+@register_law("leader_ref", {"rotate": ROTATE})
 class LeaderReferenceFormation(FormationLaw):
     """Section 3.4, eq. (16): around the real leader, reference derivatives."""
 

@@ -1,0 +1,81 @@
+"""``sandbox plugins``: every registered plug-in, its kind, origin and parameters."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from sandbox.cli.common import EXIT_OK, add_plugin_option
+from sandbox.plugins import KINDS
+
+
+def _param_text(key: str, p) -> str:  # noqa: ANN001 - a sandbox.plugins.Param
+    from sandbox.plugins import REQUIRED
+
+    default = "REQUIRED" if p.default is REQUIRED else p.default
+    if isinstance(default, tuple):
+        default = list(default)
+    bits = [f"{key}: {p.type}"]
+    bits.append("required" if p.default is REQUIRED else f"default {default}")
+    if p.unit:
+        bits.append(f"[{p.unit}]")
+    if p.bounds_text():
+        bits.append(p.bounds_text())
+    if p.choices:
+        bits.append("one of " + "|".join(p.choices))
+    text = ", ".join(bits[:2]) + (" " + " ".join(bits[2:]) if bits[2:] else "")
+    return f"{text}; {p.doc}" if p.doc else text
+
+
+def cmd_plugins(args: argparse.Namespace) -> int:
+    """``sandbox plugins [--kind KIND] [--json]``: list the registered names."""
+    from sandbox import plugins
+
+    kinds = [args.kind] if args.kind else list(plugins.KINDS)
+    if args.json:
+        out = {
+            kind: [
+                {
+                    "name": p.name,
+                    "origin": p.origin,
+                    "doc": p.doc,
+                    "params": {k: _param_text(k, v) for k, v in p.params.items()},
+                }
+                for p in plugins.registry(kind).values()
+            ]
+            for kind in kinds
+        }
+        sys.stdout.write(json.dumps(out, indent=2) + "\n")
+        return EXIT_OK
+    for kind in kinds:
+        info = plugins.KINDS[kind]
+        where = (
+            f"{info.section}.{info.selector}"
+            if info.section
+            else "(no scenario section yet)"
+        )
+        print(f"{kind} ({info.title}; {where}): {info.context}")
+        for p in plugins.registry(kind).values():
+            print(f"  {p.name:<16} {p.origin}")
+            if p.doc:
+                print(f"      {p.doc}")
+            for key, param in p.params.items():
+                print(f"      - {_param_text(key, param)}")
+    return EXIT_OK
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``plugins`` command."""
+    p = sub.add_parser(
+        "plugins",
+        help="list the registered laws, strategies, failures, references, ...",
+    )
+    p.add_argument(
+        "--kind",
+        choices=tuple(KINDS),
+        help="only this kind",
+    )
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    add_plugin_option(p)
+    p.set_defaults(func=cmd_plugins)

@@ -1,0 +1,1002 @@
+"""Plug-ins: formation laws, recovery strategies, failures, references, obstacles, ...
+
+Everything a scenario selects by name is a plug-in registered here, the built-ins
+included: ``sandbox.control.formation`` registers the five laws, ``sandbox.recovery``
+the four strategies, ``sandbox.failures`` the five failure kinds,
+``sandbox.references`` the five reference types and ``sandbox.obstacles`` the four
+obstacle types, all with the same public decorators a user's file calls::
+
+    from sandbox.plugins import register_strategy
+
+    @register_strategy("push_apart", params={"gain": 1.0})
+    def push_apart(ctx):
+        i, j, dist = ctx.pairs(1.0)
+        ...
+        return shift, active
+
+Each registration declares its YAML parameters once (:class:`Param`: type or default,
+unit, bounds, a one-line doc). From that declaration the loader reads and validates the
+keys (unknown key with did-you-mean, type, bounds, the line of the field), the JSON
+Schema describes them, and ``sandbox plugins`` lists them.
+
+Plug-ins are imported from the ``plugins:`` list of a scenario (files relative to it,
+or module names), from ``--plugin PATH_OR_MODULE`` on the command line, and from the
+entry-point group ``sandbox.plugins`` of installed packages (:func:`load_plugin`,
+:func:`load_entry_points`). The contexts passed to plug-ins are documented in the
+README's "Plug-ins" section.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import inspect
+import sys
+import traceback
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sandbox.errors import SandboxError
+
+#: A parameter without a default: the key must be given.
+REQUIRED: Any = type("Required", (), {"__repr__": lambda self: "REQUIRED"})()
+#: Entry-point group of installed plug-in packages.
+ENTRY_POINT_GROUP = "sandbox.plugins"
+#: Parameter types a declaration may name.
+PARAM_TYPES = (
+    "number",
+    "length",
+    "integer",
+    "boolean",
+    "string",
+    "name",
+    "choice",
+    "point",
+    "points",
+)
+#: Further types the scenario layer uses for its own sections (read by its code).
+SECTION_TYPES = ("text", "custom")
+
+
+class PluginError(SandboxError):
+    """A plug-in could not be imported or registered (the message names it)."""
+
+
+# ----------------------------------------------------------------------- parameters
+@dataclass(frozen=True)
+class Param:
+    """One YAML key of a plug-in or of a section of the scenario format.
+
+    Parameters
+    ----------
+    type : str
+        One of :data:`PARAM_TYPES`: ``number``, ``length`` (metres or ``"3d"``),
+        ``integer``, ``boolean``, ``string``, ``name`` (one plain line, usable in
+        file names), ``choice`` (one of ``choices``), ``point`` (two lengths [m]),
+        ``points`` (a list of at least ``min_items`` points).
+    default : optional
+        The value used when the key is left out; :data:`REQUIRED` (the default) makes
+        the key required; ``None`` makes it optional without a value. A length's
+        default may be written ``"3d"`` (a multiple of the vehicle diameter).
+    unit : str
+        Unit of the value (``"m"``, ``"s"``, ``"rad/s"``, ...), empty for none.
+    doc : str
+        One line: what the key means.
+    minimum, maximum : float, optional
+        Bounds (inclusive unless ``exclusive``).
+    exclusive : bool
+        Whether ``minimum`` itself is excluded (``> minimum``).
+    choices : tuple of str
+        The allowed values of a ``choice``.
+    min_items : int
+        Fewest points of a ``points`` value.
+    schema : dict, optional
+        The JSON Schema fragment of a ``custom`` key (a section of the format).
+    """
+
+    type: str = "number"
+    default: Any = REQUIRED
+    unit: str = ""
+    doc: str = ""
+    minimum: float | None = None
+    maximum: float | None = None
+    exclusive: bool = False
+    choices: tuple[str, ...] = ()
+    min_items: int = 2
+    schema: dict[str, Any] | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.type not in PARAM_TYPES + SECTION_TYPES:
+            raise ValueError(
+                f"parameter type {self.type!r} is not one of: {', '.join(PARAM_TYPES)}"
+            )
+        if self.type == "choice" and not self.choices:
+            raise ValueError("a choice parameter needs its choices")
+
+    @property
+    def required(self) -> bool:
+        """Whether the key must be given."""
+        return self.default is REQUIRED
+
+    def bounds_text(self) -> str:
+        """The bounds in words, e.g. ``> 0`` or ``from 1 to 10000`` (empty if none)."""
+        lo, hi = self.minimum, self.maximum
+        if lo is not None and hi is not None:
+            return f"from {lo:g} to {hi:g}"
+        if lo is not None:
+            return f"{'>' if self.exclusive else '>='} {lo:g}"
+        if hi is not None:
+            return f"<= {hi:g}"
+        return ""
+
+
+def declare(params: Mapping[str, Any] | None) -> dict[str, Param]:
+    """Turn a ``params=`` argument into :class:`Param` declarations, in order.
+
+    A value that is a :class:`Param` is used as is; any other value is a default and
+    its type gives the parameter's: a float (or None) a ``number``, an int an
+    ``integer``, a bool a ``boolean``, a str a ``string``, two numbers a ``point``.
+
+    >>> declare({"gain": 1.0, "count": 3})["count"].type
+    'integer'
+    """
+    out: dict[str, Param] = {}
+    for name, value in (params or {}).items():
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ValueError(f"parameter name {name!r} is not an identifier")
+        if isinstance(value, Param):
+            out[name] = value
+        elif isinstance(value, bool):
+            out[name] = Param("boolean", value)
+        elif isinstance(value, int):
+            out[name] = Param("integer", value)
+        elif value is None or isinstance(value, float):
+            out[name] = Param("number", value)
+        elif isinstance(value, str):
+            out[name] = Param("string", value)
+        elif isinstance(value, list | tuple) and len(value) == 2:
+            out[name] = Param("point", tuple(float(v) for v in value), unit="m")
+        else:
+            raise ValueError(
+                f"parameter {name!r}: cannot tell the type of the default {value!r} "
+                "(give a Param(...))"
+            )
+    return out
+
+
+# ------------------------------------------------------------------------ the kinds
+@dataclass(frozen=True)
+class Kind:
+    """A kind of plug-in: where a scenario selects it and how.
+
+    Attributes
+    ----------
+    name : str
+        ``law``, ``strategy``, ...
+    section : str
+        The YAML section that selects it (empty: none yet).
+    selector : str
+        The key of that section holding the plug-in's name.
+    title : str
+        What one is called in messages (``recovery strategy``).
+    lenient : bool
+        Whether the section accepts, and ignores, keys declared by another plug-in of
+        the kind (so that switching e.g. the strategy with ``--set`` keeps a file
+        valid); otherwise such a key is an error naming the plug-ins it applies to.
+    context : str
+        One line on what the plug-in receives and returns.
+    """
+
+    name: str
+    section: str
+    selector: str
+    title: str
+    lenient: bool
+    context: str
+
+
+KINDS: dict[str, Kind] = {
+    k.name: k
+    for k in (
+        Kind(
+            "law",
+            "formation",
+            "law",
+            "formation law",
+            False,
+            "a FormationLaw subclass, or f(ctx: LawContext) -> (slot, v_ref, a_ref)",
+        ),
+        Kind(
+            "strategy",
+            "recovery",
+            "strategy",
+            "recovery strategy",
+            True,
+            "f(ctx: StrategyContext) -> (shift (n, 2) [m], active (n,) bool)",
+        ),
+        Kind(
+            "failure",
+            "failures",
+            "kind",
+            "failure kind",
+            True,
+            "f(ctx: FailureContext) -> (v1 [m/s], v2 [rad/s]) of the failed vehicle",
+        ),
+        Kind(
+            "reference",
+            "reference",
+            "type",
+            "reference type",
+            False,
+            "a class built with the params, with evaluate(t) -> (p, dp, ddp), or "
+            "f(ctx: ReferenceContext) -> (p, dp, ddp)",
+        ),
+        Kind(
+            "obstacle",
+            "obstacles",
+            "type",
+            "obstacle type",
+            False,
+            "f(ctx: ObstacleContext) -> ObstacleSpec (a circle, box, polygon or wall)",
+        ),
+        Kind(
+            "filter",
+            "",
+            "filter",
+            "safety filter",
+            False,
+            "f(ctx: FilterContext) -> (v1 (n,) [m/s], v2 (n,) [rad/s])",
+        ),
+        Kind(
+            "detector",
+            "",
+            "detector",
+            "failure detector",
+            False,
+            "f(ctx: DetectorContext) -> suspected (n,) bool",
+        ),
+    )
+}
+
+
+@dataclass(frozen=True)
+class Plugin:
+    """One registered name.
+
+    Attributes
+    ----------
+    kind, name : str
+    obj : object
+        The registered function or class.
+    params : dict of str to Param
+        Its YAML parameters.
+    doc : str
+        The first line of its docstring.
+    origin : str
+        Where it comes from: ``built-in (module)``, a file path, a module name or an
+        entry point.
+    options : dict
+        Kind-specific flags (a law's ``needs_leader``, a failure's ``immovable``, ...).
+    check : callable, optional
+        ``check(values, section) -> [(key, what, got, expected), ...]``: checks across
+        the plug-in's values (which it may complete, e.g. a default that depends on
+        another key); ``section`` is the whole YAML section, read.
+    """
+
+    kind: str
+    name: str
+    obj: Any
+    params: dict[str, Param]
+    doc: str
+    origin: str
+    options: dict[str, Any] = field(default_factory=dict)
+    check: Callable[[dict[str, Any], dict[str, Any]], list[tuple]] | None = None
+
+
+_REGISTRY: dict[str, dict[str, Plugin]] = {kind: {} for kind in KINDS}
+#: Where plug-ins registered now come from (set while a plug-in module is imported).
+_ORIGIN: list[str] = []
+
+
+def _ensure_builtins() -> None:
+    """Import the modules that register the built-in plug-ins."""
+    import sandbox.control.formation  # noqa: F401
+    import sandbox.failures  # noqa: F401
+    import sandbox.obstacles  # noqa: F401
+    import sandbox.recovery  # noqa: F401
+    import sandbox.references  # noqa: F401
+
+
+def registry(kind: str) -> dict[str, Plugin]:
+    """The registered plug-ins of a kind, name to :class:`Plugin`, in order."""
+    if kind not in KINDS:
+        raise KeyError(f"no plug-in kind {kind!r}; kinds: {', '.join(KINDS)}")
+    _ensure_builtins()
+    return _REGISTRY[kind]
+
+
+def names(kind: str) -> tuple[str, ...]:
+    """The registered names of a kind, in registration order (built-ins first)."""
+    return tuple(registry(kind))
+
+
+def get(kind: str, name: str) -> Plugin:
+    """The plug-in registered under ``name`` (``KeyError`` if none)."""
+    return registry(kind)[name]
+
+
+def all_params(kind: str) -> dict[str, list[str]]:
+    """Every parameter name of a kind, with the plug-ins that declare it."""
+    out: dict[str, list[str]] = {}
+    for plugin in registry(kind).values():
+        for key in plugin.params:
+            out.setdefault(key, []).append(plugin.name)
+    return out
+
+
+class RegistryView(Mapping):
+    """A read-only, live mapping name -> registered object of one kind.
+
+    ``sandbox.control.formation.LAWS`` is ``RegistryView("law")``: code that looked
+    laws up by name keeps working, and sees plug-ins registered later.
+    """
+
+    def __init__(self, kind: str) -> None:
+        self.kind = kind
+
+    def __getitem__(self, name: str) -> Any:
+        return registry(self.kind)[name].obj
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(registry(self.kind))
+
+    def __len__(self) -> int:
+        return len(registry(self.kind))
+
+
+def _first_line(obj: Any) -> str:
+    text = inspect.getdoc(obj) or ""
+    return text.strip().splitlines()[0] if text.strip() else ""
+
+
+def register(
+    kind: str,
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+    **options: Any,
+) -> Callable[[Any], Any]:
+    """Decorator registering ``obj`` as the plug-in ``name`` of ``kind``.
+
+    The ``register_*`` functions are this with their kind filled in.
+
+    Raises
+    ------
+    ValueError
+        The name is already registered for this kind, is not a plain name, or a
+        parameter declaration is invalid, or clashes with a key of the section.
+    """
+    if kind not in KINDS:
+        raise ValueError(f"no plug-in kind {kind!r}; kinds: {', '.join(KINDS)}")
+    if not isinstance(name, str) or not name or not name.replace("_", "a").isalnum():
+        raise ValueError(f"{kind} name {name!r}: use letters, digits and _ only")
+    declared = declare(params)
+    reserved = _SECTION_KEYS.get(kind, ())
+    clash = [k for k in declared if k in reserved]
+    if clash:
+        raise ValueError(
+            f"{kind} {name!r}: parameter {clash[0]!r} is a key of the "
+            f"{KINDS[kind].section} section itself; choose another name"
+        )
+
+    def add(obj: Any) -> Any:
+        table = _REGISTRY[kind]
+        if name in table:
+            raise ValueError(
+                f"{KINDS[kind].title} {name!r} is already registered "
+                f"(by {table[name].origin})"
+            )
+        module = getattr(obj, "__module__", "") or ""
+        origin = _ORIGIN[-1] if _ORIGIN else ""
+        if not origin:
+            origin = f"built-in ({module})" if module.startswith("sandbox.") else module
+        table[name] = Plugin(
+            kind,
+            name,
+            obj,
+            declared,
+            doc if doc is not None else _first_line(obj),
+            origin,
+            dict(options),
+            check,
+        )
+        return obj
+
+    return add
+
+
+#: Keys of each kind's YAML section that are not plug-in parameters (set by the
+#: scenario layer, which declares those sections).
+_SECTION_KEYS: dict[str, tuple[str, ...]] = {}
+
+
+def reserve_section_keys(kind: str, keys: tuple[str, ...]) -> None:
+    """Record the section's own keys of a kind (a plug-in may not declare them)."""
+    _SECTION_KEYS[kind] = tuple(keys)
+
+
+def unregister(kind: str, name: str) -> None:
+    """Remove a registration (for tests and interactive sessions)."""
+    _REGISTRY[kind].pop(name, None)
+
+
+def register_law(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    needs_leader: bool | None = None,
+    needs_reference: bool | None = None,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a formation law (``formation: {law: NAME, ...}``).
+
+    The law is a :class:`~sandbox.control.formation.FormationLaw` subclass, built as
+    ``cls(delta, h, **params)``, or a function ``f(ctx: LawContext) -> (slot, v_ref,
+    a_ref)``, each of shape (n, 2) [m], [m/s], [m/s^2].
+
+    Parameters
+    ----------
+    needs_leader, needs_reference : bool, optional
+        Whether the law needs a vehicle with ``leader: true`` / a ``reference``
+        (default: the class's attributes; for a function, a leader and no reference).
+    """
+
+    def add(obj: Any) -> Any:
+        lead = needs_leader
+        ref = needs_reference
+        if lead is None:
+            lead = bool(getattr(obj, "needs_leader", True))
+        if ref is None:
+            ref = bool(getattr(obj, "needs_reference", False))
+        if inspect.isclass(obj):
+            obj.name = name
+            obj.needs_leader, obj.needs_reference = lead, ref
+        return register(
+            "law",
+            name,
+            params,
+            doc=doc,
+            check=check,
+            needs_leader=lead,
+            needs_reference=ref,
+        )(obj)
+
+    return add
+
+
+def register_strategy(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a recovery strategy (``recovery: {strategy: NAME, ...}``).
+
+    The strategy is ``f(ctx: StrategyContext) -> (shift, active)``: the shift of each
+    vehicle's target, shape (n, 2) [m], and whether each vehicle is avoiding (mode
+    ``avoid``), shape (n,) bool. Vehicles that may not avoid (``ctx.may_avoid``
+    false) keep a zero shift whatever it returns.
+    """
+    return register("strategy", name, params, doc=doc, check=check)
+
+
+def register_failure(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    controlled_speed: bool = False,
+    immovable: bool = False,
+    permanent: bool = False,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a failure kind (``failures: [{kind: NAME, vehicle: ..., at: ...}]``).
+
+    The kind is ``f(ctx: FailureContext) -> (v1, v2)``: the commands the failed
+    vehicle really applies [m/s], [rad/s], called once per control period while the
+    failure is active.
+
+    Parameters
+    ----------
+    controlled_speed : bool
+        Whether the controller still drives v1 (its states keep integrating).
+    immovable : bool
+        Whether the vehicle becomes a fixed obstacle at onset.
+    permanent : bool
+        Whether the failure cannot end (``until`` is refused).
+    """
+    return register(
+        "failure",
+        name,
+        params,
+        doc=doc,
+        check=check,
+        controlled_speed=controlled_speed,
+        immovable=immovable,
+        permanent=permanent,
+    )
+
+
+def register_reference(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a reference type (``reference: {type: NAME, ...}``).
+
+    Either a class built once as ``cls(**params)`` with ``evaluate(t) -> (p, dp,
+    ddp)``, or a function ``f(ctx: ReferenceContext) -> (p, dp, ddp)``; ``t`` is a
+    float or an array of times [s], and each result has shape ``t.shape + (2,)``
+    [m], [m/s], [m/s^2].
+    """
+    return register("reference", name, params, doc=doc, check=check)
+
+
+def register_obstacle(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register an obstacle type (``obstacles: [{type: NAME, ...}]``).
+
+    The type is ``f(ctx: ObstacleContext) -> ObstacleSpec``: the shape it occupies,
+    as a circle, box, polygon or wall (:class:`~sandbox.scenario.ObstacleSpec`),
+    built once at load time.
+    """
+    return register("obstacle", name, params, doc=doc, check=check)
+
+
+def register_filter(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a safety filter: ``f(ctx: FilterContext) -> (v1, v2)``, shape (n,).
+
+    A filter sees the commands about to be applied and returns the ones to apply
+    (e.g. a control barrier function). The kind is declared for the safety features;
+    only ``none`` is built in.
+    """
+    return register("filter", name, params, doc=doc, check=check)
+
+
+def register_detector(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a failure detector: ``f(ctx: DetectorContext) -> suspected (n,)``.
+
+    A detector sees what the vehicles measure and flags those it believes failed. The
+    kind is declared for the detection features; only ``none`` is built in.
+    """
+    return register("detector", name, params, doc=doc, check=check)
+
+
+# ------------------------------------------------------------------------- contexts
+@dataclass
+class StrategyContext:
+    """What a recovery strategy sees at one control step.
+
+    Attributes
+    ----------
+    t, dt : float [s]
+        Time and control period.
+    pos : ndarray (n, 2) [m]
+    theta : ndarray (n,) [rad]
+    vel : ndarray (n, 2) [m/s]
+        Measured positions, headings and velocities.
+    slot : ndarray (n, 2) [m]
+        The law's slot of each vehicle (NaN for open-loop vehicles).
+    diameter : ndarray (n,) [m]
+    may_avoid : ndarray (n,) bool
+        Vehicles allowed to avoid (not the leader unless ``leader_avoids``, not failed,
+        not open loop).
+    failed : ndarray (n,) bool
+        Vehicles with an active failure.
+    params : dict
+        The strategy's YAML values (lengths in metres, defaults filled in).
+    R : float [m]
+        The safe-zone radius ``recovery.R`` (the radius of the neighbour index).
+    obstacle_field : ObstacleField
+        The static obstacles.
+    """
+
+    t: float
+    dt: float
+    pos: np.ndarray
+    theta: np.ndarray
+    vel: np.ndarray
+    slot: np.ndarray
+    diameter: np.ndarray
+    may_avoid: np.ndarray
+    failed: np.ndarray
+    params: dict[str, Any]
+    R: float
+    obstacle_field: Any
+    neighbours: Any = None
+
+    @property
+    def n(self) -> int:
+        """Number of vehicles."""
+        return len(self.pos)
+
+    def pairs(self, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vehicle pairs closer than ``radius`` [m]: ``(i, j, dist)``, ``i < j``.
+
+        From the neighbour index (kept between steps) when ``radius <= R``, else a
+        fresh search. Sorted by ``(i, j)``; ``dist`` (m,) [m] centre to centre.
+        """
+        i, j, rel = self._near(radius)
+        return i, j, np.sqrt(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1])
+
+    def _near(self, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        from sandbox.recovery import neighbour_pairs
+
+        if self.neighbours is not None and radius <= self.neighbours.radius:
+            i, j, rel = self.neighbours.near(self.pos)
+            if radius < self.neighbours.radius:
+                d2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
+                keep = np.flatnonzero(d2 < radius * radius)
+                i, j, rel = i.take(keep), j.take(keep), np.take(rel, keep, axis=0)
+            return i, j, rel
+        i, j = neighbour_pairs(self.pos, radius)
+        order = np.lexsort((j, i))
+        i, j = i[order].astype(np.intp), j[order].astype(np.intp)
+        return i, j, self.pos[i] - self.pos[j]
+
+    def obstacles(
+        self, radius: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Vehicle-obstacle pairs closer than ``radius`` [m] to the surface.
+
+        Returns
+        -------
+        i : ndarray (m,) int
+            Vehicle.
+        k : ndarray (m,) int
+            Obstacle, its index in the scenario's ``obstacles`` list.
+        dist : ndarray (m,) [m]
+            Distance from the vehicle's centre to the obstacle's surface, negative
+            inside it.
+        away : ndarray (m, 2)
+            Unit vector from the nearest surface point toward the vehicle (out of the
+            obstacle when the centre is inside).
+        """
+        field_ = self.obstacle_field
+        if field_ is None or field_.empty:
+            empty = np.zeros(0, dtype=np.intp)
+            return empty, empty, np.zeros(0), np.zeros((0, 2))
+        rows, cols = field_.candidates(self.pos, radius)
+        signed, point = field_.pair_distance(self.pos, rows, cols)
+        keep = np.flatnonzero(signed < radius)
+        rows, cols, signed = rows[keep], cols[keep], signed[keep]
+        rel = (self.pos[rows] - point[keep]) * np.where(signed < 0, -1.0, 1.0)[:, None]
+        norm = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), 1e-12)
+        return rows, field_.order[cols], signed, rel / norm[:, None]
+
+
+@dataclass
+class LawContext:
+    """What a formation law sees at one control step.
+
+    Attributes
+    ----------
+    t, dt : float [s]
+    pos : ndarray (n, 2) [m]
+    theta : ndarray (n,) [rad]
+    vel : ndarray (n, 2) [m/s]
+    offset : ndarray (n, 2) [m]
+        The vehicles' ``offset`` (delta1, delta2).
+    leader : int
+        Index of the leader, -1 if none.
+    leader_pos : ndarray (2,) [m] or None
+    leader_theta : float [rad] or None
+    reference : tuple of ndarray (2,) or None
+        ``(p, p', p'')`` of the reference at ``t``.
+    params : dict
+        The law's YAML values.
+    memory : dict
+        Kept from one step to the next (for a law's own estimates).
+    """
+
+    t: float
+    dt: float
+    pos: np.ndarray
+    theta: np.ndarray
+    vel: np.ndarray
+    offset: np.ndarray
+    leader: int
+    leader_pos: np.ndarray | None
+    leader_theta: float | None
+    reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+    params: dict[str, Any]
+    memory: dict[str, Any]
+
+
+@dataclass
+class FailureContext:
+    """What a failure kind sees for one failed vehicle at one control step.
+
+    Attributes
+    ----------
+    t : float [s]
+    since : float [s]
+        Time since the failure's onset.
+    vehicle : str
+        Name of the vehicle.
+    index : int
+        Its index in the fleet.
+    v1, v2 : float [m/s], [rad/s]
+        The controller's commands this step.
+    v2_onset : float [rad/s]
+        The steering command at onset.
+    params : dict
+        The failure's YAML values.
+    """
+
+    t: float
+    since: float
+    vehicle: str
+    index: int
+    v1: float
+    v2: float
+    v2_onset: float
+    params: dict[str, Any]
+
+
+@dataclass
+class ReferenceContext:
+    """What a reference function sees: ``t`` (float or array [s]) and its params."""
+
+    t: Any
+    params: dict[str, Any]
+
+
+@dataclass
+class ObstacleContext:
+    """What an obstacle type sees: its ``name`` and its YAML values ``params``."""
+
+    name: str
+    params: dict[str, Any]
+
+
+@dataclass
+class FilterContext:
+    """What a safety filter sees at one control step.
+
+    Attributes
+    ----------
+    t, dt : float [s]
+    pos, theta, vel : ndarray
+        As for :class:`StrategyContext`.
+    v1, v2 : ndarray (n,) [m/s], [rad/s]
+        The commands about to be applied.
+    diameter : ndarray (n,) [m]
+    params : dict
+    """
+
+    t: float
+    dt: float
+    pos: np.ndarray
+    theta: np.ndarray
+    vel: np.ndarray
+    v1: np.ndarray
+    v2: np.ndarray
+    diameter: np.ndarray
+    params: dict[str, Any]
+
+
+@dataclass
+class DetectorContext:
+    """What a failure detector sees at one control step.
+
+    Attributes
+    ----------
+    t, dt : float [s]
+    pos, theta, vel : ndarray
+        Measured states.
+    v1, v2 : ndarray (n,)
+        The commands the controller asked for.
+    params : dict
+    memory : dict
+        Kept from one step to the next.
+    """
+
+    t: float
+    dt: float
+    pos: np.ndarray
+    theta: np.ndarray
+    vel: np.ndarray
+    v1: np.ndarray
+    v2: np.ndarray
+    params: dict[str, Any]
+    memory: dict[str, Any]
+
+
+@register_filter("none")
+def no_filter(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
+    """No safety filter: the commands pass unchanged."""
+    return ctx.v1, ctx.v2
+
+
+@register_detector("none")
+def no_detector(ctx: DetectorContext) -> np.ndarray:
+    """No failure detection: no vehicle is suspected."""
+    return np.zeros(len(ctx.pos), dtype=bool)
+
+
+# -------------------------------------------------------------------------- loading
+#: Plug-in sources already imported (resolved path or module name -> module).
+_LOADED: dict[str, Any] = {}
+
+
+def load_plugin(spec: str, base: Path | None = None) -> Any:
+    """Import a plug-in file or module once; its decorators register its names.
+
+    Parameters
+    ----------
+    spec : str
+        A ``.py`` file (relative to ``base``, else to the working directory) or a
+        dotted module name.
+    base : Path, optional
+        The directory of the scenario that lists it.
+
+    Raises
+    ------
+    PluginError
+        The file or module cannot be found or fails to import; the message names it
+        and gives the error (and the line of the plug-in where it happened).
+    """
+    text = str(spec).strip()
+    if looks_like_file(text):
+        path = resolve_file(text, base)
+        key = str(path.resolve())
+        if key in _LOADED:
+            return _LOADED[key]
+        if not path.is_file():
+            raise PluginError(
+                f"plug-in {text}: no such file (looked for {path})",
+            )
+        name = "sandbox_plugin_" + "".join(
+            c if c.isalnum() else "_" for c in path.resolve().as_posix()
+        )
+        module_spec = importlib.util.spec_from_file_location(name, path)
+        if module_spec is None or module_spec.loader is None:
+            raise PluginError(f"plug-in {text}: not a Python file")
+        module = importlib.util.module_from_spec(module_spec)
+        sys.modules[name] = module
+        _import(text, str(path), lambda: module_spec.loader.exec_module(module))
+        _LOADED[key] = module
+        return module
+    if text in _LOADED:
+        return _LOADED[text]
+    module = _import(text, text, lambda: importlib.import_module(text))
+    _LOADED[text] = module
+    return module
+
+
+def looks_like_file(spec: str) -> bool:
+    """Whether a plug-in spec names a file (``.py`` or a path) rather than a module."""
+    text = str(spec).strip()
+    return text.endswith(".py") or "/" in text or "\\" in text
+
+
+def resolve_file(spec: str, base: Path | None = None) -> Path:
+    """The absolute path of a plug-in file, relative to ``base`` (else the cwd)."""
+    path = Path(str(spec).strip()).expanduser()
+    if not path.is_absolute():
+        path = (base or Path.cwd()) / path
+    return path.resolve()
+
+
+def _import(label: str, origin: str, action: Callable[[], Any]) -> Any:
+    _ensure_builtins()
+    _ORIGIN.append(origin)
+    try:
+        result = action()
+    except ModuleNotFoundError as exc:
+        if exc.name and label.startswith(exc.name):
+            raise PluginError(
+                f"plug-in {label}: no such module (not a file ending in .py, and "
+                "no importable module of that name)"
+            ) from None
+        raise PluginError(f"plug-in {label} failed to import: {_where(exc)}") from None
+    except Exception as exc:  # any error of a user's file is reported, not raised
+        raise PluginError(f"plug-in {label} failed to import: {_where(exc)}") from None
+    finally:
+        _ORIGIN.pop()
+    return result
+
+
+def _where(exc: BaseException) -> str:
+    """``Type: message (file, line N)`` of the innermost frame of the plug-in."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    own = [f for f in frames if "importlib" not in f.filename]
+    where = f" ({own[-1].filename}, line {own[-1].lineno})" if own else ""
+    if isinstance(exc, SyntaxError) and exc.lineno:
+        where = f" ({exc.filename}, line {exc.lineno})"
+    message = str(exc).splitlines()[0] if str(exc) else ""
+    return f"{type(exc).__name__}: {message}{where}"
+
+
+_ENTRY_POINTS_LOADED: list[bool] = []
+
+
+def load_entry_points() -> list[str]:
+    """Import every plug-in of the entry-point group ``sandbox.plugins`` (once).
+
+    Returns the entry points' names. A broken one is a :class:`PluginError` naming
+    it and its package.
+    """
+    if _ENTRY_POINTS_LOADED:
+        return []
+    _ENTRY_POINTS_LOADED.append(True)
+    from importlib.metadata import entry_points
+
+    loaded = []
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        label = f"{ep.name} (entry point {ep.value})"
+        _import(label, f"entry point {ep.name}", ep.load)
+        loaded.append(ep.name)
+    return loaded
+
+
+def load_plugins(specs: list[str] | tuple[str, ...], base: Path | None = None) -> None:
+    """Load several plug-ins (see :func:`load_plugin`), and the entry points."""
+    load_entry_points()
+    for spec in specs:
+        load_plugin(spec, base)
+
+
+# ------------------------------------------------------------------ building plug-ins
+class FunctionLaw:
+    """A formation law registered as a function ``f(ctx) -> (slot, v_ref, a_ref)``."""
+
+    def __init__(self, func: Callable[[LawContext], Any]) -> None:
+        self.func = func
+
+    def targets(self, ctx: LawContext) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Call the law; each result is broadcast to the fleet's shape (n, 2)."""
+        shape = np.shape(ctx.offset)
+        return tuple(
+            np.broadcast_to(np.asarray(a, dtype=float), shape) for a in self.func(ctx)
+        )
+
+
+def make_law(name: str, params: Mapping[str, Any], delta: np.ndarray, h: float) -> Any:
+    """Build the registered law ``name`` for offsets ``delta`` (n, 2) and period h.
+
+    A class is built as ``cls(delta, h, **params)``; a function is wrapped in a
+    :class:`FunctionLaw`. Either has ``targets(ctx: LawContext)``.
+    """
+    obj = get("law", name).obj
+    if inspect.isclass(obj):
+        return obj(delta, h, **dict(params))
+    return FunctionLaw(obj)

@@ -1,0 +1,321 @@
+"""Plug-ins: a user's own strategy, law, failure, reference and obstacle type.
+
+A plug-in is a file a scenario lists under ``plugins:`` (or ``--plugin``); its
+registrations declare their YAML parameters once, and the loader, the schema,
+``sandbox run``, ``validate``, ``compare`` and ``plugins`` all know them.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from sandbox import plugins
+from sandbox.cli import main
+from sandbox.errors import ScenarioError
+from sandbox.scenario import load_scenario
+
+#: A strategy pushing each avoiding vehicle straight away from its neighbours, a law
+#: that puts each slot at a fixed spot, a failure that halves the speed, a reference
+#: moving along x1 at a declared speed, and an obstacle type of a square post.
+PLUGIN = '''
+"""Test plug-ins (a user's file)."""
+import numpy as np
+from sandbox.obstacles import ObstacleSpec
+from sandbox.plugins import (
+    Param, register_failure, register_law, register_obstacle, register_reference,
+    register_strategy,
+)
+
+
+@register_strategy("repel", params={
+    "gain": Param("number", 1.0, unit="m", doc="Shift per neighbour", minimum=0.0),
+    "reach": Param("length", "2d", unit="m", doc="Radius of the push", minimum=0.0,
+                   exclusive=True),
+})
+def repel(ctx):
+    """Push away from each neighbour within reach by gain metres."""
+    shift = np.zeros((ctx.n, 2))
+    i, j, dist = ctx.pairs(ctx.params["reach"])
+    u = (ctx.pos[i] - ctx.pos[j]) / dist[:, None]
+    np.add.at(shift, i, ctx.params["gain"] * u)
+    np.add.at(shift, j, -ctx.params["gain"] * u)
+    active = np.zeros(ctx.n, dtype=bool)
+    active[i] = active[j] = True
+    return shift, active
+
+
+@register_law("pinned", params={"spot": Param("point", (0.0, 0.0), unit="m",
+                                             doc="Where every slot is, plus offset")})
+def pinned(ctx):
+    """Every vehicle holds spot + offset."""
+    slot = np.asarray(ctx.params["spot"]) + ctx.offset
+    ctx.memory["calls"] = ctx.memory.get("calls", 0) + 1
+    return slot, np.zeros_like(slot), np.zeros_like(slot)
+
+
+@register_failure("slow", params={"factor": Param("number", 0.5, doc="Speed factor",
+                                                  minimum=0.0, maximum=1.0)},
+                  controlled_speed=True)
+def slow(ctx):
+    """The motor gives only a fraction of the commanded speed."""
+    return ctx.params["factor"] * ctx.v1, ctx.v2
+
+
+@register_reference("drift", params={"speed": Param("number", 0.5, unit="m/s",
+                                                    doc="Speed along x1")})
+def drift(ctx):
+    """Along x1 from the origin."""
+    t = np.asarray(ctx.t, dtype=float)
+    p = np.stack((ctx.params["speed"] * t, 0 * t), -1)
+    v = np.stack((0 * t + ctx.params["speed"], 0 * t), -1)
+    return p, v, np.zeros_like(p)
+
+
+@register_obstacle("post", params={"at": Param("point", unit="m", doc="Centre"),
+                                   "side": Param("length", 0.4, unit="m", doc="Side",
+                                                 minimum=0.0, exclusive=True)})
+def post(ctx):
+    """A square post."""
+    return ObstacleSpec("box", ctx.name, center=ctx.params["at"],
+                        size=(ctx.params["side"], ctx.params["side"]))
+'''
+
+
+@pytest.fixture
+def registry_snapshot():
+    """Restore the registry (and the loaded-file cache) after a test."""
+    plugins._ensure_builtins()
+    saved = {k: dict(v) for k, v in plugins._REGISTRY.items()}
+    loaded = dict(plugins._LOADED)
+    yield
+    for k, v in saved.items():
+        plugins._REGISTRY[k].clear()
+        plugins._REGISTRY[k].update(v)
+    plugins._LOADED.clear()
+    plugins._LOADED.update(loaded)
+
+
+def scenario_doc(**recovery) -> dict:
+    return {
+        "name": "mine",
+        "duration": 1.0,
+        "plugins": ["my_plugins.py"],
+        "reference": {"type": "line", "speed": 0.5},
+        "formation": {"law": "rotating"},
+        "recovery": {"strategy": "repel", **recovery},
+        "vehicles": [
+            {"name": "leader", "pose": [0, 0, 0], "leader": True},
+            {"name": "red", "pose": [-0.8, 0.2, 0], "offset": [-0.8, 0.0]},
+            {"name": "green", "pose": [-0.8, -0.6, 0], "offset": [-0.8, -0.6]},
+        ],
+    }
+
+
+def write(tmp_path: Path, doc: dict) -> Path:
+    (tmp_path / "my_plugins.py").write_text(PLUGIN, encoding="utf-8")
+    path = tmp_path / "mine.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+    return path
+
+
+def test_a_users_strategy_runs_validates_compares_and_is_in_the_schema(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    registry_snapshot: None,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    path = write(tmp_path, scenario_doc(gain=0.3, reach="2d"))
+    monkeypatch.chdir(tmp_path / "..")  # the plug-in path is relative to the file
+    assert main(["validate", str(path)]) == 0
+    assert "ok (3 vehicles" in capsys.readouterr().out
+    sc = load_scenario(path)
+    assert sc.recovery.strategy == "repel"
+    assert sc.recovery.params == {"gain": 0.3, "reach": 1.0}  # "2d" with d = 0.5 m
+
+    out = tmp_path / "run"
+    assert main(["run", str(path), "--out", str(out)]) == 0
+    capsys.readouterr()
+    # the run's scenario.yaml reloads with the plug-in (an absolute path)
+    again = load_scenario(out / "scenario.yaml")
+    assert again.recovery == sc.recovery
+    modes = np.load(out / "run.npz")["mode"]
+    assert (modes == 1).any()  # MODE_AVOID: the strategy shifted targets
+
+    assert main(["compare", str(path), "--strategies", "repel,none"]) == 0
+    table = capsys.readouterr().out
+    assert re.search(r"\| mine +\| repel +\|", table), table
+    assert re.search(r"\| mine +\| none +\|", table), table
+
+    assert main(["schema"]) == 0
+    schema = json.loads(capsys.readouterr().out)
+    recovery = schema["$defs"]["recovery"]
+    assert "repel" in recovery["properties"]["strategy"]["enum"]
+    gain = recovery["properties"]["gain"]
+    assert gain["default"] == 1.0 and gain["x-unit"] == "m"
+    assert "Shift per neighbour" in gain["description"]
+
+    assert main(["plugins"]) == 0
+    listing = capsys.readouterr().out
+    assert "strategy" in listing and "repel" in listing and "my_plugins.py" in listing
+    assert "gain" in listing and "continuous" in listing and "built-in" in listing
+
+
+@pytest.mark.parametrize(
+    ("recovery", "message"),
+    [
+        ({"gian": 1.0}, "recovery.gian: unknown key; did you mean 'gain'?"),
+        ({"gain": -1.0}, "recovery.gain: must be at least 0 (got -1.0"),
+        ({"gain": "much"}, "recovery.gain: not a number (got 'much'"),
+        ({"reach": 0}, "recovery.reach: must be greater than 0"),
+    ],
+)
+def test_a_plugins_parameters_are_validated_with_their_line(
+    tmp_path: Path,
+    recovery: dict,
+    message: str,
+    registry_snapshot: None,
+) -> None:
+    path = write(tmp_path, scenario_doc(**recovery))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    lines = info.value.lines
+    line = next(
+        i + 1
+        for i, row in enumerate(path.read_text().splitlines())
+        if row.strip().startswith(next(iter(recovery)))
+    )
+    assert any(f"mine.yaml:{line}: {message}" in x for x in lines), lines
+
+
+def test_law_failure_reference_and_obstacle_plugins_act_in_a_run(
+    tmp_path: Path, registry_snapshot: None
+) -> None:
+    doc = scenario_doc()
+    doc.update(
+        reference={"type": "drift", "speed": 0.25},
+        formation={"law": "pinned", "spot": [3, 0]},
+        recovery={"strategy": "none"},
+        failures=[{"vehicle": "red", "at": 0.0, "kind": "slow", "factor": 0.0}],
+        obstacles=[{"type": "post", "name": "p", "at": [0, 5]}],
+    )
+    sc = load_scenario(write(tmp_path, doc))
+    assert sc.obstacles[0].type == "box" and sc.obstacles[0].size == (0.4, 0.4)
+    assert sc.reference.build().evaluate(2.0)[0].tolist() == [0.5, 0.0]
+    from sandbox.simulation import Simulation
+
+    sim = Simulation(sc)
+    run = sim.run()
+    assert sim.law_memory["calls"] >= 100  # the law's memory persists between steps
+    # the leader tracks the drift reference: x1 = 0.25 t
+    assert run.pose[-1, 0, 0] == pytest.approx(0.25, abs=0.05)
+    # red's failure (factor 0) stops it; green heads for its pinned slot (3, -0.6)
+    assert abs(run.pose[-1, 1, 0] - run.pose[0, 1, 0]) < 0.01
+    assert run.pose[-1, 2, 0] > run.pose[0, 2, 0] + 0.3
+
+
+def test_a_broken_plugin_is_one_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], registry_snapshot: None
+) -> None:
+    path = write(tmp_path, scenario_doc())
+    (tmp_path / "my_plugins.py").write_text("import numpy\n1 / 0\n", encoding="utf-8")
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2, err  # the import problem, and the unknown strategy
+    assert "plugins[0]: plug-in cannot be loaded" in err[0]
+    assert "ZeroDivisionError: division by zero" in err[0]
+    assert "my_plugins.py, line 2" in err[0]
+    assert "Traceback" not in "".join(err)
+    assert main(["validate", str(path), "--plugin", "no_such_module_xyz"]) == 2
+    err = capsys.readouterr().err
+    assert "error: plug-in no_such_module_xyz: no such module" in err
+    assert main(["validate", str(path), "--plugin", "missing.py"]) == 2
+    assert "plug-in missing.py: no such file" in capsys.readouterr().err
+
+
+def test_plugin_from_the_command_line_and_as_a_module(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    registry_snapshot: None,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    doc = scenario_doc()
+    del doc["plugins"]
+    path = write(tmp_path, doc)
+    assert main(["validate", str(path)]) == 2
+    assert "did you mean" in capsys.readouterr().err or True
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert main(["validate", str(path), "--plugin", "my_plugins"]) == 0
+    capsys.readouterr()
+    sys.modules.pop("my_plugins", None)
+
+
+def test_declarations_are_checked_when_registering() -> None:
+    with pytest.raises(ValueError, match="already registered"):
+        plugins.register_strategy("smooth")(lambda ctx: None)
+    with pytest.raises(ValueError, match="is a key of the recovery section"):
+        plugins.register_strategy("x1", params={"R": 1.0})(lambda ctx: None)
+    with pytest.raises(ValueError, match="cannot tell the type"):
+        plugins.register_strategy("x2", params={"gain": object()})(lambda ctx: None)
+    with pytest.raises(ValueError, match="not one of"):
+        plugins.Param("vector")
+    assert "x1" not in plugins.names("strategy")
+
+
+def test_every_kind_is_declared_with_a_builtin() -> None:
+    for kind in ("law", "strategy", "failure", "reference", "obstacle"):
+        builtins = [
+            p for p in plugins.registry(kind).values() if "built-in" in p.origin
+        ]
+        assert builtins, kind
+    assert plugins.names("filter") == ("none",)
+    assert plugins.names("detector") == ("none",)
+    assert len(plugins.names("law")) >= 5 and len(plugins.names("failure")) >= 5
+    assert len(plugins.names("reference")) >= 5 and len(plugins.names("obstacle")) >= 4
+
+
+def test_the_strategy_context_pairs_and_obstacles() -> None:
+    from sandbox.obstacles import ObstacleSpec
+    from sandbox.plugins import StrategyContext
+    from sandbox.recovery import NeighbourList, ObstacleField
+
+    pos = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0]])
+    field = ObstacleField(
+        (
+            ObstacleSpec("box", "b", center=(5.0, 2.0), size=(2.0, 2.0)),
+            ObstacleSpec("circle", "c", center=(0.0, -1.5), radius=0.5),
+        )
+    )
+    ctx = StrategyContext(
+        t=0.0,
+        dt=0.01,
+        pos=pos,
+        theta=np.zeros(3),
+        vel=np.zeros((3, 2)),
+        slot=pos,
+        diameter=np.full(3, 0.5),
+        may_avoid=np.ones(3, bool),
+        failed=np.zeros(3, bool),
+        params={},
+        R=1.5,
+        obstacle_field=field,
+        neighbours=NeighbourList(1.5),
+    )
+    i, j, dist = ctx.pairs(1.5)
+    assert (i.tolist(), j.tolist(), dist.tolist()) == ([0], [1], [1.0])
+    assert ctx.pairs(0.5)[0].tolist() == []
+    i, j, dist = ctx.pairs(10.0)  # beyond R: a fresh search
+    assert list(zip(i.tolist(), j.tolist(), strict=True)) == [(0, 1), (0, 2), (1, 2)]
+    # vehicle 2 is 1 m below the box (its face at y = 1); vehicle 0 is 1 m above the
+    # circle's top (y = -1): k is the index in the scenario's list
+    i, k, dist, away = ctx.obstacles(1.2)
+    got = sorted(zip(i.tolist(), k.tolist(), dist.round(9).tolist(), strict=True))
+    assert got == [(0, 1, 1.0), (2, 0, 1.0)]
+    order = np.argsort(i)
+    np.testing.assert_allclose(away[order], [[0.0, 1.0], [0.0, -1.0]], atol=1e-12)
