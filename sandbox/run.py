@@ -168,13 +168,18 @@ class Run:
 
     # ------------------------------------------------------------------ persistence
     def save_npz(self, path: Path) -> None:
-        """Write the arrays and the event log to ``path`` (a ``.npz``)."""
+        """Write the arrays and the event log to ``path`` (a ``.npz``).
+
+        Identical runs give identical bytes: the wall-clock time a run took (in
+        ``info``, for the console) is left out, and numpy stamps every member of the
+        archive with the same fixed date.
+        """
         meta = {
             "names": self.names,
             "colors": self.colors,
             "leader": self.leader,
             "status": self.status,
-            "info": self.info,
+            "info": {k: v for k, v in self.info.items() if k not in _NOT_SAVED},
             "events": [
                 [e.t, e.a, e.b, e.kind, e.end, e.healthy, e.penetration]
                 for e in self.events
@@ -213,6 +218,9 @@ class Run:
             **arrays,
         )
 
+
+#: Keys of ``Run.info`` that differ between identical runs and are not saved.
+_NOT_SAVED = ("wall_time",)
 
 #: Above this size [bytes] a run's record is streamed to files on disk (see
 #: :class:`Recorder`); smaller records stay in memory.

@@ -42,7 +42,12 @@ def test_two_cli_runs_write_identical_files(tmp_path: Path) -> None:
         a, b = tmp_path / f"{case}_a", tmp_path / f"{case}_b"
         cli_run(path, a, sets)
         cli_run(path, b, sets)
-        for name in ("trajectory.csv", "metrics.json", "scenario.yaml"):
+        names = sorted(p.name for p in a.iterdir())
+        assert names == sorted(p.name for p in b.iterdir())
+        assert {"trajectory.csv", "metrics.json", "scenario.yaml", "run.npz"} <= set(
+            names
+        )
+        for name in names:  # every output, run.npz too (no wall time in it)
             assert (a / name).read_bytes() == (b / name).read_bytes(), (case, name)
 
 

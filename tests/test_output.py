@@ -33,7 +33,13 @@ DOC = {
         {"name": "red", "pose": [4, -1, 1.5708], "offset": [-1, 1]},
     ],
 }
-RUN_FILES = ["metrics.json", "run.npz", "scenario.yaml", "trajectory.csv"]
+RUN_FILES = [
+    "manifest.json",
+    "metrics.json",
+    "run.npz",
+    "scenario.yaml",
+    "trajectory.csv",
+]
 
 
 @pytest.fixture(scope="module")
@@ -60,13 +66,14 @@ def test_a_run_directory_has_its_files_and_ordinary_permissions(
     assert sorted(p.name for p in out.parent.iterdir()) == ["small"]  # no leftovers
 
 
-def test_rewriting_replaces_the_earlier_run_as_a_whole(
+def test_rewriting_replaces_the_run_files_and_keeps_the_others(
     run: Run, tmp_path: Path
 ) -> None:
     out = write(run, tmp_path / "out")
-    (out / "stale.png").write_bytes(b"from an earlier run")
+    (out / "note.png").write_bytes(b"a user's file")
     write(run, out)
-    assert sorted(p.name for p in out.iterdir()) == RUN_FILES
+    assert sorted(p.name for p in out.iterdir()) == sorted([*RUN_FILES, "note.png"])
+    assert (out / "note.png").read_bytes() == b"a user's file"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
@@ -75,9 +82,9 @@ def test_the_fallback_swap_without_renameat2(
 ) -> None:
     monkeypatch.setattr(output, "_exchange", lambda a, b: False)
     out = write(run, tmp_path / "out")
-    (out / "stale.png").write_bytes(b"old")
+    (out / "note.png").write_bytes(b"old")
     write(run, out)
-    assert sorted(p.name for p in out.iterdir()) == RUN_FILES
+    assert sorted(p.name for p in out.iterdir()) == sorted([*RUN_FILES, "note.png"])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 

@@ -238,10 +238,12 @@ def test_sigkill_mid_run_leaves_the_earlier_run_whole(tmp_path: Path) -> None:
     assert proc.returncode == -signal.SIGKILL
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["long.yaml", "out"]
-    # Re-running replaces the earlier run as a whole: its stray file disappears.
+    # Re-running replaces the earlier run's files; the user's note is kept.
     assert main(["run", str(src), "--out", str(out), "--duration", "0.3"]) == 0
     assert sorted(p.name for p in out.iterdir()) == [
+        "manifest.json",
         "metrics.json",
+        "notes.txt",
         "run.npz",
         "scenario.yaml",
         "trajectory.csv",
