@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 
 from sandbox.errors import OutputError
-from sandbox.run import MODE_NAMES, Run
+from sandbox.run import MODE_NAMES, Run, RunFileError
 from sandbox.scenario import load_scenario
 
 CSV_HEADER = "t,vehicle,x1,x2,x3,v1,v2,chi1,chi2,mode,failed"
@@ -437,12 +437,18 @@ _DAMAGED = (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFi
 
 
 def load_run_dir(run_dir: Path) -> Run:
-    """Read back a run directory written by :func:`write_run_dir`."""
+    """Read back a run directory written by :func:`write_run_dir`.
+
+    Every array of ``run.npz`` is checked (members, dtypes, shapes against the number
+    of samples and vehicles, sizes before inflating; see :meth:`Run.load_npz`), so a
+    crafted or damaged directory is refused with :class:`~sandbox.errors.OutputError`
+    (``not a valid run directory: DIR (...)``) before rendering or plotting reads it.
+    """
     run_dir = Path(run_dir)
     npz = run_dir / "run.npz"
     if not npz.is_file():
         raise OutputError(
-            f"{run_dir}: not a run directory (no run.npz; run a scenario "
+            f"not a valid run directory: {run_dir} (no run.npz; run a scenario "
             "with 'sandbox run FILE --out DIR' first)"
         )
     scenario = None
@@ -451,6 +457,20 @@ def load_run_dir(run_dir: Path) -> Run:
     try:
         # An open file we own: numpy leaves its own file open when the zip is damaged.
         with open(npz, "rb") as fh:
-            return Run.load_npz(fh, scenario)
+            run = Run.load_npz(fh, scenario)
+    except RunFileError as exc:
+        raise OutputError(
+            f"not a valid run directory: {run_dir} (run.npz: {exc})"
+        ) from None
     except _DAMAGED as exc:
-        raise OutputError(f"{npz}: damaged, cannot be read ({exc})") from None
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise OutputError(
+            f"not a valid run directory: {run_dir} (run.npz: damaged, cannot be read: "
+            f"{reason})"
+        ) from None
+    if scenario is not None and [v.name for v in scenario.vehicles] != run.names:
+        raise OutputError(
+            f"not a valid run directory: {run_dir} (scenario.yaml names other vehicles "
+            "than run.npz)"
+        )
+    return run

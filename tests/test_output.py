@@ -260,7 +260,7 @@ def test_non_finite_numbers_are_written_as_null(tmp_path: Path) -> None:
 def test_damaged_run_directories_give_clear_errors(
     run: Run, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    with pytest.raises(OutputError, match="not a run directory"):
+    with pytest.raises(OutputError, match="not a valid run directory"):
         load_run_dir(tmp_path)
     out = write(run, tmp_path / "out")
     (out / "run.npz").write_bytes(b"\x89PNG not a zip")
