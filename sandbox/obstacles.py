@@ -71,8 +71,10 @@ class ObstacleSpec:
         doc: dict[str, Any] = {"type": self.type, "name": self.name}
         for k in keys:
             value = getattr(self, k)
-            if isinstance(value, tuple):
-                value = [list(v) if isinstance(v, tuple) else v for v in value]
+            if isinstance(value, tuple):  # plain floats, also from a plug-in's numpy
+                value = np.asarray(value, dtype=float).tolist()
+            elif value is not None:
+                value = float(value)
             doc[{"start": "from", "end": "to"}.get(k, k)] = value
         return doc
 

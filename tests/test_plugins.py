@@ -319,3 +319,39 @@ def test_the_strategy_context_pairs_and_obstacles() -> None:
     assert got == [(0, 1, 1.0), (2, 0, 1.0)]
     order = np.argsort(i)
     np.testing.assert_allclose(away[order], [[0.0, 1.0], [0.0, -1.0]], atol=1e-12)
+
+
+# ------------------------------------------------------------- validated changes
+SOLO = {
+    "reference": {"type": "point", "position": [1, 0]},
+    "vehicles": [{"name": "solo", "pose": [0, 0, 0]}],
+}
+
+
+def test_replace_goes_through_the_loader() -> None:
+    import dataclasses
+
+    sc = load_scenario(SOLO)
+    with pytest.raises(ScenarioError, match="control period too long"):
+        dataclasses.replace(sc, dt=0.5)
+    with pytest.raises(ScenarioError, match="must be greater than 0"):
+        dataclasses.replace(sc, duration=-1.0)
+    ok = dataclasses.replace(sc, duration=3)
+    assert ok.duration == 3.0 and isinstance(ok.duration, float)  # as the loader reads
+    assert ok.vehicles == sc.vehicles
+
+
+def test_with_overrides_validates_and_names_the_change() -> None:
+    sc = load_scenario(SOLO)
+    changed = sc.with_overrides("vehicles[0].pose=[0, 1, 0]", dt=0.02, seed=3)
+    assert (changed.dt, changed.seed, changed.vehicles[0].pose) == (
+        0.02,
+        3,
+        (0.0, 1.0, 0.0),
+    )
+    assert sc.dt == 0.01  # frozen: the original is unchanged
+    with pytest.raises(ScenarioError) as info:
+        sc.with_overrides("recovery.beta=-1", substeps=0)
+    text = "\n".join(info.value.lines)
+    assert "substeps: out of range (got 0" in text and "[from --set substeps=0]" in text
+    assert "recovery.beta: must be at least 0" in text

@@ -1,0 +1,147 @@
+"""Scenario files: YAML -> validated, frozen dataclasses.
+
+Everything a run needs is checked at load time, and every problem of a document is
+reported at once as a :class:`~sandbox.errors.Problem` with the YAML line of the field
+(``FILE:LINE: path.to.field: what is wrong (got X; expected Y)``). The simulation never
+re-checks configuration.
+
+Each key of the format is declared once, as a :class:`~sandbox.plugins.Param`, beside
+the code that reads it: the sections in :mod:`.sections` and :mod:`.vehicles`, the keys
+of a law, strategy, failure kind, reference or obstacle type in its plug-in's
+registration. The reader, the JSON Schema and the documentation checks derive from
+those declarations. The package:
+
+- :mod:`.specs`: the frozen dataclasses (:class:`Scenario` and its sections);
+- :mod:`.reader`: typed field access and the limits of the format;
+- :mod:`.yamlfile`: bounded YAML reading, line numbers, duplicate keys;
+- :mod:`.sections`, :mod:`.vehicles`: the declared sections and their readers;
+- :mod:`.checks`: checks across sections;
+- :mod:`.parse`: :func:`load_scenario`, :func:`parse_scenario`, ``--set``.
+
+The format is documented key by key in ``scenarios/reference.yaml``. Lengths may be
+written in metres (``0.75``) or as multiples of the default vehicle diameter (``"3d"``,
+``1.5d``).
+"""
+
+from sandbox.obstacles import ObstacleSpec
+from sandbox.scenario.checks import _overlapping_pairs
+from sandbox.scenario.parse import load_scenario, parse_scenario
+from sandbox.scenario.reader import (
+    _BAD_NAME,
+    _LENGTH,
+    MAX_FILE_BYTES,
+    MAX_LENGTH,
+    MAX_NAME,
+    MAX_NUMBER,
+    MAX_RECORD_BYTES,
+    MAX_RECORD_EVERY,
+    MAX_SEED,
+    MAX_STEPS,
+    MAX_SUBSTEPS,
+    MAX_VEHICLES,
+    MIN_DIAMETER,
+    MIN_MASS,
+    NAME_RULE,
+    name_problem,
+)
+from sandbox.scenario.sections import (
+    FAILURE,
+    FORMATION,
+    METRICS,
+    OBSTACLE,
+    PLUGIN_SECTIONS,
+    RECOVERY,
+    REFERENCE,
+    REPORT_DT_BOUND,
+    TOP,
+    TOP_KEYS,
+    read_param,
+    read_params,
+    read_plugin_section,
+)
+from sandbox.scenario.specs import (
+    DRIVE_TYPES,
+    PALETTE,
+    PLATOON_PATTERNS,
+    DriveSpec,
+    FailureSpec,
+    FormationSpec,
+    FunctionReference,
+    MetricsSpec,
+    PlatoonSpec,
+    RecoverySpec,
+    ReferenceSpec,
+    Scenario,
+    VehicleSpec,
+)
+from sandbox.scenario.vehicles import (
+    DRIVE,
+    GAINS,
+    PLATOON,
+    VEHICLE,
+    VEHICLE_KEYS,
+    VEHICLE_PARAM_KEYS,
+    VEHICLE_PARAMS,
+    platoon_offsets,
+)
+from sandbox.scenario.yamlfile import _duplicate_keys, _line_map, _YAMLLoader
+
+__all__ = [
+    "DRIVE",
+    "DRIVE_TYPES",
+    "FAILURE",
+    "FORMATION",
+    "GAINS",
+    "MAX_FILE_BYTES",
+    "MAX_LENGTH",
+    "MAX_NAME",
+    "MAX_NUMBER",
+    "MAX_RECORD_BYTES",
+    "MAX_RECORD_EVERY",
+    "MAX_SEED",
+    "MAX_STEPS",
+    "MAX_SUBSTEPS",
+    "MAX_VEHICLES",
+    "METRICS",
+    "MIN_DIAMETER",
+    "MIN_MASS",
+    "NAME_RULE",
+    "OBSTACLE",
+    "PALETTE",
+    "PLATOON",
+    "PLATOON_PATTERNS",
+    "PLUGIN_SECTIONS",
+    "RECOVERY",
+    "REFERENCE",
+    "REPORT_DT_BOUND",
+    "TOP",
+    "TOP_KEYS",
+    "VEHICLE",
+    "VEHICLE_KEYS",
+    "VEHICLE_PARAMS",
+    "VEHICLE_PARAM_KEYS",
+    "DriveSpec",
+    "FailureSpec",
+    "FormationSpec",
+    "FunctionReference",
+    "MetricsSpec",
+    "ObstacleSpec",
+    "PlatoonSpec",
+    "RecoverySpec",
+    "ReferenceSpec",
+    "Scenario",
+    "VehicleSpec",
+    "_BAD_NAME",
+    "_LENGTH",
+    "_YAMLLoader",
+    "_duplicate_keys",
+    "_line_map",
+    "_overlapping_pairs",
+    "load_scenario",
+    "name_problem",
+    "parse_scenario",
+    "platoon_offsets",
+    "read_param",
+    "read_params",
+    "read_plugin_section",
+]

@@ -1,0 +1,396 @@
+"""The validated scenario: frozen dataclasses built by the loader only.
+
+A :class:`Scenario` is made by :func:`~sandbox.scenario.load_scenario` or
+:func:`~sandbox.scenario.parse_scenario`; one made any other way (its constructor,
+``dataclasses.replace``) is validated by the same loader in ``__post_init__``, and
+:meth:`Scenario.with_overrides` changes one through it. :meth:`Scenario.to_dict` is the
+document that parses back to the same scenario.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass, field, fields, is_dataclass
+from typing import Any
+
+import numpy as np
+
+from sandbox import plugins
+from sandbox.control.flatness import (
+    Gains,
+)
+from sandbox.errors import Problem, ScenarioError
+from sandbox.obstacles import ObstacleSpec
+from sandbox.plugins import (
+    ReferenceContext,
+)
+
+PLATOON_PATTERNS = ("grid", "line", "wedge", "ring")
+
+DRIVE_TYPES = ("reference", "commands")
+
+# : Default colours, in vehicle order (the report draws the leader blue, then red,
+# green).
+PALETTE = (
+    "blue",
+    "red",
+    "green",
+    "orange",
+    "purple",
+    "brown",
+    "magenta",
+    "teal",
+    "olive",
+    "navy",
+)
+
+
+@dataclass(frozen=True)
+class DriveSpec:
+    """How a vehicle is driven: by its law (``reference``) or by a command schedule.
+
+    ``schedule`` rows are ``(t [s], v1 [m/s], v2 [rad/s])``, held from ``t`` until the
+    next row (zero before the first row).
+    """
+
+    type: str = "reference"
+    schedule: tuple[tuple[float, float, float], ...] = ()
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    """One vehicle: identity, initial pose, slot offset, physical limits."""
+
+    name: str
+    pose: tuple[float, float, float]
+    offset: tuple[float, float] = (0.0, 0.0)
+    leader: bool = False
+    color: str = "blue"
+    diameter: float = 0.5
+    mass: float = 10.0
+    gains: Gains = field(default_factory=Gains)
+    v1_max: float | None = None
+    v2_max: float | None = None
+    max_accel: float | None = None
+    motor_accel: float | None = None
+    drive: DriveSpec = field(default_factory=DriveSpec)
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    """The reference trajectory: a registered reference ``type`` and its values.
+
+    The values are also readable as attributes (``spec.radius``).
+    """
+
+    type: str
+    params: dict[str, Any] = field(default_factory=dict)
+
+    def __getattr__(self, name: str) -> Any:
+        params = self.__dict__.get("params", {})
+        if name in params:
+            return params[name]
+        raise AttributeError(name)
+
+    def build(self) -> Any:
+        """Return the reference object that evaluates ``(p, p', p'')``."""
+        plugin = plugins.get("reference", self.type)
+        if isinstance(plugin.obj, type):
+            return plugin.obj(**self.params)
+        return FunctionReference(plugin.obj, dict(self.params))
+
+
+@dataclass(frozen=True)
+class FunctionReference:
+    """A reference registered as a function ``f(ctx) -> (p, dp, ddp)``."""
+
+    func: Any
+    params: dict[str, Any]
+
+    def evaluate(self, t: float | np.ndarray) -> tuple[np.ndarray, ...]:
+        """Return ``(p, dp, ddp)`` at time(s) ``t`` [s], each ``t.shape + (2,)``."""
+        t = np.asarray(t, dtype=float)
+        p, dp, ddp = self.func(ReferenceContext(t, self.params))
+        shape = t.shape + (2,)
+        return tuple(
+            np.broadcast_to(np.asarray(a, dtype=float), shape).copy()
+            for a in (p, dp, ddp)
+        )
+
+
+@dataclass(frozen=True)
+class FormationSpec:
+    """Which formation law the followers use, and its values."""
+
+    law: str = "rotating"
+    params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def rotate(self) -> bool:
+        """The ``rotate`` value of the laws that have one (else False)."""
+        return bool(self.params.get("rotate", False))
+
+
+@dataclass(frozen=True)
+class RecoverySpec:
+    """Collision avoidance of section 4: the strategy and its values [m]."""
+
+    strategy: str = "none"
+    R: float = 1.5
+    leader_avoids: bool = False
+    target_derivatives: str = "hold"
+    params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def beta(self) -> float | None:
+        """``beta`` of the strategy (the built-in weighted ones have it)."""
+        return self.params.get("beta")
+
+    @property
+    def r(self) -> float | None:
+        """Inner radius ``r`` of the strategy (continuous and smooth)."""
+        return self.params.get("r")
+
+    @property
+    def steepness(self) -> float | None:
+        """``steepness`` of the strategy (smooth)."""
+        return self.params.get("steepness")
+
+
+@dataclass(frozen=True)
+class FailureSpec:
+    """A failure of one vehicle from ``at`` until ``until`` (or the end)."""
+
+    vehicle: str
+    at: float
+    kind: str
+    until: float | None = None
+    params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def v1(self) -> float | None:
+        """The ``v1`` value of the kinds that have one."""
+        return self.params.get("v1")
+
+    @property
+    def v2(self) -> float | None:
+        """The ``v2`` value of the kinds that have one."""
+        return self.params.get("v2")
+
+
+@dataclass(frozen=True)
+class PlatoonSpec:
+    """Generated followers: ``count`` vehicles placed by ``pattern``."""
+
+    count: int
+    pattern: str = "grid"
+    spacing: float = 1.0
+    jitter: float = 0.0
+    columns: int | None = None
+    prefix: str = "v"
+
+
+@dataclass(frozen=True)
+class MetricsSpec:
+    """Parameters of the metrics (``metrics.json``).
+
+    ``settle_tol`` [m]: formation error of a settled vehicle; ``settle_dwell`` [s]: how
+    long the run must go on in band after the settling time; ``contact_release`` [m]:
+    gap between two surfaces that ends a contact episode.
+    """
+
+    settle_tol: float = 0.05
+    settle_dwell: float = 1.0
+    contact_release: float = 0.01
+
+
+#: Set while the loader constructs a scenario (which it has just validated).
+_LOADER_BUILDS: ContextVar[bool] = ContextVar("loader_builds", default=False)
+
+
+@contextmanager
+def _from_loader() -> Iterator[None]:
+    """Construct scenarios without validating them again (the loader's own)."""
+    token = _LOADER_BUILDS.set(True)
+    try:
+        yield
+    finally:
+        _LOADER_BUILDS.reset(token)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario (build it with :func:`load_scenario`).
+
+    Change one with :meth:`with_overrides`; any other construction is validated too.
+    """
+
+    name: str
+    description: str
+    duration: float
+    dt: float
+    substeps: int
+    seed: int
+    record_every: int
+    vehicles: tuple[VehicleSpec, ...]
+    reference: ReferenceSpec | None
+    formation: FormationSpec | None
+    recovery: RecoverySpec
+    failures: tuple[FailureSpec, ...]
+    obstacles: tuple[ObstacleSpec, ...]
+    platoon: PlatoonSpec | None
+    metrics: MetricsSpec
+    diameter: float
+    source: str | None = None
+    warnings: tuple[str, ...] = ()
+    plugins: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        """Validate a scenario not made by the loader (the constructor, ``replace``).
+
+        The loader builds scenarios under :func:`_from_loader`; any other
+        construction, such as ``dataclasses.replace(sc, dt=0.5)``, is parsed again
+        from :meth:`to_dict` by the same loader, so it raises the loader's
+        :class:`~sandbox.errors.ScenarioError` for an invalid value and otherwise
+        holds exactly what the loader makes of it.
+        """
+        if _LOADER_BUILDS.get():
+            return
+        from sandbox.scenario.parse import parse_scenario
+
+        try:
+            doc = self.to_dict()
+        except (AttributeError, TypeError, ValueError, IndexError) as exc:
+            raise ScenarioError(
+                [Problem("", f"not a valid scenario ({type(exc).__name__}: {exc})")],
+                self.source,
+            ) from None
+        checked = parse_scenario(doc, source=self.source)
+        for f in fields(self):
+            if f.name != "source":
+                object.__setattr__(self, f.name, getattr(checked, f.name))
+
+    def with_overrides(self, *assignments: str, **changes: Any) -> Scenario:
+        """A copy with some fields changed, validated by the loader.
+
+        Parameters
+        ----------
+        *assignments : str
+            ``path=value`` assignments in the ``--set`` syntax, e.g.
+            ``"recovery.beta=2.5"`` or ``"vehicles[1].pose=[0, 1, 0]"``.
+        **changes
+            Top-level keys replaced whole, e.g. ``dt=0.02`` or
+            ``recovery={"strategy": "smooth"}`` (YAML values: lengths may be
+            ``"3d"``).
+
+        Raises
+        ------
+        ScenarioError
+            The changed scenario is invalid (every problem at once, each naming its
+            ``--set``).
+
+        Examples
+        --------
+        >>> from sandbox.scenario import load_scenario
+        >>> sc = load_scenario({"reference": {"type": "point", "position": [1, 0]},
+        ...     "vehicles": [{"pose": [0, 0, 0]}]})
+        >>> sc.with_overrides("duration=2", dt=0.02).duration
+        2.0
+        """
+        import json
+
+        from sandbox.scenario.parse import parse_scenario
+
+        sets = list(assignments)
+        for key, value in changes.items():
+            sets.append(f"{key}={json.dumps(_plain(value))}")
+        return parse_scenario(self.to_dict(), source=self.source, overrides=sets)
+
+    @property
+    def leader_index(self) -> int:
+        """Index of the leader vehicle, or -1."""
+        for i, v in enumerate(self.vehicles):
+            if v.leader:
+                return i
+        return -1
+
+    def to_dict(self) -> dict[str, Any]:
+        """A plain document that :func:`parse_scenario` reads back to this scenario.
+
+        Lengths are resolved to metres. A platoon is written as its ``platoon`` section
+        (with the vehicle parameters it uses under ``vehicle``), not as a list of its
+        vehicles: parsing regenerates exactly the same vehicles (same seed), and the
+        document of a 10,000-vehicle scenario stays a few lines long.
+        """
+        doc: dict[str, Any] = {
+            "name": self.name,
+            "description": self.description,
+            "duration": self.duration,
+            "dt": self.dt,
+            "substeps": self.substeps,
+            "seed": self.seed,
+            "record_every": self.record_every,
+            "vehicle": {"diameter": self.diameter},
+        }
+        if self.plugins:
+            doc["plugins"] = list(self.plugins)
+        if self.reference is not None:
+            doc["reference"] = {"type": self.reference.type}
+            doc["reference"].update(_plain(self.reference.params, skip_none=True))
+        if self.formation is not None:
+            doc["formation"] = {"law": self.formation.law}
+            doc["formation"].update(_plain(self.formation.params, skip_none=True))
+        listed = self.vehicles
+        if self.platoon is not None:
+            listed = self.vehicles[: len(self.vehicles) - self.platoon.count]
+            made = self.vehicles[len(listed)]
+            for key in ("mass", "v1_max", "v2_max", "max_accel", "motor_accel"):
+                if getattr(made, key) is not None:
+                    doc["vehicle"][key] = getattr(made, key)
+            doc["vehicle"]["gains"] = _plain(made.gains)
+            doc["platoon"] = _plain(self.platoon, skip_none=True)
+        doc["vehicles"] = []
+        for v in listed:
+            item = _plain(v, skip_none=True)
+            item["gains"] = _plain(v.gains)
+            if v.drive.type == "reference":
+                del item["drive"]
+            doc["vehicles"].append(item)
+        doc["recovery"] = _plain(self.recovery, skip_none=True)
+        doc["recovery"].update(doc["recovery"].pop("params"))
+        # A failure that never starts (a run shortened by --duration) is left out.
+        failures = [f for f in self.failures if f.at < self.duration]
+        if failures:
+            doc["failures"] = []
+            for f in failures:
+                item = _plain(f, skip_none=True)
+                item.update(item.pop("params"))
+                doc["failures"].append(item)
+        if self.obstacles:
+            doc["obstacles"] = [o.document() for o in self.obstacles]
+        doc["metrics"] = _plain(self.metrics)
+        return doc
+
+
+def _plain(obj: Any, skip_none: bool = False) -> Any:
+    if isinstance(obj, Mapping):
+        return {
+            k: _plain(v, skip_none)
+            for k, v in obj.items()
+            if not (skip_none and v is None)
+        }
+    if is_dataclass(obj):
+        out = {}
+        for f in fields(obj):
+            value = getattr(obj, f.name)
+            if skip_none and value is None:
+                continue
+            out[f.name] = _plain(value, skip_none)
+        return out
+    if isinstance(obj, tuple | list):
+        return [_plain(v, skip_none) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj

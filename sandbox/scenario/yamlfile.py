@@ -1,0 +1,209 @@
+"""YAML text to a document: bounded reading, the safe loader, line numbers.
+
+A scenario file is read only if it is a regular file of at most ``MAX_FILE_BYTES``; it
+is parsed by the safe (libyaml when available) loader into nodes, from which the line
+of every field and the keys given twice are found before the document is constructed.
+Syntax errors become one problem with their line.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import stat
+from pathlib import Path
+
+import yaml
+
+from sandbox.errors import Problem
+from sandbox.scenario.reader import MAX_FILE_BYTES, MAX_NUMBER, _describe, _says
+
+
+class _YAMLLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+    """Safe YAML loader that also reads exponent floats like ``1e-3`` as numbers.
+
+    YAML 1.1 (PyYAML's default) reads ``1e-3`` and ``2.5e3`` as text; YAML 1.2, JSON and
+    the editors that check files against the JSON Schema read them as numbers. It is
+    libyaml's C parser (``yaml.CSafeLoader``, about 20 times faster) when PyYAML was
+    built with it, else the pure-Python ``yaml.SafeLoader``; both give the nodes with
+    their lines, from which line numbers and duplicate keys are found.
+    """
+
+
+_YAMLLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
+def _line_map(node: yaml.Node | None, path: str, out: dict[str, int]) -> None:
+    """Record the 1-based line of every field of a composed YAML node tree.
+
+    A node reached again through an alias is mapped once (its first path): recursive or
+    exponentially aliased documents stay linear. Iterative, so deep nesting cannot
+    exhaust the stack.
+    """
+    seen: set[int] = set()
+    stack: list[tuple[yaml.Node | None, str]] = [(node, path)]
+    while stack:
+        node, path = stack.pop()
+        if node is None or id(node) in seen:
+            continue
+        seen.add(id(node))
+        out.setdefault(path, node.start_mark.line + 1)
+        if isinstance(node, yaml.MappingNode):
+            for key, value in node.value:
+                sub = f"{path}.{_key_text(key)}" if path else _key_text(key)
+                out.setdefault(sub, key.start_mark.line + 1)
+                stack.append((value, sub))
+        elif isinstance(node, yaml.SequenceNode):
+            for i, value in enumerate(node.value):
+                stack.append((value, f"{path}[{i}]"))
+
+
+def _key_text(key: yaml.Node) -> str:
+    return str(key.value) if isinstance(key, yaml.ScalarNode) else "?"
+
+
+def _duplicate_keys(root: yaml.Node | None) -> list[Problem]:
+    """Keys given twice in one mapping (PyYAML would silently keep the last one)."""
+    problems = []
+    seen: set[int] = set()
+    stack: list[tuple[yaml.Node | None, str]] = [(root, "")]
+    while stack:
+        node, path = stack.pop()
+        if node is None or id(node) in seen:
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.MappingNode):
+            first: dict[tuple[str, str], int] = {}
+            for key, value in node.value:
+                text = _key_text(key)
+                sub = f"{path}.{text}" if path else text
+                stack.append((value, sub))
+                if not isinstance(key, yaml.ScalarNode) or key.tag.endswith(":merge"):
+                    continue
+                line = key.start_mark.line + 1
+                if (key.tag, key.value) in first:
+                    problems.append(
+                        Problem(
+                            sub,
+                            _says(
+                                "duplicate key",
+                                f"{text!r} again on line {line}",
+                                "each key once; first on line "
+                                f"{first[key.tag, key.value]}",
+                            ),
+                            line,
+                        )
+                    )
+                else:
+                    first[key.tag, key.value] = line
+        elif isinstance(node, yaml.SequenceNode):
+            for i, value in enumerate(node.value):
+                stack.append((value, f"{path}[{i}]"))
+    return sorted(problems, key=lambda p: p.line or 0)
+
+
+_YAML_HINTS = (
+    ("'\\t'", "indentation with spaces (YAML does not allow tabs)"),
+    ("mapping values are not allowed", "one 'key: value' per line, a space after ':'"),
+    ("could not find expected ':'", "'key: value' pairs"),
+    ("expected a single document", "one document (no second '---')"),
+    ("constructor for the tag", "plain YAML without custom tags"),
+    ("unhashable key", "keys that are plain names"),
+    ("unacceptable character", "a text file"),
+)
+
+
+def _yaml_problem(exc: yaml.YAMLError, text: str) -> Problem:
+    """One problem for a YAML syntax error, with its line and the text found there."""
+    mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+    what = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+    context = getattr(exc, "context", None)
+    if context:
+        what = f"{context}, {what}"
+    if isinstance(exc, yaml.reader.ReaderError):
+        line = text.count("\n", 0, exc.position) + 1
+        char = exc.character
+        code = char if isinstance(char, int) else ord(char)
+        got, what = f"character {code:#x} at line {line}", "not text"
+    elif mark is not None:
+        line = mark.line + 1
+        rows = text.splitlines()
+        row = rows[mark.line] if mark.line < len(rows) else ""
+        if "\t" in row[: len(row) - len(row.lstrip())]:
+            what += " (a tab, '\\t', in the indentation)"
+        got = (
+            f"{row.strip()[:40]!r} at column {mark.column + 1}"
+            if row.strip()
+            else (f"the end of the file at column {mark.column + 1}")
+        )
+    else:
+        line, got = None, "text that is not YAML"
+    expected = next(
+        (hint for key, hint in _YAML_HINTS if key in what), "well-formed YAML"
+    )
+    return Problem("", _says(f"malformed YAML: {what}", got, expected), line)
+
+
+class _NotAFile(OSError):
+    """A scenario path that is not a regular file of a readable size."""
+
+
+def _read_limited(path: Path) -> bytes:
+    """The bytes of a regular file of at most :data:`MAX_FILE_BYTES` bytes.
+
+    Devices, pipes and sockets are refused before they are opened (opening a pipe
+    could block, reading /dev/zero would never end), and at most one byte beyond the
+    limit is read, so a file that grows while it is read is refused too.
+    """
+    mode = path.stat().st_mode
+    if stat.S_ISDIR(mode):
+        raise IsADirectoryError(path)
+    if not stat.S_ISREG(mode):
+        raise _NotAFile("not a regular file (a device, pipe or socket)")
+    too_big = f"larger than {MAX_FILE_BYTES // 1_000_000} MB"
+    if path.stat().st_size > MAX_FILE_BYTES:
+        raise _NotAFile(f"{path.stat().st_size:,} bytes, {too_big}")
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+            raise _NotAFile("not a regular file (a device, pipe or socket)")
+        data = f.read(MAX_FILE_BYTES + 1)
+    if len(data) > MAX_FILE_BYTES:
+        raise _NotAFile(f"more than {MAX_FILE_BYTES:,} bytes, {too_big}")
+    return data
+
+
+def _long_integer_problem(node: yaml.Node | None, exc: ValueError) -> Problem:
+    """The problem of a value YAML cannot construct, like an over-long integer."""
+    stack, seen = [node], set()
+    while stack:
+        n = stack.pop()
+        if n is None or id(n) in seen:
+            continue
+        seen.add(id(n))
+        if isinstance(n, yaml.ScalarNode):
+            if n.tag.endswith(":int") and len(n.value) > 4000:
+                return Problem(
+                    "",
+                    _says(
+                        "number too large",
+                        "an integer of more than 4000 digits",
+                        f"a number within +-{MAX_NUMBER:g}",
+                    ),
+                    n.start_mark.line + 1,
+                )
+        elif isinstance(n, yaml.MappingNode):
+            stack.extend(v for kv in n.value for v in kv)
+        elif isinstance(n, yaml.SequenceNode):
+            stack.extend(n.value)
+    return Problem(
+        "",
+        _says(
+            "a value YAML cannot read", _describe(str(exc)), "valid numbers and dates"
+        ),
+        None,
+    )
