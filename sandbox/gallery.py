@@ -3,11 +3,10 @@
 ``sandbox gallery`` (default folders ``scenarios/paper`` and ``scenarios/failures``,
 output ``renders/``) makes the GIFs committed in ``renders/`` and shown in the README.
 A GIF over the size budget is rendered again smaller (fewer pixels, then fewer frames
-per
-second) until it fits. A run that spreads along a line (a platoon on a straight
+per second) until it fits. A run that spreads along a line (a platoon on a straight
 reference) would be drawn tiny in a square frame that holds all of it: its camera
-follows
-the leader instead.
+follows the leader instead (:func:`sandbox.render.auto_follow`, the camera of ``sandbox
+run --gif`` too).
 """
 
 from __future__ import annotations
@@ -15,18 +14,16 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
-
-from sandbox.render import write_gif
+from sandbox.render import AUTO_FOLLOW_ASPECT, auto_follow, write_gif
 from sandbox.run import Run
 from sandbox.scenario import load_scenario
 from sandbox.simulation import Simulation
 
 #: Largest GIF the gallery keeps [bytes].
 MAX_GIF_BYTES = 3_000_000
-# : Above this ratio of the sides of the area a run covers, the camera follows the
-# leader.
-MAX_ASPECT = 2.5
+#: Above this ratio of the sides of the area a run covers, the camera follows the
+#: leader.
+MAX_ASPECT = AUTO_FOLLOW_ASPECT
 #: ``(size [px], fps)`` tried in turn until a GIF fits the budget.
 ATTEMPTS = ((560, 25.0), (480, 20.0), (400, 15.0), (320, 10.0))
 
@@ -40,15 +37,12 @@ def scenario_files(folders: list[Path]) -> list[Path]:
 
 
 def camera_follow(run: Run) -> str | None:
-    """``"leader"`` for a run spread along a line, else None (frame it whole)."""
-    if run.leader < 0:
-        return None
-    pos = run.pose[:, :, :2].reshape(-1, 2)
-    pos = pos[np.isfinite(pos).all(axis=1)]
-    if len(pos) == 0:
-        return None
-    extent = np.ptp(pos, axis=0) + float(np.max(run.diameter))
-    return "leader" if extent.max() > MAX_ASPECT * extent.min() else None
+    """``"leader"`` for a run spread along a line, else None (frame it whole).
+
+    The automatic camera of :func:`sandbox.render.auto_follow`, which ``sandbox run
+    --gif`` and ``sandbox render`` use too.
+    """
+    return auto_follow(run)
 
 
 def render_gallery(

@@ -42,15 +42,22 @@ import struct
 import uuid
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 from typing import IO, Any
 
 import imageio.v3 as iio
 import numpy as np
 from numpy.typing import ArrayLike
-from PIL import Image, ImageColor, ImageDraw, ImageFont
+from PIL import Image, ImageColor, ImageDraw
 
+from sandbox.render_overlay import (
+    LEGEND_NAMES_MAX,
+    Bands,
+    LegendItem,
+    TextStamps,
+    draw_bottom_band,
+    frame_bands,
+)
 from sandbox.run import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, Run
 
 __all__ = [
@@ -71,8 +78,6 @@ MAX_GIF_FPS = 50.0
 #: Frames encoded per imageio call in :func:`write_gif` (bounds memory on long runs).
 GIF_CHUNK = 128
 
-_HUD_HEIGHT = 16  # [px] band at the top for the heads-up line
-_BAR_HEIGHT = 18  # [px] band at the bottom for the scale bar
 _MARGIN = 0.04  # fraction of the image size kept free around the content
 _TRAIL_LEVELS = 4  # fading steps of a trail
 _TRAIL_FADE = (0.2, 0.45, 0.65, 0.82)  # blend toward white of each step, newest first
@@ -171,15 +176,22 @@ class Camera:
         return Camera((float(c[0]), float(c[1])), self.scale, self.size, self.anchor)
 
     @classmethod
-    def fit(cls, lo: ArrayLike, hi: ArrayLike, size: int) -> Camera:
+    def fit(
+        cls,
+        lo: ArrayLike,
+        hi: ArrayLike,
+        size: int,
+        bands: tuple[int, int] = (16, 18),
+    ) -> Camera:
         """Camera showing the world box ``[lo, hi]`` [m] whole, with a margin.
 
         The box is centred in the viewport, the part of the image below the heads-up
-        band and above the scale-bar band.
+        band and above the bottom band (scale bar and legend), ``bands = (top,
+        bottom)`` [px] high.
         """
         lo = np.asarray(lo, dtype=float)
         hi = np.asarray(hi, dtype=float)
-        x0, y0, x1, y1 = _viewport(size)
+        x0, y0, x1, y1 = _viewport(size, bands)
         extent = np.maximum(hi - lo, 1e-9)
         scale = float(min((x1 - x0) / extent[0], (y1 - y0) / extent[1]))
         mid = (lo + hi) / 2.0
@@ -188,41 +200,118 @@ class Camera:
         )
 
     @classmethod
-    def for_run(cls, run: Run, size: int = 640, follow: str | None = None) -> Camera:
+    def for_run(
+        cls,
+        run: Run,
+        size: int = 640,
+        follow: str | None = None,
+        legend: bool = True,
+    ) -> Camera:
         """Build the camera of the first frame of ``run``.
 
         Parameters
         ----------
         run : Run
         size : int [px]
-        follow : {None, "leader"} or str
+        follow : {None, "auto", "leader"} or str
             ``None``: the whole run is framed (every pose, the reference path and the
             obstacles) and the camera never moves. ``"leader"`` or a vehicle name: a
             window centred on that vehicle (the fleet centroid when ``"leader"`` is
             asked of a run without leader), 1.3 times as wide as the initial formation;
-            :func:`render_frames` recentres it on every frame.
+            :func:`render_frames` recentres it on every frame. ``"auto"``: the choice
+            of :func:`auto_follow` (``"leader"`` for a run spread along a line).
+        legend : bool
+            Whether the frame has a legend strip (the viewport leaves room for it).
 
         Returns
         -------
         Camera
         """
+        follow = resolve_follow(run, follow)
         pos = run.pose[:, :, :2]
         reach = float(np.max(run.diameter, initial=0.0)) / 2.0
+        bands = _run_bands(run, size, legend)
+        edges = (bands.top, bands.bottom)
         if follow is None:
             lo, hi = _content_bounds(run, reach)
-            return cls.fit(lo, hi, size)
+            return cls.fit(lo, hi, size, edges)
         track = _follow_track(run, follow)
         first = pos[0][np.isfinite(pos[0]).all(axis=1)]
         spread = float(np.max(np.linalg.norm(first - track[0], axis=1), initial=0.0))
         width = max(1.3 * 2.0 * (spread + reach), 10.0 * reach, 1e-3)  # [m]
         c = track[0]
-        return cls.fit(c - width / 2, c + width / 2, size)
+        return cls.fit(c - width / 2, c + width / 2, size, edges)
 
 
-def _viewport(size: int) -> tuple[float, float, float, float]:
+#: Above this ratio of the sides of the area a run covers, ``follow="auto"`` follows
+#: the leader.
+AUTO_FOLLOW_ASPECT = 2.5
+
+
+def auto_follow(run: Run) -> str | None:
+    """The automatic camera: ``"leader"`` for a run spread along a line, else None.
+
+    A run whose covered area (every pose, plus a vehicle diameter) is more than
+    :data:`AUTO_FOLLOW_ASPECT` times longer than wide, and that has a leader, would be
+    drawn tiny in a square frame holding all of it (a platoon on a straight
+    reference): the camera follows the leader instead. Otherwise the whole run is
+    framed.
+    """
+    if run.leader < 0:
+        return None
+    box = _finite_box(run.pose[:, :, :2])
+    if box is None:
+        return None
+    extent = box[1] - box[0] + float(np.max(run.diameter, initial=0.0))
+    return "leader" if extent.max() > AUTO_FOLLOW_ASPECT * extent.min() else None
+
+
+def resolve_follow(run: Run, follow: str | None) -> str | None:
+    """``follow`` with ``"auto"`` replaced by the choice of :func:`auto_follow`."""
+    return auto_follow(run) if follow == "auto" else follow
+
+
+def _viewport(
+    size: int, bands: tuple[int, int] = (16, 18)
+) -> tuple[float, float, float, float]:
     """Pixel box ``(x0, y0, x1, y1)`` the world content is fitted into."""
     pad = _MARGIN * size
-    return pad, _HUD_HEIGHT + pad, size - pad, size - _BAR_HEIGHT - pad
+    return pad, bands[0] + pad, size - pad, size - bands[1] - pad
+
+
+def _legend_items(run: Run, body: np.ndarray, large: bool) -> list[LegendItem]:
+    """The legend strip of ``run``: its vehicles, then the marks its frames show."""
+    if run.n_vehicles <= LEGEND_NAMES_MAX:
+        items = [
+            LegendItem("vehicle", name, int(body[i]))
+            for i, name in enumerate(run.names)
+        ]
+    else:
+        items = [LegendItem("vehicle", f"{run.n_vehicles} vehicles", int(body[0]))]
+    mode = np.asarray(run.mode)
+    if _reference_path(run) is not None:
+        items.append(LegendItem("reference", "reference"))
+    if not large:
+        items.append(LegendItem("slot", "slot"))
+    if (mode == MODE_AVOID).any():
+        items.append(LegendItem("avoid", "avoiding"))
+    if (mode == MODE_EXTERNAL).any():
+        items.append(LegendItem("external", "external command"))
+    if np.asarray(run.failed, dtype=bool).any() or (mode == MODE_FAILED).any():
+        items.append(LegendItem("failed", "failed"))
+    if len(run.events):
+        items.append(LegendItem("collision", "collision"))
+    return items
+
+
+def _run_bands(run: Run, size: int, legend: bool) -> Bands:
+    """Layout of the text bands of ``run``'s frames (no legend rows without legend)."""
+    if not legend:
+        return frame_bands(int(size), [])
+    _, body, _ = _build_palette(run.colors)
+    return frame_bands(
+        int(size), _legend_items(run, body, run.n_vehicles > LARGE_FLEET)
+    )
 
 
 def _content_bounds(run: Run, reach: float) -> tuple[np.ndarray, np.ndarray]:
@@ -282,8 +371,8 @@ def _follow_track(run: Run, follow: str) -> np.ndarray:
         track = pos[:, run.names.index(follow)].copy()
     else:
         raise ValueError(
-            f"follow: expected None, 'leader' or a vehicle name in {run.names}, "
-            f"got {follow!r}"
+            f"follow: expected None, 'auto', 'leader' or a vehicle name in "
+            f"{run.names}, got {follow!r}"
         )
     # Hold the last finite point where the followed point is undefined.
     good = np.isfinite(track).all(axis=1)
@@ -438,13 +527,6 @@ def _build_palette(colors: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.nd
     return np.array(entries, dtype=np.uint8).reshape(-1, 3), body, trail
 
 
-@lru_cache(maxsize=1)
-def _font() -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
-    """Pillow's built-in bitmap font (deterministic, no font files needed)."""
-    loader = getattr(ImageFont, "load_default_imagefont", None)
-    return loader() if loader is not None else ImageFont.load_default()
-
-
 def _nice_length(target: float) -> float:
     """Largest 1, 2 or 5 times a power of ten not above ``target`` [m].
 
@@ -588,9 +670,11 @@ class _Scene:
         follow: str | None,
         trail_seconds: float,
         step: float,
+        legend: bool = True,
     ) -> None:
         if int(size) < 64:
             raise ValueError(f"size: expected at least 64 px, got {size!r}")
+        follow = resolve_follow(run, follow)
         self.run = run
         self.size = int(size)
         self.t = np.asarray(run.t, dtype=float)
@@ -599,7 +683,9 @@ class _Scene:
         self.n = run.n_vehicles
         self.large = self.n > LARGE_FLEET
         self.rgb, self.body, self.trail_idx = _build_palette(run.colors)
-        self.camera = Camera.for_run(run, self.size, follow)
+        self.camera = Camera.for_run(run, self.size, follow, legend)
+        self.bands = _run_bands(run, self.size, legend)
+        self.stamps = TextStamps(self.bands.px)
         self.track = None if follow is None else _follow_track(run, follow)
         self.radius_px = np.asarray(run.diameter, dtype=float) / 2.0 * self.camera.scale
         self.mode = np.asarray(run.mode)
@@ -630,10 +716,18 @@ class _Scene:
         on, off = (v / self.camera.scale for v in _DASH_PX)
         self.dashes = np.zeros((0, 2, 2)) if path is None else _dashes(path, on, off)
         self.bar = _nice_length(0.22 * self.size / self.camera.scale)
+        self.bottom_band = draw_bottom_band(
+            self.bands,
+            bar_m=self.bar,
+            bar_px=self.bar * self.camera.scale,
+            white=WHITE,
+            black=BLACK,
+            marks={"path": PATH, "orange": ORANGE, "blue": BLUE, "red": RED},
+        )
         # Collisions: where and when to flash.
         self._prepare_events(step)
         label = run.info.get("scenario_name") if isinstance(run.info, dict) else None
-        self.hud_prefix = f"{label}   " if label else ""
+        self.hud_prefix = str(label) if label else ""
         self.background = (
             None if self.track is not None else self._background(self.camera)
         )
@@ -661,7 +755,7 @@ class _Scene:
         self.flash_for = max(COLLISION_FLASH, 1.5 * step)
 
     def _background(self, cam: Camera) -> Image.Image:
-        """White canvas with obstacles, reference path and scale bar."""
+        """White canvas with obstacles and reference path."""
         img = Image.new("L", (self.size, self.size), WHITE)
         draw = ImageDraw.Draw(img)
         for kind, geom in self.obstacles:
@@ -683,17 +777,7 @@ class _Scene:
             seen = (hi > -2).all(axis=1) & (lo < self.size + 2).all(axis=1)
             for a in seg[seen]:
                 draw.line(_flat(a), fill=PATH, width=1)
-        self._scale_bar(draw, cam)
         return img
-
-    def _scale_bar(self, draw: ImageDraw.ImageDraw, cam: Camera) -> None:
-        x0 = _MARGIN * self.size
-        y = self.size - 7
-        x1 = x0 + self.bar * cam.scale
-        draw.line([x0, y, x1, y], fill=BLACK, width=2)
-        draw.line([x0, y - 4, x0, y + 1], fill=BLACK, width=1)
-        draw.line([x1, y - 4, x1, y + 1], fill=BLACK, width=1)
-        draw.text((x1 + 5, y - 9), f"{self.bar:g} m", fill=BLACK, font=_font())
 
     # ------------------------------------------------------------ one frame
     def draw(self, k: int) -> np.ndarray:
@@ -748,7 +832,8 @@ class _Scene:
             )
         self._draw_failures(draw, centers[failed], radius[failed])
         self._draw_flashes(draw, cam, self.t[k])
-        self._draw_hud(draw, self.t[k])
+        self._draw_hud(draw, img, self.t[k])
+        img.paste(self.bottom_band, (0, self.size - self.bands.bottom))
         return np.asarray(img)
 
     def _draw_slots(self, draw: ImageDraw.ImageDraw, slots: np.ndarray) -> None:
@@ -868,14 +953,22 @@ class _Scene:
                     width=2,
                 )
 
-    def _draw_hud(self, draw: ImageDraw.ImageDraw, now: float) -> None:
+    def _draw_hud(
+        self, draw: ImageDraw.ImageDraw, img: Image.Image, now: float
+    ) -> None:
+        """The heads-up line: scenario, time, collisions so far, recovery strategy."""
         hits = int(np.searchsorted(self.event_t, now, side="right"))
-        draw.rectangle([0, 0, self.size - 1, _HUD_HEIGHT - 1], fill=WHITE)
-        text = (
-            f"{self.hud_prefix}t = {now:7.2f} s   collisions: {hits}"
-            f"   recovery: {self.strategy}"
-        )
-        draw.text((4, 3), text, fill=BLACK, font=_font())
+        draw.rectangle([0, 0, self.size - 1, self.bands.top - 1], fill=WHITE)
+        x, y = max(4, int(0.02 * self.size)), 3
+        if self.hud_prefix:
+            x = self.stamps.paste(img, (x, y), self.hud_prefix, BLACK)
+        x = self.stamps.paste(img, (x, y), "t =", BLACK) - self.bands.px // 2
+        x = self.stamps.paste_number(img, (x, y), f"{now:.2f}", BLACK)
+        x = self.stamps.paste(img, (x, y), " s", BLACK)
+        x = self.stamps.paste(img, (x, y), f"collisions: {hits}", BLACK)
+        last = f"recovery: {self.strategy}"
+        if x + self.stamps.mask(last).width <= self.size:  # whole, or not at all
+            self.stamps.paste(img, (x, y), last, BLACK)
 
     def to_rgb(self, canvas: np.ndarray) -> np.ndarray:
         """RGB image (H, W, 3) uint8 of a palette-index canvas."""
@@ -887,7 +980,7 @@ class _Scene:
 def _check_follow(follow: str | None) -> None:
     if follow is not None and not isinstance(follow, str):
         raise ValueError(
-            f"follow: expected None, 'leader' or a vehicle name, got {follow!r}"
+            f"follow: expected None, 'auto', 'leader' or a vehicle name, got {follow!r}"
         )
 
 
@@ -901,6 +994,7 @@ def _indexed_frames(
     trail_seconds: float,
     speed: float,
     fps: float,
+    legend: bool = True,
 ) -> tuple[_Scene, Iterator[np.ndarray]]:
     _check_follow(follow)
     scene = _Scene(
@@ -910,6 +1004,7 @@ def _indexed_frames(
         follow=follow,
         trail_seconds=trail_seconds,
         step=speed / fps,
+        legend=legend,
     )
     return scene, (scene.draw(int(k)) for k in plan.index)
 
@@ -924,6 +1019,7 @@ def render_frames(
     zones: bool = False,
     follow: str | None = None,
     trail_seconds: float = 3.0,
+    legend: bool = True,
 ) -> Iterator[np.ndarray]:
     """Frames of an animation of ``run``, drawn lazily.
 
@@ -940,10 +1036,14 @@ def render_frames(
     zones : bool
         Draw each vehicle's avoidance radii ``R`` (and ``r``) from ``info["recovery"]``
         as thin circles: orange while the vehicle is avoiding, light grey otherwise.
-    follow : {None, "leader"} or str
+    follow : {None, "auto", "leader"} or str
         Camera, see :meth:`Camera.for_run`.
     trail_seconds : float [s]
         Length of the fading trails (0 disables them).
+    legend : bool
+        Draw the legend strip at the bottom: each vehicle's name by its colour (or the
+        fleet's size above :data:`~sandbox.render_overlay.LEGEND_NAMES_MAX` vehicles)
+        and what the marks the run shows mean.
 
     Yields
     ------
@@ -960,6 +1060,7 @@ def render_frames(
         trail_seconds=trail_seconds,
         speed=speed,
         fps=fps,
+        legend=legend,
     )
     for canvas in frames:
         yield scene.to_rgb(canvas)
@@ -973,6 +1074,7 @@ def render_frame(
     zones: bool = False,
     follow: str | None = None,
     trail_seconds: float = 3.0,
+    legend: bool = True,
 ) -> np.ndarray:
     """One RGB frame of recorded sample ``k`` (default the last), as drawn in a GIF.
 
@@ -992,6 +1094,7 @@ def render_frame(
         follow=follow,
         trail_seconds=trail_seconds,
         step=1.0 / 25.0,
+        legend=legend,
     )
     return scene.to_rgb(scene.draw(int(k) % len(run.t)))
 
@@ -1006,6 +1109,7 @@ def write_gif(
     zones: bool = False,
     follow: str | None = None,
     trail_seconds: float = 3.0,
+    legend: bool = True,
 ) -> dict[str, Any]:
     """Write an animated GIF of ``run``, atomically.
 
@@ -1021,7 +1125,7 @@ def write_gif(
         Output file; its directory is created if needed.
     fps : float [1/s]
         ``0 < fps <= 50``; see the module docstring for delays.
-    size, speed, zones, follow, trail_seconds
+    size, speed, zones, follow, trail_seconds, legend
         As in :func:`render_frames`.
 
     Returns
@@ -1045,6 +1149,7 @@ def write_gif(
         trail_seconds=trail_seconds,
         speed=speed,
         fps=fps,
+        legend=legend,
     )
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
