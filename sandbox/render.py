@@ -192,6 +192,7 @@ class Camera:
         lo = np.asarray(lo, dtype=float)
         hi = np.asarray(hi, dtype=float)
         x0, y0, x1, y1 = _viewport(size, bands)
+        y1 = max(y1, y0 + 1.0)  # [px] bands taller than the frame: a one-pixel view
         extent = np.maximum(hi - lo, 1e-9)
         scale = float(min((x1 - x0) / extent[0], (y1 - y0) / extent[1]))
         mid = (lo + hi) / 2.0

@@ -23,6 +23,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 __all__ = [
     "LEGEND_NAMES_MAX",
+    "MAX_BANDS",
     "Bands",
     "LegendItem",
     "TextStamps",
@@ -34,6 +35,9 @@ __all__ = [
 
 #: Fleets up to this size are named vehicle by vehicle in the legend.
 LEGEND_NAMES_MAX = 12
+#: Largest fraction of a frame's height the text bands take; a legend that would need
+#: more is left out (small frames).
+MAX_BANDS = 0.4
 
 Font = ImageFont.ImageFont | ImageFont.FreeTypeFont
 
@@ -130,7 +134,8 @@ def frame_bands(size: int, items: Sequence[LegendItem]) -> Bands:
     """Lay out the bands of a frame ``size`` px wide with the legend ``items``.
 
     Items flow left to right and wrap onto new rows; the bottom band holds the scale
-    bar row and every legend row.
+    bar row and every legend row. When the bands would take more than
+    :data:`MAX_BANDS` of the frame's height, the legend is left out.
     """
     px = font_px(size)
     f = font(px)
@@ -148,7 +153,10 @@ def frame_bands(size: int, items: Sequence[LegendItem]) -> Bands:
         x += width + sep
     rows = [r for r in rows if r]
     top = line + 6
-    bottom = (line + 6) + len(rows) * (line + 3) + 3
+    bar = line + 6
+    bottom = bar + len(rows) * (line + 3) + 3
+    if top + bottom > MAX_BANDS * size:  # a small frame: no legend rather than no view
+        rows, bottom = [], bar + 3
     return Bands(size, px, line, top, bottom, tuple(tuple(r) for r in rows))
 
 

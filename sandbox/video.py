@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import math
 import os
+import subprocess
+import tempfile
 import uuid
 from pathlib import Path
 from typing import Any
@@ -28,7 +30,15 @@ from sandbox.errors import SandboxError
 from sandbox.render import _indexed_frames, frame_plan
 from sandbox.run import Run
 
-__all__ = ["MAX_MP4_FPS", "MP4_CRF", "VideoUnavailable", "video_available", "write_mp4"]
+__all__ = [
+    "MAX_MP4_FPS",
+    "MP4_CRF",
+    "VideoError",
+    "VideoUnavailable",
+    "require_video",
+    "video_available",
+    "write_mp4",
+]
 
 #: Highest frame rate :func:`write_mp4` accepts [1/s].
 MAX_MP4_FPS = 120.0
@@ -38,6 +48,10 @@ MP4_CRF = 18
 
 class VideoUnavailable(SandboxError):
     """MP4 output was asked for, but the optional ``imageio-ffmpeg`` is missing."""
+
+
+class VideoError(SandboxError):
+    """ffmpeg could not write the video (its last message says why)."""
 
 
 def video_available() -> bool:
@@ -92,6 +106,8 @@ def write_mp4(
     ------
     VideoUnavailable
         Without ``imageio-ffmpeg``.
+    VideoError
+        When ffmpeg fails (a full disk, say).
     ValueError
         On a frame rate out of range (and the renderer's own checks).
     """
@@ -118,37 +134,37 @@ def write_mp4(
     side = scene.size + scene.size % 2  # [px] yuv420p needs even sides
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    writer = imageio_ffmpeg.write_frames(
-        str(tmp),
-        (side, side),
-        fps=fps,
-        codec="libx264",
-        pix_fmt_out="yuv420p",
-        quality=None,
-        macro_block_size=1,
-        ffmpeg_log_level="error",
-        output_params=[
-            "-f", "mp4",
-            "-crf", str(MP4_CRF),
-            "-threads", "1",
-            "-fflags", "+bitexact",
-            "-flags:v", "+bitexact",
-            "-map_metadata", "-1",
-            "-movflags", "+faststart",
-        ],
-    )  # fmt: skip
+    command = [
+        imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-y",
+        "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{side}x{side}",
+        "-framerate", f"{fps:.12g}", "-i", "pipe:0",
+        "-an", "-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", str(MP4_CRF),
+        "-threads", "1", "-fflags", "+bitexact", "-flags:v", "+bitexact",
+        "-map_metadata", "-1", "-movflags", "+faststart", "-f", "mp4", str(tmp),
+    ]  # fmt: skip
     count = 0
-    try:
-        writer.send(None)  # start ffmpeg
-        frame = np.full((side, side, 3), 255, dtype=np.uint8)
-        for canvas in frames:
-            frame[: scene.size, : scene.size] = scene.to_rgb(canvas)
-            writer.send(frame.tobytes())
-            count += 1
-        writer.close()
-        os.replace(tmp, path)
-    except BaseException:
-        writer.close()
-        tmp.unlink(missing_ok=True)
-        raise
+    with tempfile.TemporaryFile() as log:
+        proc = subprocess.Popen(
+            command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log
+        )
+        try:
+            assert proc.stdin is not None
+            frame = np.full((side, side, 3), 255, dtype=np.uint8)
+            with proc.stdin:
+                for canvas in frames:
+                    frame[: scene.size, : scene.size] = scene.to_rgb(canvas)
+                    proc.stdin.write(frame.tobytes())
+                    count += 1
+            if proc.wait() != 0:
+                log.seek(0)
+                lines = log.read().decode("utf-8", "replace").strip().splitlines()
+                why = lines[-1] if lines else f"exit status {proc.returncode}"
+                raise VideoError(f"{path}: ffmpeg failed: {why}")
+            os.replace(tmp, path)
+        except BaseException:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            tmp.unlink(missing_ok=True)
+            raise
     return {"frames": count, "duration": count / fps, "path": str(path)}

@@ -63,22 +63,46 @@ class StopFlag:
 
 
 def render_gif(run: Run, args: argparse.Namespace) -> None:
-    """Render ``run`` to ``args.gif`` (atomically: temporary file, then rename)."""
+    """Render ``run`` to ``args.gif`` and/or ``args.mp4`` (each atomically).
+
+    The camera is ``args.follow``: ``auto`` (the default: the gallery's automatic
+    camera, following the leader of a run spread along a line), ``leader`` or
+    ``whole`` (frame the whole run).
+    """
     from sandbox.render import write_gif
 
-    try:
-        info = write_gif(
-            run,
-            Path(args.gif),
-            fps=args.fps,
-            size=args.size,
-            speed=args.speed,
-            zones=args.zones,
-            follow=args.follow,
+    follow = None if args.follow == "whole" else args.follow
+    options = {
+        "fps": args.fps,
+        "size": args.size,
+        "speed": args.speed,
+        "zones": args.zones,
+        "follow": follow,
+    }
+    outputs = [("gif", args.gif, write_gif)]
+    if getattr(args, "mp4", None):
+        from sandbox.video import write_mp4
+
+        outputs.append(("mp4", args.mp4, write_mp4))
+    for kind, target, write in outputs:
+        if not target:
+            continue
+        try:
+            info = write(run, Path(target), **options)
+        except ValueError as exc:  # an option the renderer refuses (fps, size, ...)
+            raise GifOptionError(f"--{kind} {target}: {exc}") from None
+        print(
+            f"{kind}: {info['path']} ({info['frames']} frames, "
+            f"{info['duration']:.1f} s)"
         )
-    except ValueError as exc:  # an option the renderer refuses (fps, size, ...)
-        raise GifOptionError(f"--gif {args.gif}: {exc}") from None
-    print(f"gif: {info['path']} ({info['frames']} frames, {info['duration']:.1f} s)")
+
+
+def check_mp4(args: argparse.Namespace) -> None:
+    """Before a run: refuse ``--mp4`` when MP4 output cannot work here."""
+    if getattr(args, "mp4", None):
+        from sandbox.video import require_video
+
+        require_video()
 
 
 class GifOptionError(SandboxError):
@@ -124,9 +148,15 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
     p.add_argument(
         "--follow",
-        choices=("leader",),
-        default=None,
-        help="camera follows the leader instead of framing the whole run",
+        choices=("auto", "leader", "whole"),
+        default="auto",
+        help="camera: auto (default: follow the leader of a run spread along a line, "
+        "else frame the whole run, as the gallery does), leader, or whole",
+    )
+    p.add_argument(
+        "--mp4",
+        metavar="OUT.mp4",
+        help="also write an MP4 video of the same frames (needs the extra 'video')",
     )
 
 

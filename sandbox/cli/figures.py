@@ -8,16 +8,25 @@ from pathlib import Path
 
 from sandbox.cli.common import (
     EXIT_FAILED,
+    EXIT_INVALID,
     EXIT_OK,
     add_gif_options,
     add_plugin_option,
+    check_mp4,
     render_gif,
 )
 from sandbox.output import load_run_dir
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    """``sandbox render RUN_DIR --gif PATH``: a GIF from a saved run."""
+    """``sandbox render RUN_DIR --gif PATH [--mp4 PATH]``: a GIF (and/or MP4)."""
+    if not (args.gif or args.mp4):
+        print(
+            "error: sandbox render: give --gif OUT.gif, --mp4 OUT.mp4 or both",
+            file=sys.stderr,
+        )
+        return EXIT_INVALID
+    check_mp4(args)
     run = load_run_dir(Path(args.run_dir))
     render_gif(run, args)
     return EXIT_OK
@@ -67,9 +76,9 @@ def _dpi(text: str) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``render``, ``gallery`` and ``plot`` commands."""
-    p = sub.add_parser("render", help="render a saved run to a GIF")
-    p.add_argument("run_dir")
-    p.add_argument("--gif", required=True, help="output GIF file")
+    p = sub.add_parser("render", help="render a saved run to a GIF or an MP4")
+    p.add_argument("run_dir", help="a run directory written by sandbox run")
+    p.add_argument("--gif", help="output GIF file")
     add_gif_options(p)
     add_plugin_option(p)
     p.set_defaults(func=cmd_render)

@@ -13,6 +13,7 @@ from sandbox.cli.common import (
     StopFlag,
     add_gif_options,
     add_plugin_option,
+    check_mp4,
     progress_printer,
     render_gif,
 )
@@ -33,6 +34,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"warning: {line}", file=sys.stderr)
     out_dir = Path(args.out) if args.out else Path("runs") / scenario.name
     check_out_dir(out_dir)  # before simulating: refuse early, not after a long run
+    check_mp4(args)
     # SIGINT/SIGTERM only raise the flag until the outputs are written: the run stops
     # at the next step and its outputs so far are still written whole (atomically).
     with StopFlag() as stop:
@@ -48,7 +50,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             f"{args.gif} renders what was simulated)",
             file=sys.stderr,
         )
-    elif args.gif:
+    elif args.gif or args.mp4:
         render_gif(run, args)
     if run.status == STATUS_DIVERGED:
         d = metrics.get("diverged", {})
