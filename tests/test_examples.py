@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
+import re
 import subprocess
 import sys
 
@@ -71,3 +73,77 @@ def test_a_random_policy_does_worse_than_the_scenarios_own_laws() -> None:
     assert agents == {"red", "green", "orange"}
     for agent in agents:
         assert returns["zero", agent] > returns["random", agent]
+
+
+# ------------------------------------------------------------ a strategy plug-in
+def sandbox_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "sandbox", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=REPO,
+    )
+
+
+def test_the_keep_right_plug_in_is_selected_from_yaml_and_avoids_the_collision(
+    tmp_path,
+) -> None:
+    scenario = str(EXAMPLES / "keep_right.yaml")
+    for label, extra in (("kr", []), ("none", ["--set", "recovery.strategy=none"])):
+        done = sandbox_cli(
+            "run", scenario, "--duration", "8", "--out", str(tmp_path / label), *extra
+        )
+        assert done.returncode == 0, done.stderr
+    kr = json.loads((tmp_path / "kr" / "metrics.json").read_text())
+    none = json.loads((tmp_path / "none" / "metrics.json").read_text())
+    assert kr["collisions"]["total"] == 0 and none["collisions"]["total"] >= 1
+    assert kr["min_distance"] > 0.5  # d = 0.5 m: never in contact
+    assert kr["vehicles"]["orange"]["mode_switches"] > 0  # it did yield
+    listed = sandbox_cli("plugins", "--plugin", str(EXAMPLES / "keep_right.py"))
+    assert listed.returncode == 0, listed.stderr
+    assert "keep_right" in listed.stdout
+    assert re.search(r"radius: length, default 3d \[m\]", listed.stdout)
+    bad = sandbox_cli("validate", scenario, "--set", "recovery.gain=-1")
+    assert bad.returncode == 2 and "recovery.gain" in bad.stderr
+
+
+@pytest.fixture
+def keep_right():
+    from sandbox import plugins
+
+    module = load_example("keep_right")
+    yield module.keep_right
+    plugins.unregister("strategy", "keep_right")
+
+
+def test_keep_right_yields_to_the_right_of_what_is_ahead_only(keep_right) -> None:
+    from sandbox.plugins import StrategyContext
+
+    # a at the origin heading +x1, b 1 m ahead heading -x1 (head-on), c 1 m behind a.
+    pos = np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0]])
+    ctx = StrategyContext(
+        t=0.0,
+        dt=0.01,
+        pos=pos,
+        theta=np.array([0.0, np.pi, 0.0]),
+        vel=np.zeros((3, 2)),
+        slot=pos.copy(),
+        diameter=np.full(3, 0.5),
+        may_avoid=np.ones(3, dtype=bool),
+        failed=np.zeros(3, dtype=bool),
+        params={"radius": 1.5, "gain": 1.0},
+        R=1.5,
+        obstacle_field=None,
+    )
+    shift, active = keep_right(ctx)
+    # 1 m away within 1.5 m: 1.5 x (1 - 1 / 1.5) = 0.5 m to each one's right.
+    np.testing.assert_allclose(shift[0], [0.0, -0.5], atol=1e-12)  # right of +x1
+    np.testing.assert_allclose(shift[1], [0.0, 0.5], atol=1e-12)  # right of -x1
+    # c has a ahead of it, 1 m: it yields too; a ignores c behind it (b is nearer).
+    np.testing.assert_allclose(shift[2], [0.0, -0.5], atol=1e-12)
+    assert active.tolist() == [True, True, True]
+    ctx.pos = np.array([[0.0, 0.0], [-1.0, 0.0], [5.0, 5.0]])  # b behind a, c far
+    ctx.theta = np.zeros(3)
+    shift, active = keep_right(ctx)
+    assert active.tolist() == [False, True, False]
