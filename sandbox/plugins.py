@@ -40,10 +40,50 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.contexts import (
+    DetectorContext,
+    FailureContext,
+    FilterContext,
+    LawContext,
+    ObstacleContext,
+    ReferenceContext,
+    StrategyContext,
+)
 from sandbox.errors import SandboxError
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "KINDS",
+    "REQUIRED",
+    "DetectorContext",
+    "FailureContext",
+    "FilterContext",
+    "LawContext",
+    "ObstacleContext",
+    "Param",
+    "Plugin",
+    "PluginError",
+    "ReferenceContext",
+    "StrategyContext",
+    "get",
+    "load_entry_points",
+    "load_plugin",
+    "load_plugins",
+    "make_law",
+    "names",
+    "register_detector",
+    "register_failure",
+    "register_law",
+    "register_obstacle",
+    "register_reference",
+    "register_strategy",
+    "registry",
+]
 
 #: A parameter without a default: the key must be given.
 REQUIRED: Any = type("Required", (), {"__repr__": lambda self: "REQUIRED"})()
+#: Where a law lays out a generated platoon's offsets (``register_law(frame=...)``).
+LAW_FRAMES = ("leader", "world", "reference", "leader_reference")
 #: Entry-point group of installed plug-in packages.
 ENTRY_POINT_GROUP = "sandbox.plugins"
 #: Parameter types a declaration may name.
@@ -442,6 +482,7 @@ def register_law(
     *,
     needs_leader: bool | None = None,
     needs_reference: bool | None = None,
+    frame: str = "leader",
     doc: str | None = None,
     check: Callable | None = None,
 ) -> Callable[[Any], Any]:
@@ -456,7 +497,17 @@ def register_law(
     needs_leader, needs_reference : bool, optional
         Whether the law needs a vehicle with ``leader: true`` / a ``reference``
         (default: the class's attributes; for a function, a leader and no reference).
+        A law without a leader has every vehicle follow its slot; with one, the
+        leader tracks the reference itself.
+    frame : str
+        Where the offsets of a generated ``platoon`` are laid out at t = 0:
+        ``leader`` (around the leader, in its frame), ``world`` (around the leader,
+        in the world frame), ``reference`` (around the reference's start, turned by
+        its tangent with ``rotate``) or ``leader_reference`` (around the leader,
+        turned by the reference's tangent with ``rotate``).
     """
+    if frame not in LAW_FRAMES:
+        raise ValueError(f"law {name!r}: frame {frame!r} is not one of {LAW_FRAMES}")
 
     def add(obj: Any) -> Any:
         lead = needs_leader
@@ -476,6 +527,7 @@ def register_law(
             check=check,
             needs_leader=lead,
             needs_reference=ref,
+            frame=frame,
         )(obj)
 
     return add
@@ -597,247 +649,6 @@ def register_detector(
     kind is declared for the detection features; only ``none`` is built in.
     """
     return register("detector", name, params, doc=doc, check=check)
-
-
-# ------------------------------------------------------------------------- contexts
-@dataclass
-class StrategyContext:
-    """What a recovery strategy sees at one control step.
-
-    Attributes
-    ----------
-    t, dt : float [s]
-        Time and control period.
-    pos : ndarray (n, 2) [m]
-    theta : ndarray (n,) [rad]
-    vel : ndarray (n, 2) [m/s]
-        Measured positions, headings and velocities.
-    slot : ndarray (n, 2) [m]
-        The law's slot of each vehicle (NaN for open-loop vehicles).
-    diameter : ndarray (n,) [m]
-    may_avoid : ndarray (n,) bool
-        Vehicles allowed to avoid (not the leader unless ``leader_avoids``, not failed,
-        not open loop).
-    failed : ndarray (n,) bool
-        Vehicles with an active failure.
-    params : dict
-        The strategy's YAML values (lengths in metres, defaults filled in).
-    R : float [m]
-        The safe-zone radius ``recovery.R`` (the radius of the neighbour index).
-    obstacle_field : ObstacleField
-        The static obstacles.
-    """
-
-    t: float
-    dt: float
-    pos: np.ndarray
-    theta: np.ndarray
-    vel: np.ndarray
-    slot: np.ndarray
-    diameter: np.ndarray
-    may_avoid: np.ndarray
-    failed: np.ndarray
-    params: dict[str, Any]
-    R: float
-    obstacle_field: Any
-    neighbours: Any = None
-
-    @property
-    def n(self) -> int:
-        """Number of vehicles."""
-        return len(self.pos)
-
-    def pairs(self, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Vehicle pairs closer than ``radius`` [m]: ``(i, j, dist)``, ``i < j``.
-
-        From the neighbour index (kept between steps) when ``radius <= R``, else a
-        fresh search. Sorted by ``(i, j)``; ``dist`` (m,) [m] centre to centre.
-        """
-        i, j, rel = self._near(radius)
-        return i, j, np.sqrt(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1])
-
-    def _near(self, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        from sandbox.recovery import neighbour_pairs
-
-        if self.neighbours is not None and radius <= self.neighbours.radius:
-            i, j, rel = self.neighbours.near(self.pos)
-            if radius < self.neighbours.radius:
-                d2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
-                keep = np.flatnonzero(d2 < radius * radius)
-                i, j, rel = i.take(keep), j.take(keep), np.take(rel, keep, axis=0)
-            return i, j, rel
-        i, j = neighbour_pairs(self.pos, radius)
-        order = np.lexsort((j, i))
-        i, j = i[order].astype(np.intp), j[order].astype(np.intp)
-        return i, j, self.pos[i] - self.pos[j]
-
-    def obstacles(
-        self, radius: float
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Vehicle-obstacle pairs closer than ``radius`` [m] to the surface.
-
-        Returns
-        -------
-        i : ndarray (m,) int
-            Vehicle.
-        k : ndarray (m,) int
-            Obstacle, its index in the scenario's ``obstacles`` list.
-        dist : ndarray (m,) [m]
-            Distance from the vehicle's centre to the obstacle's surface, negative
-            inside it.
-        away : ndarray (m, 2)
-            Unit vector from the nearest surface point toward the vehicle (out of the
-            obstacle when the centre is inside).
-        """
-        field_ = self.obstacle_field
-        if field_ is None or field_.empty:
-            empty = np.zeros(0, dtype=np.intp)
-            return empty, empty, np.zeros(0), np.zeros((0, 2))
-        rows, cols = field_.candidates(self.pos, radius)
-        signed, point = field_.pair_distance(self.pos, rows, cols)
-        keep = np.flatnonzero(signed < radius)
-        rows, cols, signed = rows[keep], cols[keep], signed[keep]
-        rel = (self.pos[rows] - point[keep]) * np.where(signed < 0, -1.0, 1.0)[:, None]
-        norm = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), 1e-12)
-        return rows, field_.order[cols], signed, rel / norm[:, None]
-
-
-@dataclass
-class LawContext:
-    """What a formation law sees at one control step.
-
-    Attributes
-    ----------
-    t, dt : float [s]
-    pos : ndarray (n, 2) [m]
-    theta : ndarray (n,) [rad]
-    vel : ndarray (n, 2) [m/s]
-    offset : ndarray (n, 2) [m]
-        The vehicles' ``offset`` (delta1, delta2).
-    leader : int
-        Index of the leader, -1 if none.
-    leader_pos : ndarray (2,) [m] or None
-    leader_theta : float [rad] or None
-    reference : tuple of ndarray (2,) or None
-        ``(p, p', p'')`` of the reference at ``t``.
-    params : dict
-        The law's YAML values.
-    memory : dict
-        Kept from one step to the next (for a law's own estimates).
-    """
-
-    t: float
-    dt: float
-    pos: np.ndarray
-    theta: np.ndarray
-    vel: np.ndarray
-    offset: np.ndarray
-    leader: int
-    leader_pos: np.ndarray | None
-    leader_theta: float | None
-    reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None
-    params: dict[str, Any]
-    memory: dict[str, Any]
-
-
-@dataclass
-class FailureContext:
-    """What a failure kind sees for one failed vehicle at one control step.
-
-    Attributes
-    ----------
-    t : float [s]
-    since : float [s]
-        Time since the failure's onset.
-    vehicle : str
-        Name of the vehicle.
-    index : int
-        Its index in the fleet.
-    v1, v2 : float [m/s], [rad/s]
-        The controller's commands this step.
-    v2_onset : float [rad/s]
-        The steering command at onset.
-    params : dict
-        The failure's YAML values.
-    """
-
-    t: float
-    since: float
-    vehicle: str
-    index: int
-    v1: float
-    v2: float
-    v2_onset: float
-    params: dict[str, Any]
-
-
-@dataclass
-class ReferenceContext:
-    """What a reference function sees: ``t`` (float or array [s]) and its params."""
-
-    t: Any
-    params: dict[str, Any]
-
-
-@dataclass
-class ObstacleContext:
-    """What an obstacle type sees: its ``name`` and its YAML values ``params``."""
-
-    name: str
-    params: dict[str, Any]
-
-
-@dataclass
-class FilterContext:
-    """What a safety filter sees at one control step.
-
-    Attributes
-    ----------
-    t, dt : float [s]
-    pos, theta, vel : ndarray
-        As for :class:`StrategyContext`.
-    v1, v2 : ndarray (n,) [m/s], [rad/s]
-        The commands about to be applied.
-    diameter : ndarray (n,) [m]
-    params : dict
-    """
-
-    t: float
-    dt: float
-    pos: np.ndarray
-    theta: np.ndarray
-    vel: np.ndarray
-    v1: np.ndarray
-    v2: np.ndarray
-    diameter: np.ndarray
-    params: dict[str, Any]
-
-
-@dataclass
-class DetectorContext:
-    """What a failure detector sees at one control step.
-
-    Attributes
-    ----------
-    t, dt : float [s]
-    pos, theta, vel : ndarray
-        Measured states.
-    v1, v2 : ndarray (n,)
-        The commands the controller asked for.
-    params : dict
-    memory : dict
-        Kept from one step to the next.
-    """
-
-    t: float
-    dt: float
-    pos: np.ndarray
-    theta: np.ndarray
-    vel: np.ndarray
-    v1: np.ndarray
-    v2: np.ndarray
-    params: dict[str, Any]
-    memory: dict[str, Any]
 
 
 @register_filter("none")

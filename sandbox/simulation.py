@@ -129,7 +129,7 @@ class Simulation:
         self.tracks_reference = np.zeros(n, dtype=bool)
         if self.law is None:
             self.tracks_reference[:] = True
-        elif law_spec.law != "virtual" and self.leader >= 0:
+        elif get("law", law_spec.law).options["needs_leader"] and self.leader >= 0:
             self.tracks_reference[self.leader] = True
         self.tracks_reference &= ~self.fleet.commanded
         self._schedules = {

@@ -17,7 +17,10 @@ def _param_text(key: str, p) -> str:  # noqa: ANN001 - a sandbox.plugins.Param
     if isinstance(default, tuple):
         default = list(default)
     bits = [f"{key}: {p.type}"]
-    bits.append("required" if p.default is REQUIRED else f"default {default}")
+    if p.default is REQUIRED:
+        bits.append("required")
+    else:
+        bits.append("optional" if default is None else f"default {default}")
     if p.unit:
         bits.append(f"[{p.unit}]")
     if p.bounds_text():

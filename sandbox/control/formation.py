@@ -144,7 +144,7 @@ ROTATE = Param(
 )
 
 
-@register_law("fixed")
+@register_law("fixed", frame="world")
 class FixedFormation(FormationLaw):
     """Section 3.2, eqs. (7)-(9): world-frame offsets, leader derivatives estimated."""
 
@@ -171,7 +171,7 @@ class RotatingFormation(FixedFormation):
         return slot, np.broadcast_to(v, slot.shape), np.broadcast_to(a, slot.shape)
 
 
-@register_law("virtual", {"rotate": ROTATE})
+@register_law("virtual", {"rotate": ROTATE}, frame="reference")
 class VirtualLeaderFormation(FormationLaw):
     """Section 3.4, eqs. (13)-(15): each vehicle tracks the reference + its offset."""
 
@@ -185,7 +185,7 @@ class VirtualLeaderFormation(FormationLaw):
         return slot, np.broadcast_to(dp, slot.shape), np.broadcast_to(ddp, slot.shape)
 
 
-@register_law("leader_ref", {"rotate": ROTATE})
+@register_law("leader_ref", {"rotate": ROTATE}, frame="leader_reference")
 class LeaderReferenceFormation(FormationLaw):
     """Section 3.4, eq. (16): around the real leader, reference derivatives."""
 

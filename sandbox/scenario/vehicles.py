@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox import plugins
 from sandbox.control.flatness import (
     Gains,
 )
@@ -423,7 +424,8 @@ def _platoon_frame(
     """Where a platoon's slots are at t = 0, as its formation law defines them.
 
     Returns ``(x, y, angle, heading)``: the point the offsets are added to [m], the
-    angle they are turned by [rad], and the heading the vehicles start with [rad]:
+    angle they are turned by [rad], and the heading the vehicles start with [rad], by
+    the ``frame`` the law registered with (:func:`sandbox.plugins.register_law`):
 
     - ``fixed``: the leader, offsets in the world frame (eq. (7));
     - ``rotating``, ``own_estimate``: the leader, offsets in its frame (eqs. (10),
@@ -445,14 +447,16 @@ def _platoon_frame(
         x, y, heading = float(ref[0][0]), float(ref[0][1]), tangent
     else:
         x, y, heading = 0.0, 0.0, 0.0
-    law = formation.law if formation is not None else None
+    frame = "leader"
+    if formation is not None:
+        frame = plugins.get("law", formation.law).options["frame"]
     rotate = formation is not None and formation.rotate
-    if law == "virtual" and ref is not None:
+    if frame == "reference" and ref is not None:
         x, y, heading = float(ref[0][0]), float(ref[0][1]), tangent
         return x, y, tangent if rotate else 0.0, heading
-    if law == "fixed":
+    if frame == "world":
         return x, y, 0.0, heading
-    if law == "leader_ref":
+    if frame == "leader_reference":
         return x, y, tangent if rotate and ref is not None else 0.0, heading
     return x, y, heading, heading
 
