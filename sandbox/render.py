@@ -1,12 +1,17 @@
 """Headless animation of a recorded run: frames in memory and animated GIFs.
 
-This is the only module that draws frames. It reads a :class:`sandbox.run.Run` and
-never touches the simulation. Frames are drawn with Pillow's ``ImageDraw`` (and, for
-large fleets, vectorized numpy stamps of the bodies) on a canvas of palette indices:
-every colour a frame can contain is known before drawing starts (white, black, greys,
-orange, red, each vehicle's colour and a few paler shades of it for trails), so no
-per-frame quantization is needed and the GIF palette is exact. Drawing is not
-antialiased (that would need blended colours outside the palette).
+This module and its helpers are the only ones that draw frames: the camera and framing
+(:mod:`sandbox.render_camera`), the palette and drawing primitives
+(:mod:`sandbox.render_palette`), the text bands (:mod:`sandbox.render_overlay`: the
+heads-up line, the scale bar and the legend strip) and the GIF encoder
+(:mod:`sandbox.gif_stream`); :mod:`sandbox.video` writes the same frames as MP4. They
+read a :class:`sandbox.run.Run` and never touch the simulation. Frames are drawn with
+Pillow's ``ImageDraw`` (and, for large fleets, vectorized numpy stamps of the bodies) on
+a canvas of palette indices: every colour a frame can contain is known before drawing
+starts (white, black, greys, orange, red, blue, each vehicle's colour and a few paler
+shades of it for trails), so no per-frame quantization is needed and the GIF palette is
+exact. Drawing is not antialiased (that would need blended colours outside the
+palette).
 
 Timing
 ------
@@ -38,30 +43,53 @@ from __future__ import annotations
 
 import math
 import os
-import struct
 import uuid
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
-import imageio.v3 as iio
 import numpy as np
-from numpy.typing import ArrayLike
-from PIL import Image, ImageColor, ImageDraw
+from PIL import Image, ImageDraw
 
+from sandbox.gif_stream import GifStream as _GifStream
+from sandbox.render_camera import (
+    AUTO_FOLLOW_ASPECT,
+    LARGE_FLEET,
+    Camera,
+    _follow_track,
+    _obstacles,
+    _reference_path,
+    _run_bands,
+    auto_follow,
+    resolve_follow,
+)
 from sandbox.render_overlay import (
-    LEGEND_NAMES_MAX,
-    Bands,
-    LegendItem,
     TextStamps,
     draw_bottom_band,
-    frame_bands,
+)
+from sandbox.render_palette import (
+    BLACK,
+    BLUE,
+    OBSTACLE,
+    OBSTACLE_EDGE,
+    ORANGE,
+    PATH,
+    RED,
+    WHITE,
+    ZONE,
+    _build_palette,
+    _dashes,
+    _flat,
+    _nice_length,
+    _stamp_discs,
 )
 from sandbox.run import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, Run
 
 __all__ = [
+    "AUTO_FOLLOW_ASPECT",
     "Camera",
+    "auto_follow",
     "FramePlan",
     "LARGE_FLEET",
     "frame_plan",
@@ -69,8 +97,6 @@ __all__ = [
     "write_gif",
 ]
 
-#: Fleets larger than this are drawn without trails, slot marks and zones.
-LARGE_FLEET = 100
 #: How long a collision flash stays visible [s] (simulated; at least 1.5 frames).
 COLLISION_FLASH = 0.3
 #: Highest frame rate :func:`write_gif` accepts [1/s] (browsers slow delays < 20 ms).
@@ -78,310 +104,9 @@ MAX_GIF_FPS = 50.0
 #: Frames encoded per imageio call in :func:`write_gif` (bounds memory on long runs).
 GIF_CHUNK = 128
 
-_MARGIN = 0.04  # fraction of the image size kept free around the content
-_TRAIL_LEVELS = 4  # fading steps of a trail
-_TRAIL_FADE = (0.2, 0.45, 0.65, 0.82)  # blend toward white of each step, newest first
 _TRAIL_POINTS = 40  # at most about this many points per trail
 _DASH_PX = (8.0, 6.0)  # reference path: dash and gap lengths [px]
 _MIN_DETAIL_PX = 3.0  # bodies smaller than this radius [px] get no edge nor heading
-
-# Fixed palette entries (indices); vehicle colours follow.
-WHITE, BLACK, OBSTACLE, OBSTACLE_EDGE, PATH, ORANGE, RED, ZONE, BLUE = range(9)
-_BASE_COLORS = (
-    (255, 255, 255),  # WHITE: background
-    (0, 0, 0),  # BLACK: heading lines, edges, failure marks, text
-    (175, 175, 175),  # OBSTACLE: fill
-    (110, 110, 110),  # OBSTACLE_EDGE
-    (128, 128, 128),  # PATH: reference path and reference point
-    (255, 140, 0),  # ORANGE: avoidance mode
-    (225, 0, 0),  # RED: collision flashes
-    (200, 200, 200),  # ZONE: avoidance radii of vehicles not avoiding
-    (0, 120, 255),  # BLUE: external mode (driven through Simulation.step)
-)
-_FALLBACK_COLORS = (
-    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd",
-    "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf",
-)  # fmt: skip
-
-
-# ---------------------------------------------------------------------------- camera
-@dataclass(frozen=True)
-class Camera:
-    """Map from world coordinates [m] (y up) to pixel coordinates (y down).
-
-    Pixel coordinates are continuous: pixel ``(col, row)`` covers ``[col, col + 1) x
-    [row, row + 1)``, so the pixel containing a world point is ``floor`` of its pixel
-    coordinates. One metre is ``scale`` pixels along both axes (1:1 aspect).
-
-    Attributes
-    ----------
-    center : tuple of float [m]
-        World point drawn at ``anchor``.
-    scale : float [px/m]
-    size : int [px]
-        Width and height of the (square) image.
-    anchor : tuple of float [px]
-        Pixel coordinates of ``center``.
-
-    Examples
-    --------
-    >>> cam = Camera(center=(0.0, 0.0), scale=10.0, size=100, anchor=(50.0, 50.0))
-    >>> cam.world_to_pixel([1.0, 2.0]).tolist()
-    [60.0, 30.0]
-    >>> cam.pixel_to_world([60.0, 30.0]).tolist()
-    [1.0, 2.0]
-    """
-
-    center: tuple[float, float]
-    scale: float
-    size: int
-    anchor: tuple[float, float]
-
-    def world_to_pixel(self, xy: ArrayLike) -> np.ndarray:
-        """Pixel coordinates of world points.
-
-        Parameters
-        ----------
-        xy : array_like, shape (..., 2) [m]
-
-        Returns
-        -------
-        ndarray, shape (..., 2) [px]
-            Column then row, as floats.
-        """
-        xy = np.asarray(xy, dtype=float)
-        col = self.anchor[0] + (xy[..., 0] - self.center[0]) * self.scale
-        row = self.anchor[1] - (xy[..., 1] - self.center[1]) * self.scale
-        return np.stack((col, row), axis=-1)
-
-    def pixel_to_world(self, px: ArrayLike) -> np.ndarray:
-        """World coordinates of pixel points, the inverse of :meth:`world_to_pixel`.
-
-        Parameters
-        ----------
-        px : array_like, shape (..., 2) [px]
-
-        Returns
-        -------
-        ndarray, shape (..., 2) [m]
-        """
-        px = np.asarray(px, dtype=float)
-        x = self.center[0] + (px[..., 0] - self.anchor[0]) / self.scale
-        y = self.center[1] - (px[..., 1] - self.anchor[1]) / self.scale
-        return np.stack((x, y), axis=-1)
-
-    def centered_on(self, center: ArrayLike) -> Camera:
-        """Return this camera moved so that ``center`` [m] is drawn at the anchor."""
-        c = np.asarray(center, dtype=float)
-        return Camera((float(c[0]), float(c[1])), self.scale, self.size, self.anchor)
-
-    @classmethod
-    def fit(
-        cls,
-        lo: ArrayLike,
-        hi: ArrayLike,
-        size: int,
-        bands: tuple[int, int] = (16, 18),
-    ) -> Camera:
-        """Camera showing the world box ``[lo, hi]`` [m] whole, with a margin.
-
-        The box is centred in the viewport, the part of the image below the heads-up
-        band and above the bottom band (scale bar and legend), ``bands = (top,
-        bottom)`` [px] high.
-        """
-        lo = np.asarray(lo, dtype=float)
-        hi = np.asarray(hi, dtype=float)
-        x0, y0, x1, y1 = _viewport(size, bands)
-        y1 = max(y1, y0 + 1.0)  # [px] bands taller than the frame: a one-pixel view
-        extent = np.maximum(hi - lo, 1e-9)
-        scale = float(min((x1 - x0) / extent[0], (y1 - y0) / extent[1]))
-        mid = (lo + hi) / 2.0
-        return cls(
-            (float(mid[0]), float(mid[1])), scale, size, ((x0 + x1) / 2, (y0 + y1) / 2)
-        )
-
-    @classmethod
-    def for_run(
-        cls,
-        run: Run,
-        size: int = 640,
-        follow: str | None = None,
-        legend: bool = True,
-    ) -> Camera:
-        """Build the camera of the first frame of ``run``.
-
-        Parameters
-        ----------
-        run : Run
-        size : int [px]
-        follow : {None, "auto", "leader"} or str
-            ``None``: the whole run is framed (every pose, the reference path and the
-            obstacles) and the camera never moves. ``"leader"`` or a vehicle name: a
-            window centred on that vehicle (the fleet centroid when ``"leader"`` is
-            asked of a run without leader), 1.3 times as wide as the initial formation;
-            :func:`render_frames` recentres it on every frame. ``"auto"``: the choice
-            of :func:`auto_follow` (``"leader"`` for a run spread along a line).
-        legend : bool
-            Whether the frame has a legend strip (the viewport leaves room for it).
-
-        Returns
-        -------
-        Camera
-        """
-        follow = resolve_follow(run, follow)
-        pos = run.pose[:, :, :2]
-        reach = float(np.max(run.diameter, initial=0.0)) / 2.0
-        bands = _run_bands(run, size, legend)
-        edges = (bands.top, bands.bottom)
-        if follow is None:
-            lo, hi = _content_bounds(run, reach)
-            return cls.fit(lo, hi, size, edges)
-        track = _follow_track(run, follow)
-        first = pos[0][np.isfinite(pos[0]).all(axis=1)]
-        spread = float(np.max(np.linalg.norm(first - track[0], axis=1), initial=0.0))
-        width = max(1.3 * 2.0 * (spread + reach), 10.0 * reach, 1e-3)  # [m]
-        c = track[0]
-        return cls.fit(c - width / 2, c + width / 2, size, edges)
-
-
-#: Above this ratio of the sides of the area a run covers, ``follow="auto"`` follows
-#: the leader.
-AUTO_FOLLOW_ASPECT = 2.5
-
-
-def auto_follow(run: Run) -> str | None:
-    """The automatic camera: ``"leader"`` for a run spread along a line, else None.
-
-    A run whose covered area (every pose, plus a vehicle diameter) is more than
-    :data:`AUTO_FOLLOW_ASPECT` times longer than wide, and that has a leader, would be
-    drawn tiny in a square frame holding all of it (a platoon on a straight
-    reference): the camera follows the leader instead. Otherwise the whole run is
-    framed.
-    """
-    if run.leader < 0:
-        return None
-    box = _finite_box(run.pose[:, :, :2])
-    if box is None:
-        return None
-    extent = box[1] - box[0] + float(np.max(run.diameter, initial=0.0))
-    return "leader" if extent.max() > AUTO_FOLLOW_ASPECT * extent.min() else None
-
-
-def resolve_follow(run: Run, follow: str | None) -> str | None:
-    """``follow`` with ``"auto"`` replaced by the choice of :func:`auto_follow`."""
-    return auto_follow(run) if follow == "auto" else follow
-
-
-def _viewport(
-    size: int, bands: tuple[int, int] = (16, 18)
-) -> tuple[float, float, float, float]:
-    """Pixel box ``(x0, y0, x1, y1)`` the world content is fitted into."""
-    pad = _MARGIN * size
-    return pad, bands[0] + pad, size - pad, size - bands[1] - pad
-
-
-def _legend_items(run: Run, body: np.ndarray, large: bool) -> list[LegendItem]:
-    """The legend strip of ``run``: its vehicles, then the marks its frames show."""
-    if run.n_vehicles <= LEGEND_NAMES_MAX:
-        items = [
-            LegendItem("vehicle", name, int(body[i]))
-            for i, name in enumerate(run.names)
-        ]
-    else:
-        items = [LegendItem("vehicle", f"{run.n_vehicles} vehicles", int(body[0]))]
-    mode = np.asarray(run.mode)
-    if _reference_path(run) is not None:
-        items.append(LegendItem("reference", "reference"))
-    if not large:
-        items.append(LegendItem("slot", "slot"))
-    if (mode == MODE_AVOID).any():
-        items.append(LegendItem("avoid", "avoiding"))
-    if (mode == MODE_EXTERNAL).any():
-        items.append(LegendItem("external", "external command"))
-    if np.asarray(run.failed, dtype=bool).any() or (mode == MODE_FAILED).any():
-        items.append(LegendItem("failed", "failed"))
-    if len(run.events):
-        items.append(LegendItem("collision", "collision"))
-    return items
-
-
-def _run_bands(run: Run, size: int, legend: bool) -> Bands:
-    """Layout of the text bands of ``run``'s frames (no legend rows without legend)."""
-    if not legend:
-        return frame_bands(int(size), [])
-    _, body, _ = _build_palette(run.colors)
-    return frame_bands(
-        int(size), _legend_items(run, body, run.n_vehicles > LARGE_FLEET)
-    )
-
-
-def _content_bounds(run: Run, reach: float) -> tuple[np.ndarray, np.ndarray]:
-    """World bounding box [m] of poses, reference path and obstacles."""
-    boxes = [_finite_box(run.pose[:, :, :2]), _finite_box(run.reference)]
-    path = _reference_path(run)
-    if path is not None:
-        boxes.append(_finite_box(path))
-    for kind, geom in _obstacles(run):
-        if kind == "circle":
-            (cx, cy), r = geom
-            boxes.append((np.array([cx - r, cy - r]), np.array([cx + r, cy + r])))
-        else:
-            boxes.append(_finite_box(geom))
-    found = [b for b in boxes if b is not None]
-    if found:
-        lo = np.min([b[0] for b in found], axis=0) - reach
-        hi = np.max([b[1] for b in found], axis=0) + reach
-    else:
-        lo, hi = np.full(2, -reach), np.full(2, reach)
-    side = max(float(np.max(hi - lo)), 8.0 * reach, 0.5)  # [m] never a degenerate box
-    half = np.maximum((hi - lo) / 2.0, side / 2.0)
-    mid = (lo + hi) / 2.0
-    return mid - half, mid + half
-
-
-def _finite_box(points: ArrayLike) -> tuple[np.ndarray, np.ndarray] | None:
-    """Bounding box ``(lo, hi)`` of the finite points of an array (..., 2), or None.
-
-    Reads a large (possibly memory-mapped) array a block of samples at a time.
-    """
-    arr = np.asarray(points, dtype=float)
-    arr = arr.reshape(len(arr), -1, 2) if arr.ndim >= 2 else arr.reshape(1, -1, 2)
-    step = max(1, 1_000_000 // max(arr.shape[1], 1))
-    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
-    for start in range(0, len(arr), step):
-        block = arr[start : start + step].reshape(-1, 2)
-        block = block[np.isfinite(block).all(axis=1)]
-        if len(block):
-            lo = np.minimum(lo, block.min(axis=0))
-            hi = np.maximum(hi, block.max(axis=0))
-    return (lo, hi) if np.isfinite(lo).all() else None
-
-
-def _follow_track(run: Run, follow: str) -> np.ndarray:
-    """Point the camera follows at each sample, shape (T, 2) [m]."""
-    pos = run.pose[:, :, :2]
-    if follow == "leader" and run.leader >= 0:
-        track = pos[:, run.leader].copy()
-    elif follow == "leader":
-        alive = np.isfinite(pos).all(axis=2) & ~np.asarray(run.failed, dtype=bool)
-        count = alive.sum(axis=1)
-        total = np.where(alive[..., None], pos, 0.0).sum(axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            track = total / count[:, None]
-    elif follow in run.names:
-        track = pos[:, run.names.index(follow)].copy()
-    else:
-        raise ValueError(
-            f"follow: expected None, 'auto', 'leader' or a vehicle name in "
-            f"{run.names}, got {follow!r}"
-        )
-    # Hold the last finite point where the followed point is undefined.
-    good = np.isfinite(track).all(axis=1)
-    if not good.any():
-        return np.zeros_like(track)
-    last = np.maximum.accumulate(np.where(good, np.arange(len(track)), -1))
-    last[last < 0] = int(np.argmax(good))
-    return track[last]
 
 
 # ---------------------------------------------------------------------------- timing
@@ -455,210 +180,6 @@ def frame_plan(run: Run, fps: float = 25.0, speed: float = 1.0) -> FramePlan:
 
 
 # ---------------------------------------------------------------------------- scene
-def _reference_path(run: Run) -> np.ndarray | None:
-    """Return the reference path (m, 2) [m]: ``info["reference_path"]`` or samples."""
-    raw = run.info.get("reference_path") if isinstance(run.info, dict) else None
-    pts = None
-    if raw is not None:
-        arr = np.asarray(raw, dtype=float)
-        if arr.ndim == 2 and arr.shape[1] == 2:
-            pts = arr
-    if pts is None:
-        pts = np.asarray(run.reference, dtype=float).reshape(-1, 2)
-    pts = pts[np.isfinite(pts).all(axis=1)]
-    return pts if len(pts) >= 2 else None
-
-
-def _obstacles(run: Run) -> list[tuple[str, Any]]:
-    """List obstacles as ``("circle", ((x, y), r))`` or ``("polygon", (m, 2))`` [m]."""
-    out: list[tuple[str, Any]] = []
-    raw = run.info.get("obstacles", []) if isinstance(run.info, dict) else []
-    for ob in raw or []:
-        kind = ob.get("type")
-        if kind == "circle":
-            c = np.asarray(ob["center"], dtype=float)
-            out.append(("circle", ((float(c[0]), float(c[1])), float(ob["radius"]))))
-        elif kind == "polygon":
-            pts = np.asarray(ob["points"], dtype=float).reshape(-1, 2)
-            if len(pts) >= 2:
-                out.append(("polygon", pts))
-    return out
-
-
-def _rgb(color: str, k: int) -> tuple[int, int, int]:
-    """RGB of a colour name, or a default colour when Pillow cannot parse it."""
-    try:
-        rgb = ImageColor.getrgb(str(color))
-    except ValueError:
-        rgb = ImageColor.getrgb(_FALLBACK_COLORS[k % len(_FALLBACK_COLORS)])
-    return (int(rgb[0]), int(rgb[1]), int(rgb[2]))
-
-
-def _build_palette(colors: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Palette of a run.
-
-    Returns
-    -------
-    rgb : ndarray, shape (m, 3), uint8
-        Palette entries, ``m <= 255`` (one index stays free).
-    body : ndarray, shape (n,), int
-        Index of each vehicle's colour.
-    trail : ndarray, shape (n, L), int
-        Index of each vehicle's fading trail shades, newest first (``L`` may be 0).
-    """
-    rgbs = [_rgb(c, k) for k, c in enumerate(colors)]
-    unique = list(dict.fromkeys(rgbs))
-    room = 255 - len(_BASE_COLORS)
-    if len(unique) > room:  # snap to a 6x6x6 colour cube
-        rgbs = [tuple(int(round(v / 51.0)) * 51 for v in c) for c in rgbs]
-        unique = list(dict.fromkeys(rgbs))
-    levels = min(_TRAIL_LEVELS, room // len(unique) - 1) if unique else 0
-    entries = list(_BASE_COLORS)
-    where: dict[tuple[int, int, int], int] = {}
-    shades: dict[tuple[int, int, int], list[int]] = {}
-    for c in unique:
-        where[c] = len(entries)
-        entries.append(c)
-        shades[c] = []
-        for a in _TRAIL_FADE[:levels]:
-            shades[c].append(len(entries))
-            entries.append(tuple(int(round(v + (255 - v) * a)) for v in c))
-    body = np.array([where[c] for c in rgbs], dtype=np.int64)
-    trail = np.array([shades[c] for c in rgbs], dtype=np.int64).reshape(len(rgbs), -1)
-    return np.array(entries, dtype=np.uint8).reshape(-1, 3), body, trail
-
-
-def _nice_length(target: float) -> float:
-    """Largest 1, 2 or 5 times a power of ten not above ``target`` [m].
-
-    >>> _nice_length(3.7), _nice_length(0.12), _nice_length(10.0)
-    (2.0, 0.1, 10.0)
-    """
-    if not (target > 0 and math.isfinite(target)):
-        return 1.0
-    exp = math.floor(math.log10(target))
-    best = 10.0**exp
-    for m in (2.0, 5.0, 10.0):
-        if m * 10.0**exp <= target * (1 + 1e-9):
-            best = m * 10.0**exp
-    return float(f"{best:.12g}")
-
-
-def _dashes(path: np.ndarray, on: float, off: float) -> np.ndarray:
-    """Dash segments along a polyline, shape (k, 2, 2), in the polyline's units."""
-    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
-    s = np.concatenate(([0.0], np.cumsum(seg)))
-    if s[-1] <= 0:
-        return np.zeros((0, 2, 2))
-    starts = np.arange(0.0, s[-1], on + off)
-    ends = np.minimum(starts + on, s[-1])
-    a = np.stack(
-        (np.interp(starts, s, path[:, 0]), np.interp(starts, s, path[:, 1])), -1
-    )
-    b = np.stack((np.interp(ends, s, path[:, 0]), np.interp(ends, s, path[:, 1])), -1)
-    return np.stack((a, b), axis=1)
-
-
-def _stamp_discs(
-    canvas: np.ndarray,
-    centers: np.ndarray,
-    radius: np.ndarray,
-    *,
-    fill: np.ndarray | None,
-    edge: np.ndarray | None = None,
-    edge_width: float = 1.0,
-    heading: np.ndarray | None = None,
-    heading_width: np.ndarray | None = None,
-    detail: np.ndarray | None = None,
-    halo: np.ndarray | None = None,
-    halo_width: float = 0.0,
-    halo_color: np.ndarray | None = None,
-) -> None:
-    """Paint discs onto a canvas of palette indices, vectorized over discs.
-
-    A pixel belongs to a disc when its centre lies within ``radius`` of the disc centre.
-    Later discs are painted over earlier ones.
-
-    Parameters
-    ----------
-    canvas : ndarray, shape (H, W), uint8
-        Modified in place.
-    centers : ndarray, shape (m, 2) [px]
-    radius : ndarray, shape (m,) [px]
-    fill : ndarray, shape (m,), int, or None
-        Fill index of each disc; ``None`` paints only the edge (a ring).
-    edge : ndarray, shape (m,), int, optional
-        Index of a ring of ``edge_width`` [px] just inside the radius.
-    heading : ndarray, shape (m,) [rad], optional
-        World heading of a black line from the centre to the rim.
-    heading_width : ndarray, shape (m,) [px], optional
-        Full width of the heading line.
-    detail : ndarray, shape (m,), bool, optional
-        Which discs get their edge and heading line (default: all).
-    halo : ndarray, shape (m,), bool, optional
-        Discs that get an orange ring of ``halo_width`` [px] outside the radius.
-    halo_color : ndarray, shape (m,), int, optional
-        Palette index of each disc's ring instead of orange.
-    """
-    h, w = canvas.shape
-    ok = np.isfinite(centers).all(axis=1) & np.isfinite(radius)
-    if heading is not None:
-        ok &= np.isfinite(heading)
-    sel = np.flatnonzero(ok)
-    if sel.size == 0:
-        return
-    reach = radius[sel] + (halo_width if halo is not None else 0.0)
-    half = int(math.ceil(float(reach.max()))) + 1
-    offs = np.arange(-half, half + 1)
-    side = offs.size
-    per_chunk = max(1, 1_500_000 // (side * side))
-    for start in range(0, sel.size, per_chunk):
-        i = sel[start : start + per_chunk]
-        c = centers[i]
-        r = radius[i][:, None, None]
-        cols = np.floor(c[:, 0]).astype(np.int64)[:, None] + offs  # (m, side)
-        rows = np.floor(c[:, 1]).astype(np.int64)[:, None] + offs
-        dx = (cols + 0.5 - c[:, :1])[:, None, :]  # (m, 1, side)
-        dy = (rows + 0.5 - c[:, 1:])[:, :, None]  # (m, side, 1)
-        d2 = dx * dx + dy * dy
-        inside = d2 <= r * r
-        val = np.full(d2.shape, -1, dtype=np.int16)
-        if halo is not None:
-            ring = halo[i][:, None, None] & ~inside & (d2 <= (r + halo_width) ** 2)
-            if halo_color is None:
-                val[ring] = ORANGE
-            else:
-                color = np.broadcast_to(halo_color[i][:, None, None], ring.shape)
-                val[ring] = color[ring]
-        if fill is not None:
-            val = np.where(inside, fill[i][:, None, None], val)
-        fine = (
-            np.ones((len(i), 1, 1), bool)
-            if detail is None
-            else detail[i][:, None, None]
-        )
-        if edge is not None:
-            rim = inside & fine & (d2 > np.maximum(r - edge_width, 0.0) ** 2)
-            val = np.where(rim, edge[i][:, None, None], val)
-        if heading is not None and heading_width is not None:
-            ux = np.cos(heading[i])[:, None, None]
-            uy = -np.sin(heading[i])[:, None, None]  # rows point down
-            along = dx * ux + dy * uy
-            across = np.abs(dx * uy - dy * ux)
-            half_w = heading_width[i][:, None, None] / 2.0
-            line = inside & fine & (along >= 0) & (across <= half_w)
-            val[line] = BLACK
-        rr = np.broadcast_to(rows[:, :, None], d2.shape)
-        cc = np.broadcast_to(cols[:, None, :], d2.shape)
-        paint = (val >= 0) & (rr >= 0) & (rr < h) & (cc >= 0) & (cc < w)
-        canvas[rr[paint], cc[paint]] = val[paint].astype(np.uint8)
-
-
-def _flat(points: np.ndarray) -> list[float]:
-    """Flatten pixel points (m, 2) for ``ImageDraw`` (whose integer x is a centre)."""
-    return (points - 0.5).ravel().tolist()
-
-
 class _Scene:
     """What stays the same from frame to frame, and the drawing of one frame."""
 
@@ -1179,135 +700,3 @@ def write_gif(
         "duration": stream.duration_ms / 1000.0,
         "path": str(path),
     }
-
-
-# ------------------------------------------------------------------------- GIF stream
-class _GifStream:
-    """One GIF89a stream assembled from GIFs that imageio encodes a chunk at a time.
-
-    The header (logical screen, global colour table = the run's palette, NETSCAPE loop
-    block) is written once; from each chunk only the frames are kept (graphic control
-    extensions, image descriptors and LZW data), with any local colour table dropped.
-    imageio receives the frames as ``L`` images of palette indices with
-    ``optimize=False``, so Pillow writes the indices unchanged (it neither quantizes nor
-    remaps them) and only its placeholder colour tables need replacing.
-
-    Every frame after the first codes the pixels that did not change as the transparent
-    index ``len(palette)`` (no disposal: the previous frame shows through), which about
-    halves the file size; Pillow crops each frame to the box that changed.
-    """
-
-    def __init__(
-        self, fh: IO[bytes], width: int, height: int, palette: np.ndarray, loop: int = 0
-    ) -> None:
-        if len(palette) > 255:
-            raise ValueError("the palette must leave one index free for transparency")
-        self.fh = fh
-        self.frames = 0
-        self.duration_ms = 0
-        self.clear = len(palette)  # transparent index: "unchanged since last frame"
-        self.previous: np.ndarray | None = None
-        bits = max(1, int(math.ceil(math.log2(len(palette) + 1))))
-        table = np.full((1 << bits, 3), 255, dtype=np.uint8)
-        table[: len(palette)] = palette
-        fh.write(b"GIF89a")
-        fh.write(
-            struct.pack("<HHBBB", width, height, 0x80 | 0x70 | (bits - 1), WHITE, 0)
-        )
-        fh.write(table.tobytes())
-        fh.write(b"!\xff\x0bNETSCAPE2.0\x03\x01" + struct.pack("<H", loop) + b"\x00")
-
-    def add(self, frames: list[np.ndarray], delays_ms: list[int]) -> None:
-        """Encode frames (palette indices, (H, W) uint8) with their delays [ms]."""
-        if not frames:
-            return
-        batch = np.empty((len(frames), *frames[0].shape), dtype=np.uint8)
-        for j, frame in enumerate(frames):
-            if self.previous is None:
-                batch[j] = frame
-            else:
-                _changes(frame, self.previous, self.clear, out=batch[j])
-            self.previous = frame
-        duration: int | list[int] = delays_ms if len(frames) > 1 else delays_ms[0]
-        data = iio.imwrite(
-            "<bytes>",
-            batch,
-            extension=".gif",
-            plugin="pillow",
-            is_batch=True,
-            duration=duration,
-            loop=0,
-            optimize=False,
-            transparency=self.clear,
-        )
-        self.fh.write(_frame_blocks(data))
-        self.frames += len(frames)
-        self.duration_ms += int(sum(delays_ms))
-
-    def close(self) -> None:
-        """Write the trailer."""
-        self.fh.write(b";")
-
-
-def _changes(
-    frame: np.ndarray, previous: np.ndarray, clear: int, out: np.ndarray
-) -> None:
-    """Copy into ``out`` the changed pixels of ``frame``, and ``clear`` elsewhere.
-
-    All arrays are (H, W) uint8. The changed box is found comparing up to 8 pixels at a
-    time, then refined pixel by pixel.
-    """
-    width = frame.shape[1]
-    word = next(b for b in (8, 4, 2, 1) if width % b == 0)
-    as_words = np.dtype(f"u{word}")
-    moved = frame.view(as_words) != previous.view(as_words)
-    out.fill(clear)
-    rows = np.flatnonzero(moved.any(axis=1))
-    if rows.size == 0:
-        return
-    r0, r1 = int(rows[0]), int(rows[-1]) + 1
-    cols = np.flatnonzero(moved[r0:r1].any(axis=0))
-    c0, c1 = int(cols[0]) * word, (int(cols[-1]) + 1) * word
-    box = frame[r0:r1, c0:c1]
-    np.copyto(out[r0:r1, c0:c1], box, where=box != previous[r0:r1, c0:c1])
-
-
-def _skip_subblocks(data: bytes, pos: int) -> int:
-    """Position just after the data sub-blocks starting at ``pos``."""
-    while True:
-        length = data[pos]
-        pos += 1 + length
-        if length == 0:
-            return pos
-
-
-def _frame_blocks(data: bytes) -> bytes:
-    """Extract the frames of a GIF stream, without header, trailer nor colour tables."""
-    if data[:6] not in (b"GIF87a", b"GIF89a"):
-        raise ValueError("not a GIF stream")
-    flags = data[10]
-    pos = 13 + (3 << ((flags & 7) + 1) if flags & 0x80 else 0)
-    out = bytearray()
-    started = False
-    while True:
-        block = data[pos]
-        if block == 0x3B:  # trailer
-            return bytes(out)
-        if block == 0x21:  # extension: keep graphic control and later ones
-            end = _skip_subblocks(data, pos + 2)
-            started = started or data[pos + 1] == 0xF9
-            if started:
-                out += data[pos:end]
-            pos = end
-        elif block == 0x2C:  # image descriptor
-            started = True
-            desc = bytearray(data[pos : pos + 10])
-            pos += 10
-            if desc[9] & 0x80:
-                pos += 3 << ((desc[9] & 7) + 1)
-                desc[9] &= 0x40  # keep only the interlace flag
-            end = _skip_subblocks(data, pos + 1)  # after the LZW minimum code size
-            out += desc + data[pos:end]
-            pos = end
-        else:
-            raise ValueError(f"unexpected GIF block 0x{block:02x} at byte {pos}")

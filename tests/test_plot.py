@@ -291,7 +291,9 @@ def test_large_fleet_draws_median_and_percentile_bands() -> None:
     assert len(top.get_lines()) < 10
 
 
-def test_cli_plot_writes_into_the_run_directory_figures(tmp_path: Path) -> None:
+def test_cli_plot_writes_into_the_run_directory_figures_that_a_rerun_keeps(
+    tmp_path: Path,
+) -> None:
     from helpers import PAPER
 
     from sandbox.cli import main
@@ -303,6 +305,10 @@ def test_cli_plot_writes_into_the_run_directory_figures(tmp_path: Path) -> None:
     assert sorted(p.name for p in (out / "figures").iterdir()) == sorted(
         f"{stem}.pdf" for stem in plot.FIGURES
     )
+    # a re-run into the directory keeps the figures (they are not the run's files)
+    before = (out / "figures" / "trajectories.pdf").read_bytes()
+    assert main(["run", scenario, "--out", str(out), "--duration", "0.5"]) == 0
+    assert (out / "figures" / "trajectories.pdf").read_bytes() == before
 
 
 @pytest.mark.parametrize(

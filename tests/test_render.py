@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from PIL import Image, ImageColor
 
-from sandbox import render
+from sandbox import gif_stream, render, render_camera, render_overlay, render_palette
 from sandbox.run import MODE_AVOID, CollisionEvent, Run
 
 
@@ -254,7 +254,7 @@ def test_failure_mark_appears_only_after_failure_time() -> None:
 def test_collision_flash_is_red_for_a_moment() -> None:
     run = make_run(n=2)
     run.events.append(CollisionEvent(1.0, "v0", "v1", "vehicle_vehicle"))
-    red = np.array(render._BASE_COLORS[render.RED])
+    red = np.array(render_palette._BASE_COLORS[render_palette.RED])
 
     def reds(t: float) -> int:
         return int((frame_at(run, t, size=160) == red).all(axis=-1).sum())
@@ -267,7 +267,7 @@ def test_collision_flash_is_red_for_a_moment() -> None:
 def test_avoiding_vehicle_gets_an_orange_ring() -> None:
     run = make_run(n=2)
     run.mode[run.t >= 1.0, 0] = MODE_AVOID
-    orange = np.array(render._BASE_COLORS[render.ORANGE])
+    orange = np.array(render_palette._BASE_COLORS[render_palette.ORANGE])
 
     def oranges(t: float) -> int:
         return int((frame_at(run, t, size=160) == orange).all(axis=-1).sum())
@@ -299,12 +299,14 @@ def test_renders_without_display(
 
 
 def test_render_imports_only_numpy_pil_imageio() -> None:
-    tree = ast.parse(Path(render.__file__).read_text())
-    roots = {
-        (alias.name if isinstance(node, ast.Import) else node.module).split(".")[0]
-        for node in ast.walk(tree)
-        if isinstance(node, (ast.Import, ast.ImportFrom))
-        for alias in node.names
-    }
+    roots = set()
+    for module in (render, render_camera, render_palette, render_overlay, gif_stream):
+        tree = ast.parse(Path(module.__file__).read_text())
+        roots |= {
+            (alias.name if isinstance(node, ast.Import) else node.module).split(".")[0]
+            for node in ast.walk(tree)
+            if isinstance(node, (ast.Import, ast.ImportFrom))
+            for alias in node.names
+        }
     third_party = roots - set(sys.stdlib_module_names) - {"sandbox"}
     assert third_party == {"numpy", "PIL", "imageio"}
