@@ -27,9 +27,13 @@ class Physics(Protocol):
     ----------
     events : list of CollisionEvent
         Contact onsets so far, in time order (appended by :meth:`step`).
+    failed : ndarray, shape (n,), bool, or None
+        Set by the loop every period before :meth:`step`: the vehicles with an active
+        failure, so that a contact starting then can be marked not ``healthy``.
     """
 
     events: list[CollisionEvent]
+    failed: np.ndarray | None
 
     def read_state(self) -> PhysicalState:
         """Every vehicle's pose and velocity, arrays indexed by vehicle (copies)."""

@@ -289,6 +289,7 @@ class KinematicWorld:
         self.pose = np.array([v.pose for v in vs], dtype=float)
         self.cmd = np.zeros((len(vs), 2))
         self.events: list = []
+        self.failed = None
 
     def read_state(self) -> PhysicalState:
         v1, v2 = self.cmd.T
