@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sandbox.cli import compare, figures, plugins, run, sweep, validate
+from sandbox.cli import check, compare, figures, plugins, run, sweep, validate
 from sandbox.cli.common import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
@@ -28,7 +28,7 @@ from sandbox.errors import SandboxError, ScenarioError
 from sandbox.plugins import PluginError
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
-COMMANDS = (run, validate, figures, compare, sweep, plugins)
+COMMANDS = (run, validate, check, figures, compare, sweep, plugins)
 
 __all__ = ["EXIT_FAILED", "EXIT_INTERRUPTED", "EXIT_INVALID", "EXIT_OK", "main"]
 

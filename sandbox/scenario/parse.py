@@ -17,6 +17,8 @@ import yaml
 
 from sandbox import plugins, randomize
 from sandbox.errors import Problem, ScenarioError
+from sandbox.expectations import allowed_keys as expect_keys
+from sandbox.expectations import read_expectations
 from sandbox.plugins import (
     KINDS,
     PluginError,
@@ -237,6 +239,9 @@ def parse_scenario(
         **{k: METRICS[k].default if v is None else v for k, v in read.items()}
     )
 
+    names = [n for _, n, _ in rd.declared] + [v.name for _, v in generated]
+    expect = read_expectations(rd, doc.get("expect"), "expect", names)
+
     _check_consistency(
         rd,
         doc,
@@ -280,6 +285,7 @@ def parse_scenario(
             warnings=tuple(
                 w.format(source) for w in _mark_overrides(rd.warnings, overridden)
             ),
+            expect=expect,
         )
     return scenario
 
@@ -436,6 +442,8 @@ def _allowed_keys(parents: list[str], node: dict[Any, Any]) -> tuple[str, ...]:
     names = [t for t in parents if not t.startswith("[")]
     if not names:
         return TOP_KEYS
+    if names[0] == "expect":
+        return expect_keys(names[1:], node)
     head = names[-1]
     if head == "gains":
         return GAIN_KEYS

@@ -18,6 +18,7 @@ from sandbox.control.flatness import (
     Gains,
     max_control_period,
 )
+from sandbox.expectations import EXPECT_SCHEMA
 from sandbox.obstacles import SHAPES, ObstacleSpec
 from sandbox.plugins import (
     KINDS,
@@ -169,6 +170,14 @@ TOP: dict[str, Param] = {
         "(numbers or equal-length lists, elementwise) or {choice: [a, b, ...]}; "
         "overlapping starts are redrawn (see sandbox/randomize.py)",
         schema=_RANDOMIZE_SCHEMA,
+    ),
+    "expect": Param(
+        "custom",
+        None,
+        doc="What the run must show, checked by 'sandbox check' and the pytest plugin "
+        "(see sandbox/expectations.py; bounds are inclusive; quantities are those of "
+        "metrics.json)",
+        schema=EXPECT_SCHEMA,
     ),
 }
 

@@ -13,7 +13,7 @@ from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, field, fields, is_dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,6 +26,9 @@ from sandbox.obstacles import ObstacleSpec
 from sandbox.plugins import (
     ReferenceContext,
 )
+
+if TYPE_CHECKING:
+    from sandbox.expectations import Expectations
 
 PLATOON_PATTERNS = ("grid", "line", "wedge", "ring")
 
@@ -246,6 +249,8 @@ class Scenario:
     source: str | None = None
     warnings: tuple[str, ...] = ()
     plugins: tuple[str, ...] = ()
+    #: The ``expect:`` section (see :mod:`sandbox.expectations`), or None.
+    expect: Expectations | None = None
 
     def __post_init__(self) -> None:
         """Validate a scenario not made by the loader (the constructor, ``replace``).
@@ -371,6 +376,8 @@ class Scenario:
         if self.obstacles:
             doc["obstacles"] = [o.document() for o in self.obstacles]
         doc["metrics"] = _plain(self.metrics)
+        if self.expect is not None:
+            doc["expect"] = self.expect.to_dict()
         return doc
 
 
