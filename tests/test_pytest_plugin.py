@@ -39,6 +39,22 @@ HEADON = {
 }
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _warm_imports(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Import, in this process, everything an inner session imports lazily.
+
+    pytester runs each inner session in this process and unloads the modules it
+    imported afterwards; numpy's and scipy's extension modules cannot be loaded twice,
+    so they must be loaded before the first inner session.
+    """
+    from sandbox.render import write_gif
+    from sandbox.testing import check_scenario
+
+    folder = tmp_path_factory.mktemp("warm")
+    result = check_scenario(write(folder, "warm.yaml", {"collisions": {"total": 1}}))
+    write_gif(result.run, folder / "warm.gif")
+
+
 def write(folder: Path, name: str, expect: object = None) -> Path:
     doc = dict(HEADON)
     if expect is not None:
