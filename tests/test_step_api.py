@@ -342,3 +342,15 @@ def test_a_zero_shift_drives_as_the_built_in_stack_and_a_shift_moves_the_slot() 
         [[0, -0.5]] * (len(b.t) - 1),
         atol=1e-9,
     )
+
+
+def test_run_reports_progress_about_a_hundred_times_and_stops_when_asked() -> None:
+    sc = load_scenario(DUEL | {"duration": 3.0})  # 300 steps: every 3rd reported
+    calls: list[tuple[int, int]] = []
+    run = Simulation(sc).run(progress=lambda k, steps: calls.append((k, steps)))
+    assert calls == [(k, 300) for k in range(0, 300, 3)]
+    assert run.status == "ok" and len(run.t) == 301
+    polls = iter(range(1000))
+    stopped = Simulation(sc).run(should_stop=lambda: next(polls) >= 50)
+    assert stopped.status == "interrupted" and len(stopped.t) == 51
+    np.testing.assert_array_equal(stopped.pose, run.pose[:51])
