@@ -442,3 +442,16 @@ def test_installed_packages_plug_in_through_the_entry_point_group(
     assert "plug-in demo (entry point ep_demo_plugins) failed to import" in err
     assert "RuntimeError: no" in err
     sys.modules.pop("ep_demo_plugins", None)
+
+
+def test_every_command_takes_plugin() -> None:
+    import argparse
+
+    from sandbox.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    assert {"run", "validate", "compare", "schema", "plugins"} <= set(sub.choices)
+    for name, command in sub.choices.items():
+        options = {o for a in command._actions for o in a.option_strings}
+        assert "--plugin" in options, name

@@ -6,7 +6,13 @@ import argparse
 import sys
 from concurrent.futures import ProcessPoolExecutor
 
-from sandbox.cli.common import EXIT_FAILED, EXIT_INVALID, EXIT_OK, positive
+from sandbox.cli.common import (
+    EXIT_FAILED,
+    EXIT_INVALID,
+    EXIT_OK,
+    add_plugin_option,
+    positive,
+)
 from sandbox.errors import ScenarioError
 from sandbox.testing import CheckResult, check_scenario, load_checked
 
@@ -86,4 +92,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also print every expectation that holds, with its measured value",
     )
+    add_plugin_option(p)
     p.set_defaults(func=cmd_check)

@@ -11,7 +11,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from sandbox.cli.common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK
+from sandbox.cli.common import (
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_INVALID,
+    EXIT_OK,
+    add_plugin_option,
+)
 from sandbox.errors import SandboxError
 
 
@@ -221,4 +227,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="md",
         help="table: Markdown (default) or CSV",
     )
+    add_plugin_option(p)
     p.set_defaults(func=cmd_sweep)
