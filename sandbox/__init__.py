@@ -5,6 +5,7 @@ Public API::
     from sandbox import load_scenario, Simulation, simulate, compute_metrics
 """
 
+import sandbox._startup  # noqa: F401  (first: quiet Ctrl-C while the command starts)
 from sandbox.errors import SandboxError, ScenarioError
 from sandbox.metrics import compute_metrics
 from sandbox.run import Run

@@ -438,18 +438,27 @@ class Recorder:
             k: np.zeros((self._chunk, *shape), dtype)
             for k, (shape, dtype) in shapes.items()
         }
-        self._dir = Path(tempfile.mkdtemp(prefix="sandbox-record-", dir=directory))
+        where = (
+            Path(directory) if directory is not None else Path(tempfile.gettempdir())
+        )
+        remove_dead_records(where)
+        self._dir = Path(
+            tempfile.mkdtemp(prefix=f"sandbox-record-{os.getpid()}-", dir=where)
+        )
         self._files: dict[str, Any] = {}
         # Closes and removes the files if the recorder is dropped before arrays() (a
         # run that failed).
         self._cleanup = weakref.finalize(self, _discard, self._files, self._dir)
         self._offsets: dict[str, int] = {}
         for k, (shape, dtype) in shapes.items():
-            path = self._dir / f"{k}.npy"
-            mm = np.lib.format.open_memmap(path, "w+", dtype=dtype, shape=(T, *shape))
-            self._offsets[k] = int(mm.offset)
-            del mm
-            self._files[k] = open(path, "r+b")  # closed by arrays() or _discard()
+            # Only the header is written now: the file grows as samples are appended
+            # (never a sparse file of the record's full size), and arrays() rewrites
+            # the header with the samples actually recorded.
+            header = _npy_header(dtype, (T, *shape))
+            fh = open(self._dir / f"{k}.npy", "w+b")  # closed by arrays()/_discard()
+            fh.write(header)
+            self._files[k] = fh
+            self._offsets[k] = len(header)
         self._flushed = 0
 
     def append(
@@ -503,7 +512,10 @@ class Recorder:
         if not self.on_disk:
             return {name: buf[:k] for name, buf in self._buffers.items()}
         self._flush()
-        for fh in self._files.values():
+        for name, fh in self._files.items():
+            shape, dtype = self._shapes[name]
+            fh.seek(0)
+            fh.write(_npy_header(dtype, (k, *shape), self._offsets[name]))
             fh.close()
         self._files.clear()
         out = {
@@ -517,6 +529,64 @@ class Recorder:
         else:  # pragma: no cover - files in use cannot be removed elsewhere
             atexit.register(shutil.rmtree, self._dir, ignore_errors=True)
         return out
+
+
+def _npy_header(dtype: np.dtype, shape: tuple[int, ...], length: int = 0) -> bytes:
+    """A ``.npy`` (version 1.0) header for an array of ``shape``.
+
+    Padded to a multiple of 64 bytes, or to ``length`` bytes when given (to rewrite a
+    header in place with a smaller shape).
+    """
+    text = (
+        f"{{'descr': {np.lib.format.dtype_to_descr(np.dtype(dtype))!r}, "
+        f"'fortran_order': False, 'shape': {tuple(shape)!r}, }}"
+    )
+    total = length or -(-(10 + len(text) + 1) // 64) * 64
+    text = text + " " * (total - 10 - len(text) - 1) + "\n"
+    return (
+        b"\x93NUMPY\x01\x00" + len(text).to_bytes(2, "little") + text.encode("latin1")
+    )
+
+
+#: The files a disk-backed record holds.
+_RECORD_FILES = frozenset(f"{k}.npy" for k in _FIELDS)
+
+
+def remove_dead_records(directory: Path) -> None:
+    """Remove record directories that killed runs left in ``directory``.
+
+    Only directories named ``sandbox-record-<pid>-*`` whose process is dead and that
+    hold nothing but a record's files are removed (a SIGKILL leaves them behind).
+    """
+    for path in Path(directory).glob("sandbox-record-*-*"):
+        pid = path.name[len("sandbox-record-") :].split("-", 1)[0]
+        if not pid.isdigit() or _alive(int(pid)):
+            continue
+        try:
+            if path.is_symlink() or not path.is_dir():
+                continue
+            entries = list(path.iterdir())
+            if not {e.name for e in entries} <= _RECORD_FILES:
+                continue
+            for e in entries:
+                if e.is_file() and not e.is_symlink():
+                    e.unlink()
+            path.rmdir()
+        except OSError:
+            continue
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (or may: it belongs to another user)."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
 
 
 def _discard(files: dict[str, Any], directory: Path) -> None:

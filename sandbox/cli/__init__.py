@@ -22,6 +22,7 @@ from sandbox.cli.common import (
     EXIT_INVALID,
     EXIT_OK,
     GifOptionError,
+    command_signals,
     load_cli_plugins,
 )
 from sandbox.errors import SandboxError, ScenarioError
@@ -49,6 +50,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status."""
+    with command_signals():
+        try:
+            return _dispatch(argv)
+        except KeyboardInterrupt:
+            print("interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+
+
+def _dispatch(argv: list[str] | None) -> int:
+    """Parse the command line and run the command; errors become messages."""
     args = build_parser().parse_args(argv)
     try:
         load_cli_plugins(args)

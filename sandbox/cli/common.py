@@ -9,8 +9,9 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
+from typing import Any
 
-from sandbox.errors import SandboxError
+from sandbox.errors import OutputError, SandboxError
 from sandbox.run import Run
 
 EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -62,6 +63,33 @@ class StopFlag:
             signal.signal(sig, old)
 
 
+class command_signals:  # noqa: N801 - used as a context manager, like a function
+    """SIGINT and SIGTERM raise ``KeyboardInterrupt`` while a command runs.
+
+    The same at every phase (loading, writing a GIF, ...): whatever is being written
+    is removed or left whole by its ``except``/``finally``, and ``main`` exits with
+    status 130. A run's simulation and output writing use :class:`StopFlag` instead.
+    The earlier handlers are restored on exit.
+    """
+
+    def __enter__(self) -> command_signals:
+        self._old: dict[int, Any] = {}
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._old[sig] = signal.signal(sig, _interrupt)
+            except (ValueError, OSError):  # not the main thread
+                pass
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt
+
+
 def render_gif(run: Run, args: argparse.Namespace) -> None:
     """Render ``run`` to ``args.gif`` and/or ``args.mp4`` (each atomically).
 
@@ -91,6 +119,11 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
             info = write(run, Path(target), **options)
         except ValueError as exc:  # an option the renderer refuses (fps, size, ...)
             raise GifOptionError(f"--{kind} {target}: {exc}") from None
+        except OSError as exc:  # named by the user's path, never the temporary file's
+            reason = exc.strerror or type(exc).__name__
+            raise OutputError(
+                f"{target}: cannot write the {kind.upper()} ({reason})"
+            ) from None
         print(
             f"{kind}: {info['path']} ({info['frames']} frames, "
             f"{info['duration']:.1f} s)"
@@ -125,25 +158,108 @@ def positive(kind: type) -> Callable[[str], float]:
     return parse
 
 
+#: Bounds of the GIF options, checked when the command line is read (before any
+#: run): frames per second (GIF delays are whole hundredths of a second, and viewers
+#: slow down delays under 2), frame size [px], playback speed (simulated seconds per
+#: second), and the most frames a GIF may have.
+GIF_FPS = (0.5, 50.0)
+GIF_SIZE = (64, 4096)
+GIF_SPEED = (0.01, 1000.0)
+MAX_GIF_FRAMES = 20_000
+
+
+def bounded(kind: type, low: float, high: float) -> Callable[[str], float]:
+    """An argparse type: a number of ``kind`` from ``low`` to ``high``.
+
+    argparse names the option in its message (``argument --size: expected ...``).
+    """
+    what = "a whole number" if kind is int else "a number"
+
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except (ValueError, OverflowError):
+            raise argparse.ArgumentTypeError(
+                f"expected {what} from {low:g} to {high:g}, got {text!r}"
+            ) from None
+        if not (low <= value <= high):  # NaN fails too
+            raise argparse.ArgumentTypeError(
+                f"expected {what} from {low:g} to {high:g}, got {text!r}"
+            )
+        return value
+
+    return parse
+
+
+def nonempty(text: str) -> str:
+    """An argparse type: a path that is not empty."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
+    return text
+
+
+def jobs(text: str) -> int:
+    """An argparse type for ``--jobs``: a whole number >= 1 (see :func:`cap_jobs`)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a whole number >= 1, got {text!r}"
+        ) from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return value
+
+
+def cap_jobs(value: int) -> int:
+    """``--jobs`` capped at the usable cores, with a warning when it is more."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    if value > cores:
+        print(
+            f"warning: --jobs {value} capped at the {cores} usable cores",
+            file=sys.stderr,
+        )
+        return cores
+    return value
+
+
+def check_gif_frames(duration: float, args: argparse.Namespace) -> None:
+    """Refuse GIF options that would make more than :data:`MAX_GIF_FRAMES` frames.
+
+    ``duration`` [s] is the simulated time to animate; checked before a run starts.
+    """
+    frames = duration * args.fps / args.speed
+    if frames > MAX_GIF_FRAMES:
+        raise GifOptionError(
+            f"--gif {args.gif}: {duration:g} s at --fps {args.fps:g} and --speed "
+            f"{args.speed:g} would make {frames:,.0f} frames (at most "
+            f"{MAX_GIF_FRAMES:,}: a higher --speed or a lower --fps)"
+        )
+
+
 def add_gif_options(p: argparse.ArgumentParser) -> None:
     """Add the options of GIF rendering to a command's parser."""
     p.add_argument(
         "--fps",
-        type=positive(float),
+        type=bounded(float, *GIF_FPS),
         default=25.0,
-        help="frames per second, at most 50 (default 25)",
+        help=f"frames per second, {GIF_FPS[0]:g} to {GIF_FPS[1]:g} (default 25)",
     )
     p.add_argument(
         "--size",
-        type=positive(int),
+        type=bounded(int, *GIF_SIZE),
         default=640,
-        help="frame size in pixels (default 640)",
+        help=f"frame size in pixels, {GIF_SIZE[0]} to {GIF_SIZE[1]} (default 640)",
     )
     p.add_argument(
         "--speed",
-        type=positive(float),
+        type=bounded(float, *GIF_SPEED),
         default=1.0,
-        help="playback speed relative to simulated time (default 1)",
+        help="playback speed relative to simulated time, "
+        f"{GIF_SPEED[0]:g} to {GIF_SPEED[1]:g} (default 1)",
     )
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
     p.add_argument(
@@ -155,6 +271,7 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--mp4",
+        type=nonempty,
         metavar="OUT.mp4",
         help="also write an MP4 video of the same frames (needs the extra 'video')",
     )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sandbox.cli.common import EXIT_INVALID, EXIT_OK, add_plugin_option
+from sandbox.cli.common import EXIT_INVALID, EXIT_OK, add_plugin_option, cap_jobs, jobs
 from sandbox.errors import ScenarioError
 
 
@@ -22,7 +22,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
             names(args.strategies) if args.strategies is not None else None,
             names(args.derivatives),
             args.set or [],
-            jobs=args.jobs,
+            jobs=cap_jobs(args.jobs),
             plugin_specs=args.plugin or [],
         )
     except ValueError as exc:
@@ -58,9 +58,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--format", choices=("markdown", "csv"), default="markdown")
     p.add_argument(
         "--jobs",
-        type=int,
+        type=jobs,
         default=1,
-        help="worker processes (default 1); the table is the same",
+        help="worker processes, >= 1, capped at the usable cores (default 1); the "
+        "table is the same",
     )
     add_plugin_option(p)
     p.set_defaults(func=cmd_compare)

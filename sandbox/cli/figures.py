@@ -12,7 +12,9 @@ from sandbox.cli.common import (
     EXIT_OK,
     add_gif_options,
     add_plugin_option,
+    check_gif_frames,
     check_mp4,
+    nonempty,
     render_gif,
 )
 from sandbox.output import load_run_dir
@@ -28,6 +30,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         return EXIT_INVALID
     check_mp4(args)
     run = load_run_dir(Path(args.run_dir))
+    if args.gif:
+        check_gif_frames(float(run.t[-1] - run.t[0]), args)
     render_gif(run, args)
     return EXIT_OK
 
@@ -78,7 +82,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``render``, ``gallery`` and ``plot`` commands."""
     p = sub.add_parser("render", help="render a saved run to a GIF or an MP4")
     p.add_argument("run_dir", help="a run directory written by sandbox run")
-    p.add_argument("--gif", help="output GIF file")
+    p.add_argument("--gif", type=nonempty, help="output GIF file")
     add_gif_options(p)
     add_plugin_option(p)
     p.set_defaults(func=cmd_render)
