@@ -115,12 +115,19 @@ class ScenarioSource:
         return load_scenario({**self.doc, "seed": int(seed)})
 
 
+def default_agents(scenario: Scenario) -> list[str]:
+    """Every vehicle that is neither the leader nor open-loop, in scenario order."""
+    return [
+        v.name for v in scenario.vehicles if not v.leader and v.drive.type != "commands"
+    ]
+
+
 class Task:
     """One episode after another of a scenario, seen by a set of agents.
 
     Parameters
     ----------
-    scenario : str, Path, mapping or Scenario
+    scenario : str, Path, mapping, Scenario or ScenarioSource
         See :class:`ScenarioSource`.
     agents : sequence of str, optional
         Vehicles driven by actions; default every vehicle that is neither the leader
@@ -152,7 +159,7 @@ class Task:
 
     def __init__(
         self,
-        scenario: str | Path | Mapping[str, Any] | Scenario,
+        scenario: str | Path | Mapping[str, Any] | Scenario | ScenarioSource,
         *,
         agents: Sequence[str] | None = None,
         action: str = "commands",
@@ -165,16 +172,16 @@ class Task:
         max_command: tuple[float, float] | None = None,
         render_size: int = 400,
     ) -> None:
-        self.source = ScenarioSource(scenario)
+        self.source = (
+            scenario
+            if isinstance(scenario, ScenarioSource)
+            else ScenarioSource(scenario)
+        )
         sc = self.source.scenario
         names = [v.name for v in sc.vehicles]
         self.names = names
         if agents is None:
-            agents = [
-                v.name
-                for v in sc.vehicles
-                if not v.leader and v.drive.type != "commands"
-            ]
+            agents = default_agents(sc)
         for a in agents:
             if a not in names:
                 raise ValueError(

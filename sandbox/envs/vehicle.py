@@ -17,7 +17,13 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
 
-from sandbox.envs.core import SEED_RANGE, Task, Weights
+from sandbox.envs.core import (
+    SEED_RANGE,
+    ScenarioSource,
+    Task,
+    Weights,
+    default_agents,
+)
 from sandbox.scenario import Scenario
 
 
@@ -74,8 +80,11 @@ class VehicleEnv(gym.Env):
             raise ValueError(
                 f"render_mode: expected None or 'rgb_array', got {render_mode!r}"
             )
+        source = ScenarioSource(scenario)
+        if agent is None:
+            agent = (default_agents(source.scenario) or [None])[0]
         self.task = Task(
-            scenario,
+            source,
             agents=None if agent is None else [agent],
             action=action,
             neighbours=neighbours,
@@ -83,16 +92,6 @@ class VehicleEnv(gym.Env):
             weights=weights,
             **bounds,
         )
-        if agent is None:
-            self.task = Task(
-                scenario,
-                agents=self.task.agents[:1],
-                action=action,
-                neighbours=neighbours,
-                repeat=repeat,
-                weights=weights,
-                **bounds,
-            )
         self.agent = self.task.agents[0]
         low, high = self.task.bounds()
         self.observation_space = spaces.Box(
