@@ -13,8 +13,9 @@ by key in ``scenarios/reference.yaml``)::
         vehicle_obstacle: 0
       converged: true             # every healthy vehicle settles (metrics.json)
       min_distance: {at_least: 0.45}        # [m] (or "0.9d")
-      settling_time: {at_most: 8}           # [s], the worst healthy vehicle ...
-      settling_time: {red: {at_most: 8}}    # ... and/or per vehicle by name
+      settling_time:                        # [s]
+        at_most: 8                          #   the worst healthy vehicle, and/or
+        red: {at_most: 5}                   #   per vehicle by name
       formation_error:                      # [m] per vehicle: rms_last_quarter,
         red: {rms_last_quarter: {at_most: 0.06}, final: {at_most: 0.001}}  # final, max
 
