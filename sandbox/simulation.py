@@ -154,6 +154,8 @@ class Simulation:
         self._v1_max = _uniform(fl.v1_max)
         self._v2_max = _uniform(fl.v2_max)
         self._accel_max = _uniform(fl.accel_max)
+        # The turn-rate limit of the anti-windup: None when no vehicle has one.
+        self._turn_max = None if np.all(np.isinf(fl.v2_max)) else self._v2_max
         # The loop's state: step index, record, status, and what recovery needs.
         self.rec = scenario.recovery
         self._avoid_candidates = ~fl.commanded
@@ -373,10 +375,22 @@ class Simulation:
 
         gains = self._gains
         chi_dot = extension_rate(fleet.pos, fleet.chi, aim, v_ref, a_ref, gains)
-        chi_next, chi_dot = advance_extension(
-            fleet.chi, chi_dot, h, self._v1_max, self._accel_max
-        )
-        v1, v2 = flat_inputs(fleet.theta, fleet.chi, chi_dot, gains.kp)
+        aim = None
+        if self._turn_max is None:
+            chi_next, chi_dot = advance_extension(
+                fleet.chi, chi_dot, h, self._v1_max, self._accel_max
+            )
+        else:  # the turn-rate limit of the anti-windup
+            chi_next, chi_dot, aim = advance_extension(
+                fleet.chi,
+                chi_dot,
+                h,
+                self._v1_max,
+                self._accel_max,
+                fleet.theta,
+                self._turn_max,
+            )
+        v1, v2 = flat_inputs(fleet.theta, fleet.chi, chi_dot, gains.kp, aim)
         v2 = np.clip(v2, -self._v2_max, self._v2_max)
         # Vehicles not driven by the controller this period.
         passive = fleet.commanded

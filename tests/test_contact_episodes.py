@@ -153,8 +153,8 @@ def test_events_in_metrics_carry_end_healthy_and_penetration() -> None:
 
 
 def test_fig12_contacts_of_one_encounter_are_one_event() -> None:
-    # red cuts past the leader: contacts at 0.525, 0.785 and 0.85 s are one episode
-    # (the bundled start of earlier versions)
+    # red cuts past the leader: one episode (three contact onsets, 0.525-0.85 s, with
+    # the controller of earlier versions; the bundled start of earlier versions)
     _, metrics = run_scenario(
         PAPER / "fig12_no_recovery.yaml",
         "vehicles[1].pose=[1.2, -0.9, 2.0]",
@@ -163,8 +163,7 @@ def test_fig12_contacts_of_one_encounter_are_one_event() -> None:
     )
     events = metrics["collisions"]["events"]
     assert [(e["a"], e["b"]) for e in events] == [("leader", "red")]
-    assert events[0]["t"] == pytest.approx(0.525, abs=0.003)
-    assert events[0]["end"] == pytest.approx(0.89, abs=0.01)
+    assert 0.5 < events[0]["t"] < events[0]["end"] < 1.0
 
 
 @pytest.mark.parametrize("value", [0, -0.01, "far"])

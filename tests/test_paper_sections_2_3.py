@@ -163,16 +163,16 @@ def test_stabilization_parks_at_the_point() -> None:
     assert np.ptp(run.pose[last, 0, :2], axis=0).max() < 1e-9
 
 
-def test_stabilization_with_weak_braking_circles_the_point() -> None:
-    # What the file's comment says about max_accel: at 4 m/s^2 the vehicle cannot brake
-    # as the report's gains ask, overshoots, and ends circling the point (turn rate
-    # pinned at v2_max) instead of parking.
+def test_stabilization_with_weak_braking_parks_too() -> None:
+    # At 4 m/s^2 the vehicle cannot brake as the report's gains ask and overshoots;
+    # it circled the point for ever (turn rate pinned at v2_max) before the turn-rate
+    # limit became part of the anti-windup. It now turns back and parks.
     run, metrics = run_scenario(
         PAPER / "stabilization.yaml", "vehicle.max_accel=4", duration=10.0
     )
-    assert metrics["vehicles"]["blue"]["formation_error"]["rms_last_quarter"] > 0.1
+    assert metrics["vehicles"]["blue"]["formation_error"]["rms_last_quarter"] < 0.001
     late = window(run, 7.0)
-    assert np.abs(run.cmd[late, 0, 1]).max() == pytest.approx(3.0)
+    assert np.abs(run.cmd[late, 0, 1]).max() < 3.0
 
 
 def test_single_vehicle_converges_onto_the_circle_to_millimetres() -> None:

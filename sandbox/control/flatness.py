@@ -75,7 +75,11 @@ def extension_rate(
 
 
 def flat_inputs(
-    theta: np.ndarray, chi: np.ndarray, chi_dot: np.ndarray, kp: float | np.ndarray
+    theta: np.ndarray,
+    chi: np.ndarray,
+    chi_dot: np.ndarray,
+    kp: float | np.ndarray,
+    aim: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Control inputs ``(v1, v2)`` from the extension states, eq. (5).
 
@@ -90,6 +94,9 @@ def flat_inputs(
     theta : ndarray, shape (n,) [rad]
     chi, chi_dot : ndarray, shape (n, 2) [m/s], [m/s^2]
     kp : float or ndarray, shape (n,) [1/s]
+    aim : ndarray, shape (n,) [rad], optional
+        Where not NaN, the direction the turn-rate anti-windup held chi back from
+        (:func:`limit_turn`): the heading error is measured to it instead of to chi.
 
     Returns
     -------
@@ -105,6 +112,11 @@ def flat_inputs(
     # "arctan2(chi1, chi2)" in the report is the angle of the vector (chi1, chi2).
     heading_error = wrap_angle(theta - np.arctan2(c2, c1))
     v2 = np.where(defined, feedforward - kp * heading_error, 0.0)  # eq. (5)
+    if aim is not None:
+        turning = ~np.isnan(aim)
+        if np.any(turning):  # chi held back by the turn limit: turn towards its aim
+            toward = -kp * wrap_angle(theta - np.where(turning, aim, 0.0))
+            v2 = np.where(turning, np.where(defined, feedforward, 0.0) + toward, v2)
     return np.where(defined, v1, 0.0), v2
 
 
@@ -114,14 +126,18 @@ def advance_extension(
     dt: float,
     v1_max: np.ndarray,
     accel_max: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
+    theta: np.ndarray | None = None,
+    turn_max: np.ndarray | float | None = None,
+) -> tuple[np.ndarray, ...]:
     """Integrate the extension states one control period, with saturation.
 
     Explicit Euler ``chi + dt * chi_dot``, then the limits act on chi itself (state
     clamping, the anti-windup of this product): the change of chi is at most
     ``accel_max * dt`` in norm and ``|chi| <= v1_max``. Because ``v1 = |chi|``, the
     commanded speed then never exceeds its limits and chi never winds up beyond what the
-    vehicle is asked to do.
+    vehicle is asked to do. With a turn-rate limit (``theta`` and ``turn_max`` given),
+    chi is also kept within the directions the vehicle can drive along by the next
+    period (:func:`limit_turn`).
 
     Parameters
     ----------
@@ -129,12 +145,19 @@ def advance_extension(
     dt : float [s]
     v1_max, accel_max : ndarray, shape (n,) [m/s], [m/s^2]
         ``inf`` where unlimited.
+    theta : ndarray, shape (n,) [rad], optional
+        Headings, for the turn-rate limit.
+    turn_max : float or ndarray, shape (n,) [rad/s], optional
+        ``v2_max`` (``inf`` where unlimited); None: no turn-rate limit.
 
     Returns
     -------
     chi_next : ndarray, shape (n, 2) [m/s]
     chi_dot_applied : ndarray, shape (n, 2) [m/s^2]
         ``(chi_next - chi) / dt``: the rate actually applied (use it for eq. (5)).
+    aim : ndarray, shape (n,) [rad]
+        Only with ``turn_max``: see :func:`limit_turn` (pass it to
+        :func:`flat_inputs`).
     """
     step = chi_dot * dt
     step_norm = np.hypot(step[..., 0], step[..., 1])
@@ -144,7 +167,60 @@ def advance_extension(
     norm = np.hypot(nxt[..., 0], nxt[..., 1])
     scale = np.where(norm > v1_max, v1_max / np.maximum(norm, 1e-300), 1.0)
     nxt = nxt * scale[..., None]
-    return nxt, (nxt - chi) / dt
+    if turn_max is None:
+        return nxt, (nxt - chi) / dt
+    nxt, aim = limit_turn(nxt, theta, turn_max * dt)
+    return nxt, (nxt - chi) / dt, aim
+
+
+def limit_turn(
+    chi: np.ndarray, theta: np.ndarray, limit: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Turn-rate anti-windup: keep chi where the vehicle can drive in one period.
+
+    A unicycle heading ``theta`` can move, by the next period, only along directions
+    within ``limit = v2_max * dt`` of its heading. A chi outside that cone is replaced
+    by its projection on the nearer edge of the cone (its component along that
+    direction, or zero when it points away): chi then stays what the vehicle can do,
+    as with the speed and acceleration clamps, instead of rotating faster than the
+    vehicle can turn while the heading falls behind for ever. The direction the
+    controller asked for is returned as ``aim``: the heading loop of eq. (5) turns
+    the vehicle towards it (see :func:`flat_inputs`), at rest included, so a vehicle
+    facing away from its target turns (at up to ``v2_max``) before it drives.
+
+    Parameters
+    ----------
+    chi : ndarray, shape (n, 2) [m/s]
+        The extension states after the speed and acceleration clamps.
+    theta : ndarray, shape (n,) [rad]
+    limit : float or ndarray, shape (n,) [rad]
+
+    Returns
+    -------
+    chi : ndarray, shape (n, 2) [m/s]
+    aim : ndarray, shape (n,) [rad]
+        Angle of the requested chi where it was outside the cone, NaN elsewhere.
+
+    >>> chi, aim = limit_turn(np.array([[0.0, 1.0]]), np.array([0.0]), 0.1)
+    >>> chi.round(3).tolist(), aim.round(4).tolist()
+    ([[0.0, 0.0]], [1.5708])
+    """
+    c1, c2 = chi[..., 0], chi[..., 1]
+    norm = np.hypot(c1, c2)
+    angle = np.arctan2(c2, c1)
+    off = wrap_angle(angle - theta)
+    outside = (np.abs(off) > limit) & (norm >= CHI_HOLD)
+    if not np.any(outside):
+        return chi, np.full(norm.shape, np.nan)
+    edge = np.clip(off, -limit, limit)
+    along = np.maximum(norm * np.cos(off - edge), 0.0)
+    direction = theta + edge
+    out = np.where(
+        outside[..., None],
+        np.stack((along * np.cos(direction), along * np.sin(direction)), -1),
+        chi,
+    )
+    return out, np.where(outside, angle, np.nan)
 
 
 def discrete_spectral_radius(k_pos: float, k_vel: float, dt: float) -> float:

@@ -22,6 +22,12 @@ from sandbox.plugins import Param, RegistryView, register_law
 
 Triple = tuple[np.ndarray, np.ndarray, np.ndarray]
 
+#: Below this reference speed [m/s] the tangent angle of eq. (15) is undefined
+#: (``atan2(0, 0)``): rotated offsets keep the last tangent direction, so that the
+#: formation holds its orientation when a waypoint path ends or the reference stops
+#: (a reference at rest from the start uses the world frame, angle 0).
+REST_SPEED = 1e-3
+
 
 def rotate_offsets(delta: np.ndarray, angle: float | np.ndarray) -> np.ndarray:
     """Project offsets given in a frame rotated by ``angle`` into the world frame.
@@ -109,7 +115,8 @@ class FormationLaw:
         Control period (for the backward differences).
     rotate : bool
         For ``virtual`` and ``leader_ref``: project the offsets on the reference's
-        tangent.
+        tangent (the last one defined while the reference is at rest, see
+        :data:`REST_SPEED`).
     """
 
     #: Whether the law needs a real leader / the reference's derivatives.
@@ -120,6 +127,7 @@ class FormationLaw:
         self.delta = np.asarray(delta, dtype=float)
         self.h = h
         self.rotate = rotate
+        self._tangent = 0.0  # angle of eq. (15) last defined [rad]
 
     def targets(self, inputs: LawInputs) -> Triple:
         """Return ``slot, v_ref, a_ref``, each of shape (n, 2)."""
@@ -130,8 +138,10 @@ class FormationLaw:
         if not self.rotate:
             return self.delta
         dp = reference[1]
-        theta = np.arctan2(dp[1], dp[0])  # eq. (15)
-        return rotate_offsets(self.delta, theta)  # eq. (14)
+        if np.hypot(dp[0], dp[1]) >= REST_SPEED:
+            self._tangent = float(np.arctan2(dp[1], dp[0]))  # eq. (15)
+        # At rest eq. (15) is atan2(0, 0): the last tangent is kept (0 if none yet).
+        return rotate_offsets(self.delta, self._tangent)  # eq. (14)
 
 
 #: The registered laws by name (a live view of the plug-in registry).

@@ -70,6 +70,7 @@ from sandbox.scenario.yamlfile import (
     _yaml_problem,
     _YAMLLoader,
 )
+from sandbox.tunnelling import tunnelling_warning
 
 
 def parse_scenario(
@@ -262,6 +263,11 @@ def parse_scenario(
             sorted(found, key=lambda p: (p.line is None, p.line or 0)), source
         )
     vehicles = [v for _, v in listed + generated]
+    law = formation.law if formation is not None else None
+    fails = [f for _, f in failures]
+    tunnel = tunnelling_warning(vehicles, fails, reference, law, dt, substeps, duration)
+    if tunnel is not None:
+        rd.warn("substeps", tunnel)
     with _from_loader():
         scenario = Scenario(
             name=name,
