@@ -21,6 +21,7 @@ from sandbox.plugins import (
     Param,
 )
 from sandbox.scenario.reader import (
+    _BAD_TEXT,
     _REQUIRED,
     MAX_VEHICLES,
     MIN_DIAMETER,
@@ -343,6 +344,14 @@ def _vehicles(
                 )
         offset = rd.vector(m, "offset", sub, 2, (0.0, 0.0), length=True)
         color = rd.string(m, "color", sub, PALETTE[i % len(PALETTE)])
+        if isinstance(color, str) and _BAD_TEXT.search(color):
+            rd.fail(
+                f"{sub}.color",
+                "holds a control character",
+                _describe(color),
+                "a colour name or #rrggbb",
+            )
+            color = PALETTE[i % len(PALETTE)]
         drive: DriveSpec | None = DriveSpec()
         if m.get("drive") is not None:
             drive = _drive(rd, m["drive"], f"{sub}.drive")

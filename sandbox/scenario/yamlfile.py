@@ -12,6 +12,7 @@ import os
 import re
 import stat
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -35,6 +36,27 @@ _YAMLLoader.add_implicit_resolver(
     re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
     list("-+0123456789"),
 )
+
+
+def _base_60_as_text(tag: str) -> Any:
+    """A constructor that reads YAML 1.1 base-60 numbers (``1:30`` = 90) as text.
+
+    YAML 1.2, JSON and the editors that check files against the JSON Schema have no
+    base-60 numbers; ``duration: 1:30`` is then reported as not a number instead of
+    silently meaning 90 s.
+    """
+    base = yaml.constructor.SafeConstructor.yaml_constructors[tag]
+
+    def construct(loader: Any, node: yaml.ScalarNode) -> Any:
+        if ":" in str(node.value):
+            return loader.construct_scalar(node)
+        return base(loader, node)
+
+    return construct
+
+
+for _tag in ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float"):
+    _YAMLLoader.add_constructor(_tag, _base_60_as_text(_tag))
 
 
 def _line_map(node: yaml.Node | None, path: str, out: dict[str, int]) -> None:
