@@ -326,3 +326,9 @@ def test_cli_plot_bad_options(tmp_path: Path, capsys, argv: list, message: str):
         main(["plot", str(tmp_path), *argv])
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_cli_dpi_bounds_are_the_plot_module_s() -> None:
+    from sandbox.cli import figures
+
+    assert figures.DPI_RANGE == plot.DPI_RANGE

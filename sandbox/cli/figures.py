@@ -62,9 +62,14 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+#: Resolutions ``--dpi`` accepts, as :data:`sandbox.plot.DPI_RANGE` (a test checks
+#: they agree; not imported from there, since matplotlib is slow to import).
+DPI_RANGE = (10, 1200)
+
+
 def _dpi(text: str) -> int:
     """An argparse type: a whole number of dots per inch within the plot's bounds."""
-    low, high = 10, 1200  # sandbox.plot.DPI_RANGE (not imported: matplotlib is slow)
+    low, high = DPI_RANGE
     try:
         value = int(text)
     except ValueError:
@@ -111,7 +116,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--dpi",
         type=_dpi,
         default=120,
-        help="resolution of PNG figures, 10 to 1200 dots per inch (default 120)",
+        help=f"resolution of PNG figures, {DPI_RANGE[0]} to {DPI_RANGE[1]} dots per "
+        "inch (default 120)",
     )
     add_plugin_option(p)
     p.set_defaults(func=cmd_plot)
