@@ -87,6 +87,37 @@ _RANDOMIZE_SCHEMA = {
     },
 }
 
+
+def _nullable_keys(schema: dict[str, Any]) -> dict[str, Any]:
+    """An object schema whose keys, at every depth, also accept null, as the reader
+    does (null is the default).
+    """
+    docs = ("description", "default")
+
+    def nullable(sub: Any) -> Any:
+        if not isinstance(sub, dict):
+            return sub
+        sub = _nullable_keys(sub)
+        if any(a.get("type") == "null" for a in sub.get("anyOf", [])):
+            return sub
+        core = {k: v for k, v in sub.items() if k not in docs}
+        return {
+            "anyOf": [core, {"type": "null"}],
+            **{k: sub[k] for k in docs if k in sub},
+        }
+
+    out = dict(schema)
+    if "properties" in out:
+        out["properties"] = {k: nullable(v) for k, v in out["properties"].items()}
+    if isinstance(out.get("additionalProperties"), dict):
+        out["additionalProperties"] = nullable(out["additionalProperties"])
+    if "anyOf" in out:
+        out["anyOf"] = [
+            _nullable_keys(a) if isinstance(a, dict) else a for a in out["anyOf"]
+        ]
+    return out
+
+
 #: The control-period bound of eq. (6) with the report's gains [s].
 REPORT_DT_BOUND = max_control_period(Gains().k1, Gains().k2)
 
@@ -177,7 +208,7 @@ TOP: dict[str, Param] = {
         doc="What the run must show, checked by 'sandbox check' and the pytest plugin "
         "(see sandbox/expectations.py; bounds are inclusive; quantities are those of "
         "metrics.json)",
-        schema=EXPECT_SCHEMA,
+        schema=_nullable_keys(EXPECT_SCHEMA),
     ),
 }
 
