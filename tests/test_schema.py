@@ -22,7 +22,12 @@ from sandbox.schema import (
 )
 
 REPO = Path(__file__).resolve().parent.parent
-BUNDLED = sorted((REPO / "scenarios").rglob("*.yaml"))
+# Sweep files (scenarios/studies/, with a ``base:`` key) are not scenarios.
+BUNDLED = sorted(
+    p
+    for p in (REPO / "scenarios").rglob("*.yaml")
+    if "base" not in (yaml.safe_load(p.read_text()) or {})
+)
 VALIDATOR = jsonschema.Draft202012Validator(build_schema())
 
 

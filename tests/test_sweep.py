@@ -451,3 +451,17 @@ def test_table_and_plot(tmp_path, base, capsys):
         "rates_recovery_beta.png",
     ]
     assert main(["sweep", "table", str(tmp_path)]) == 1
+
+
+def test_bundled_study_files_validate(capsys):
+    studies = sorted((REPO / "scenarios" / "studies").glob("section4_*.yaml"))
+    assert len(studies) >= 2
+    assert main(["validate", *map(str, studies)]) == 0
+    out = capsys.readouterr().out
+    assert "sweep: 7 grid points x 200 seeds = 1400 runs" in out
+
+
+def test_validate_reports_a_bad_sweep_file(tmp_path, base, capsys):
+    bad = sweep_file(tmp_path, base, "bad.yaml", grid={"recovery.beta": [1, -1]})
+    assert main(["validate", str(bad)]) == 2
+    assert "--set recovery.beta=-1" in capsys.readouterr().err

@@ -20,8 +20,24 @@ from sandbox.scenario import load_scenario
 
 def cmd_validate(args: argparse.Namespace) -> int:
     """``sandbox validate FILE...``: check files without running them."""
+    from sandbox.study.sweep import SweepError, check_sweep_file
+
     status = EXIT_OK
     for name in args.files:
+        try:  # a sweep file (sandbox sweep): its base and every grid point
+            sweep = check_sweep_file(name)
+        except SweepError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            status = EXIT_INVALID
+            continue
+        except ScenarioError as exc:
+            for line in exc.lines:
+                print(line, file=sys.stderr)
+            status = EXIT_INVALID
+            continue
+        if sweep is not None:
+            print(f"{name}: ok ({sweep})")
+            continue
         try:
             scenario = load_scenario(name, overrides=args.set)
         except ScenarioError as exc:
@@ -39,6 +55,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 def cmd_list(args: argparse.Namespace) -> int:
     """``sandbox list``: the bundled scenarios with their descriptions."""
+    from sandbox.study.sweep import SweepError, check_sweep_file
+
     root = bundled_scenarios_dir()
     files = sorted(p for p in root.rglob("*.yaml") if p.name != "reference.yaml")
     if not files:
@@ -46,10 +64,13 @@ def cmd_list(args: argparse.Namespace) -> int:
         return EXIT_FAILED
     for path in files:
         try:
-            sc = load_scenario(path)
-            desc = (sc.description.splitlines() or [""])[0]
+            sweep = check_sweep_file(path)
+            sc = load_scenario(path) if sweep is None else None
+            desc = (sc.description.splitlines() or [""])[0] if sc else sweep
         except ScenarioError as exc:
             desc = f"(invalid: {exc.lines[0]})"
+        except SweepError as exc:
+            desc = f"(invalid: {exc})"
         print(f"{path.relative_to(root.parent)}\n    {desc}")
     return EXIT_OK
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import os
 import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -274,7 +275,7 @@ def build_spec(
                 f"{file}: {unknown[0]}: unknown key of a sweep file (expected one of: "
                 f"{', '.join(SWEEP_KEYS)})"
             )
-        base = (path.parent / str(doc["base"])).resolve()
+        base = Path(os.path.normpath(path.parent / str(doc["base"])))
         if not base.is_file():
             raise SweepError(f"{file}: base: no such scenario file {doc['base']!r}")
         for key, out in (("grid", file_grid), ("zip", file_zip)):

@@ -22,7 +22,7 @@ import yaml
 
 from sandbox.errors import ScenarioError
 from sandbox.study import engine
-from sandbox.study.spec import SweepError, SweepSpec, Task
+from sandbox.study.spec import SweepError, SweepSpec, Task, build_spec, is_sweep_file
 from sandbox.study.store import Store, digest
 
 
@@ -256,3 +256,28 @@ def describe_dry_run(spec: SweepSpec, out: Path, retry_failed: bool) -> list[str
 
 
 __all__ = ["SweepError", "SweepReport", "run_sweep"]
+
+
+def check_sweep_file(path: str | Path) -> str | None:
+    """Validate a sweep file (``sandbox validate``); None if ``path`` is not one.
+
+    Returns a one-line summary (``N grid points x S seeds = R runs of BASE``).
+
+    Raises
+    ------
+    SweepError, ScenarioError
+        The sweep file, its base scenario or one of its grid points is invalid.
+    """
+    try:
+        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return None  # the scenario loader reports it
+    if not is_sweep_file(doc):
+        return None
+    spec = build_spec(path)
+    check_points(spec, read_base(spec))
+    points = len(spec.points())
+    return (
+        f"sweep: {points} grid points x {len(spec.seeds)} seeds = "
+        f"{points * len(spec.seeds)} runs of {spec.base}"
+    )
