@@ -98,10 +98,11 @@ def resolve(
             )
         ]
     entries, problems = [], []
-    for path in sorted(str(p) for p in spec):
+    named = {str(p): v for p, v in spec.items()}
+    for path in sorted(named):
         where = f"randomize.{path}"
         try:
-            entries.append((path, _distribution(spec[path], where)))
+            entries.append((path, _distribution(named[path], where)))
             _tokens(path, where)
         except _Bad as bad:
             problems.append(Problem(bad.path, bad.message, line(where)))
@@ -132,28 +133,41 @@ def resolve(
 
 
 # ----------------------------------------------------------------- the distributions
-def _numbers(value: Any, where: str) -> float | list[float]:
-    """A number or a list of numbers, as floats."""
-    if isinstance(value, bool):
-        raise _Bad(where, f"not a number (got {value!r}; expected a number)")
-    if isinstance(value, int | float):
-        if not math.isfinite(value):
-            raise _Bad(where, f"not finite (got {value!r}; expected a finite number)")
-        return float(value)
-    if isinstance(value, list) and value:
-        return [_numbers(v, where) for v in value]  # type: ignore[misc]
+def _number(value: Any, where: str) -> float:
+    """A finite number, as a float."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        try:
+            x = float(value)
+        except OverflowError:
+            x = math.inf
+        if math.isfinite(x):
+            return x
     raise _Bad(
         where,
-        f"not a number or a list of numbers (got {value!r}; expected e.g. 1.5 or "
-        "[0, 0, 3.14])",
+        f"not a finite number or a list of them (got {_show(value)}; expected e.g. "
+        "1.5 or [0, 0, 3.14])",
     )
+
+
+def _numbers(value: Any, where: str) -> float | list[float]:
+    """A number or a non-empty list of numbers, as floats."""
+    if isinstance(value, list) and value:
+        return [_number(v, where) for v in value]
+    return _number(value, where)
+
+
+def _show(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _distribution(entry: Any, where: str) -> tuple[str, tuple[Any, ...]]:
     """Validate one entry; return ``(kind, arguments)``."""
     expected = "{uniform: [low, high]}, {normal: [mean, std]} or {choice: [a, b, ...]}"
     if not isinstance(entry, Mapping) or len(entry) != 1:
-        raise _Bad(where, f"not a distribution (got {entry!r}; expected {expected})")
+        raise _Bad(
+            where, f"not a distribution (got {_show(entry)}; expected {expected})"
+        )
     kind, args = next(iter(entry.items()))
     if kind not in DISTRIBUTIONS:
         raise _Bad(
@@ -164,24 +178,31 @@ def _distribution(entry: Any, where: str) -> tuple[str, tuple[Any, ...]]:
     where = f"{where}.{kind}"
     if kind == "choice":
         if not isinstance(args, list) or not args:
-            raise _Bad(where, f"not a list (got {args!r}; expected [a, b, ...])")
+            raise _Bad(where, f"not a list (got {_show(args)}; expected [a, b, ...])")
         return kind, tuple(args)
     if not isinstance(args, list) or len(args) != 2:
         names = "[low, high]" if kind == "uniform" else "[mean, std]"
-        raise _Bad(where, f"not a pair (got {args!r}; expected {names})")
+        raise _Bad(where, f"not a pair (got {_show(args)}; expected {names})")
     a, b = _numbers(args[0], where), _numbers(args[1], where)
-    shape_a, shape_b = np.shape(a), np.shape(b)
-    if shape_a != shape_b or len(shape_a) > 1:
+    if np.shape(a) != np.shape(b):
         raise _Bad(
             where,
-            f"the two bounds differ in shape (got {args!r}; expected two numbers or "
-            "two lists of equal length)",
+            f"the two bounds differ in shape (got {_show(args)}; expected two numbers "
+            "or two lists of equal length)",
         )
     lo, hi = np.asarray(a), np.asarray(b)
     if kind == "uniform" and np.any(hi < lo):
-        raise _Bad(where, f"high below low (got {args!r}; expected low <= high)")
+        raise _Bad(where, f"high below low (got {_show(args)}; expected low <= high)")
     if kind == "normal" and np.any(hi < 0):
-        raise _Bad(where, f"negative std (got {args!r}; expected std >= 0)")
+        raise _Bad(where, f"negative std (got {_show(args)}; expected std >= 0)")
+    with np.errstate(over="ignore", invalid="ignore"):
+        spread = hi - lo if kind == "uniform" else lo + 10 * hi
+    if not np.all(np.isfinite(spread)):
+        raise _Bad(
+            where,
+            f"the range overflows (got {_show(args)}; expected bounds whose "
+            "difference is a finite number)",
+        )
     return kind, (a, b)
 
 

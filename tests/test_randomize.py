@@ -109,7 +109,11 @@ def test_no_possible_draw_is_an_error():
         ({"uniform": [1]}, "randomize.recovery.beta.uniform: not a pair"),
         ({"uniform": [2, 1]}, "high below low"),
         ({"uniform": [[1, 2], [3]]}, "differ in shape"),
-        ({"uniform": ["a", 1]}, "not a number or a list of numbers"),
+        ({"uniform": ["a", 1]}, "not a finite number or a list of them"),
+        ({"uniform": [10**400, 1]}, "not a finite number"),
+        ({"uniform": [[1, [2]], [3, 4]]}, "not a finite number"),
+        ({"uniform": [-1e308, 1e308]}, "the range overflows"),
+        ({"normal": [0, 1e308]}, "the range overflows"),
         ({"normal": [1, -1]}, "negative std"),
         ({"choice": []}, "not a list"),
         ({"gauss": [1, 2]}, "unknown distribution"),
@@ -121,6 +125,11 @@ def test_bad_entries(tmp_path, entry, message):
     with pytest.raises(ScenarioError, match=re.escape(message)) as exc:
         load_scenario(path)
     assert exc.value.lines[0].startswith(f"{path}:")  # file and line named
+
+
+def test_a_key_that_is_not_text_names_no_field():
+    with pytest.raises(ScenarioError, match="randomize"):
+        load_scenario(doc(randomize={3: {"uniform": [1, 2]}}))
 
 
 def test_bad_path():

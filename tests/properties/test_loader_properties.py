@@ -28,11 +28,15 @@ from sandbox.schema import build_schema
 from sandbox.simulation import Simulation
 
 REPO = Path(__file__).resolve().parents[2]
-#: Bundled scenarios small enough to be parsed hundreds of times (big platoons are not).
+#: Bundled scenarios small enough to be parsed hundreds of times (big platoons are not);
+#: sweep files (scenarios/studies/, with a ``base:`` key) are not scenarios.
 BUNDLED = [
     p
     for p in sorted((REPO / "scenarios").rglob("*.yaml"))
-    if len(parse_scenario(yaml.load(p.read_text("utf-8"), Loader=_YAMLLoader)).vehicles)
+    if "base" not in (yaml.safe_load(p.read_text("utf-8")) or {})
+    and len(
+        parse_scenario(yaml.load(p.read_text("utf-8"), Loader=_YAMLLoader)).vehicles
+    )
     <= 50
 ]
 DOCS = [yaml.load(p.read_text(encoding="utf-8"), Loader=_YAMLLoader) for p in BUNDLED]
