@@ -14,7 +14,9 @@ one deterministic scenario per seed. Each path has its own stream,
 ``numpy.random.default_rng([seed, attempt, crc32(path)])``: a value depends only on the
 seed, the attempt and its own path, never on the order of the keys in the file or on
 the other randomized paths. Paths are applied in sorted order. A path that ``--set``
-assigned is not drawn (the value given on the command line is kept).
+assigned is not drawn (the value given on the command line is kept). Each path must
+name a value the file writes (the draw replaces it), so that the file without
+``randomize`` is a valid scenario too (the hand-picked case of the draws).
 
 A draw whose vehicles start overlapping each other, or start inside a static obstacle,
 is redrawn (``attempt`` 1, 2, ...) up to :data:`MAX_ATTEMPTS` times; after that it is a
@@ -109,6 +111,14 @@ def resolve(
     if problems:
         return out, problems
     entries = [(p, d) for p, d in entries if p not in skip]
+    if check is not None:
+        # The file without randomize must be a valid scenario but for where its
+        # vehicles start (which the draws move): else the loader reports its problems.
+        try:
+            check(out)
+        except ScenarioError as exc:
+            if not all(_is_overlap(p) for p in exc.problems):
+                return out, []
     for attempt in range(MAX_ATTEMPTS):
         candidate = copy.deepcopy(out)
         try:
@@ -231,7 +241,7 @@ def _tokens(path: str, where: str) -> list[str]:
 
 
 def _assign(doc: dict[str, Any], path: str, value: Any) -> None:
-    """Set ``path`` in ``doc``; missing mappings on the way are created."""
+    """Replace the value at ``path`` in ``doc``; the field must be written there."""
     where = f"randomize.{path}"
     tokens = _tokens(path, where)
     target: Any = doc
@@ -239,65 +249,37 @@ def _assign(doc: dict[str, Any], path: str, value: Any) -> None:
         last = k == len(tokens) - 1
         if tok.startswith("["):
             idx = int(tok[1:-1])
-            if not isinstance(target, list) or idx >= len(target):
-                size = len(target) if isinstance(target, list) else 0
-                raise _Bad(
-                    where,
-                    f"names no field (got index {idx}; expected an index below {size})",
-                )
-            if last:
-                target[idx] = value
-            else:
-                target = target[idx]
-            continue
-        if not isinstance(target, dict):
-            raise _Bad(
-                where, f"names no field (got {tok!r} under a value; expected a mapping)"
-            )
-        if last:
-            target[tok] = value
+            found = isinstance(target, list) and idx < len(target)
         else:
-            if target.get(tok) is None:
-                target[tok] = {}
-            target = target[tok]
+            found = isinstance(target, dict) and target.get(tok) is not None
+        if not found:
+            raise _Bad(
+                where,
+                f"names no field written in the scenario (got {path!r}; expected the "
+                "path of a value the file sets: randomize replaces it, so that the "
+                "file is a valid scenario without randomize too)",
+            )
+        key = int(tok[1:-1]) if tok.startswith("[") else tok
+        if last:
+            target[key] = value
+        else:
+            target = target[key]
 
 
 # ----------------------------------------------------------------------- the starts
+def _is_overlap(problem: Problem) -> bool:
+    """Whether a problem is a start overlapping another vehicle or an obstacle."""
+    return "start" in problem.message and "overlapping" in problem.message
+
+
 def _starts_clear(candidate: dict[str, Any], check: Callable[[dict], Any]) -> bool:
-    """Whether no vehicle starts overlapping another or inside an obstacle.
+    """Whether no vehicle starts overlapping another or an obstacle (loader checks).
 
     A candidate with other problems counts as clear: redrawing would not help, and the
     loader reports those problems.
     """
     try:
-        scenario = check(candidate)
+        check(candidate)
     except ScenarioError as exc:
-        return not any(
-            "overlapping" in p.message and p.path.endswith((".pose", ".spacing"))
-            for p in exc.problems
-        )
-    for v in scenario.vehicles:
-        for o in scenario.obstacles:
-            if _obstacle_distance(v.pose[:2], o) < v.diameter / 2:
-                return False
+        return not any(_is_overlap(p) for p in exc.problems)
     return True
-
-
-def _obstacle_distance(point: tuple[float, float], obstacle: Any) -> float:
-    """Distance from a point to an obstacle's outline [m]; 0 inside it."""
-    x, y = point
-    if obstacle.type == "circle":
-        cx, cy = obstacle.center
-        return max(math.hypot(x - cx, y - cy) - obstacle.radius, 0.0)
-    poly = np.asarray(obstacle.outline(), dtype=float)
-    a, b = poly, np.roll(poly, -1, axis=0)
-    ab = b - a
-    p = np.array([x, y])
-    s = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
-    nearest = float(np.min(np.hypot(*(a + s[:, None] * ab - p).T)))
-    # Even-odd rule: inside when a ray to +x crosses the outline an odd number of times.
-    crosses = (a[:, 1] > y) != (b[:, 1] > y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        at = a[:, 0] + (y - a[:, 1]) * ab[:, 0] / ab[:, 1]
-    inside = int(np.count_nonzero(crosses & (x < at))) % 2 == 1
-    return 0.0 if inside else nearest

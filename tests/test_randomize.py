@@ -23,6 +23,7 @@ def doc(**extra):
         "name": "drawn",
         "duration": 0.5,
         "seed": 3,
+        "vehicle": {"mass": 10.0},
         "reference": {"type": "line", "start": [0, 0], "heading": 0, "speed": 1},
         "formation": {"law": "rotating"},
         "recovery": {"strategy": "continuous", "beta": 1.0, "R": "3d", "r": "1.5d"},
@@ -135,8 +136,11 @@ def test_a_key_that_is_not_text_names_no_field():
 def test_bad_path():
     with pytest.raises(ScenarioError, match=re.escape("vehicles[7]")):
         load_scenario(doc(randomize={"vehicles[7].pose": POSE}))
-    with pytest.raises(ScenarioError, match="unknown key"):
+    with pytest.raises(ScenarioError, match="names no field written"):
         load_scenario(doc(randomize={"recovery.bta": {"uniform": [1, 2]}}))
+    # A field left at its default is not written: randomize replaces values only.
+    with pytest.raises(ScenarioError, match="names no field written"):
+        load_scenario(doc(randomize={"recovery.steepness": {"uniform": [1, 2]}}))
 
 
 def test_a_path_given_by_set_is_not_drawn():
