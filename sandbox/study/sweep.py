@@ -26,6 +26,10 @@ from sandbox.study.spec import SweepError, SweepSpec, Task, build_spec, is_sweep
 from sandbox.study.store import Store, digest
 
 
+#: A sweep file is a few lines; larger files are not read as one.
+MAX_SWEEP_BYTES = 1_000_000
+
+
 @dataclass
 class SweepReport:
     """What an invocation did."""
@@ -268,10 +272,12 @@ def check_sweep_file(path: str | Path) -> str | None:
     SweepError, ScenarioError
         The sweep file, its base scenario or one of its grid points is invalid.
     """
-    try:
+    try:  # anything odd (huge, binary, hostile YAML) is left to the scenario loader
+        if not Path(path).is_file() or Path(path).stat().st_size > MAX_SWEEP_BYTES:
+            return None
         doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
-        return None  # the scenario loader reports it
+    except (OSError, ValueError, RecursionError, yaml.YAMLError):
+        return None
     if not is_sweep_file(doc):
         return None
     spec = build_spec(path)
