@@ -296,6 +296,27 @@ def _pole_text(s: complex) -> str:
     return f"{s.real:.4g}{s.imag:+.4g}j"
 
 
+def _with_neighbours(
+    tree: Any,
+    pos: np.ndarray,
+    rad: np.ndarray,
+    small: np.ndarray,
+    reach: float,
+    same: bool,
+) -> Iterator[int]:
+    """The discs of ``small`` with any other disc of ``tree`` within reach.
+
+    Counted in C a block at a time (no lists are built), so that only those discs are
+    looked at one by one; a block in a dense crowd yields at once and the caller stops.
+    """
+    for lo in range(0, len(small), 1024):
+        block = small[lo : lo + 1024]
+        counts = tree.query_ball_point(
+            pos[block], rad[block] + reach, return_length=True
+        )
+        yield from (int(a) for a in block[np.asarray(counts) > (1 if same else 0)])
+
+
 def _overlapping_pairs(
     pos: np.ndarray, rad: np.ndarray, limit: int
 ) -> Iterator[tuple[int, int, float]]:
@@ -331,7 +352,7 @@ def _overlapping_pairs(
         for gj in range(gi, len(groups)):
             big, tree = groups[gj], trees[gj]
             reach = float(rad[big].max())
-            for a in small:
+            for a in _with_neighbours(tree, pos, rad, small, reach, gi == gj):
                 found = tree.query_ball_point(pos[a], rad[a] + reach)
                 found = [int(big[k]) for k in found[:37]]
                 if len(found) == 37:
