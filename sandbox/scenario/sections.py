@@ -89,9 +89,7 @@ _RANDOMIZE_SCHEMA = {
 
 
 def _nullable_keys(schema: dict[str, Any]) -> dict[str, Any]:
-    """An object schema whose keys, at every depth, also accept null, as the reader
-    does (null is the default).
-    """
+    """The schema with every key, at every depth, also accepting null (the default)."""
     docs = ("description", "default")
 
     def nullable(sub: Any) -> Any:
