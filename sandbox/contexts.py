@@ -39,6 +39,12 @@ class StrategyContext:
         The safe-zone radius ``recovery.R`` (the radius of the neighbour index).
     obstacle_field : ObstacleField
         The static obstacles.
+    neighbours : NeighbourList or None
+        The loop's incremental neighbour index (over the true positions).
+    seen_pos : ndarray (n, 2) [m] or None
+        The broadcast positions each vehicle receives of the others (``sensing:``,
+        see :mod:`sandbox.sensing`); None: every vehicle sees the others' true
+        ``pos``. A vehicle's own position is always ``pos``.
     """
 
     t: float
@@ -54,6 +60,7 @@ class StrategyContext:
     R: float
     obstacle_field: Any
     neighbours: Any = None
+    seen_pos: np.ndarray | None = None
 
     @property
     def n(self) -> int:

@@ -621,11 +621,32 @@ def weighted_shift(
         # Sum over the pairs, +alpha u/dist on i and -alpha u/dist on j (eqs. (23)-
         # (24)), in pair order: the same sums as np.add.at, several times faster.
         both = np.concatenate((i, j))
-        for axis in (0, 1):
-            c = alpha * (rel[:, axis] / dd)
-            shift[:, axis] = np.bincount(both, np.concatenate((c, -c)), minlength=n)
-        active[i[on]] = True
-        active[j[on]] = True
+        seen = ctx.seen_pos
+        if seen is None:
+            for axis in (0, 1):
+                c = alpha * (rel[:, axis] / dd)
+                shift[:, axis] = np.bincount(both, np.concatenate((c, -c)), minlength=n)
+            active[i[on]] = True
+            active[j[on]] = True
+        else:
+            # Each vehicle sees itself exactly and the other's broadcast position: i
+            # reads pos[i] - seen[j], j reads seen[i] - pos[j] (the pairs are those
+            # of the true positions).
+            rel_i = pos[i] - seen[j]
+            rel_j = seen[i] - pos[j]
+            terms = []
+            for r_ in (rel_i, rel_j):
+                d2 = r_[:, 0] * r_[:, 0] + r_[:, 1] * r_[:, 1]
+                d = np.maximum(np.sqrt(d2), MIN_DIST)  # eq. (25)
+                terms.append((weight(d, R, r, steepness), r_, d * d))
+            for axis in (0, 1):
+                (a_i, r_i, dd_i), (a_j, r_j, dd_j) = terms
+                c = np.concatenate(
+                    (a_i * r_i[:, axis] / dd_i, -a_j * r_j[:, axis] / dd_j)
+                )
+                shift[:, axis] = np.bincount(both, c, minlength=n)
+            active[i[terms[0][0] > 0]] = True
+            active[j[terms[1][0] > 0]] = True
     if not obstacles.empty and neighbours is not None:
         # Only the obstacles near each vehicle (alpha is 0 beyond R for every strategy);
         # the same terms as below, summed over the candidate pairs.

@@ -30,6 +30,7 @@ from sandbox.scenario import (
     METRICS,
     PLATOON,
     PLUGIN_SECTIONS,
+    SENSING,
     TOP,
     VEHICLE,
     VEHICLE_PARAMS,
@@ -62,6 +63,7 @@ def sections() -> dict[str, dict[str, Param]]:
         "drive": DRIVE,
         "platoon": PLATOON,
         "metrics": METRICS,
+        "sensing": SENSING,
     }
     for kind, own in PLUGIN_SECTIONS.items():
         section = KINDS[kind].section
@@ -295,6 +297,7 @@ def build_schema() -> dict[str, Any]:
             "failure": _plugin_section("failure"),
             "obstacle": _plugin_section("obstacle"),
             "metrics": _object(METRICS),
+            "sensing": _object(SENSING),
         },
     }
 

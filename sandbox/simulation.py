@@ -53,6 +53,7 @@ from sandbox.run import (
     Run,
 )
 from sandbox.scenario import Scenario
+from sandbox.sensing import make_broadcast
 from sandbox.state import Fleet
 from sandbox.world import World
 
@@ -124,6 +125,10 @@ class Simulation:
         self.obstacles = ObstacleField(scenario.obstacles)
         self.failures = FailureSchedule(scenario.failures, self.names)
         self.shift_motion = BackwardDifference(self.h)
+        # What the vehicles see of each other (None: the truth, see sandbox.sensing).
+        self.broadcast = make_broadcast(scenario.sensing, self.h, scenario.seed)
+        #: The broadcast poses received at t_k, shape (n, 3), or None without sensing.
+        self.seen: np.ndarray | None = None
         n = self.fleet.n
         # Vehicles that track the reference itself (eq. (6)) rather than a slot.
         self.tracks_reference = np.zeros(n, dtype=bool)
@@ -200,7 +205,13 @@ class Simulation:
         fleet, n = self.fleet, self.fleet.n
         ref = self.reference.evaluate(t) if self.reference is not None else None
         if self.law is not None:
-            lead = self.leader
+            lead, seen = self.leader, self.seen
+            if lead < 0:
+                leader_pos = leader_theta = None
+            elif seen is None:
+                leader_pos, leader_theta = fleet.pos[lead], float(fleet.theta[lead])
+            else:  # the followers read the leader's broadcast pose
+                leader_pos, leader_theta = seen[lead, :2], float(seen[lead, 2])
             inputs = LawContext(
                 t=t,
                 dt=self.h,
@@ -209,8 +220,8 @@ class Simulation:
                 vel=fleet.vel,
                 offset=fleet.offset,
                 leader=lead,
-                leader_pos=fleet.pos[lead] if lead >= 0 else None,
-                leader_theta=float(fleet.theta[lead]) if lead >= 0 else None,
+                leader_pos=leader_pos,
+                leader_theta=leader_theta,
                 reference=ref,
                 params=self.law_params,
                 memory=self.law_memory,
@@ -283,6 +294,8 @@ class Simulation:
         fleet.pos, fleet.theta, fleet.vel = state.pos, state.theta, state.vel
         bad = _diverged(fleet)
         if bad is None:
+            if self.broadcast is not None:
+                self.seen = self.broadcast.update(fleet.pos, fleet.theta)
             return True
         n = fleet.n
         self.status = STATUS_DIVERGED
@@ -331,6 +344,7 @@ class Simulation:
                 R=rec.R,
                 obstacle_field=self.obstacles,
                 neighbours=self._neighbours,
+                seen_pos=None if self.seen is None else self.seen[:, :2],
             )
         )
         # a strategy never moves a vehicle that may not avoid

@@ -31,6 +31,7 @@ from sandbox.scenario import (
     PLATOON,
     RECOVERY,
     REPORT_DT_BOUND,
+    SENSING,
     TOP,
     VEHICLE,
     VEHICLE_PARAMS,
@@ -78,6 +79,7 @@ def declaration(path: str, doc: dict[str, Any]) -> Param | None:
         "vehicle": VEHICLE_PARAMS,
         "platoon": PLATOON,
         "metrics": METRICS,
+        "sensing": SENSING,
     }.get(head)
     if parts[-2] == "gains":
         return GAINS.get(key)
@@ -118,6 +120,7 @@ def default_matches(stated: str, p: Param) -> bool:
 
 def test_every_declared_key_is_documented() -> None:
     tables = [TOP, VEHICLE_PARAMS, GAINS, VEHICLE, DRIVE, PLATOON, METRICS, RECOVERY]
+    tables.append(SENSING)
     tables.append(FAILURE)
     for kind in ("law", "strategy", "failure", "reference", "obstacle"):
         for plugin in plugins.registry(kind).values():

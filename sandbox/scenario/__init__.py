@@ -53,6 +53,7 @@ from sandbox.scenario.sections import (
     RECOVERY,
     REFERENCE,
     REPORT_DT_BOUND,
+    SENSING,
     TOP,
     TOP_KEYS,
     read_param,
@@ -72,6 +73,7 @@ from sandbox.scenario.specs import (
     RecoverySpec,
     ReferenceSpec,
     Scenario,
+    SensingSpec,
     VehicleSpec,
 )
 from sandbox.scenario.vehicles import (
@@ -125,6 +127,8 @@ __all__ = [
     "FormationSpec",
     "FunctionReference",
     "MetricsSpec",
+    "SensingSpec",
+    "SENSING",
     "ObstacleSpec",
     "PlatoonSpec",
     "RecoverySpec",

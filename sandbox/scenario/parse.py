@@ -38,6 +38,8 @@ from sandbox.scenario.sections import (
     METRICS,
     METRICS_KEYS,
     PLUGIN_SECTIONS,
+    SENSING,
+    SENSING_KEYS,
     TOP,
     TOP_KEYS,
     _failures,
@@ -48,7 +50,13 @@ from sandbox.scenario.sections import (
     read_param,
     read_params,
 )
-from sandbox.scenario.specs import MetricsSpec, Scenario, VehicleSpec, _from_loader
+from sandbox.scenario.specs import (
+    MetricsSpec,
+    Scenario,
+    SensingSpec,
+    VehicleSpec,
+    _from_loader,
+)
 from sandbox.scenario.vehicles import (
     DRIVE_KEYS,
     GAIN_KEYS,
@@ -239,6 +247,7 @@ def parse_scenario(
     metrics = MetricsSpec(
         **{k: METRICS[k].default if v is None else v for k, v in read.items()}
     )
+    sensing = _sensing(rd, doc.get("sensing"), dt)
 
     names = [n for _, n, _ in rd.declared] + [v.name for _, v in generated]
     expect = read_expectations(rd, doc.get("expect"), "expect", names)
@@ -285,6 +294,7 @@ def parse_scenario(
             obstacles=tuple(o for _, o in obstacles),
             platoon=platoon,
             metrics=metrics,
+            sensing=sensing,
             diameter=rd.diameter,
             source=source,
             plugins=tuple(loaded),
@@ -458,6 +468,7 @@ def _allowed_keys(parents: list[str], node: dict[Any, Any]) -> tuple[str, ...]:
         "vehicles": VEHICLE_KEYS,
         "platoon": PLATOON_KEYS,
         "metrics": METRICS_KEYS,
+        "sensing": SENSING_KEYS,
         "drive": DRIVE_KEYS,
     }
     if head in table:
@@ -578,3 +589,28 @@ def load_scenario(
     return parse_scenario(
         doc, source=name, lines=lines, overrides=overrides, problems=duplicates
     )
+
+
+def _sensing(rd: _Reader, doc: Any, dt: Any) -> SensingSpec:
+    """The ``sensing:`` section: bounds, and a delay of whole control periods."""
+    m = rd.mapping(doc, "sensing") or {}
+    rd.keys(m, SENSING_KEYS, "sensing")
+    read, ok = read_params(rd, m, "sensing", SENSING)
+    values = {k: SENSING[k].default if v is None else v for k, v in read.items()}
+    if not ok:
+        return SensingSpec()
+    if values["loss"] >= 1:
+        rd.fail(
+            "sensing.loss", "must be below 1", f"{values['loss']:g}", "0 <= loss < 1"
+        )
+    delay = values["delay"]
+    if isinstance(dt, int | float) and dt > 0 and delay > 0:
+        periods = delay / dt
+        if abs(periods - round(periods)) > 1e-9 * max(1.0, periods):
+            rd.fail(
+                "sensing.delay",
+                f"must be a whole number of control periods dt = {dt:g} s",
+                f"{delay:g} s = {periods:g} periods",
+                f"a multiple of {dt:g} s",
+            )
+    return SensingSpec(**values)

@@ -191,6 +191,11 @@ TOP: dict[str, Param] = {
     "failures": Param(**_list_of("failure"), doc="Failures injected into vehicles"),
     "obstacles": Param(**_list_of("obstacle"), doc="Static obstacles"),
     "metrics": Param(**_section("metrics"), doc="Parameters of metrics.json"),
+    "sensing": Param(
+        **_section("sensing"),
+        doc="What the vehicles see of each other: a noisy, delayed, lossy broadcast "
+        "of the poses (see sandbox/sensing.py; all 0: the truth)",
+    ),
     "randomize": Param(
         "custom",
         None,
@@ -235,6 +240,37 @@ METRICS: dict[str, Param] = {
         "returns are the same collision)",
         minimum=0.0,
         exclusive=True,
+    ),
+}
+
+SENSING: dict[str, Param] = {
+    "position_noise": Param(
+        "number",
+        0.0,
+        "m",
+        "Standard deviation of the noise on each broadcast position coordinate",
+        minimum=0.0,
+    ),
+    "heading_noise": Param(
+        "number",
+        0.0,
+        "rad",
+        "Standard deviation of the noise on each broadcast heading",
+        minimum=0.0,
+    ),
+    "delay": Param(
+        "number",
+        0.0,
+        "s",
+        "Latency of the broadcast, a whole number of control periods dt",
+        minimum=0.0,
+    ),
+    "loss": Param(
+        "number",
+        0.0,
+        doc="Probability that a vehicle's packet of a period is lost (the last "
+        "received copy is held), below 1",
+        minimum=0.0,
     ),
 }
 
@@ -307,6 +343,8 @@ for _kind, _own in PLUGIN_SECTIONS.items():
 TOP_KEYS = tuple(TOP)
 
 METRICS_KEYS = tuple(METRICS)
+
+SENSING_KEYS = tuple(SENSING)
 
 
 def _length_default(rd: _Reader, value: Any) -> Any:

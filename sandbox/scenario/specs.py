@@ -209,6 +209,21 @@ class MetricsSpec:
     contact_release: float = 0.01
 
 
+@dataclass(frozen=True)
+class SensingSpec:
+    """What the vehicles see of each other (``sensing:``, see :mod:`sandbox.sensing`).
+
+    ``position_noise`` [m] and ``heading_noise`` [rad]: standard deviations of the
+    broadcast noise; ``delay`` [s]: the latency, a whole number of control periods;
+    ``loss``: the probability that a packet is lost. All 0: the truth.
+    """
+
+    position_noise: float = 0.0
+    heading_noise: float = 0.0
+    delay: float = 0.0
+    loss: float = 0.0
+
+
 #: Set while the loader constructs a scenario (which it has just validated).
 _LOADER_BUILDS: ContextVar[bool] = ContextVar("loader_builds", default=False)
 
@@ -251,6 +266,8 @@ class Scenario:
     plugins: tuple[str, ...] = ()
     #: The ``expect:`` section (see :mod:`sandbox.expectations`), or None.
     expect: Expectations | None = None
+    #: The ``sensing:`` section (all 0 by default: the truth).
+    sensing: SensingSpec = SensingSpec()
 
     def __post_init__(self) -> None:
         """Validate a scenario not made by the loader (the constructor, ``replace``).
@@ -376,6 +393,8 @@ class Scenario:
         if self.obstacles:
             doc["obstacles"] = [o.document() for o in self.obstacles]
         doc["metrics"] = _plain(self.metrics)
+        if self.sensing != SensingSpec():
+            doc["sensing"] = _plain(self.sensing)
         if self.expect is not None:
             doc["expect"] = self.expect.to_dict()
         return doc
