@@ -182,3 +182,12 @@ def test_the_readmes_examples_pass(pytester: pytest.Pytester) -> None:
     result = pytester.runpytest(*QUIET, "-v")
     result.assert_outcomes(passed=2)
     result.stdout.fnmatch_lines([f"*{test_yaml[1]}::expect PASSED*"])
+
+
+def test_no_bundled_scenario_is_collected_as_a_test() -> None:
+    # Only test_*.yaml files are items; the bundled scenarios are examples, not tests
+    # of the user's code (they are checked by tests/test_check.py instead).
+    root = Path(__file__).resolve().parent.parent
+    named = [p for p in (root / "scenarios").rglob("test_*.y*ml")]
+    assert named == []
+    assert [p for p in (root / "tests").rglob("test_*.y*ml")] == []
