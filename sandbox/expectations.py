@@ -100,6 +100,15 @@ _COUNT_BOUND = {
 }
 _LENGTH_BOUND = _bound_schema(_LENGTH_END, "a length [m] (or like '3d')")
 _TIME_BOUND = _bound_schema(_TIME, "a time [s]")
+
+
+def _nullable(fragment: dict[str, Any]) -> dict[str, Any]:
+    """A fragment that also accepts null (the loader reads null as "not given")."""
+    docs = {k: v for k, v in fragment.items() if k == "description"}
+    core = {k: v for k, v in fragment.items() if k != "description"}
+    return {"anyOf": [core, {"type": "null"}], **docs}
+
+
 _COLLISION_DOCS = {
     "healthy": "Contacts in which no vehicle had an active failure",
     "total": "Every contact episode",
@@ -122,47 +131,61 @@ EXPECT_SCHEMA: dict[str, Any] = {
             "left out)",
             "default": "ok",
         },
-        "collisions": {
-            "type": "object",
-            "description": "Bounds on the collision counts of metrics.json",
-            "properties": {
-                k: {**_COUNT_BOUND, "description": doc}
-                for k, doc in _COLLISION_DOCS.items()
-            },
-            "additionalProperties": False,
-        },
-        "converged": {
-            "type": "boolean",
-            "description": "Whether every healthy vehicle must settle (metrics.json)",
-        },
-        "min_distance": {
-            **_LENGTH_BOUND,
-            "description": "Bound on the smallest centre distance between two "
-            "vehicles [m]",
-        },
-        "settling_time": {
-            "type": "object",
-            "description": "at_least/at_most: bound on the latest settling time of "
-            "the healthy vehicles [s]; a vehicle name: bound on that vehicle's",
-            "properties": {
-                k: {"anyOf": [_TIME, {"type": "null"}]} for k in ("at_least", "at_most")
-            },
-            "additionalProperties": _TIME_BOUND,
-            "minProperties": 1,
-        },
-        "formation_error": {
-            "type": "object",
-            "description": "Per vehicle name: bounds on its formation-error "
-            "statistics (metrics.json) [m]",
-            "additionalProperties": {
+        "collisions": _nullable(
+            {
                 "type": "object",
+                "description": "Bounds on the collision counts of metrics.json",
                 "properties": {
-                    k: {**_LENGTH_BOUND, "description": doc}
-                    for k, doc in _STAT_DOCS.items()
+                    k: _nullable({**_COUNT_BOUND, "description": doc})
+                    for k, doc in _COLLISION_DOCS.items()
                 },
                 "additionalProperties": False,
-            },
-        },
+            }
+        ),
+        "converged": _nullable(
+            {
+                "type": "boolean",
+                "description": "Whether every healthy vehicle must settle "
+                "(metrics.json)",
+            }
+        ),
+        "min_distance": _nullable(
+            {
+                **_LENGTH_BOUND,
+                "description": "Bound on the smallest centre distance between two "
+                "vehicles [m]",
+            }
+        ),
+        "settling_time": _nullable(
+            {
+                "type": "object",
+                "description": "at_least/at_most: bound on the latest settling time of "
+                "the healthy vehicles [s]; a vehicle name: bound on that vehicle's",
+                "properties": {
+                    k: {"anyOf": [_TIME, {"type": "null"}]}
+                    for k in ("at_least", "at_most")
+                },
+                "additionalProperties": _nullable(_TIME_BOUND),
+                "minProperties": 1,
+            }
+        ),
+        "formation_error": _nullable(
+            {
+                "type": "object",
+                "description": "Per vehicle name: bounds on its formation-error "
+                "statistics (metrics.json) [m]",
+                "additionalProperties": _nullable(
+                    {
+                        "type": "object",
+                        "properties": {
+                            k: _nullable({**_LENGTH_BOUND, "description": doc})
+                            for k, doc in _STAT_DOCS.items()
+                        },
+                        "additionalProperties": False,
+                    }
+                ),
+            }
+        ),
     },
 }
 
@@ -338,11 +361,13 @@ def read_expectations(
         sub = f"{path}.settling_time"
         sm = rd.mapping(m["settling_time"], sub)
         if sm is not None:
-            own = {k: v for k, v in sm.items() if k in BOUND_KEYS}
+            own = {k: v for k, v in sm.items() if k in BOUND_KEYS and v is not None}
             if own:
                 settling_time = _bound(rd, own, sub, "time")
             for name, value in sm.items():
                 if name in BOUND_KEYS or not _vehicle(rd, name, names, sub, True):
+                    continue
+                if value is None:  # null: not given, as everywhere in the format
                     continue
                 b = _bound(rd, value, f"{sub}.{name}", "time")
                 if b is not None:

@@ -249,3 +249,21 @@ def test_a_diverged_run_fails_its_status() -> None:
     assert not status.holds
     assert status.got == "diverged (at 0.42 s, vehicle east: speed beyond 1e3 m/s)"
     assert evaluate(Expectations(status="diverged"), run, diverged)[0].holds
+
+
+def test_null_means_not_given_for_the_loader_and_the_schema() -> None:
+    validator = jsonschema.Draft202012Validator(build_schema())
+    expect = {
+        "collisions": {"total": None, "healthy": 0},
+        "converged": None,
+        "min_distance": None,
+        "settling_time": {"red": None, "at_most": None, "green": {"at_most": 3}},
+        "formation_error": {"red": None, "green": {"final": None}},
+    }
+    doc = doc_with(expect)
+    assert list(validator.iter_errors(doc)) == []
+    ex = load_scenario(doc).expect
+    assert ex == Expectations(
+        collisions=(("healthy", Bound(0, 0)),),
+        settling_times=(("green", Bound(None, 3.0)),),
+    )
