@@ -190,32 +190,6 @@ EXPECT_SCHEMA: dict[str, Any] = {
 }
 
 
-# A key left null is no bound (the loader accepts it), so the schema accepts it too.
-def _nullable(fragment: dict[str, Any]) -> dict[str, Any]:
-    inner = {k: v for k, v in fragment.items() if k != "description"}
-    out: dict[str, Any] = {"anyOf": [inner, {"type": "null"}]}
-    if "description" in fragment:
-        out["description"] = fragment["description"]
-    return out
-
-
-_props = EXPECT_SCHEMA["properties"]
-for _key in ("collisions", "formation_error"):
-    _inner = _props[_key]
-    if _key == "formation_error":
-        _inner = _inner["additionalProperties"]
-    _inner["properties"] = {k: _nullable(v) for k, v in _inner["properties"].items()}
-_props["settling_time"]["additionalProperties"] = _nullable(
-    _props["settling_time"]["additionalProperties"]
-)
-for _key in ("collisions", "converged", "settling_time", "formation_error"):
-    _props[_key] = _nullable(_props[_key])
-_props["formation_error"]["anyOf"][0]["additionalProperties"] = _nullable(
-    _props["formation_error"]["anyOf"][0]["additionalProperties"]
-)
-_props["min_distance"] = _nullable(_props["min_distance"])
-
-
 @dataclass(frozen=True)
 class Bound:
     """An inclusive range ``at_least <= x <= at_most``; either end may be open.
