@@ -263,6 +263,8 @@ def build_spec(
         raise SweepError(
             f"{file}: malformed YAML ({str(exc).splitlines()[0]})"
         ) from None
+    except (ValueError, RecursionError):  # e.g. integers of thousands of digits
+        raise SweepError(f"{file}: not a readable sweep or scenario file") from None
     file_grid: list[Axis] = []
     file_zip: list[Axis] = []
     fixed: list[str] = []

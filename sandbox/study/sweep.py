@@ -25,7 +25,6 @@ from sandbox.study import engine
 from sandbox.study.spec import SweepError, SweepSpec, Task, build_spec, is_sweep_file
 from sandbox.study.store import Store, digest
 
-
 #: A sweep file is a few lines; larger files are not read as one.
 MAX_SWEEP_BYTES = 1_000_000
 
