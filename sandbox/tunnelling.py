@@ -34,26 +34,33 @@ REFERENCE_SAMPLES = 400
 
 
 def peak_gain_speed(
-    k_pos: float, k_vel: float, dt: float, error: float, v_ref: float
-) -> float:
+    k_pos: float, k_vel: float, dt: float, error: float | np.ndarray, v_ref: float
+) -> float | np.ndarray:
     """Largest ``|chi|`` [m/s] eq. (6) asks for from rest at ``error`` [m].
 
     Forward Euler of the error dynamics, as the loop advances them: ``e+ = e + dt c``,
     ``c+ = c + dt (k_pos e + k_vel c)`` from ``e = error``, ``c = -v_ref`` (chi = 0),
-    for ten time constants; returns ``max |c| + v_ref``.
+    for ten time constants; returns ``max |c| + v_ref``. ``error`` may be an array of
+    initial errors (one per vehicle): they are advanced together, one numpy step per
+    period, and an array of peaks is returned.
 
     >>> round(peak_gain_speed(-100.0, -20.0, 0.01, 1.0, 0.0), 2)
     3.87
     """
-    if not (k_pos < 0 and k_vel < 0) or error <= 0.0:
-        return abs(v_ref)
-    poles = np.roots([1.0, -k_vel, -k_pos])
-    steps = int(min(100_000, 10.0 / max(1e-9, np.min(-poles.real)) / dt) + 1)
-    e, c, peak = error, -abs(v_ref), abs(v_ref)
-    for _ in range(steps):
-        e, c = e + dt * c, c + dt * (k_pos * e + k_vel * c)
-        peak = max(peak, abs(c))
-    return peak + abs(v_ref)
+    errors = np.atleast_1d(np.asarray(error, dtype=float))
+    peak = np.full(errors.shape, abs(v_ref))
+    if k_pos < 0 and k_vel < 0:
+        poles = np.roots([1.0, -k_vel, -k_pos])
+        steps = int(min(100_000, 10.0 / max(1e-9, np.min(-poles.real)) / dt) + 1)
+        live = errors > 0.0
+        e, c = errors[live], np.full(int(live.sum()), -abs(v_ref))
+        top = peak[live]
+        for _ in range(steps if len(e) else 0):
+            e, c = e + dt * c, c + dt * (k_pos * e + k_vel * c)
+            np.maximum(top, np.abs(c), out=top)
+        peak[live] = top
+    out = peak + abs(v_ref)
+    return float(out[0]) if np.ndim(error) == 0 else out
 
 
 def fastest_speeds(
@@ -63,8 +70,15 @@ def fastest_speeds(
     law: str | None,
     dt: float,
     duration: float,
+    frame: tuple[float, float, float] | None = None,
 ) -> np.ndarray:
-    """Fastest speed [m/s] each vehicle can reach in the scenario, shape (n,)."""
+    """Fastest speed [m/s] each vehicle can reach in the scenario, shape (n,).
+
+    ``frame`` is ``(x, y, angle)``, where the formation law puts the slots at t = 0
+    (the point offsets are added to [m], the angle they are turned by [rad]): a
+    follower's initial error is then its distance to its own slot. Without it, the
+    error is bounded by its distance to the anchor plus the length of its offset.
+    """
     ref_speed, ref_start = 0.0, None
     if reference is not None:
         built = reference.build()
@@ -74,6 +88,8 @@ def fastest_speeds(
         ref_start = np.asarray(p[0], dtype=float)
     leader = next((v for v in vehicles if v.leader), None)
     out = np.zeros(len(vehicles))
+    # Vehicles driven by their gains, grouped by gains: one vectorised peak per group.
+    groups: dict[tuple[float, float], list[tuple[int, float]]] = {}
     for i, v in enumerate(vehicles):
         if v.drive.type == "commands":
             out[i] = max((abs(row[1]) for row in v.drive.schedule), default=0.0)
@@ -88,12 +104,22 @@ def fastest_speeds(
                 anchor = np.asarray(leader.pose[:2], dtype=float)
             else:
                 anchor = pos
-            error = float(np.hypot(*(pos - anchor)) + np.hypot(*v.offset))
+            if frame is not None and not own_reference:
+                c, sn = math.cos(frame[2]), math.sin(frame[2])
+                d1, d2 = v.offset
+                slot = (frame[0] + c * d1 - sn * d2, frame[1] + sn * d1 + c * d2)
+                error = float(np.hypot(pos[0] - slot[0], pos[1] - slot[1]))
+            else:
+                error = float(np.hypot(*(pos - anchor)) + np.hypot(*v.offset))
             g = v.gains
-            out[i] = max(
-                peak_gain_speed(k_pos, k_vel, dt, error, ref_speed)
-                for k_pos, k_vel in ((g.k1, g.k2), (g.k3, g.k4))
-            )
+            for gains in ((g.k1, g.k2), (g.k3, g.k4)):
+                groups.setdefault(gains, []).append((i, error))
+    for (k_pos, k_vel), members in groups.items():
+        rows = np.array([i for i, _ in members], dtype=np.intp)
+        peaks = peak_gain_speed(
+            k_pos, k_vel, dt, np.array([e for _, e in members]), ref_speed
+        )
+        np.maximum.at(out, rows, peaks)
     names = [v.name for v in vehicles]
     for f in failures:
         if f.kind == "uncontrolled" and f.v1 is not None and f.vehicle in names:
@@ -110,6 +136,7 @@ def tunnelling_warning(
     dt: float,
     substeps: int,
     duration: float,
+    frame: tuple[float, float, float] | None = None,
 ) -> str | None:
     """A warning when some vehicle can move more than a quarter diameter per substep.
 
@@ -118,7 +145,7 @@ def tunnelling_warning(
     """
     if not vehicles:
         return None
-    speed = fastest_speeds(vehicles, failures, reference, law, dt, duration)
+    speed = fastest_speeds(vehicles, failures, reference, law, dt, duration, frame)
     diameter = np.array([v.diameter for v in vehicles], dtype=float)
     h = dt / substeps
     ratio = speed * h / diameter

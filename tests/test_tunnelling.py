@@ -68,3 +68,18 @@ def test_peak_gain_speed_is_the_linear_error_peak():
     assert peak_gain_speed(-100.0, -20.0, 0.01, 2.0, 1.0) == pytest.approx(
         2 * peak_gain_speed(-100.0, -20.0, 0.01, 1.0, 0.0) + 1.0, rel=0.05
     )
+
+
+def test_a_platoon_that_starts_on_its_slots_is_not_warned_of_its_offsets():
+    # 400 followers on their slots behind a 1 m/s leader: no initial error, so the
+    # gains ask for about the reference's speed, far below a quarter diameter per
+    # substep. (Bounding the error by |pos - leader| + |offset| warned here.)
+    scenario = load_scenario(
+        {
+            "reference": {"type": "line", "speed": 1.0},
+            "formation": {"law": "rotating"},
+            "vehicles": [{"name": "lead", "pose": [0, 0, 0], "leader": True}],
+            "platoon": {"count": 400, "spacing": 0.6},
+        }
+    )
+    assert not any("substep" in w for w in scenario.warnings)

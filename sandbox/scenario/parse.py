@@ -65,6 +65,7 @@ from sandbox.scenario.vehicles import (
     VEHICLE_PARAM_KEYS,
     _expand_platoon,
     _platoon,
+    _platoon_frame,
     _vehicle_defaults,
     _vehicle_params,
     _vehicles,
@@ -274,7 +275,11 @@ def parse_scenario(
     vehicles = [v for _, v in listed + generated]
     law = formation.law if formation is not None else None
     fails = [f for _, f in failures]
-    tunnel = tunnelling_warning(vehicles, fails, reference, law, dt, substeps, duration)
+    leader = next((v for v in vehicles if v.leader), None)
+    x, y, angle, _ = _platoon_frame(formation, leader, reference)
+    tunnel = tunnelling_warning(
+        vehicles, fails, reference, law, dt, substeps, duration, (x, y, angle)
+    )
     if tunnel is not None:
         rd.warn("substeps", tunnel)
     with _from_loader():
