@@ -2,15 +2,38 @@
 
 Public API::
 
-    from sandbox import load_scenario, Simulation, simulate, compute_metrics
+    from sandbox import load_scenario, Simulation, simulate, compute_metrics, load_run
+
+    run = load_run("runs/rotating_circle")   # a run directory written by `sandbox run`
+    run.vehicle("red").x1                    # one vehicle's arrays
+    run.to_dataframe()                       # long table (needs the 'analysis' extra)
+
+The names are imported on first use (``import sandbox`` alone loads neither numpy nor
+the physics engine), so the command line starts fast.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
 import sandbox._startup  # noqa: F401  (first: quiet Ctrl-C while the command starts)
-from sandbox.errors import SandboxError, ScenarioError
-from sandbox.metrics import compute_metrics
-from sandbox.run import Run
-from sandbox.scenario import Scenario, load_scenario
-from sandbox.simulation import Simulation, simulate
+
+__version__ = "0.1.0"
+
+#: Public name -> (module, attribute) it is imported from on first use.
+_EXPORTS = {
+    "Run": ("sandbox.run", "Run"),
+    "SandboxError": ("sandbox.errors", "SandboxError"),
+    "Scenario": ("sandbox.scenario", "Scenario"),
+    "ScenarioError": ("sandbox.errors", "ScenarioError"),
+    "Simulation": ("sandbox.simulation", "Simulation"),
+    "VehicleTrack": ("sandbox.analysis", "VehicleTrack"),
+    "compute_metrics": ("sandbox.metrics", "compute_metrics"),
+    "load_run": ("sandbox.output", "load_run_dir"),
+    "load_scenario": ("sandbox.scenario", "load_scenario"),
+    "simulate": ("sandbox.simulation", "simulate"),
+}
 
 __all__ = [
     "Run",
@@ -18,8 +41,34 @@ __all__ = [
     "Scenario",
     "ScenarioError",
     "Simulation",
+    "VehicleTrack",
     "compute_metrics",
+    "load_run",
     "load_scenario",
     "simulate",
 ]
-__version__ = "0.1.0"
+
+if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports lazily
+    from sandbox.analysis import VehicleTrack
+    from sandbox.errors import SandboxError, ScenarioError
+    from sandbox.metrics import compute_metrics
+    from sandbox.output import load_run_dir as load_run
+    from sandbox.run import Run
+    from sandbox.scenario import Scenario, load_scenario
+    from sandbox.simulation import Simulation, simulate
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name on first use (PEP 562)."""
+    try:
+        module, attribute = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module 'sandbox' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), attribute)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    """The module's names, the lazily imported ones included."""
+    return sorted({*globals(), *_EXPORTS})

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import astuple, dataclass, fields
 from pathlib import Path
@@ -162,6 +162,7 @@ def compare(
     overrides: Sequence[str] = (),
     jobs: int = 1,
     plugin_specs: Sequence[str] = (),
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[Row]:
     """Run every scenario under every recovery setting; rows in (file, case) order.
 
@@ -180,6 +181,8 @@ def compare(
         Worker processes (1: run in this process).
     plugin_specs : sequence of str
         Plug-in files or modules to load first (also in the worker processes).
+    progress : callable, optional
+        Called as ``progress(done, total)`` after each run (``total`` runs in all).
 
     Raises
     ------
@@ -214,9 +217,23 @@ def compare(
                 (str(path), strategy, deriv, tuple(overrides), tuple(plugin_specs))
             )
     if jobs <= 1 or len(todo) <= 1:
-        return [_run_case_args(args) for args in todo]
+        return _collect(map(_run_case_args, todo), len(todo), progress)
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        return list(pool.map(_run_case_args, todo))
+        return _collect(pool.map(_run_case_args, todo), len(todo), progress)
+
+
+def _collect(
+    rows: Iterator[Row], total: int, progress: Callable[[int, int], None] | None
+) -> list[Row]:
+    """The rows, in order, reporting ``progress(done, total)`` as each one arrives."""
+    done: list[Row] = []
+    if progress is not None:
+        progress(0, total)
+    for row in rows:
+        done.append(row)
+        if progress is not None:
+            progress(len(done), total)
+    return done
 
 
 def _cell(value: object, column: str) -> str:

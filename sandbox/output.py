@@ -96,8 +96,13 @@ def write_text_atomic(path: Path, text: str) -> None:
         raise
 
 
-def write_run_dir(run: Run, metrics: dict[str, Any], out_dir: Path) -> Path:
+def write_run_dir(
+    run: Run, metrics: dict[str, Any], out_dir: Path, trajectory: str = "csv"
+) -> Path:
     """Write a run's outputs into ``out_dir``, replacing an earlier run there.
+
+    ``trajectory`` chooses ``trajectory.csv`` (``"csv"``) or ``trajectory.parquet``
+    (``"parquet"``, the same columns; needs pyarrow, the ``analysis`` extra).
 
     The files and their manifest (:data:`MANIFEST`) are written into a temporary
     directory beside ``out_dir`` (named ``.<name>.tmp-<pid>-...``), which then takes
@@ -131,7 +136,12 @@ def write_run_dir(run: Run, metrics: dict[str, Any], out_dir: Path) -> Path:
             f"{out_dir}: cannot create the output directory ({_reason(exc)})"
         ) from None
     try:
-        write_csv(run, tmp / "trajectory.csv")
+        if trajectory == "parquet":
+            from sandbox.analysis import write_parquet
+
+            write_parquet(run, tmp / "trajectory.parquet")
+        else:
+            write_csv(run, tmp / "trajectory.csv")
         write_json(metrics, tmp / "metrics.json")
         if run.scenario is not None:
             text = yaml.safe_dump(run.scenario.to_dict(), sort_keys=False)

@@ -20,9 +20,14 @@ import tempfile
 import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import pandas
+
+    from sandbox.analysis import VehicleTrack
 
 #: Integer codes of the ``mode`` array, and their names in ``trajectory.csv``.
 MODE_FORMATION = 0
@@ -165,6 +170,26 @@ class Run:
         return np.stack(
             (c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]), -1
         )
+
+    def vehicle(self, name: str) -> VehicleTrack:
+        """One vehicle's arrays by name: ``run.vehicle("red").x1``.
+
+        See :class:`sandbox.analysis.VehicleTrack`; raises ``KeyError`` (listing the
+        names) for an unknown vehicle.
+        """
+        from sandbox.analysis import vehicle_track
+
+        return vehicle_track(self, name)
+
+    def to_dataframe(self) -> pandas.DataFrame:
+        """The run as a long pandas DataFrame: t, vehicle, x1, ..., mode, failed.
+
+        One row per vehicle per sample, the columns of ``trajectory.csv``; needs the
+        ``analysis`` extra. See :func:`sandbox.analysis.to_dataframe`.
+        """
+        from sandbox.analysis import to_dataframe
+
+        return to_dataframe(self)
 
     # ------------------------------------------------------------------ persistence
     def save_npz(self, path: Path) -> None:

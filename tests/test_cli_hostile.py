@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import sandbox.cli.run as cli_run
+import sandbox.output as output_module
 import sandbox.render as render
+import sandbox.simulation as simulation_module
 from sandbox.cli import main
 from sandbox.run import Recorder, remove_dead_records
 
@@ -94,7 +95,7 @@ def test_too_many_frames_are_refused_before_the_run_starts(
     def never(*args, **kwargs):
         raise AssertionError("simulated although the GIF options were refused")
 
-    monkeypatch.setattr(cli_run.Simulation, "run", never)
+    monkeypatch.setattr(simulation_module.Simulation, "run", never)
     out = tmp_path / "out"
     argv = ["run", str(src), "--out", str(out), "--gif", str(tmp_path / "x.gif")]
     assert main([*argv, "--duration", "4000", "--fps", "50", "--speed", "1"]) == 2
@@ -289,13 +290,14 @@ def test_a_signal_while_the_gif_renders_exits_130_and_leaves_no_file(
 def test_a_signal_while_outputs_are_written_finishes_them_and_exits_130(
     src: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
 ) -> None:
-    real = cli_run.write_run_dir
+    real = output_module.write_run_dir
 
-    def signalled(run, metrics, out_dir):
+    def signalled(run, metrics, out_dir, **options):
         os.kill(os.getpid(), signal.SIGTERM)  # arrives after the last step
-        return real(run, metrics, out_dir)
+        return real(run, metrics, out_dir, **options)
 
-    monkeypatch.setattr(cli_run, "write_run_dir", signalled)
+    # `sandbox run` imports its writer when it runs: patch it where it lives
+    monkeypatch.setattr(output_module, "write_run_dir", signalled)
     out = tmp_path / "out"
     gif = tmp_path / "x.gif"
     assert main(["run", str(src), "--out", str(out), "--gif", str(gif)]) == 130

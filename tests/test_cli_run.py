@@ -192,7 +192,7 @@ def test_list_shows_the_bundled_scenarios(capsys: pytest.CaptureFixture) -> None
         "virtual_rotating",
         "leader_ref_drift",
     ):
-        assert f"scenarios/paper/{name}.yaml" in out
+        assert f"paper/{name}\n" in out  # the name `sandbox run` accepts
     # each with the first line of its description
     assert "Section 3.3, Figs. 7-8: rotating formation" in out
     assert "reference.yaml" not in out  # the format's documentation is not a scenario

@@ -3,8 +3,11 @@
 No simulation logic lives here: the commands call the same API as Python users. Every
 user mistake ends in one line per problem on stderr and a non-zero exit, never a
 traceback. Each command lives in a module of this package with a ``register(sub)``
-function that adds its subparser; :data:`COMMANDS` lists them in help order. A new
-command is a new module and one entry there.
+function that adds its subparser (with :func:`sandbox.cli.common.add_command`: help text
+and an epilog of examples); :data:`COMMANDS` lists them in help order. A new command is
+a new module and one entry there. Command modules import numpy, the simulation and
+matplotlib inside their command functions, never at module level, so that building the
+parser (``sandbox --help``) stays fast; ``tests/test_cli_help.py`` checks it.
 
 Exit status: 0 success; 1 a run diverged or a command failed; 2 invalid input;
 130 a run was interrupted (its outputs so far are written, flagged ``interrupted``).
@@ -15,7 +18,17 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sandbox.cli import check, compare, figures, plugins, run, sweep, validate
+from sandbox import __version__
+from sandbox.cli import (
+    check,
+    compare,
+    figures,
+    plugins,
+    run,
+    scenarios,
+    sweep,
+    validate,
+)
 from sandbox.cli.common import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
@@ -29,7 +42,15 @@ from sandbox.errors import SandboxError, ScenarioError
 from sandbox.plugins import PluginError
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
-COMMANDS = (run, validate, check, figures, compare, sweep, plugins)
+COMMANDS = (run, validate, check, scenarios, figures, compare, sweep, plugins)
+
+EPILOG = """\
+examples:
+  sandbox list                                   the bundled scenarios
+  sandbox run paper/rotating_circle --gif r.gif  run one, write runs/<name>/ and a GIF
+  sandbox plot runs/rotating_circle              figures of a saved run
+  sandbox COMMAND --help                         the options of one command
+"""
 
 __all__ = ["EXIT_FAILED", "EXIT_INTERRUPTED", "EXIT_INVALID", "EXIT_OK", "main"]
 
@@ -41,8 +62,11 @@ def build_parser() -> argparse.ArgumentParser:
         description=(
             "Physics-backed 2D sandbox for collective motion of unicycle vehicles."
         ),
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser.add_argument("--version", action="version", version=f"sandbox {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module in COMMANDS:
         module.register(sub)
     return parser
@@ -60,7 +84,11 @@ def main(argv: list[str] | None = None) -> int:
 
 def _dispatch(argv: list[str] | None) -> int:
     """Parse the command line and run the command; errors become messages."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:  # plain `sandbox`: say what it can do
+        parser.print_help()
+        return EXIT_OK
     try:
         load_cli_plugins(args)
         return args.func(args)

@@ -10,6 +10,7 @@ from sandbox.cli.common import (
     EXIT_FAILED,
     EXIT_INVALID,
     EXIT_OK,
+    add_command,
     add_plugin_option,
     positive,
 )
@@ -66,9 +67,14 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``check`` command."""
-    p = sub.add_parser(
+    p = add_command(
+        sub,
         "check",
-        help="run scenario files and check their expect: sections",
+        "run scenario files and check their expect: sections",
+        [
+            "sandbox check scenarios/paper/*.yaml --jobs 2",
+            "sandbox check my.yaml --set recovery.beta=2.5 -v",
+        ],
         description="Run each file and evaluate its expect: section. Prints one line "
         "per failed expectation (FILE: expectation: expected X, got Y). Exit status: "
         "0 every expectation holds, 1 one fails, 2 invalid input.",

@@ -1,42 +1,143 @@
-"""What every ``sandbox`` command shares: exit codes, signals, progress, GIF options."""
+"""What every ``sandbox`` command shares: exit codes, signals, progress, GIF options.
+
+Importing this module (as every command module does) stays cheap: nothing here imports
+numpy, the simulation or matplotlib at module level, so ``sandbox --help`` starts fast.
+"""
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import signal
 import sys
+import textwrap
 from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sandbox.errors import OutputError, SandboxError
-from sandbox.run import Run
+
+if TYPE_CHECKING:  # the CLI imports numpy and the simulation only when a command runs
+    from sandbox.run import Run
 
 EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
-def bundled_scenarios_dir() -> Path:
-    """The ``scenarios/`` folder: the working directory's, else the source tree's."""
-    here = Path.cwd() / "scenarios"
-    if here.is_dir():
-        return here
-    return Path(__file__).resolve().parent.parent / "scenarios"
+def scenario_file(text: str) -> Path:
+    """A scenario argument as a file: the file if it exists, else the bundled one.
+
+    ``sandbox run paper/rotating_circle`` (with or without ``.yaml``) therefore works
+    from any directory; see :mod:`sandbox.bundled`. Raises
+    :class:`~sandbox.errors.ScenarioError` (one line, exit status 2) for neither.
+    """
+    from sandbox.bundled import resolve
+
+    return resolve(text)
 
 
-def progress_printer() -> Callable[[int, int], None] | None:
-    """A progress line on an interactive terminal; nothing under CI or into a pipe."""
-    if os.environ.get("CI") or not sys.stderr.isatty():
-        return None
+#: Environment variable that forces the progress bars on (``1``) or off (``0``).
+PROGRESS_ENV = "SANDBOX_PROGRESS"
 
-    def show(step: int, steps: int) -> None:
-        sys.stderr.write(f"\r  simulating: {100 * step // max(steps, 1):3d}%")
-        sys.stderr.flush()
-        if step + max(1, steps // 100) > steps:
-            sys.stderr.write("\r" + " " * 24 + "\r")
 
-    return show
+def progress_enabled() -> bool:
+    """Whether progress bars are drawn: on a terminal, and not under CI.
+
+    Off when standard error is not a terminal (a pipe, a file, a test), when ``CI`` is
+    set (to anything but ``""``, ``0`` or ``false``) or ``TERM=dumb``;
+    ``SANDBOX_PROGRESS=1`` or ``0`` forces them on or off.
+    """
+    forced = os.environ.get(PROGRESS_ENV, "").strip()
+    if forced in ("0", "1"):
+        return forced == "1"
+    if os.environ.get("CI", "").strip().lower() not in ("", "0", "false"):
+        return False
+    if os.environ.get("TERM") == "dumb":
+        return False
+    stream = sys.stderr
+    return stream is not None and hasattr(stream, "isatty") and stream.isatty()
+
+
+class Progress:
+    """A progress bar with an ETA on standard error, drawn only where someone watches.
+
+    Every command that can take more than a second shows one; other command modules
+    use it the same way::
+
+        with progress(len(files), "running", unit="run") as bar:
+            for f in files:
+                ...
+                bar.advance()          # one more done
+                bar.write(f"{f}: ok")  # a line printed above the bar
+
+    ``bar(done, total)`` sets the position instead, so a ``Progress`` can be passed
+    as the ``progress`` callback of :meth:`sandbox.simulation.Simulation.run`. The bar
+    is drawn by tqdm while :func:`progress_enabled` holds; otherwise every call does
+    nothing (and tqdm is not even imported). Leaving the ``with`` block erases the bar
+    line, so what the command prints next starts on a clean line.
+
+    Parameters
+    ----------
+    total : int
+        Units of work (steps, runs, figures).
+    desc : str
+        What is being done, shown before the bar.
+    unit : str
+        Name of one unit of work.
+    """
+
+    def __init__(self, total: int, desc: str, unit: str = "step") -> None:
+        self.total = int(total)
+        self.desc = desc
+        self.unit = unit
+        self._bar: Any = None
+
+    def __enter__(self) -> Progress:
+        if progress_enabled():
+            from tqdm import tqdm
+
+            self._bar = tqdm(
+                total=self.total,
+                desc=self.desc,
+                unit=self.unit,
+                leave=False,
+                file=sys.stderr,
+                dynamic_ncols=True,
+                mininterval=0.2,
+            )
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.close()  # leave=False: the bar's line is erased
+            self._bar = None
+
+    def __call__(self, done: int, total: int | None = None) -> None:
+        """Set the position to ``done`` units (of ``total``, when it is given)."""
+        bar = self._bar
+        if bar is None:
+            return
+        if total is not None and total != bar.total:
+            bar.total = total
+        bar.update(done - bar.n)
+
+    def advance(self, units: int = 1) -> None:
+        """Count ``units`` more units of work done."""
+        if self._bar is not None:
+            self._bar.update(units)
+
+    def write(self, line: str) -> None:
+        """Print ``line`` on standard output, above the bar."""
+        if self._bar is None:
+            print(line)
+        else:
+            self._bar.write(line, file=sys.stdout)
+
+
+def progress(total: int, desc: str, unit: str = "step") -> Progress:
+    """A :class:`Progress` bar of ``total`` units: ``with progress(n, "running"):``."""
+    return Progress(total, desc, unit)
 
 
 class StopFlag:
@@ -299,3 +400,38 @@ def load_cli_plugins(args: argparse.Namespace) -> None:
     from sandbox.plugins import load_plugins
 
     load_plugins(tuple(getattr(args, "plugin", None) or ()))
+
+
+def add_command(
+    sub: argparse._SubParsersAction,
+    name: str,
+    summary: str,
+    examples: list[str],
+    description: str | None = None,
+) -> argparse.ArgumentParser:
+    """Add the subparser of command ``name``, with an epilog of examples.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        What :func:`sandbox.cli.build_parser` hands to each module's ``register``.
+    name : str
+        The command, e.g. ``"run"``.
+    summary : str
+        One line for ``sandbox --help``; also the description unless one is given.
+    examples : list of str
+        Command lines, each optionally followed by ``  # what it does``, shown under
+        ``examples:`` at the end of ``sandbox NAME --help``.
+    description : str, optional
+        A longer description for ``sandbox NAME --help``.
+    """
+    epilog = "examples:\n" + "\n".join(f"  {line}" for line in examples)
+    text = description or f"{summary[:1].upper()}{summary[1:]}."
+    width = min(shutil.get_terminal_size().columns - 2, 78)
+    return sub.add_parser(
+        name,
+        help=summary,
+        description=textwrap.fill(text, width),
+        epilog=epilog,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )

@@ -5,7 +5,16 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sandbox.cli.common import EXIT_INVALID, EXIT_OK, add_plugin_option, cap_jobs, jobs
+from sandbox.cli.common import (
+    EXIT_INVALID,
+    EXIT_OK,
+    add_command,
+    add_plugin_option,
+    cap_jobs,
+    jobs,
+    progress,
+    scenario_file,
+)
 from sandbox.errors import ScenarioError
 
 
@@ -16,15 +25,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
     def names(text: str) -> list[str]:
         return [x.strip() for x in text.split(",") if x.strip()]
 
+    files = [scenario_file(f) for f in args.files]
     try:
-        rows = compare(
-            args.files,
-            names(args.strategies) if args.strategies is not None else None,
-            names(args.derivatives),
-            args.set or [],
-            jobs=cap_jobs(args.jobs),
-            plugin_specs=args.plugin or [],
-        )
+        with progress(0, "comparing", unit="run") as bar:
+            rows = compare(
+                files,
+                names(args.strategies) if args.strategies is not None else None,
+                names(args.derivatives),
+                args.set or [],
+                jobs=cap_jobs(args.jobs),
+                plugin_specs=args.plugin or [],
+                progress=bar,
+            )
     except ValueError as exc:
         if isinstance(exc, ScenarioError):
             raise
@@ -36,8 +48,27 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``compare`` command."""
-    p = sub.add_parser("compare", help="compare recovery strategies on scenario files")
-    p.add_argument("files", nargs="+", help="scenario YAML files")
+    p = add_command(
+        sub,
+        "compare",
+        "compare recovery strategies on scenario files",
+        [
+            "sandbox compare failures/follower_stop failures/obstacle_field",
+            "sandbox compare scenarios/paper/fig1*.yaml --strategies file",
+            "sandbox compare my.yaml --derivatives hold,estimate --jobs 2 --format csv",
+        ],
+        description=(
+            "Run every scenario once per recovery strategy and target-derivative mode "
+            "and print a table of collisions, minimum distance, settling, switches "
+            "and effort (one row per run)."
+        ),
+    )
+    p.add_argument(
+        "files",
+        nargs="+",
+        metavar="SCENARIO",
+        help="scenario YAML files, or bundled names such as failures/follower_stop",
+    )
     p.add_argument(
         "--strategies",
         default=None,
@@ -55,7 +86,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="PATH=VALUE",
         help="override a field in every run (repeatable)",
     )
-    p.add_argument("--format", choices=("markdown", "csv"), default="markdown")
+    p.add_argument(
+        "--format",
+        choices=("markdown", "csv"),
+        default="markdown",
+        help="table format (default markdown)",
+    )
     p.add_argument(
         "--jobs",
         type=jobs,

@@ -10,18 +10,21 @@ from sandbox.cli.common import (
     EXIT_FAILED,
     EXIT_INVALID,
     EXIT_OK,
+    add_command,
     add_gif_options,
     add_plugin_option,
     check_gif_frames,
     check_mp4,
     nonempty,
+    progress,
     render_gif,
 )
-from sandbox.output import load_run_dir
 
 
 def cmd_render(args: argparse.Namespace) -> int:
     """``sandbox render RUN_DIR --gif PATH [--mp4 PATH]``: a GIF (and/or MP4)."""
+    from sandbox.output import load_run_dir
+
     if not (args.gif or args.mp4):
         print(
             "error: sandbox render: give --gif OUT.gif, --mp4 OUT.mp4 or both",
@@ -36,23 +39,39 @@ def cmd_render(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _gallery_folder(text: str) -> Path:
+    """A gallery folder argument: the folder if it exists, else a bundled one."""
+    from sandbox.bundled import scenarios_dir
+
+    given = Path(text)
+    if given.is_dir():
+        return given
+    bundled = scenarios_dir() / text.removeprefix("scenarios/")
+    return bundled if bundled.is_dir() else given
+
+
 def cmd_gallery(args: argparse.Namespace) -> int:
     """``sandbox gallery``: run and render every scenario of the given folders."""
-    from sandbox.gallery import render_gallery
+    from sandbox.gallery import render_gallery, scenario_files
 
-    folders = [
-        Path(f) for f in (args.folders or ["scenarios/paper", "scenarios/failures"])
-    ]
+    folders = [_gallery_folder(f) for f in (args.folders or ["paper", "failures"])]
     missing = [str(f) for f in folders if not f.is_dir()]
     if missing:
         print(f"error: no such folder: {', '.join(missing)}", file=sys.stderr)
         return EXIT_FAILED
-    render_gallery(folders, Path(args.out), zones=args.zones)
+    with progress(len(scenario_files(folders)), "gallery", unit="gif") as bar:
+
+        def log(line: str) -> None:
+            bar.write(line)
+            bar.advance()
+
+        render_gallery(folders, Path(args.out), zones=args.zones, log=log)
     return EXIT_OK
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
     """``sandbox plot RUN_DIR``: the four report figures, in ``RUN_DIR/figures/``."""
+    from sandbox.output import load_run_dir
     from sandbox.plot import plot_run
 
     run = load_run_dir(Path(args.run_dir))
@@ -85,23 +104,50 @@ def _dpi(text: str) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``render``, ``gallery`` and ``plot`` commands."""
-    p = sub.add_parser("render", help="render a saved run to a GIF or an MP4")
+    p = add_command(
+        sub,
+        "render",
+        "render a saved run to a GIF or an MP4",
+        [
+            "sandbox render runs/rotating_circle --gif rotating.gif",
+            "sandbox render runs/obstacle_field --gif o.gif --size 480 --zones",
+            "sandbox render runs/grid_1000 --mp4 grid.mp4     # needs the video extra",
+        ],
+    )
     p.add_argument("run_dir", help="a run directory written by sandbox run")
     p.add_argument("--gif", type=nonempty, help="output GIF file")
     add_gif_options(p)
     add_plugin_option(p)
     p.set_defaults(func=cmd_render)
-    p = sub.add_parser("gallery", help="run and render every scenario of some folders")
+    p = add_command(
+        sub,
+        "gallery",
+        "run and render every scenario of some folders",
+        [
+            "sandbox gallery                        # bundled paper/ and failures/",
+            "sandbox gallery my_scenarios/ --out my_renders/",
+        ],
+    )
     p.add_argument(
         "folders",
         nargs="*",
-        help="scenario folders (default scenarios/paper scenarios/failures)",
+        help="scenario folders, or bundled ones such as paper (default: the bundled "
+        "paper and failures)",
     )
     p.add_argument("--out", default="renders", help="output folder (default renders/)")
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
     add_plugin_option(p)
     p.set_defaults(func=cmd_gallery)
-    p = sub.add_parser("plot", help="write report-style figures of a saved run")
+    p = add_command(
+        sub,
+        "plot",
+        "write report-style figures of a saved run",
+        [
+            "sandbox plot runs/rotating_circle            # PNGs in RUN_DIR/figures/",
+            "sandbox plot runs/rotating_circle --format pdf --out paper/figures/",
+            "sandbox plot runs/rotating_circle --format png --dpi 300",
+        ],
+    )
     p.add_argument("run_dir", help="a run directory written by sandbox run")
     p.add_argument(
         "--out", help="directory for the figures (default: RUN_DIR/figures/)"

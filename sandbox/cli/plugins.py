@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from sandbox.cli.common import EXIT_OK, add_plugin_option
+from sandbox.cli.common import EXIT_OK, add_command, add_plugin_option
 from sandbox.plugins import KINDS
 
 
@@ -70,9 +70,15 @@ def cmd_plugins(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``plugins`` command."""
-    p = sub.add_parser(
+    p = add_command(
+        sub,
         "plugins",
-        help="list the registered laws, strategies, failures, references, ...",
+        "list the registered laws, strategies, failures, references, ...",
+        [
+            "sandbox plugins",
+            "sandbox plugins --kind law --json",
+            "sandbox plugins --plugin my_law.py     # with a plug-in file of yours",
+        ],
     )
     p.add_argument(
         "--kind",

@@ -11,30 +11,37 @@ from sandbox.cli.common import (
     EXIT_INTERRUPTED,
     EXIT_OK,
     StopFlag,
+    add_command,
     add_gif_options,
     add_plugin_option,
     check_gif_frames,
     check_mp4,
     nonempty,
     positive,
-    progress_printer,
+    progress,
     render_gif,
+    scenario_file,
 )
 from sandbox.errors import Problem, ScenarioError
-from sandbox.metrics import compute_metrics, summary_rows
-from sandbox.output import check_out_dir, write_run_dir
-from sandbox.run import STATUS_DIVERGED, STATUS_INTERRUPTED
-from sandbox.scenario import load_scenario
-from sandbox.simulation import Simulation
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     """``sandbox run FILE``: simulate, write the run directory, print a summary."""
+    from sandbox.metrics import compute_metrics
+    from sandbox.output import check_out_dir, write_run_dir
+    from sandbox.run import STATUS_DIVERGED, STATUS_INTERRUPTED
+    from sandbox.scenario import load_scenario
+    from sandbox.simulation import Simulation
+
+    if args.format == "parquet":
+        from sandbox.analysis import require
+
+        require("pyarrow", "--format parquet")  # before simulating, not after
     overrides = list(args.set or [])
     if args.duration is not None:
         overrides.append(f"duration={args.duration!r}")
     try:
-        scenario = load_scenario(args.file, overrides=overrides)
+        scenario = load_scenario(scenario_file(args.file), overrides=overrides)
     except ScenarioError as exc:
         raise _blame_duration_option(exc, args.duration) from None
     for line in scenario.warnings:
@@ -47,10 +54,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     # SIGINT/SIGTERM only raise the flag until the outputs are written: the run stops
     # at the next step and its outputs so far are still written whole (atomically).
     with StopFlag() as stop:
-        run = Simulation(scenario).run(progress=progress_printer(), should_stop=stop)
+        sim = Simulation(scenario)
+        with progress(sim.steps, "simulating") as bar:
+            run = sim.run(progress=bar, should_stop=stop)
         metrics = compute_metrics(run)
-        write_run_dir(run, metrics, out_dir)
-    _print_summary(scenario.name, metrics, out_dir)
+        write_run_dir(run, metrics, out_dir, trajectory=args.format)
+    _print_summary(scenario.name, metrics, out_dir, args.format)
     for line in metrics.get("warnings", []):
         print(f"warning: {line}", file=sys.stderr)
     if stop() and run.status != STATUS_INTERRUPTED:
@@ -101,7 +110,9 @@ def _blame_duration_option(exc: ScenarioError, duration: float | None) -> Scenar
     return ScenarioError(problems, exc.source)
 
 
-def _print_summary(name: str, metrics: dict, out_dir: Path) -> None:
+def _print_summary(name: str, metrics: dict, out_dir: Path, fmt: str) -> None:
+    from sandbox.metrics import summary_rows
+
     col = metrics["collisions"]
     md = metrics["min_distance"]
     print(
@@ -133,13 +144,34 @@ def _print_summary(name: str, metrics: dict, out_dir: Path) -> None:
         )
     if len(rows) > len(shown):
         print(f"... and {len(rows) - len(shown)} more vehicles (see metrics.json)")
-    print(f"outputs: {out_dir}/ (trajectory.csv, metrics.json, scenario.yaml, run.npz)")
+    print(
+        f"outputs: {out_dir}/ (trajectory.{fmt}, metrics.json, scenario.yaml, run.npz)"
+    )
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``run`` command."""
-    p = sub.add_parser("run", help="run a scenario file")
-    p.add_argument("file", help="scenario YAML file")
+    p = add_command(
+        sub,
+        "run",
+        "run a scenario file or a bundled scenario",
+        [
+            "sandbox run paper/rotating_circle      # a bundled one (sandbox list)",
+            "sandbox run my.yaml --out runs/try1 --gif try1.gif",
+            "sandbox run failures/follower_stop --set recovery.beta=2.5 --duration 10",
+            "sandbox run scale/grid_1000 --format parquet",
+        ],
+        description=(
+            "Simulate a scenario, write its run directory (trajectory, metrics.json, "
+            "scenario.yaml, run.npz) and print a summary. A progress bar with an ETA "
+            "is shown on a terminal (not in pipes or under CI)."
+        ),
+    )
+    p.add_argument(
+        "file",
+        metavar="SCENARIO",
+        help="scenario YAML file, or a bundled name such as paper/rotating_circle",
+    )
     p.add_argument(
         "--out", type=nonempty, help="output directory (default runs/<name>/)"
     )
@@ -153,6 +185,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="append",
         metavar="PATH=VALUE",
         help="override a field, e.g. --set recovery.beta=2.5 (repeatable)",
+    )
+    p.add_argument(
+        "--format",
+        choices=("csv", "parquet"),
+        default="csv",
+        help="trajectory file: trajectory.csv (default) or trajectory.parquet "
+        "(needs the 'analysis' extra)",
     )
     p.add_argument("--gif", type=nonempty, help="also render the run to this GIF file")
     add_gif_options(p)

@@ -16,7 +16,9 @@ from sandbox.cli.common import (
     EXIT_INTERRUPTED,
     EXIT_INVALID,
     EXIT_OK,
+    add_command,
     add_plugin_option,
+    scenario_file,
 )
 from sandbox.errors import SandboxError
 
@@ -58,7 +60,10 @@ def _run(args: argparse.Namespace, file: str) -> int:
         print("error: give --scheduler or --scheduler-file, not both", file=sys.stderr)
         return EXIT_INVALID
     try:
-        spec = build_spec(file, args.grid, args.zip, args.seeds, args.set)
+        # a bundled scenario's name (failures/follower_stop) works as in sandbox run
+        spec = build_spec(
+            str(scenario_file(file)), args.grid, args.zip, args.seeds, args.set
+        )
     except SweepError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
@@ -160,9 +165,16 @@ def _plot(args: argparse.Namespace, root: Path) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``sweep`` command."""
-    p = sub.add_parser(
+    p = add_command(
+        sub,
         "sweep",
-        help="run a study (grid x seeds) into a results directory; plot or tabulate it",
+        "run a study (grid x seeds) into a results directory; plot or tabulate it",
+        [
+            "sandbox sweep failures/follower_stop --grid recovery.beta=1,2,5 "
+            "--seeds 0:20 --out study/",
+            "sandbox sweep table study/ --by recovery.beta",
+            "sandbox sweep plot study/",
+        ],
         description=(
             "sandbox sweep FILE --out DIR [...] runs a study; sandbox sweep plot DIR "
             "and sandbox sweep table DIR look at one."

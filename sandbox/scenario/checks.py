@@ -296,6 +296,12 @@ def _pole_text(s: complex) -> str:
     return f"{s.real:.4g}{s.imag:+.4g}j"
 
 
+#: Up to this many discs the overlap checks compare every pair with numpy (80,000
+#: pairs at most) instead of querying k-d trees: importing scipy.spatial costs about
+#: 0.4 s, far more than checking a small fleet, and ``sandbox validate`` stays fast.
+BRUTE_FORCE_PAIRS = 400
+
+
 def _with_neighbours(
     tree: Any,
     pos: np.ndarray,
@@ -328,9 +334,16 @@ def _overlapping_pairs(
     radii at least as large, within the sum of its radius and that group's largest. In
     that neighbourhood at most about 36 discs of the larger group fit without
     overlapping each other, so a query that returns more candidates holds an
-    overlapping pair among its first 37, which is reported instead of reading on.
+    overlapping pair among its first 37, which is reported instead of reading on. Up to
+    :data:`BRUTE_FORCE_PAIRS` discs, every pair is compared instead.
     """
     if len(pos) < 2:
+        return
+    if len(pos) <= BRUTE_FORCE_PAIRS:  # every pair, in (a, b) order
+        i, j = np.triu_indices(len(pos), k=1)
+        dist = np.hypot(*(pos[i] - pos[j]).T)
+        for k in np.flatnonzero(dist < rad[i] + rad[j] - 1e-9)[:limit]:
+            yield int(i[k]), int(j[k]), float(dist[k])
         return
     octave = np.floor(np.log2(rad)).astype(int)
     groups = [np.flatnonzero(octave == o) for o in np.unique(octave)]
@@ -481,15 +494,18 @@ def _check_obstacle_starts(
     """Report vehicles that start inside or touching into an obstacle (first 5).
 
     Only the vehicles near each obstacle's bounding circle are measured, found with a
-    k-d tree, and the search stops at the fifth problem.
+    k-d tree (every vehicle, up to :data:`BRUTE_FORCE_PAIRS`), and the search stops at
+    the fifth problem.
     """
     if not vehicles or not obstacles:
         return
     pos = np.array([v.pose[:2] for _, v in vehicles])
     rad = np.array([v.diameter / 2 for _, v in vehicles])
-    from scipy.spatial import cKDTree
+    tree = None  # a small fleet is measured whole; a large one through a k-d tree
+    if len(pos) > BRUTE_FORCE_PAIRS:
+        from scipy.spatial import cKDTree
 
-    tree = cKDTree(pos)
+        tree = cKDTree(pos)
     shown = 0
     for where, o in obstacles:
         if o.type == "circle":
@@ -502,7 +518,11 @@ def _check_obstacle_starts(
             pts = np.asarray(o.outline(), dtype=float)
             centre = pts.mean(axis=0)
             bound = float(np.hypot(*(pts - centre).T).max())
-        near = np.array(tree.query_ball_point(centre, bound + rad.max()), dtype=int)
+        near = (
+            np.arange(len(pos))
+            if tree is None
+            else np.array(tree.query_ball_point(centre, bound + rad.max()), dtype=int)
+        )
         for lo in range(0, len(near), 4096):
             chunk = near[lo : lo + 4096]
             gap = _distance_to_obstacle(o, pos[chunk])
