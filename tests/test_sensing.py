@@ -125,3 +125,36 @@ def test_bad_sensing_values_name_the_field(sensing: dict, field: str) -> None:
     with pytest.raises(ScenarioError) as err:
         load_scenario(_doc(**sensing))
     assert field in str(err.value)
+
+
+def test_recovery_uses_the_own_true_and_the_others_seen_positions() -> None:
+    from sandbox.plugins import StrategyContext
+    from sandbox.recovery import ObstacleField, continuous, weighted_shift
+
+    pos = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0]])
+
+    def shift(seen):
+        ctx = StrategyContext(
+            t=0.0,
+            dt=0.01,
+            pos=pos,
+            theta=np.zeros(3),
+            vel=np.zeros((3, 2)),
+            slot=pos,
+            diameter=np.full(3, 0.5),
+            may_avoid=np.ones(3, bool),
+            failed=np.zeros(3, bool),
+            params={},
+            R=1.5,
+            obstacle_field=ObstacleField(()),
+            seen_pos=seen,
+        )
+        return weighted_shift(ctx, continuous, 1.0, 0.5, 2.0)[0]
+
+    truth = shift(None)
+    assert np.array_equal(shift(pos.copy()), truth)
+    # vehicle 1 seen 0.2 m further right: 0 pushed less, 1 (its own position true,
+    # vehicle 0's true too) exactly as before
+    moved = shift(pos + [[0.0, 0.0], [0.2, 0.0], [0.0, 0.0]])
+    assert 0 > moved[0, 0] > truth[0, 0]
+    assert moved[1] == pytest.approx(truth[1])
