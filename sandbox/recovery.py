@@ -18,6 +18,19 @@ R,
   and R: its slope there is ``s (1 - tanh(s)^2) / tanh(s)`` times the ramp's (0.15 for
   the default steepness s = 2), so the mode changes more gently than with the ramp.
 
+Beyond the report, the weighted strategies take a tangential term (``recovery.
+tangential``, the weight ``kappa >= 0``; 0, the default, is the report's field):
+
+    shift = beta * sum_i alpha_i (u_i + kappa * s_i * J u_i) / dist_i
+
+with ``J`` the +90 degree rotation and ``s_i = max(0, -g . u_i)``, ``g`` the unit
+direction from the vehicle to its slot: 1 for an obstacle straight between the vehicle
+and its slot, 0 once it is abeam or behind. Two vehicles meeting head-on both veer to
+their right and pass (the rule of the road), where the radial field alone has a
+symmetric equilibrium in which both stall. For walls, boxes and polygons ``u_i`` is
+the normal from the nearest surface point, and of the two tangents along the surface
+the one nearer ``g`` is taken (:func:`tangential_terms`).
+
 Derivatives fed to eq. (6) with the shifted target (``recovery.target_derivatives``):
 
 - ``hold`` (section 4.1): the law's own ``x_ref'``, ``x_ref''``, unchanged ("with all
@@ -92,6 +105,12 @@ STEEPNESS = Param(
     minimum=0.0,
     exclusive=True,
 )
+TANGENTIAL = Param(
+    "number",
+    0.0,
+    doc="Weight kappa of the tangential term (0: the report's field)",
+    minimum=0.0,
+)
 
 
 def _inner_radius(values: dict[str, Any], section: dict[str, Any]) -> list[tuple]:
@@ -121,7 +140,12 @@ def _weighted(name: str, weight: Weight) -> Callable[[StrategyContext], Any]:
     def strategy(ctx: StrategyContext) -> tuple[np.ndarray, np.ndarray]:
         p = ctx.params
         return weighted_shift(
-            ctx, weight, p["beta"], p.get("r"), p.get("steepness", 2.0)
+            ctx,
+            weight,
+            p["beta"],
+            p.get("r"),
+            p.get("steepness", 2.0),
+            p.get("tangential", 0.0),
         )
 
     strategy.__doc__ = weight.__doc__
@@ -169,15 +193,17 @@ def no_recovery(ctx: StrategyContext) -> tuple[np.ndarray, np.ndarray]:
 
 
 WEIGHTS["none"] = no_avoidance
-register_strategy("discontinuous", {"beta": BETA})(
+register_strategy("discontinuous", {"beta": BETA, "tangential": TANGENTIAL})(
     _weighted("discontinuous", discontinuous)
 )
-register_strategy("continuous", {"beta": BETA, "r": SMALL_R}, check=_inner_radius)(
-    _weighted("continuous", continuous)
-)
+register_strategy(
+    "continuous",
+    {"beta": BETA, "r": SMALL_R, "tangential": TANGENTIAL},
+    check=_inner_radius,
+)(_weighted("continuous", continuous))
 register_strategy(
     "smooth",
-    {"beta": BETA, "r": SMALL_R, "steepness": STEEPNESS},
+    {"beta": BETA, "r": SMALL_R, "steepness": STEEPNESS, "tangential": TANGENTIAL},
     check=_inner_radius,
 )(_weighted("smooth", smooth))
 
@@ -536,6 +562,8 @@ def avoidance_shift(
     steepness: float,
     obstacles: ObstacleField,
     neighbours: NeighbourList | None = None,
+    slot: np.ndarray | None = None,
+    tangential: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The shift ``beta * sum_i alpha_i vect_avoid_i`` of a built-in strategy.
 
@@ -562,6 +590,10 @@ def avoidance_shift(
     neighbours : NeighbourList, optional
         Reused between calls (with radius ``R``) to find the vehicle pairs; default: a
         fresh search with :func:`neighbour_pairs`.
+    slot : ndarray, shape (n, 2) [m], optional
+        Each vehicle's slot (default: none, NaN), for the tangential term.
+    tangential : float
+        The tangential weight ``kappa`` (``recovery.tangential``), >= 0.
 
     Returns
     -------
@@ -576,11 +608,11 @@ def avoidance_shift(
         pos=pos,
         theta=np.zeros(n),
         vel=np.zeros((n, 2)),
-        slot=np.full((n, 2), np.nan),
+        slot=np.full((n, 2), np.nan) if slot is None else np.asarray(slot, float),
         diameter=np.zeros(n),
         may_avoid=avoiders,
         failed=np.zeros(n, dtype=bool),
-        params={"beta": beta, "r": r, "steepness": steepness},
+        params={"beta": beta, "r": r, "steepness": steepness, "tangential": tangential},
         R=R,
         obstacle_field=obstacles,
         neighbours=neighbours,
@@ -594,11 +626,15 @@ def weighted_shift(
     beta: float,
     r: float | None,
     steepness: float,
+    kappa: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Eqs. (22)-(27): ``beta * sum_i alpha(dist_i) u_i / dist_i`` for each vehicle.
 
     The obstacles are the other vehicles within ``ctx.R`` and the static obstacles;
-    ``weight`` is ``alpha(dist, R, r, steepness)``, zero beyond ``R``.
+    ``weight`` is ``alpha(dist, R, r, steepness)``, zero beyond ``R``. With the
+    tangential weight ``kappa > 0`` each term becomes ``alpha_i (u_i + kappa s_i t_i)
+    / dist_i`` (:func:`tangential_terms`); ``kappa = 0`` computes exactly the
+    report's field.
     """
     pos, avoiders, R = ctx.pos, ctx.may_avoid, ctx.R
     obstacles, neighbours = ctx.obstacle_field, ctx.neighbours
@@ -607,6 +643,7 @@ def weighted_shift(
     active = np.zeros(n, dtype=bool)
     if not np.any(avoiders):
         return shift, active
+    goal = slot_directions(pos, ctx.slot) if kappa > 0 else None
     if neighbours is not None:
         i, j, rel = neighbours.near(pos)  # rel: from j to i
     else:
@@ -622,13 +659,13 @@ def weighted_shift(
         # (24)), in pair order: the same sums as np.add.at, several times faster.
         both = np.concatenate((i, j))
         seen = ctx.seen_pos
-        if seen is None:
+        if seen is None and goal is None:
             for axis in (0, 1):
                 c = alpha * (rel[:, axis] / dd)
                 shift[:, axis] = np.bincount(both, np.concatenate((c, -c)), minlength=n)
             active[i[on]] = True
             active[j[on]] = True
-        else:
+        elif goal is None:
             # Each vehicle sees itself exactly and the other's broadcast position: i
             # reads pos[i] - seen[j], j reads seen[i] - pos[j] (the pairs are those
             # of the true positions).
@@ -647,6 +684,25 @@ def weighted_shift(
                 shift[:, axis] = np.bincount(both, c, minlength=n)
             active[i[terms[0][0] > 0]] = True
             active[j[terms[1][0] > 0]] = True
+        else:
+            # With the tangential term: each side's vector from its obstacle, u, and
+            # the term kappa s J u, over the true or the broadcast positions.
+            if seen is None:
+                rel_i, rel_j = rel, rel
+            else:
+                rel_i, rel_j = pos[i] - seen[j], seen[i] - pos[j]
+            sides = []
+            for v, g in ((rel_i, goal[i]), (-rel_j, goal[j])):
+                d = np.maximum(np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1]), MIN_DIST)
+                u = v / d[:, None]
+                vect = (u + tangential_terms(u, g, kappa)) / d[:, None]
+                sides.append((weight(d, R, r, steepness), vect))
+            (a_i, c_i), (a_j, c_j) = sides
+            for axis in (0, 1):
+                c = np.concatenate((a_i * c_i[:, axis], a_j * c_j[:, axis]))
+                shift[:, axis] = np.bincount(both, c, minlength=n)
+            active[i[a_i > 0]] = True
+            active[j[a_j > 0]] = True
     if not obstacles.empty and neighbours is not None:
         # Only the obstacles near each vehicle (alpha is 0 beyond R for every strategy);
         # the same terms as below, summed over the candidate pairs.
@@ -657,6 +713,10 @@ def weighted_shift(
         outward = np.where(signed < 0, -1.0, 1.0)[:, None]
         rel = (np.take(pos, rows, axis=0) - point) * outward
         dd = dist * dist
+        if goal is not None:
+            u = rel / dist[:, None]
+            t = tangential_terms(u, goal[rows], kappa, obstacles.kind[cols] > 0)
+            rel = rel + t * dist[:, None]
         for axis in (0, 1):  # eqs. (23)-(24)
             c = alpha * (rel[:, axis] / dd)
             shift[:, axis] += np.bincount(rows, c, minlength=n)
@@ -668,6 +728,13 @@ def weighted_shift(
         dist = np.maximum(np.abs(signed), MIN_DIST)  # eq. (25)
         alpha = weight(np.maximum(signed, MIN_DIST), R, r, steepness)
         rel = (pos[:, None, :] - point) * np.where(signed < 0, -1.0, 1.0)[..., None]
+        if goal is not None:
+            m = signed.shape[1]
+            u = (rel / dist[..., None]).reshape(-1, 2)
+            g = np.repeat(goal, m, axis=0)
+            flat = np.tile(obstacles.kind > 0, len(pos))
+            t = tangential_terms(u, g, kappa, flat).reshape(rel.shape)
+            rel = rel + t * dist[..., None]
         vect = rel / (dist * dist)[..., None]  # eqs. (23)-(24)
         shift += np.sum(alpha[..., None] * vect, axis=1)
         active |= np.any(alpha > 0, axis=1)
@@ -675,3 +742,52 @@ def weighted_shift(
     shift[~avoiders] = 0.0
     active &= avoiders
     return shift, active
+
+
+def slot_directions(pos: np.ndarray, slot: np.ndarray) -> np.ndarray:
+    """Unit direction ``g`` from each vehicle to its slot, (n, 2); 0 when undefined.
+
+    Zero for a vehicle on its slot (closer than :data:`MIN_DIST`) or without one (a
+    NaN slot: open loop), so that its tangential term vanishes.
+    """
+    rel = np.asarray(slot, dtype=float) - pos
+    norm = np.hypot(rel[:, 0], rel[:, 1])
+    ok = np.isfinite(norm) & (norm > MIN_DIST)
+    out = np.zeros_like(pos, dtype=float)
+    out[ok] = rel[ok] / norm[ok, None]
+    return out
+
+
+def tangential_terms(
+    u: np.ndarray,
+    goal: np.ndarray,
+    kappa: float,
+    surface: np.ndarray | None = None,
+) -> np.ndarray:
+    """The tangential terms ``kappa s_i t_i`` of the avoidance vectors, (m, 2).
+
+    ``s_i = max(0, -g . u_i)`` is 1 when obstacle i lies straight between the vehicle
+    and its slot and 0 once it is abeam or behind; ``t_i = J u_i`` with ``J`` the +90
+    degree rotation, so that two vehicles meeting head-on both pass on the same hand
+    (each turns to its right). For an extended obstacle (``surface`` true: walls,
+    boxes, polygons) ``u_i`` is the normal from its nearest point and ``J u_i`` runs
+    along the surface; the sign of the tangent is chosen whose dot product with ``g``
+    is the larger (the tangent nearest the slot direction; ``+J u_i`` on a tie).
+
+    Parameters
+    ----------
+    u : ndarray, shape (m, 2)
+        Unit vectors from the obstacles to the vehicles.
+    goal : ndarray, shape (m, 2)
+        Unit direction from each vehicle to its slot (0 when undefined).
+    kappa : float
+        Tangential weight, >= 0.
+    surface : ndarray of bool, shape (m,), optional
+        Terms of extended obstacles (default: none).
+    """
+    s = np.maximum(0.0, -(goal[:, 0] * u[:, 0] + goal[:, 1] * u[:, 1]))
+    t = np.column_stack((-u[:, 1], u[:, 0]))  # J u
+    if surface is not None:
+        along = goal[:, 0] * t[:, 0] + goal[:, 1] * t[:, 1]
+        t = np.where((surface & (along < 0))[:, None], -t, t)
+    return (kappa * s)[:, None] * t
