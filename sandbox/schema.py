@@ -195,7 +195,12 @@ def _selector(kind: str) -> dict[str, Any]:
         "description": f"The {info.title}. {text}",
     }
     if not own.required:
-        out["default"] = own.default
+        # An optional selector also accepts null, as the loader does (the default).
+        out = {
+            "anyOf": [{"type": "string", "enum": list(registered)}, {"type": "null"}],
+            "description": out["description"],
+            "default": own.default,
+        }
     return out
 
 

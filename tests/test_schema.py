@@ -304,3 +304,15 @@ def test_cli_prints_and_writes_the_schema(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scenario.schema.json"]
     assert main(["schema", "--out", str(tmp_path / "missing" / "s.json")]) == 1
     assert "cannot be written" in capsys.readouterr().err
+
+
+def test_an_optional_plugin_selector_accepts_null_as_the_loader_does():
+    # recovery.strategy: null is the default strategy for the loader; the schema must
+    # accept what the loader accepts (found by the loader property test).
+    doc = {
+        "reference": {"type": "point", "position": [0, 0]},
+        "vehicles": [{"name": "a", "pose": [1, 0, 0]}],
+        "recovery": {"strategy": None},
+    }
+    load_scenario(doc)
+    jsonschema.validate(doc, build_schema())
