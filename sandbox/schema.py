@@ -196,9 +196,11 @@ def _selector(kind: str) -> dict[str, Any]:
     }
     if not own.required:
         # An optional selector also accepts null, as the loader does (the default).
-        out["type"] = ["string", "null"]
-        out["enum"] = [*registered, None]
-        out["default"] = own.default
+        out = {
+            "anyOf": [{"type": "string", "enum": list(registered)}, {"type": "null"}],
+            "description": out["description"],
+            "default": own.default,
+        }
     return out
 
 
