@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 
 from sandbox.errors import OutputError
-from sandbox.run import MODE_NAMES, Run, RunFileError
+from sandbox.run import MODE_NAMES, Run, RunFileError, _alive
 from sandbox.scenario import load_scenario
 
 CSV_HEADER = "t,vehicle,x1,x2,x3,v1,v2,chi1,chi2,mode,failed"
@@ -358,18 +358,6 @@ def _remove_product_files(directory: Path, restore_to: Path | None = None) -> No
         directory.rmdir()
     except OSError:
         pass
-
-
-def _alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def _swap_into_place(tmp: Path, out_dir: Path) -> None:
