@@ -68,3 +68,10 @@ class SimulationError(SandboxError):
 
 class OutputError(SandboxError):
     """Outputs of a run could not be written."""
+
+
+class PluginError(SandboxError):
+    """A plug-in could not be imported or registered (the message names it).
+
+    Also importable as ``sandbox.plugins.PluginError``.
+    """

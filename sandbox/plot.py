@@ -650,6 +650,7 @@ def plot_run(
     *,
     dpi: int = 120,
     fmt: str = "png",
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[Path]:
     """Write the four report figures of ``run``.
 
@@ -664,6 +665,8 @@ def plot_run(
         within :data:`DPI_RANGE`.
     fmt : {"png", "pdf", "svg"}
         File format (PDF and SVG are vector formats).
+    progress : callable, optional
+        Called as ``progress(done, total)`` after each figure is written.
 
     Returns
     -------
@@ -690,4 +693,6 @@ def plot_run(
         path = out / f"{stem}.{fmt}"
         save_figure(build(run), path, int(dpi), fmt)
         paths.append(path)
+        if progress is not None:
+            progress(len(paths), len(FIGURES))
     return paths

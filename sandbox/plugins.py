@@ -44,7 +44,7 @@ from sandbox.contexts import (
     ReferenceContext,
     StrategyContext,
 )
-from sandbox.errors import SandboxError
+from sandbox.errors import PluginError
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -97,10 +97,6 @@ PARAM_TYPES = (
 )
 #: Further types the scenario layer uses for its own sections (read by its code).
 SECTION_TYPES = ("text", "custom")
-
-
-class PluginError(SandboxError):
-    """A plug-in could not be imported or registered (the message names it)."""
 
 
 # ----------------------------------------------------------------------- parameters

@@ -332,3 +332,11 @@ def test_cli_dpi_bounds_are_the_plot_module_s() -> None:
     from sandbox.cli import figures
 
     assert figures.DPI_RANGE == plot.DPI_RANGE
+
+
+def test_plot_run_reports_progress_after_each_figure(tmp_path: Path) -> None:
+    run = make_run()
+    calls: list[tuple[int, int]] = []
+    paths = plot.plot_run(run, tmp_path, dpi=DPI, progress=lambda *a: calls.append(a))
+    assert calls == [(1, 4), (2, 4), (3, 4), (4, 4)]
+    assert len(paths) == 4

@@ -38,8 +38,7 @@ from sandbox.cli.common import (
     command_signals,
     load_cli_plugins,
 )
-from sandbox.errors import SandboxError, ScenarioError
-from sandbox.plugins import PluginError
+from sandbox.errors import PluginError, SandboxError, ScenarioError
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
 COMMANDS = (run, validate, check, scenarios, figures, compare, sweep, plugins)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from concurrent.futures import ProcessPoolExecutor
+from typing import TYPE_CHECKING
 
 from sandbox.cli.common import (
     EXIT_FAILED,
@@ -15,16 +16,22 @@ from sandbox.cli.common import (
     positive,
 )
 from sandbox.errors import ScenarioError
-from sandbox.testing import CheckResult, check_scenario, load_checked
+
+if TYPE_CHECKING:  # the testing layer imports numpy: only when a command runs
+    from sandbox.testing import CheckResult
 
 
 def _check(args: tuple[str, tuple[str, ...]]) -> CheckResult:
     """Check one file, without keeping its run (worker processes send results back)."""
+    from sandbox.testing import check_scenario
+
     return check_scenario(args[0], args[1], keep_run=False)
 
 
 def cmd_check(args: argparse.Namespace) -> int:
     """``sandbox check FILE...``: exit 0 if every expectation holds, 1 if one fails."""
+    from sandbox.testing import load_checked
+
     overrides = tuple(args.set or ())
     invalid = False
     for name in args.files:  # every file is validated before the first run

@@ -76,7 +76,9 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
     run = load_run_dir(Path(args.run_dir))
     out = Path(args.out) if args.out else Path(args.run_dir) / "figures"
-    for path in plot_run(run, out, dpi=args.dpi, fmt=args.format):
+    with progress(4, "plotting", unit="figure") as bar:
+        paths = plot_run(run, out, dpi=args.dpi, fmt=args.format, progress=bar)
+    for path in paths:
         print(path)
     return EXIT_OK
 

@@ -7,7 +7,6 @@ import json
 import sys
 
 from sandbox.cli.common import EXIT_OK, add_command, add_plugin_option
-from sandbox.plugins import KINDS
 
 
 def _param_text(key: str, p) -> str:  # noqa: ANN001 - a sandbox.plugins.Param
@@ -29,6 +28,17 @@ def _param_text(key: str, p) -> str:  # noqa: ANN001 - a sandbox.plugins.Param
         bits.append("one of " + "|".join(p.choices))
     text = ", ".join(bits[:2]) + (" " + " ".join(bits[2:]) if bits[2:] else "")
     return f"{text}; {p.doc}" if p.doc else text
+
+
+def _kind(text: str) -> str:
+    """An argparse type: a plug-in kind (the registry is imported only here)."""
+    from sandbox.plugins import KINDS
+
+    if text not in KINDS:
+        raise argparse.ArgumentTypeError(
+            f"unknown kind {text!r} (expected one of: {', '.join(KINDS)})"
+        )
+    return text
 
 
 def cmd_plugins(args: argparse.Namespace) -> int:
@@ -80,11 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "sandbox plugins --plugin my_law.py     # with a plug-in file of yours",
         ],
     )
-    p.add_argument(
-        "--kind",
-        choices=tuple(KINDS),
-        help="only this kind",
-    )
+    p.add_argument("--kind", type=_kind, help="only this kind (law, strategy, ...)")
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
     add_plugin_option(p)
     p.set_defaults(func=cmd_plugins)
