@@ -44,7 +44,7 @@ from __future__ import annotations
 import math
 import os
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -632,6 +632,7 @@ def write_gif(
     follow: str | None = None,
     trail_seconds: float = 3.0,
     legend: bool = True,
+    progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
     """Write an animated GIF of ``run``, atomically.
 
@@ -649,6 +650,8 @@ def write_gif(
         ``0 < fps <= 50``; see the module docstring for delays.
     size, speed, zones, follow, trail_seconds, legend
         As in :func:`render_frames`.
+    progress : callable, optional
+        Called as ``progress(done, total)`` about a hundred times, in planned frames.
 
     Returns
     -------
@@ -680,7 +683,12 @@ def write_gif(
             stream = _GifStream(fh, scene.size, scene.size, scene.rgb, loop=0)
             held: list[np.ndarray] = []
             delays: list[int] = []
-            for canvas, ms in zip(frames, plan.durations_ms.tolist(), strict=True):
+            total = len(plan.durations_ms)
+            every = max(1, total // 100)
+            pairs = zip(frames, plan.durations_ms.tolist(), strict=True)
+            for k, (canvas, ms) in enumerate(pairs, 1):
+                if progress is not None and (k % every == 0 or k == total):
+                    progress(k, total)
                 if held and np.array_equal(canvas, held[-1]):
                     delays[-1] += ms
                     continue

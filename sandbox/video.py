@@ -21,6 +21,7 @@ import os
 import subprocess
 import tempfile
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -84,6 +85,7 @@ def write_mp4(
     follow: str | None = None,
     trail_seconds: float = 3.0,
     legend: bool = True,
+    progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
     """Write an MP4 video of ``run``, atomically (temporary file, then rename).
 
@@ -96,6 +98,8 @@ def write_mp4(
         ``0 < fps <=`` :data:`MAX_MP4_FPS`.
     size, speed, zones, follow, trail_seconds, legend
         As in :func:`sandbox.render.render_frames`.
+    progress : callable, optional
+        Called as ``progress(done, total)`` about a hundred times, in frames.
 
     Returns
     -------
@@ -151,10 +155,14 @@ def write_mp4(
             assert proc.stdin is not None
             frame = np.full((side, side, 3), 255, dtype=np.uint8)
             with proc.stdin:
+                total = len(plan.durations_ms)
+                every = max(1, total // 100)
                 for canvas in frames:
                     frame[: scene.size, : scene.size] = scene.to_rgb(canvas)
                     proc.stdin.write(frame.tobytes())
                     count += 1
+                    if progress is not None and (count % every == 0 or count == total):
+                        progress(count, total)
             if proc.wait() != 0:
                 log.seek(0)
                 lines = log.read().decode("utf-8", "replace").strip().splitlines()

@@ -310,3 +310,13 @@ def test_render_imports_only_numpy_pil_imageio() -> None:
         }
     third_party = roots - set(sys.stdlib_module_names) - {"sandbox"}
     assert third_party == {"numpy", "PIL", "imageio"}
+
+
+def test_write_gif_reports_progress_up_to_every_planned_frame(tmp_path: Path) -> None:
+    run = make_run()
+    calls: list[tuple[int, int]] = []
+    render.write_gif(run, tmp_path / "p.gif", progress=lambda *a: calls.append(a))
+    total = len(render.frame_plan(run).durations_ms)
+    assert calls[-1] == (total, total)
+    assert [d for d, _ in calls] == sorted({d for d, _ in calls})  # increasing
+    assert 1 <= len(calls) <= 101

@@ -217,7 +217,8 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
         if not target:
             continue
         try:
-            info = write(run, Path(target), **options)
+            with progress(0, f"rendering {kind.upper()}", unit="frame") as bar:
+                info = write(run, Path(target), progress=bar, **options)
         except ValueError as exc:  # an option the renderer refuses (fps, size, ...)
             raise GifOptionError(f"--{kind} {target}: {exc}") from None
         except OSError as exc:  # named by the user's path, never the temporary file's
