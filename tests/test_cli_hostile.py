@@ -287,6 +287,48 @@ def test_a_signal_while_the_gif_renders_exits_130_and_leaves_no_file(
     assert list(gifs.iterdir()) == []
 
 
+INTERRUPTED_COMMANDS = {
+    # A KeyboardInterrupt that ends a string exec (as a dataclass is made while a
+    # module is imported): under `python -m`, CPython would exit by SIGINT (-2).
+    "string_exec": 'exec("raise KeyboardInterrupt", {})',
+    # One that lands in a __del__ method: Python can only print it and go on.
+    "lost_in_del": (
+        "class Dropped:\n"
+        "        def __del__(self):\n"
+        "            raise KeyboardInterrupt\n"
+        "    Dropped()"
+    ),
+}
+
+
+@pytest.mark.parametrize("where", sorted(INTERRUPTED_COMMANDS))
+def test_an_interrupt_python_mishandles_still_exits_130(
+    where: str, tmp_path: Path
+) -> None:
+    module = tmp_path / "interrupted_command.py"
+    module.write_text(
+        "import sys\n"
+        "import sandbox.cli as cli\n"
+        "def interrupted(args):\n"
+        f"    {INTERRUPTED_COMMANDS[where]}\n"
+        "cli.load_cli_plugins = interrupted\n"
+        "sys.exit(cli.main(['list']))\n",
+        encoding="utf-8",
+    )
+    env = dict(os.environ, PYTHONPATH=str(tmp_path))
+    proc = subprocess.run(
+        [sys.executable, "-m", "interrupted_command"],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        timeout=60,
+    )
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.strip().splitlines()[-1] == "interrupted"
+    assert "Exception ignored" not in proc.stderr and "Traceback" not in proc.stderr
+
+
 def test_a_signal_while_outputs_are_written_finishes_them_and_exits_130(
     src: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
 ) -> None:

@@ -36,6 +36,7 @@ from sandbox.cli.common import (
     EXIT_OK,
     GifOptionError,
     command_signals,
+    forget_caught_interrupt,
     load_cli_plugins,
 )
 from sandbox.errors import PluginError, SandboxError, ScenarioError
@@ -73,12 +74,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status."""
-    with command_signals():
+    with command_signals() as signals:
         try:
-            return _dispatch(argv)
+            status = _dispatch(argv)
         except KeyboardInterrupt:
             print("interrupted", file=sys.stderr)
-            return EXIT_INTERRUPTED
+            status = EXIT_INTERRUPTED
+        if signals.lost and status == EXIT_OK:  # an interrupt Python could not raise
+            print("interrupted", file=sys.stderr)
+            status = EXIT_INTERRUPTED
+    forget_caught_interrupt()
+    return status
 
 
 def _dispatch(argv: list[str] | None) -> int:

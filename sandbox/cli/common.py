@@ -171,24 +171,51 @@ class command_signals:  # noqa: N801 - used as a context manager, like a functio
     is removed or left whole by its ``except``/``finally``, and ``main`` exits with
     status 130. A run's simulation and output writing use :class:`StopFlag` instead.
     The earlier handlers are restored on exit.
+
+    An interrupt that lands where Python cannot raise it (a ``__del__`` method, a
+    weakref callback) would otherwise be printed as "Exception ignored" and lost; it
+    is recorded instead (:attr:`lost`), and ``main`` then exits with status 130 too.
     """
 
     def __enter__(self) -> command_signals:
         self._old: dict[int, Any] = {}
+        self.lost = False
         for sig in (signal.SIGINT, signal.SIGTERM):
             try:
                 self._old[sig] = signal.signal(sig, _interrupt)
             except (ValueError, OSError):  # not the main thread
                 pass
+        self._old_hook = sys.unraisablehook
+        sys.unraisablehook = self._unraisable
         return self
 
+    def _unraisable(self, info: Any) -> None:
+        if isinstance(info.exc_value, KeyboardInterrupt):
+            self.lost = True
+        else:
+            self._old_hook(info)
+
     def __exit__(self, *exc: object) -> None:
+        sys.unraisablehook = self._old_hook
         for sig, old in self._old.items():
             signal.signal(sig, old)
 
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
+
+
+def forget_caught_interrupt() -> None:
+    """Make a caught ``KeyboardInterrupt`` leave the exit status alone.
+
+    CPython remembers a ``KeyboardInterrupt`` that ended a string ``exec`` (as
+    ``dataclasses`` and ``collections.namedtuple`` run while a module is imported)
+    even when a caller catches it; under ``python -m sandbox`` the interpreter then
+    kills itself with SIGINT at exit, so the status is -2 instead of the 130 that
+    :func:`sandbox.cli.main` returned. Every string ``exec`` clears that memory when
+    it starts, so an empty one, run once the command is over, does.
+    """
+    exec("pass", {})  # a constant string: it only clears the flag
 
 
 def render_gif(run: Run, args: argparse.Namespace) -> None:
