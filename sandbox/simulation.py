@@ -169,6 +169,8 @@ class Simulation:
         self._neighbours = NeighbourList(self.rec.R)
         self._has_failures = len(self.failures.specs) > 0
         self._failing = np.zeros(n, dtype=bool)
+        #: The vehicles the platoon believes failed at t_k, shape (n,) bool.
+        self.known_failed = np.zeros(n, dtype=bool)
         self.k = 0
         self.status = STATUS_OK
         self.info = self._info()
@@ -328,7 +330,11 @@ class Simulation:
                 self.failed_at.setdefault(self.failures.specs[j].vehicle, t)
             failing = np.zeros(n, dtype=bool)
             failing[self.failures.vehicle[self.failures.active(t)]] = True
-        may_avoid = self._avoid_candidates & ~failing
+        # What the platoon believes has failed; everything below reacts to this,
+        # never to the truth. The oracle: the truth, known at once.
+        known = failing
+        self.known_failed = known
+        may_avoid = self._avoid_candidates & ~known
         shift, active = self.strategy(
             StrategyContext(
                 t=t,
@@ -339,7 +345,7 @@ class Simulation:
                 slot=slot,
                 diameter=fleet.diameter,
                 may_avoid=may_avoid,
-                failed=failing,
+                failed=known,
                 params=self.strategy_params,
                 R=rec.R,
                 obstacle_field=self.obstacles,
