@@ -25,6 +25,9 @@ Definitions (the keys of ``metrics.json``):
   effort_v1 + (d/2) effort_v2`` [m/s]: they grow with aggressive and chattering inputs,
   not with steady driving; ``mode_switches``: number of changes between ``formation``
   and ``avoid`` mode; ``failed_at``: time of the first failure of the vehicle, or null.
+- ``deadlocks``: ``{vehicles, t, duration}`` for each time healthy vehicles stayed
+  below ``metrics.deadlock_speed`` for ``metrics.deadlock_time`` while farther than
+  ``metrics.deadlock_distance`` from their slots (:mod:`sandbox.deadlock`).
 - ``converged``: every healthy vehicle (no failure active at the end of the run, with a
   slot) has a settling time.
 - ``warnings``: what a user should know about the numbers (a saturated motor).
@@ -41,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.deadlock import find_deadlocks
 from sandbox.run import MODE_AVOID, MODE_FORMATION, Run
 
 #: Above this many vehicles the minimum distance uses a KD-tree per sample.
@@ -375,6 +379,7 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
             ],
         },
         "min_distance": loop["min_distance"] if loop else min_distance(run.pose),
+        "deadlocks": _deadlocks(run, spec),
         "converged": bool(healthy_settled) and all(healthy_settled),
         "settle_tol": settle_tol,
         "settle_dwell": dwell,
@@ -388,6 +393,25 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
             out[key] = run.info[key]
     out["warnings"] = run_warnings(out)
     return out
+
+
+def _deadlocks(run: Run, spec: Any) -> list[dict[str, Any]]:
+    """``deadlocks`` of ``metrics.json`` (:func:`sandbox.deadlock.find_deadlocks`)."""
+    keys = {}
+    if spec is not None:
+        keys = {
+            "speed": spec.deadlock_speed,
+            "duration": spec.deadlock_time,
+            "distance": spec.deadlock_distance,
+        }
+    return find_deadlocks(
+        np.asarray(run.t),
+        np.asarray(run.pose[:, :, :2]),
+        np.asarray(run.slot),
+        np.asarray(run.failed, dtype=bool),
+        list(run.names),
+        **keys,
+    )
 
 
 def _effort(

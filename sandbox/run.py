@@ -390,7 +390,7 @@ def _check_meta(meta: Any, n: int) -> None:
 
 
 #: Keys of ``Run.info`` that differ between identical runs and are not saved.
-_NOT_SAVED = ("wall_time",)
+_NOT_SAVED = ("wall_time", "control_time")
 
 #: Above this size [bytes] a run's record is streamed to files on disk (see
 #: :class:`Recorder`); smaller records stay in memory.

@@ -182,6 +182,8 @@ class Simulation:
         self._closed = False
         self._run: Run | None = None
         self._wall = time.perf_counter()
+        #: Wall time spent planning and acting (law, recovery, controller, filters).
+        self._control_time = 0.0
         if self._sense():
             self._plan()
 
@@ -500,7 +502,9 @@ class Simulation:
     ) -> None:
         """One control period: act, record, advance, sense and plan the next."""
         self._recorded_target = None
+        start = time.perf_counter()
         chi_next = self._act(commands, targets, shifts)
+        self._control_time += time.perf_counter() - start
         self._record(self.plan, self.fleet.mode, self.fleet.failed)
         if should_stop is not None and should_stop():
             self.status = STATUS_INTERRUPTED
@@ -509,7 +513,9 @@ class Simulation:
             return
         self._advance(chi_next)
         if self._sense():
+            start = time.perf_counter()
             self._plan()
+            self._control_time += time.perf_counter() - start
 
     def _finish(self) -> None:
         self._closed = True
@@ -607,6 +613,7 @@ class Simulation:
         info["failed_at"] = self.failed_at
         info["loop_metrics"] = self.tally.result()
         info["wall_time"] = time.perf_counter() - self._wall
+        info["control_time"] = self._control_time
         info["steps"] = self.k
         self._run = Run(
             names=list(self.names),

@@ -241,6 +241,31 @@ METRICS: dict[str, Param] = {
         minimum=0.0,
         exclusive=True,
     ),
+    "deadlock_speed": Param(
+        "number",
+        0.01,
+        "m/s",
+        "Speed below which a healthy vehicle short of its slot counts as stopped "
+        "(deadlocks in metrics.json)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "deadlock_time": Param(
+        "number",
+        2.0,
+        "s",
+        "How long vehicles must stay stopped short of their slots to be a deadlock",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "deadlock_distance": Param(
+        "number",
+        0.5,
+        "m",
+        "Distance to the slot beyond which a stopped vehicle is short of it (a "
+        "deadlock, not a vehicle settling)",
+        minimum=0.0,
+    ),
 }
 
 SENSING: dict[str, Param] = {

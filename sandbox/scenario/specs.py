@@ -201,12 +201,18 @@ class MetricsSpec:
 
     ``settle_tol`` [m]: formation error of a settled vehicle; ``settle_dwell`` [s]: how
     long the run must go on in band after the settling time; ``contact_release`` [m]:
-    gap between two surfaces that ends a contact episode.
+    gap between two surfaces that ends a contact episode; ``deadlock_speed`` [m/s],
+    ``deadlock_time`` [s], ``deadlock_distance`` [m]: a healthy vehicle slower than
+    ``deadlock_speed`` for ``deadlock_time`` while farther than ``deadlock_distance``
+    from its slot is in a deadlock (:mod:`sandbox.deadlock`).
     """
 
     settle_tol: float = 0.05
     settle_dwell: float = 1.0
     contact_release: float = 0.01
+    deadlock_speed: float = 0.01
+    deadlock_time: float = 2.0
+    deadlock_distance: float = 0.5
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,139 @@
+"""Deadlocks of a recorded run: healthy vehicles stopped short of their slots.
+
+A healthy vehicle (no failure active, a slot defined) is *stuck* at a recorded sample
+when its speed is below ``metrics.deadlock_speed`` (default 1 cm/s) while its distance
+to its slot exceeds ``metrics.deadlock_distance`` (default 0.5 m). A stretch of
+consecutive stuck samples that lasts at least ``metrics.deadlock_time`` (default 2 s)
+is a stall of that vehicle; stalls of several vehicles that overlap in time are one
+deadlock (two vehicles nose to nose, a ring of vehicles jammed at the centre of a swap).
+Each deadlock is written to ``metrics.json`` as ``{vehicles, t, duration}``: the names
+of the vehicles involved (in scenario order), the time the first of them got stuck
+[s] and the time from then to the end of the last stall [s] (up to the end of the run
+when a stall lasts until then).
+
+Speeds are the finite differences of the recorded positions, so they read the
+physics, not the commands: a vehicle pressing into another one at full command but not
+moving is stuck.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+#: Defaults of the ``metrics:`` keys that define a deadlock.
+DEADLOCK_SPEED = 0.01  # [m/s]
+DEADLOCK_TIME = 2.0  # [s]
+DEADLOCK_DISTANCE = 0.5  # [m]
+
+
+def stuck_samples(
+    t: np.ndarray,
+    pos: np.ndarray,
+    slot: np.ndarray,
+    failed: np.ndarray,
+    speed: float = DEADLOCK_SPEED,
+    distance: float = DEADLOCK_DISTANCE,
+) -> np.ndarray:
+    """Whether each vehicle is stuck at each recorded sample, shape (T, n) bool.
+
+    The speed of sample ``k`` is ``|x(k+1) - x(k)| / (t(k+1) - t(k))`` (the last
+    sample takes the speed of the interval before it).
+
+    Parameters
+    ----------
+    t : ndarray (T,) [s]
+    pos : ndarray (T, n, 2) [m]
+    slot : ndarray (T, n, 2) [m]
+        NaN where a vehicle has no slot (never stuck).
+    failed : ndarray (T, n) bool
+        Vehicles with an active failure (never stuck).
+    speed : float [m/s]
+    distance : float [m]
+    """
+    T = len(t)
+    if T < 2:
+        return np.zeros(pos.shape[:2], dtype=bool)
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1)
+    dt = np.diff(t)[:, None]
+    v = np.empty(pos.shape[:2])
+    v[:-1] = step / np.where(dt > 0, dt, np.inf)
+    v[-1] = v[-2]
+    error = np.linalg.norm(pos - slot, axis=-1)
+    with np.errstate(invalid="ignore"):
+        far = error > distance  # NaN (no slot) compares False
+    return (v < speed) & far & ~failed
+
+
+def _stretches(stuck: np.ndarray) -> list[tuple[int, int]]:
+    """``(first, last)`` sample indices of each run of True in a boolean vector."""
+    edges = np.diff(np.concatenate(([0], stuck.astype(np.int8), [0])))
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1) - 1
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
+
+
+def find_deadlocks(
+    t: np.ndarray,
+    pos: np.ndarray,
+    slot: np.ndarray,
+    failed: np.ndarray,
+    names: list[str],
+    speed: float = DEADLOCK_SPEED,
+    duration: float = DEADLOCK_TIME,
+    distance: float = DEADLOCK_DISTANCE,
+) -> list[dict[str, Any]]:
+    """The deadlocks of a run, as written to ``metrics.json``.
+
+    Parameters
+    ----------
+    t, pos, slot, failed
+        As for :func:`stuck_samples`.
+    names : list of str
+        Vehicle names, in scenario order.
+    speed : float [m/s]
+        Speed below which a vehicle is stopped.
+    duration : float [s]
+        Shortest stall that counts.
+    distance : float [m]
+        Distance to the slot beyond which a stopped vehicle is short of it.
+
+    Returns
+    -------
+    list of dict
+        ``{vehicles, t, duration}`` per deadlock, in order of time.
+
+    Examples
+    --------
+    Two vehicles stopped 2 m from their slots from t = 1 s to the end (5 s):
+
+    >>> t = np.arange(0.0, 5.01, 0.5)
+    >>> x = np.minimum(t, 1.0)
+    >>> pos = np.stack([np.stack([x, 0 * x], -1), np.stack([-x, 0 * x], -1)], 1)
+    >>> slot = np.tile([[3.0, 0.0], [-3.0, 0.0]], (len(t), 1, 1))
+    >>> find_deadlocks(t, pos, slot, np.zeros((len(t), 2), bool), ["a", "b"])
+    [{'vehicles': ['a', 'b'], 't': 1.0, 'duration': 4.0}]
+    """
+    stuck = stuck_samples(t, pos, slot, failed, speed, distance)
+    stalls = []  # (t start, t end, vehicle)
+    for i in range(stuck.shape[1]):
+        for a, b in _stretches(stuck[:, i]):
+            if t[b] - t[a] >= duration - 1e-9:
+                stalls.append((float(t[a]), float(t[b]), i))
+    stalls.sort()
+    groups: list[list[Any]] = []  # [start, end, set of vehicles]
+    for a, b, i in stalls:
+        if groups and a <= groups[-1][1]:
+            groups[-1][1] = max(groups[-1][1], b)
+            groups[-1][2].add(i)
+        else:
+            groups.append([a, b, {i}])
+    return [
+        {
+            "vehicles": [names[i] for i in sorted(g[2])],
+            "t": round(g[0], 6),
+            "duration": round(g[1] - g[0], 6),
+        }
+        for g in groups
+    ]

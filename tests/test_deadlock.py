@@ -1,0 +1,93 @@
+"""Deadlocks in ``metrics.json``: healthy vehicles stopped short of their slots.
+
+The definition on hand-made arrays (grouping, the shortest stall, failed vehicles and
+vehicles on their slots left out), the ``metrics:`` keys that set it, and the exact
+symmetric head-on swap: a deadlock with the report's radial field (kappa 0), none with
+the tangential term.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import SCENARIOS, run_scenario
+
+from sandbox import load_scenario
+from sandbox.deadlock import find_deadlocks, stuck_samples
+from sandbox.errors import ScenarioError
+
+SWAP = SCENARIOS / "safety" / "head_on_swap.yaml"
+T = np.round(np.arange(0.0, 10.001, 0.1), 6)
+
+
+def track(stop_from: float, stop_to: float, speed: float = 1.0) -> np.ndarray:
+    """Positions (T, 2) of a vehicle moving along x at ``speed`` except in a window."""
+    v = np.where((T >= stop_from) & (T < stop_to), 0.0, speed)
+    x = np.concatenate(([0.0], np.cumsum(v[:-1] * 0.1)))
+    return np.stack([x, 0 * x], -1)
+
+
+def deadlocks(pos, slot=None, failed=None, **keys):
+    pos = np.stack(pos, 1)
+    if slot is None:
+        slot = np.full_like(pos, 100.0)
+    if failed is None:
+        failed = np.zeros(pos.shape[:2], dtype=bool)
+    names = [f"v{i}" for i in range(pos.shape[1])]
+    return find_deadlocks(T, pos, slot, failed, names, **keys)
+
+
+def test_overlapping_stalls_are_one_deadlock_and_separate_ones_two() -> None:
+    got = deadlocks([track(1, 4), track(2, 5), track(7, 9.5)])
+    assert got == [
+        {"vehicles": ["v0", "v1"], "t": 1.0, "duration": pytest.approx(3.9)},
+        {"vehicles": ["v2"], "t": 7.0, "duration": pytest.approx(2.4)},
+    ]
+
+
+def test_a_short_stop_a_failed_vehicle_and_a_settled_one_are_no_deadlock() -> None:
+    assert deadlocks([track(1, 2.5)]) == []  # 1.4 s < 2 s
+    assert deadlocks([track(1, 2.5)], duration=1.0) != []
+    failed = np.zeros((len(T), 1), dtype=bool)
+    failed[:, 0] = True
+    assert deadlocks([track(1, 6)], failed=failed) == []
+    on_slot = track(1, 6)
+    slot = np.repeat(on_slot[:, None, :], 1, 1) + [0.3, 0.0]  # 0.3 m: settling
+    assert deadlocks([on_slot], slot=slot) == []
+    assert deadlocks([on_slot], slot=slot, distance=0.2) != []
+
+
+def test_speed_reads_the_positions_and_a_slow_crawl_is_not_stopped() -> None:
+    crawl = track(20, 20, speed=0.02)  # 2 cm/s all the time
+    pos = np.stack([crawl], 1)
+    slot = np.full_like(pos, 100.0)
+    stuck = stuck_samples(T, pos, slot, np.zeros((len(T), 1), dtype=bool))
+    assert not stuck.any()
+    assert stuck_samples(T, pos, slot, np.zeros((len(T), 1), bool), speed=0.03).all()
+
+
+def test_head_on_stall_is_a_deadlock_and_the_tangential_term_has_none() -> None:
+    _, stalled = run_scenario(SWAP, "recovery.tangential=0", duration=6)
+    (dead,) = stalled["deadlocks"]
+    assert dead["vehicles"] == ["west", "east"]
+    # measured: both stop nose to nose at 1.23 s and stay so to the end
+    assert 1.0 < dead["t"] < 1.5
+    assert dead["t"] + dead["duration"] == pytest.approx(6.0)
+    for kappa in ("0.5", "1", "2"):
+        _, passed = run_scenario(SWAP, f"recovery.tangential={kappa}", duration=6)
+        assert passed["deadlocks"] == [] and passed["converged"]
+
+
+def test_deadlock_keys_are_metrics_parameters() -> None:
+    _, m = run_scenario(
+        SWAP, "recovery.tangential=0", "metrics.deadlock_time=10", duration=6
+    )
+    assert m["deadlocks"] == []
+    _, m = run_scenario(
+        SWAP, "recovery.tangential=0", "metrics.deadlock_distance=3", duration=6
+    )
+    assert m["deadlocks"] == []  # 2.25 m from the slots is "near" with 3 m
+    sc = load_scenario(SWAP, overrides=["metrics.deadlock_speed=0.05"])
+    assert sc.metrics.deadlock_speed == 0.05
+    with pytest.raises(ScenarioError, match="metrics.deadlock_speed"):
+        load_scenario(SWAP, overrides=["metrics.deadlock_speed=0"])
