@@ -15,6 +15,7 @@ import pytest
 import yaml
 from helpers import REPO, write_yaml
 
+import sandbox
 from sandbox.cli import main
 from sandbox.study import engine
 from sandbox.study.spec import build_spec, split_values
@@ -256,6 +257,22 @@ def test_a_changed_base_is_refused(tmp_path, base, capsys):
         == 0
     )
     assert main(["sweep", str(base), "--out", str(tmp_path / "o2")]) == 2  # other --set
+
+
+def test_a_store_of_another_sandbox_version_is_refused(tmp_path, base, capsys):
+    out = tmp_path / "out"
+    assert main(["sweep", str(base), "--seeds", "0:1", "--out", str(out)]) == 0
+    meta = json.loads((out / "sweep.json").read_text())
+    assert meta["sandbox"] == sandbox.__version__
+    (run,) = (out / "runs").glob("*.json")
+    assert json.loads(run.read_text())["sandbox"] == sandbox.__version__
+    meta["sandbox"] = "0.0.1"
+    (out / "sweep.json").write_text(json.dumps(meta))
+    capsys.readouterr()
+    assert main(["sweep", str(base), "--seeds", "0:2", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "computed by sandbox 0.0.1" in err and len(err.splitlines()) == 1
+    assert len(list((out / "runs").glob("*.json"))) == 1  # nothing computed
 
 
 def test_failed_runs_are_rows_and_retry_failed_reruns_only_them(tmp_path, base, capsys):

@@ -14,7 +14,8 @@ Every file is written to a temporary name and renamed into place, so a killed sw
 leaves complete run files only; the next invocation computes the runs whose file is
 missing. The digest is the SHA-256 of the base scenario document as canonical JSON
 (sorted keys, so key order and comments do not matter) together with the fixed
-overrides: a sweep into a ``DIR`` made from another base is refused.
+overrides: a sweep into a ``DIR`` made from another base is refused, and so is one made
+by another version of sandbox (``sweep.json`` and every run file record the version).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from sandbox import __version__
 from sandbox.study.spec import SweepError, SweepSpec, Task
 
 #: Measured columns of ``results.csv``, after the run id, the varied paths and the seed.
@@ -105,6 +107,13 @@ class Store:
                 old = json.loads(meta.read_text(encoding="utf-8"))
             except (OSError, ValueError):
                 raise SweepError(f"{meta}: unreadable sweep description") from None
+            made_by = old.get("sandbox")
+            if made_by is not None and made_by != __version__:
+                raise SweepError(
+                    f"{self.root}: its runs were computed by sandbox {made_by}, "
+                    f"this is sandbox {__version__}; results of two versions are not "
+                    "mixed: use a new --out directory"
+                )
             if old.get("base_digest") != base_digest:
                 raise SweepError(
                     f"{self.root}: holds a sweep of another base scenario or --set "
@@ -121,6 +130,7 @@ class Store:
         self.runs.mkdir(parents=True, exist_ok=True)
         doc = {
             "format": FORMAT,
+            "sandbox": __version__,
             "base": str(spec.base),
             "base_digest": base_digest,
             "set": list(spec.fixed),
@@ -150,6 +160,7 @@ class Store:
         """Store one finished run (atomically)."""
         doc = {
             "run_id": task.run_id,
+            "sandbox": __version__,
             "values": dict(task.values),
             "seed": task.seed,
             **_finite(result),
