@@ -237,14 +237,42 @@ class FilterContext:
 class DetectorContext:
     """What a failure detector sees at one control step.
 
+    Arrays are indexed by vehicle. What a detector may use is what the vehicles
+    broadcast (poses and commands) and what the world knows (contacts); ``pos``,
+    ``theta``, ``vel`` and ``failing`` are the truth, for the ``oracle`` and for a
+    detector's first call (the initial velocities).
+
     Attributes
     ----------
     t, dt : float [s]
-    pos, theta, vel : ndarray
-        Measured states.
-    v1, v2 : ndarray (n,)
-        The commands the controller asked for.
+        Time and control period.
+    pos : ndarray (n, 2) [m]
+    theta : ndarray (n,) [rad]
+    vel : ndarray (n, 2) [m/s]
+        The true states.
+    seen : ndarray (n, 3) [m, m, rad]
+        The broadcast poses received at ``t`` (``sensing:``), or the true poses
+        without sensing.
+    fresh : ndarray (n,) bool
+        Whether each vehicle's packet of this period arrived (a lost one leaves
+        ``seen`` at the last copy received).
+    commands : ndarray (n, 2) [m/s, rad/s]
+        The commands ``(v1, v2)`` each vehicle's controller asked for in the period
+        ending at the pose in ``seen`` (before any failure acted on them; delayed
+        with the poses).
+    in_contact : ndarray (n,) bool
+        Whether each vehicle is in an open contact episode.
+    failing : ndarray (n,) bool
+        The vehicles with an active failure (the truth: for the oracle only).
+    position_noise, heading_noise : float [m], [rad]
+        The broadcast noise of ``sensing:``.
+    substeps : int
+        Physics substeps per control period.
+    motor_accel, turn_accel : ndarray (n,) [m/s^2], [rad/s^2]
+        The motors' acceleration limits (inf: the command is reached within one
+        substep).
     params : dict
+        The detector's YAML values.
     memory : dict
         Kept from one step to the next.
     """
@@ -254,7 +282,15 @@ class DetectorContext:
     pos: np.ndarray
     theta: np.ndarray
     vel: np.ndarray
-    v1: np.ndarray
-    v2: np.ndarray
+    seen: np.ndarray
+    fresh: np.ndarray
+    commands: np.ndarray
+    in_contact: np.ndarray
+    failing: np.ndarray
+    position_noise: float
+    heading_noise: float
+    substeps: int
+    motor_accel: np.ndarray
+    turn_accel: np.ndarray
     params: dict[str, Any]
     memory: dict[str, Any]

@@ -97,6 +97,12 @@ class FailureSchedule:
         """Which failures are active at time ``t`` [s], shape (k,), bool."""
         return (self.start <= t + 1e-12) & (t + 1e-12 < self.end)
 
+    def active_vehicles(self, t: float) -> np.ndarray:
+        """Which vehicles have an active failure at time ``t`` [s], shape (n,) bool."""
+        out = np.zeros(self.n, dtype=bool)
+        out[self.vehicle[self.active(t)]] = True
+        return out
+
     def start_new(self, t: float, last_v2: np.ndarray) -> np.ndarray:
         """Indices of the failures that start at this step (each reported once).
 

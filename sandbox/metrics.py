@@ -30,6 +30,11 @@ Definitions (the keys of ``metrics.json``):
   ``metrics.deadlock_distance`` from their slots (:mod:`sandbox.deadlock`).
 - ``converged``: every healthy vehicle (no failure active at the end of the run, with a
   slot) has a settling time.
+- ``detections`` and ``detection`` (with ``detection: {method: residual}`` only, see
+  :func:`sandbox.detection.detection_metrics`): every detection ``{vehicle, t, kind,
+  cleared, false_alarm}``, and per failure the detection delay [s] and whether the
+  kind was right; ``false_alarms`` counts detections on a vehicle without an active
+  failure.
 - ``warnings``: what a user should know about the numbers (a saturated motor).
 
 Formation errors, settling and mode switches read the recorded samples (at the
@@ -391,6 +396,12 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     for key in ("diverged", "interrupted"):
         if key in run.info:
             out[key] = run.info[key]
+    from sandbox.detection import detection_metrics
+
+    detection = detection_metrics(run.info, run.info.get("failures", []))
+    if detection is not None:
+        out["detections"] = detection.pop("detections")
+        out["detection"] = detection
     out["warnings"] = run_warnings(out)
     return out
 

@@ -286,11 +286,11 @@ KINDS: dict[str, Kind] = {
         ),
         Kind(
             "detector",
-            "",
-            "detector",
+            "detection",
+            "method",
             "failure detector",
-            False,
-            "f(ctx: DetectorContext) -> suspected (n,) bool",
+            True,
+            "f(ctx: DetectorContext) -> suspected (n,) bool, or (suspected, kinds)",
         ),
     )
 }
@@ -342,6 +342,7 @@ _ORIGIN: list[str] = []
 def _ensure_builtins() -> None:
     """Import the modules that register the built-in plug-ins."""
     import sandbox.control.formation  # noqa: F401
+    import sandbox.detection  # noqa: F401
     import sandbox.failures  # noqa: F401
     import sandbox.obstacles  # noqa: F401
     import sandbox.recovery  # noqa: F401
@@ -640,10 +641,13 @@ def register_detector(
     doc: str | None = None,
     check: Callable | None = None,
 ) -> Callable[[Any], Any]:
-    """Register a failure detector: ``f(ctx: DetectorContext) -> suspected (n,)``.
+    """Register a failure detector (``detection: {method: NAME, ...}``).
 
-    A detector sees what the vehicles measure and flags those it believes failed. The
-    kind is declared for the detection features; only ``none`` is built in.
+    The detector is ``f(ctx: DetectorContext) -> suspected``, shape (n,) bool: the
+    vehicles the platoon believes failed now (it keeps its state in ``ctx.memory``),
+    or ``(suspected, kinds)`` with ``kinds`` a list of n strings naming the kind of
+    each suspicion. Built in: ``oracle`` (the truth, at once), ``residual``
+    (:mod:`sandbox.detection`) and ``none`` (nothing is ever detected).
     """
     return register("detector", name, params, doc=doc, check=check)
 
@@ -656,7 +660,7 @@ def no_filter(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
 
 @register_detector("none")
 def no_detector(ctx: DetectorContext) -> np.ndarray:
-    """No failure detection: no vehicle is suspected."""
+    """No failure detection: no vehicle is ever believed failed."""
     return np.zeros(len(ctx.pos), dtype=bool)
 
 

@@ -303,6 +303,7 @@ def build_schema() -> dict[str, Any]:
             "obstacle": _plugin_section("obstacle"),
             "metrics": _object(METRICS),
             "sensing": _object(SENSING),
+            "detection": _plugin_section("detector"),
         },
     }
 

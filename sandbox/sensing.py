@@ -66,6 +66,8 @@ class Broadcast:
         self._sent: deque[np.ndarray] = deque(maxlen=delay_periods + 1)
         #: The last received pose of each vehicle, shape (n, 3) [m, m, rad].
         self.seen: np.ndarray | None = None
+        #: Whether each vehicle's packet of the last update arrived, shape (n,) bool.
+        self.fresh: np.ndarray | None = None
 
     def update(self, pos: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """Broadcast the true poses of ``t_k``; return what is received at ``t_k``.
@@ -93,8 +95,10 @@ class Broadcast:
         arrived = self._sent[0]
         if self.seen is None:
             self.seen = arrived.copy()
+            self.fresh = np.ones(n, dtype=bool)
         else:
             self.seen = np.where(lost[:, None], self.seen, arrived)
+            self.fresh = ~lost
         return self.seen
 
 

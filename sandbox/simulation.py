@@ -35,6 +35,7 @@ from sandbox.control.flatness import (
     flat_inputs,
 )
 from sandbox.control.formation import BackwardDifference
+from sandbox.detection import Detection
 from sandbox.failures import FailureSchedule
 from sandbox.metrics import LoopMetrics
 from sandbox.observation import Observation, Overrides, override_rows
@@ -171,6 +172,8 @@ class Simulation:
         self._failing = np.zeros(n, dtype=bool)
         #: The vehicles the platoon believes failed at t_k, shape (n,) bool.
         self.known_failed = np.zeros(n, dtype=bool)
+        # How it learns of failures: None = the oracle (the truth, at once).
+        self.detection = Detection.make(scenario, self.names)
         self.k = 0
         self.status = STATUS_OK
         self.info = self._info()
@@ -335,6 +338,8 @@ class Simulation:
         # What the platoon believes has failed; everything below reacts to this,
         # never to the truth. The oracle: the truth, known at once.
         known = failing
+        if self.detection is not None:  # else what the detector has found
+            known = self.detection.update(self, t, failing)
         self.known_failed = known
         may_avoid = self._avoid_candidates & ~known
         shift, active = self.strategy(
@@ -430,7 +435,13 @@ class Simulation:
             v2 = np.where(mask, np.clip(rows[:, 1], -self._v2_max, self._v2_max), v2)
             passive = passive | mask
             external = mask if external is None else external | mask
+        if self.detection is not None:  # what the controllers ask for, broadcast
+            self.detection.intended = np.column_stack((v1, v2))
         v1, v2, failed, frozen = self.failures.apply(t, v1, v2)
+        if self.detection is not None:
+            # A failed controller does not know: it keeps its own state until the
+            # failure ends (then it resumes from the applied velocity).
+            frozen = frozen & ~self.failures.active_vehicles(t + h)
         # chi follows the applied velocity of passive vehicles, so that the law resumes
         # without a jump when the failure or the override ends.
         passive = frozen | passive
@@ -611,6 +622,8 @@ class Simulation:
             self._finish()
         sc, info = self.scenario, self.info
         info["failed_at"] = self.failed_at
+        if self.detection is not None:
+            info["detection"] = self.detection.summary()
         info["loop_metrics"] = self.tally.result()
         info["wall_time"] = time.perf_counter() - self._wall
         info["control_time"] = self._control_time

@@ -42,6 +42,7 @@ from sandbox.scenario.sections import (
     SENSING_KEYS,
     TOP,
     TOP_KEYS,
+    _detection,
     _failures,
     _formation,
     _obstacles,
@@ -249,6 +250,8 @@ def parse_scenario(
         **{k: METRICS[k].default if v is None else v for k, v in read.items()}
     )
     sensing = _sensing(rd, doc.get("sensing"), dt)
+    detection = _detection(rd, doc.get("detection"), "detection")
+    _detection_window(rd, detection, dt)
 
     names = [n for _, n, _ in rd.declared] + [v.name for _, v in generated]
     expect = read_expectations(rd, doc.get("expect"), "expect", names)
@@ -300,6 +303,7 @@ def parse_scenario(
             platoon=platoon,
             metrics=metrics,
             sensing=sensing,
+            detection=detection,
             diameter=rd.diameter,
             source=source,
             plugins=tuple(loaded),
@@ -619,3 +623,18 @@ def _sensing(rd: _Reader, doc: Any, dt: Any) -> SensingSpec:
                 f"a multiple of {dt:g} s",
             )
     return SensingSpec(**values)
+
+
+def _detection_window(rd: _Reader, detection: Any, dt: Any) -> None:
+    """A detector's ``window`` [s], if it has one, is a whole number of periods."""
+    window = detection.params.get("window")
+    if not (isinstance(dt, int | float) and dt > 0 and isinstance(window, float)):
+        return
+    periods = window / dt
+    if periods < 1 - 1e-9 or abs(periods - round(periods)) > 1e-9 * max(1.0, periods):
+        rd.fail(
+            "detection.window",
+            f"must be a whole number of control periods dt = {dt:g} s",
+            f"{window:g} s = {periods:g} periods",
+            f"a multiple of {dt:g} s",
+        )

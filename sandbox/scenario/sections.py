@@ -36,6 +36,7 @@ from sandbox.scenario.reader import (
     _Reader,
 )
 from sandbox.scenario.specs import (
+    DetectionSpec,
     FailureSpec,
     FormationSpec,
     RecoverySpec,
@@ -196,6 +197,12 @@ TOP: dict[str, Param] = {
         doc="What the vehicles see of each other: a noisy, delayed, lossy broadcast "
         "of the poses (see sandbox/sensing.py; all 0: the truth)",
     ),
+    "detection": Param(
+        **_section("detection"),
+        doc="How the platoon learns of failures: oracle (the truth, at once) or "
+        "residual (observed motion against the broadcast commands, a CUSUM; see "
+        "sandbox/detection.py)",
+    ),
     "randomize": Param(
         "custom",
         None,
@@ -327,6 +334,10 @@ RECOVERY: dict[str, Param] = {
     ),
 }
 
+DETECTION: dict[str, Param] = {
+    "method": Param("custom", "oracle", doc="The failure detector (registered name)"),
+}
+
 FAILURE: dict[str, Param] = {
     "vehicle": Param("string", doc="Name of the failing vehicle"),
     "at": Param("number", unit="s", doc="Onset, within the run", minimum=0.0),
@@ -360,6 +371,7 @@ PLUGIN_SECTIONS: dict[str, dict[str, Param]] = {
     "failure": FAILURE,
     "reference": REFERENCE,
     "obstacle": OBSTACLE,
+    "detector": DETECTION,
 }
 
 for _kind, _own in PLUGIN_SECTIONS.items():
@@ -569,6 +581,16 @@ def _recovery(rd: _Reader, doc: Any, path: str) -> RecoverySpec:
         target_derivatives=own.get("target_derivatives") or "hold",
         params=values,
     )
+
+
+def _detection(rd: _Reader, doc: Any, path: str) -> DetectionSpec:
+    m = rd.mapping(doc, path)
+    if m is None:
+        return DetectionSpec()
+    plugin, _, values, ok = read_plugin_section(rd, m, path, "detector")
+    if plugin is None or not ok:
+        return DetectionSpec()
+    return DetectionSpec(method=plugin.name, params=values)
 
 
 def _failures(rd: _Reader, doc: Any, path: str) -> list[tuple[str, FailureSpec]]:

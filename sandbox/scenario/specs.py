@@ -216,6 +216,19 @@ class MetricsSpec:
 
 
 @dataclass(frozen=True)
+class DetectionSpec:
+    """How the platoon learns of failures (``detection:``, :mod:`sandbox.detection`).
+
+    ``method``: the registered detector (``oracle``: the truth at once, the default;
+    ``residual``: a CUSUM on the residual of the observed motion against the
+    broadcast commands); ``params``: its YAML values.
+    """
+
+    method: str = "oracle"
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class SensingSpec:
     """What the vehicles see of each other (``sensing:``, see :mod:`sandbox.sensing`).
 
@@ -274,6 +287,8 @@ class Scenario:
     expect: Expectations | None = None
     #: The ``sensing:`` section (all 0 by default: the truth).
     sensing: SensingSpec = SensingSpec()
+    #: The ``detection:`` section (default: the oracle).
+    detection: DetectionSpec = DetectionSpec()
 
     def __post_init__(self) -> None:
         """Validate a scenario not made by the loader (the constructor, ``replace``).
@@ -401,6 +416,9 @@ class Scenario:
         doc["metrics"] = _plain(self.metrics)
         if self.sensing != SensingSpec():
             doc["sensing"] = _plain(self.sensing)
+        if self.detection != DetectionSpec():
+            doc["detection"] = {"method": self.detection.method}
+            doc["detection"].update(_plain(self.detection.params, skip_none=True))
         if self.expect is not None:
             doc["expect"] = self.expect.to_dict()
         return doc

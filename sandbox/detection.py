@@ -1,0 +1,502 @@
+"""Failure detection without an oracle: the ``residual`` detector (``detection:``).
+
+With ``detection: {method: oracle}`` (the default) the platoon knows every failure at
+once, as in v0.1. With ``method: residual`` it has to find them: each vehicle's
+observed motion (its broadcast poses, :attr:`Simulation.seen`, or the truth without
+sensing) is compared with what the commands its controller broadcasts predict, and a
+one-sided CUSUM per vehicle decides when the difference is too large to be noise.
+
+The prediction
+    Every control period each vehicle broadcasts the commands ``(v1, v2)`` its
+    controller asks for (a failed vehicle's controller does not know it has failed:
+    it goes on asking for what its law wants). The detector integrates the unicycle
+    of eq. (1) with these commands through the motor model of the physics: in each
+    of the ``substeps`` substeps of a period the position and heading advance with the
+    body's current velocity, and then the velocity moves toward the command (the
+    world-frame vector ``v1 (cos, sin)(x3 + v2 h / 2)`` and the rate ``v2``) by at most
+    the motor's acceleration limit (``motor_accel``, and ``4 motor_accel / radius`` for
+    the turn rate; a vehicle without ``motor_accel`` reaches its command within one
+    substep). The predicted pose starts every ``window`` seconds from the last
+    observed pose; the residual of a window is the observed pose at its end minus the
+    predicted one, in the frame of the predicted heading: along-track ``r_a``,
+    cross-track ``r_c`` [m] and heading ``r_h`` [rad].
+
+Normalisation
+    Each end of a window carries the broadcast noise, so ``r_a`` and ``r_c`` have a
+    standard deviation ``sqrt(2 sigma_p^2 + floor_p^2)`` (``r_c`` also
+    ``L sigma_h`` for a travel ``L`` over the window, the start heading's error) and
+    ``r_h`` ``sqrt(2 sigma_h^2 + floor_h^2)``, with ``sigma_p, sigma_h`` the
+    ``sensing`` noise and ``floor_p = 1 mm``, ``floor_h = 1 mrad`` by default
+    (``noise_floor``, ``heading_floor``): what the prediction misses without any noise
+    (the residual of a healthy platoon seen through the truth stays below a tenth of
+    that). ``z`` is the residual divided by these.
+
+The CUSUM
+    Under no fault ``z`` is close to a standard normal vector in 3-D. The alternative
+    is a mean shift of ``shift`` standard deviations in an unknown direction; the
+    log-likelihood ratio of one window, averaged over the directions, is
+    ``l(z) = log(sinh(mu |z|) / (mu |z|)) - mu^2 / 2`` with ``mu = shift``, and the
+    detector runs ``g = max(0, g + l)`` per vehicle, alarming at ``g >= lambda``.
+    For independent windows Lorden's bound gives a mean time between false alarms of
+    at least ``e^lambda`` windows; consecutive windows share an end point, and the
+    README reports the rate measured on fault-free runs. A window during which the
+    vehicle was in a contact episode (or one window after it) is skipped: contacts
+    move vehicles against their commands and are known to the world.
+
+Isolation
+    At an alarm the residuals accumulated since ``g`` last left 0 name the kind: a
+    heading residual dominating with the vehicle (almost) still is a ``spin``, with the
+    vehicle moving a ``stuck_steering``; an along-track deficit with the vehicle still
+    is a ``stop``, or a ``crash`` when the vehicle was in contact within the last
+    second or stopped faster than its motor can brake (``motor_accel``); any other
+    motion against the commands (too fast, sideways) is ``uncontrolled``.
+
+Latching
+    A detection stays until the same statistic run the other way,
+    ``c = max(0, c - l)``, reaches ``lambda``: the vehicle has moved as commanded long
+    enough (a cleared failure); the detection is then reported cleared.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sandbox.plugins import DetectorContext, Param, register_detector
+
+#: The kinds a detection names (failure kinds of :mod:`sandbox.failures`).
+KINDS = ("stop", "spin", "stuck_steering", "uncontrolled", "crash")
+#: Speed below which a vehicle counts as still, for isolation [m/s].
+STILL_SPEED = 0.1
+#: How long after a contact a stop counts as a crash [s].
+CRASH_CONTACT_WINDOW = 1.0
+#: Angular motor limit as a multiple of ``motor_accel / radius`` (as the physics).
+ANGULAR_MOTOR_FACTOR = 4.0
+
+RESIDUAL_PARAMS = {
+    "lambda": Param(
+        "number",
+        12.0,
+        doc="CUSUM threshold [nats]: a false alarm about every e^lambda windows in "
+        "theory (independent windows)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "window": Param(
+        "number",
+        0.1,
+        "s",
+        "Length of one residual: the prediction restarts from the observed pose "
+        "every window (a whole number of control periods)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "shift": Param(
+        "number",
+        4.0,
+        doc="The fault the CUSUM is tuned to: a residual of this many noise standard "
+        "deviations",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "noise_floor": Param(
+        "number",
+        0.001,
+        "m",
+        "Least position noise assumed (what the prediction misses without noise)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "heading_floor": Param(
+        "number",
+        0.001,
+        "rad",
+        "Least heading noise assumed",
+        minimum=0.0,
+        exclusive=True,
+    ),
+}
+
+
+def llr(z_norm: np.ndarray, mu: float) -> np.ndarray:
+    """Log-likelihood ratio of a mean shift ``mu`` in an unknown 3-D direction.
+
+    ``log E_u[exp(mu u.z - mu^2/2)]`` over unit vectors ``u``, uniform on the
+    sphere: ``log(sinh(mu r) / (mu r)) - mu^2 / 2`` for ``r = |z|``.
+
+    >>> round(float(llr(np.array([0.0]), 2.0)[0]), 6)
+    -2.0
+    """
+    x = mu * np.asarray(z_norm, dtype=float)
+    # log(sinh(x)/x), stable for small and large x.
+    small = x < 1e-4
+    safe = np.where(small, 1.0, x)
+    big = safe + np.log1p(-np.exp(-2.0 * safe)) - np.log(2.0 * safe)
+    return np.where(small, x * x / 6.0, big) - 0.5 * mu * mu
+
+
+@dataclass
+class DetectorState:
+    """What the residual detector keeps between control periods, per vehicle."""
+
+    pose: np.ndarray  # predicted pose since the window's start (n, 3)
+    start: np.ndarray  # observed position at the window's start (n, 2) [m]
+    vel: np.ndarray  # the model body's velocity (n, 2) [m/s]
+    rate: np.ndarray  # the model body's turn rate (n,) [rad/s]
+    age: np.ndarray  # periods since the window's start (n,)
+    pending: np.ndarray  # the next window starts at the next observation (n,) bool
+    travel: np.ndarray  # predicted travel over the window (n,) [m]
+    gate: np.ndarray  # periods of the window in or just after contact (n,)
+    last_contact: np.ndarray  # time of the last contact (n,) [s]
+    g: np.ndarray  # the CUSUM (n,)
+    clear: np.ndarray  # the clearing CUSUM of detected vehicles (n,)
+    acc: np.ndarray  # normalised residuals summed since g left 0 (n, 3)
+    acc_raw: np.ndarray  # raw residuals summed since g left 0 (n, 3)
+    acc_obs: np.ndarray  # observed travel since g left 0 (n,) [m]
+    acc_pred: np.ndarray  # predicted travel since g left 0 (n,) [m]
+    acc_t: np.ndarray  # time since g left 0 (n,) [s]
+    detected: np.ndarray  # latched (n,) bool
+    kinds: list  # the kind of each latched detection (n,)
+
+
+def _start(ctx: DetectorContext) -> DetectorState:
+    n = len(ctx.pos)
+    z = np.zeros(n)
+    return DetectorState(
+        pose=ctx.seen.copy(),
+        start=ctx.seen[:, :2].copy(),
+        vel=np.array(ctx.vel, dtype=float),
+        rate=z.copy(),
+        age=np.zeros(n, dtype=int),
+        pending=np.zeros(n, dtype=bool),
+        travel=z.copy(),
+        gate=np.zeros(n, dtype=int),
+        last_contact=np.full(n, -np.inf),
+        g=z.copy(),
+        clear=z.copy(),
+        acc=np.zeros((n, 3)),
+        acc_raw=np.zeros((n, 3)),
+        acc_obs=z.copy(),
+        acc_pred=z.copy(),
+        acc_t=z.copy(),
+        detected=np.zeros(n, dtype=bool),
+        kinds=[""] * n,
+    )
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _advance_model(st: DetectorState, ctx: DetectorContext) -> None:
+    """One control period of the motor model (see the module docstring)."""
+    h, s = ctx.dt, max(1, int(ctx.substeps))
+    dts = h / s
+    v1, v2 = ctx.commands[:, 0], ctx.commands[:, 1]
+    heading = st.pose[:, 2] + 0.5 * v2 * h
+    target = np.column_stack((v1 * np.cos(heading), v1 * np.sin(heading)))
+    lin = ctx.motor_accel * dts  # inf: reached within one substep
+    ang = ctx.turn_accel * dts
+    start = st.pose[:, :2].copy()
+    for _ in range(s):
+        st.pose[:, :2] += st.vel * dts
+        st.pose[:, 2] += st.rate * dts
+        dv = target - st.vel
+        norm = np.hypot(dv[:, 0], dv[:, 1])
+        scale = np.where(norm > lin, lin / np.maximum(norm, 1e-300), 1.0)
+        st.vel = st.vel + dv * scale[:, None]
+        st.rate = st.rate + np.clip(v2 - st.rate, -ang, ang)
+    st.travel += np.hypot(*(st.pose[:, :2] - start).T)
+
+
+def _isolate(st: DetectorState, i: int, t: float, ctx: DetectorContext) -> str:
+    """The kind of the alarm of vehicle ``i`` from its accumulated residuals."""
+    za, zc, zh = np.abs(st.acc[i])
+    duration = max(st.acc_t[i], ctx.dt)
+    # Still, or covering less than half the predicted travel.
+    slow = st.acc_obs[i] < max(STILL_SPEED * duration, 0.5 * st.acc_pred[i])
+    windows = max(1.0, st.acc_t[i] / max(ctx.params["window"], ctx.dt))
+    if zh >= max(za, zc):
+        if slow:
+            return "spin"
+        # Moving: the speed is off the commands too (beyond 2 sigma) when uncontrolled.
+        return "uncontrolled" if za > 2.0 * np.sqrt(windows) else "stuck_steering"
+    if st.acc[i, 0] < 0 and za >= zc and slow:
+        if t - st.last_contact[i] <= CRASH_CONTACT_WINDOW:
+            return "crash"
+        brake = ctx.motor_accel[i]
+        if np.isfinite(brake):
+            # The least travel a motor-braked stop allows from the predicted speed.
+            v0 = st.acc_pred[i] / duration
+            least = min(st.acc_pred[i], 0.5 * v0 * v0 / brake)
+            sigma = np.sqrt(
+                2.0 * ctx.position_noise**2 + ctx.params["noise_floor"] ** 2
+            )
+            if st.acc_obs[i] < least - 3.0 * sigma:
+                return "crash"
+        return "stop"
+    return "uncontrolled"
+
+
+@register_detector("oracle")
+def oracle(ctx: DetectorContext) -> np.ndarray:
+    """The truth, known at once (v0.1's behaviour)."""
+    return ctx.failing.copy()
+
+
+@register_detector("residual", params=RESIDUAL_PARAMS)
+def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
+    """Residuals of the observed motion against the commands, and a CUSUM."""
+    st: DetectorState | None = ctx.memory.get("state")
+    if st is None or ctx.commands is None:
+        # The first poses (or, with a delay, the first copies held): start from them.
+        st = ctx.memory["state"] = _start(ctx)
+        return st.detected.copy(), list(st.kinds)
+    p = ctx.params
+    mu, lam = float(p["shift"]), float(p["lambda"])
+    window = max(1, int(round(p["window"] / ctx.dt)))
+    sp = np.sqrt(2.0 * ctx.position_noise**2 + p["noise_floor"] ** 2)
+    sh = np.sqrt(2.0 * ctx.heading_noise**2 + p["heading_floor"] ** 2)
+    _advance_model(st, ctx)
+    st.age += 1
+    # Windows start from a new observation (never the last one's end), so that no two
+    # windows share a pose's noise: independent windows.
+    restart = st.pending & ctx.fresh
+    if np.any(restart):
+        st.pose[restart] = ctx.seen[restart]
+        st.start[restart] = ctx.seen[restart, :2]
+        st.age[restart] = 0
+        st.travel[restart] = 0.0
+        st.pending &= ~restart
+    contact = ctx.in_contact
+    st.last_contact = np.where(contact, ctx.t, st.last_contact)
+    # A window touching a contact, or the window after it, is skipped.
+    st.gate = np.where(contact, 2 * window, np.maximum(st.gate - 1, 0))
+    due = (st.age >= window) & ctx.fresh & ~st.pending
+    if not np.any(due):
+        return st.detected.copy(), list(st.kinds)
+    rows = np.flatnonzero(due)
+    seen = ctx.seen[rows]
+    pred = st.pose[rows]
+    d = seen[:, :2] - pred[:, :2]
+    c, s = np.cos(pred[:, 2]), np.sin(pred[:, 2])
+    raw = np.column_stack(
+        (
+            c * d[:, 0] + s * d[:, 1],
+            -s * d[:, 0] + c * d[:, 1],
+            _wrap(seen[:, 2] - pred[:, 2]),
+        )
+    )
+    travel = st.travel[rows]
+    sc = np.sqrt(sp * sp + (travel * ctx.heading_noise) ** 2)
+    z = raw / np.column_stack((np.full(len(rows), sp), sc, np.full(len(rows), sh)))
+    gated = st.gate[rows] > 0
+    inc = np.where(gated, 0.0, llr(np.hypot.reduce(z, axis=1), mu))
+    observed = np.hypot(*(seen[:, :2] - st.start[rows]).T)
+    seconds = st.age[rows] * ctx.dt
+    for k, i in enumerate(rows):
+        if gated[k]:
+            continue
+        if st.detected[i]:
+            st.clear[i] = max(0.0, st.clear[i] - inc[k])
+            if st.clear[i] >= lam:
+                st.detected[i] = False
+                st.kinds[i] = ""
+                st.clear[i] = 0.0
+            continue
+        if st.g[i] <= 0.0:
+            st.acc[i] = 0.0
+            st.acc_raw[i] = 0.0
+            st.acc_obs[i] = st.acc_pred[i] = st.acc_t[i] = 0.0
+        st.g[i] = max(0.0, st.g[i] + inc[k])
+        if st.g[i] > 0.0:
+            st.acc[i] += z[k]
+            st.acc_raw[i] += raw[k]
+            st.acc_obs[i] += observed[k]
+            st.acc_pred[i] += travel[k]
+            st.acc_t[i] += seconds[k]
+        if st.g[i] >= lam:
+            st.detected[i] = True
+            st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+            st.g[i] = 0.0
+            st.clear[i] = 0.0
+    st.pending[rows] = True  # the next window starts at the next observation
+    return st.detected.copy(), list(st.kinds)
+
+
+class Detection:
+    """The loop's detector: builds its context each period and keeps the events.
+
+    Made by :meth:`make` (None for the oracle, which the loop applies itself, so that
+    the default is today's behaviour to the bit). :meth:`update` is called from
+    ``Simulation._plan`` at every ``t_k`` and returns what the platoon believes has
+    failed; :attr:`events` lists the detections, as ``{"vehicle", "t", "kind",
+    "cleared"}`` (``cleared``: the time the detection was withdrawn, or None).
+    """
+
+    def __init__(self, scenario, names: list[str]) -> None:
+        from collections import deque
+
+        from sandbox.plugins import get
+
+        spec = scenario.detection
+        self.method = spec.method
+        self.func = get("detector", spec.method).obj
+        self.params = dict(spec.params)
+        self.memory: dict = {}
+        self.names = list(names)
+        n = len(names)
+        sensing = scenario.sensing
+        self.position_noise = float(sensing.position_noise)
+        self.heading_noise = float(sensing.heading_noise)
+        delay = int(round(sensing.delay / scenario.dt))
+        self.substeps = int(scenario.substeps)
+        accel = np.array(
+            [
+                np.inf if v.motor_accel is None else v.motor_accel
+                for v in scenario.vehicles
+            ]
+        )
+        radius = np.array([v.diameter / 2.0 for v in scenario.vehicles])
+        self.motor_accel = accel
+        self.turn_accel = ANGULAR_MOTOR_FACTOR * accel / radius
+        #: The commands the controllers asked for in the last period (n, 2).
+        self.intended: np.ndarray | None = None
+        self._sent: deque[np.ndarray] = deque(maxlen=delay + 1)
+        self._known = np.zeros(n, dtype=bool)
+        self._open: dict[int, dict] = {}
+        self.events: list[dict] = []
+
+    @classmethod
+    def make(cls, scenario, names: list[str]) -> Detection | None:
+        """The detection of a scenario, or None for ``method: oracle``."""
+        if scenario.detection.method == "oracle":
+            return None
+        return cls(scenario, names)
+
+    def update(self, sim, t: float, failing: np.ndarray) -> np.ndarray:
+        """What the platoon believes has failed at ``t`` (n,) bool; records events."""
+        fleet = sim.fleet
+        if self.intended is not None:
+            self._sent.append(self.intended)
+            self.intended = None
+        full = len(self._sent) == self._sent.maxlen
+        if sim.seen is not None:
+            seen = sim.seen
+            fresh = getattr(sim.broadcast, "fresh", None)
+        else:
+            seen = np.column_stack((fleet.pos, fleet.theta))
+            fresh = None
+        n = fleet.n
+        contact = getattr(sim.world, "in_contact", None)
+        ctx = DetectorContext(
+            t=t,
+            dt=sim.h,
+            pos=fleet.pos,
+            theta=fleet.theta,
+            vel=fleet.vel,
+            seen=seen,
+            fresh=np.ones(n, dtype=bool) if fresh is None else fresh,
+            commands=self._sent[0] if full else None,
+            in_contact=np.zeros(n, dtype=bool) if contact is None else contact(),
+            failing=failing,
+            position_noise=self.position_noise,
+            heading_noise=self.heading_noise,
+            substeps=self.substeps,
+            motor_accel=self.motor_accel,
+            turn_accel=self.turn_accel,
+            params=self.params,
+            memory=self.memory,
+        )
+        out = self.func(ctx)
+        kinds = None
+        if isinstance(out, tuple):
+            out, kinds = out
+        known = np.asarray(out, dtype=bool).copy()
+        for i in np.flatnonzero(known & ~self._known):
+            kind = kinds[i] if kinds is not None and kinds[i] else "unknown"
+            event = {"vehicle": self.names[i], "t": round(t, 9), "kind": kind}
+            event["cleared"] = None
+            self.events.append(event)
+            self._open[int(i)] = event
+        for i in np.flatnonzero(~known & self._known):
+            event = self._open.pop(int(i), None)
+            if event is not None:
+                event["cleared"] = round(t, 9)
+        self._known = known
+        return known
+
+    def summary(self) -> dict:
+        """What ``Run.info["detection"]`` keeps: the method, its values, the events."""
+        return {
+            "method": self.method,
+            "params": dict(self.params),
+            "events": [dict(e) for e in self.events],
+        }
+
+
+def detection_metrics(info: dict, failures: list[dict]) -> dict | None:
+    """The ``detection`` block of ``metrics.json``, or None under the oracle.
+
+    Parameters
+    ----------
+    info : dict
+        ``Run.info`` (its ``detection`` entry holds the method and the events).
+    failures : list of dict
+        ``Run.info["failures"]``: ``{vehicle, kind, at, until}`` of each failure.
+
+    Returns
+    -------
+    dict
+        ``method``; ``detections``: ``{vehicle, t, kind, cleared, false_alarm}`` in
+        the order they happened, ``false_alarm`` when the vehicle had no active
+        failure at ``t``; ``failures``: per failure ``{vehicle, kind, at, detected_at,
+        delay, detected_kind, kind_right}`` (the first detection on the vehicle
+        during the failure; null fields when it was never detected);
+        ``false_alarms``: how many detections were false alarms.
+    """
+    block = info.get("detection")
+    if not block:
+        return None
+    events = block.get("events", [])
+
+    def failing(vehicle: str, t: float) -> bool:
+        return any(
+            f["vehicle"] == vehicle
+            and f["at"] <= t + 1e-9
+            and (f["until"] is None or t + 1e-9 < f["until"])
+            for f in failures
+        )
+
+    detections = [
+        {**e, "false_alarm": not failing(e["vehicle"], e["t"])} for e in events
+    ]
+    per_failure = []
+    for f in failures:
+        end = np.inf if f["until"] is None else f["until"]
+        hit = next(
+            (
+                e
+                for e in events
+                if e["vehicle"] == f["vehicle"] and f["at"] - 1e-9 <= e["t"] < end
+            ),
+            None,
+        )
+        per_failure.append(
+            {
+                "vehicle": f["vehicle"],
+                "kind": f["kind"],
+                "at": f["at"],
+                "detected_at": None if hit is None else hit["t"],
+                "delay": None if hit is None else round(hit["t"] - f["at"], 9),
+                "detected_kind": None if hit is None else hit["kind"],
+                "kind_right": None if hit is None else hit["kind"] == f["kind"],
+            }
+        )
+    return {
+        "method": block.get("method"),
+        "detections": detections,
+        "failures": per_failure,
+        "false_alarms": sum(d["false_alarm"] for d in detections),
+    }
