@@ -470,6 +470,23 @@ def test_table_and_plot(tmp_path, base, capsys):
     assert main(["sweep", "table", str(tmp_path)]) == 1
 
 
+def test_zipped_paths_are_one_axis_of_the_figures(tmp_path, base):
+    out = tmp_path / "out"
+    argv = ["sweep", str(base), "--seeds", "0:1", "--set", "duration=0.2"]
+    argv += ["--grid", "recovery.beta=1,2"]
+    argv += ["--zip", "vehicles[1].offset=[-2,1],[-1.5,1]"]
+    argv += ["--zip", "vehicles[2].offset=[-2,-1],[-1.5,-1]", "--out", str(out)]
+    assert main(argv) == 0
+    assert main(["sweep", "plot", str(out)]) == 0
+    zipped = "vehicles_1_offset_vehicles_2_offset"
+    figs = sorted(p.name for p in (out / "figures").glob("*.png"))
+    assert figs == [f"heatmap_recovery_beta_{zipped}.png", "rates_recovery_beta.png"]
+    # --by one of the zipped paths draws against the pair
+    assert main(["sweep", "plot", str(out), "--by", "vehicles[2].offset"]) == 0
+    assert (out / "figures" / f"rates_{zipped}.png").is_file()
+    assert (out / "figures" / f"heatmap_{zipped}_recovery_beta.png").is_file()
+
+
 def test_bundled_study_files_validate(capsys):
     studies = sorted((REPO / "scenarios" / "studies").glob("section4_*.yaml"))
     assert len(studies) >= 2

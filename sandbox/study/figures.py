@@ -6,6 +6,9 @@
   of the other varied paths;
 - ``heatmap_<x>_<y>.png`` (two or more varied paths): the collision rate and the
   unsettled rate over ``x`` and ``y``, one pair of panels per value of the other paths.
+
+The zipped paths vary together, so they are one axis of the figures, named by their
+paths joined with `` & `` (its values likewise); ``--by`` any of them selects it.
 """
 
 from __future__ import annotations
@@ -18,11 +21,14 @@ from pathlib import Path
 import numpy as np
 
 from sandbox.study.spec import SweepError
-from sandbox.study.store import read_results, varied_paths
+from sandbox.study.store import read_results, varied_axes
 from sandbox.study.summary import group_rows
 
 #: At most this many heatmap pairs (values of the other paths) are drawn.
 MAX_PANELS = 6
+
+#: Joins the paths (and the values) of the zipped paths into one axis.
+AXIS_JOIN = " & "
 
 
 def _numeric(values: list[str]) -> list[float] | None:
@@ -63,15 +69,24 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
 
     try:
         _, rows = read_results(root)
-        paths = varied_paths(root)
+        axes = varied_axes(root)
     except OSError as exc:
         raise SweepError(f"{root}: not a sweep directory ({exc})") from None
-    if not paths:
+    if not axes:
         raise SweepError(f"{root}: the sweep varies no path: nothing to plot against")
-    by = list(by or paths)
-    for p in by:
-        if p not in paths:
+    named = {AXIS_JOIN.join(a): a for a in axes}
+    axis_of = {p: name for name, a in named.items() for p in a}
+    paths = list(named)
+    chosen = []
+    for p in by or paths:
+        if p not in axis_of and p not in named:
             raise SweepError(f"--by {p}: not a varied path of {root}")
+        chosen.append(axis_of.get(p, p))
+    by = list(dict.fromkeys(chosen))
+    rows = [
+        {**r, **{n: AXIS_JOIN.join(r[p] for p in a) for n, a in named.items()}}
+        for r in rows
+    ]
     rest = [p for p in paths if p not in by]
     by = by + rest
     x, others = by[0], by[1:]

@@ -262,3 +262,12 @@ def varied_paths(root: Path) -> list[str]:
     """The varied paths of the sweep in ``DIR`` (from ``sweep.json``)."""
     meta = json.loads((Path(root) / "sweep.json").read_text(encoding="utf-8"))
     return [*meta.get("grid", {}), *meta.get("zip", {})]
+
+
+def varied_axes(root: Path) -> list[tuple[str, ...]]:
+    """The sweep's axes: each grid path alone, then the zipped paths as one axis."""
+    meta = json.loads((Path(root) / "sweep.json").read_text(encoding="utf-8"))
+    axes = [(p,) for p in meta.get("grid", {})]
+    if meta.get("zip"):
+        axes.append(tuple(meta["zip"]))
+    return axes
