@@ -7,7 +7,7 @@ by vehicle, in fleet order; the plug-in must not modify them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -209,17 +209,37 @@ class ObstacleContext:
 
 @dataclass
 class FilterContext:
-    """What a safety filter sees at one control step.
+    """What a safety filter sees at one control step (``safety:``).
 
     Attributes
     ----------
     t, dt : float [s]
     pos, theta, vel : ndarray
-        As for :class:`StrategyContext`.
+        As for :class:`StrategyContext`: the true positions [m], headings [rad] and
+        measured velocities [m/s] of the centres.
     v1, v2 : ndarray (n,) [m/s], [rad/s]
-        The commands about to be applied.
+        The commands about to be applied (the controller's, ``v2`` within
+        ``v2_max``).
     diameter : ndarray (n,) [m]
     params : dict
+        The filter's YAML values (lengths in metres, defaults filled in).
+    v1_prev, v2_prev : ndarray (n,) [m/s], [rad/s] or None
+        The commands applied over the last period (None at the first step).
+    v1_max, v2_max, accel_max : float or ndarray (n,)
+        The vehicles' limits [m/s], [rad/s], [m/s^2] (``inf`` where unlimited).
+    known_failed : ndarray (n,) bool or None
+        The vehicles the platoon believes failed (``Simulation.known_failed``).
+    commanded : ndarray (n,) bool or None
+        Vehicles driven open loop (``drive: commands``).
+    obstacle_field : ObstacleField or None
+        The static obstacles.
+    seen : ndarray (n, 3) or None
+        The broadcast poses ``(x1, x2, x3)`` each vehicle receives of the others
+        (``sensing:``); None: the truth.
+    memory : dict
+        Kept from one step to the next (the filter's own state).
+    stats : dict
+        Counters the filter keeps; written to ``metrics.json`` under ``safety``.
     """
 
     t: float
@@ -231,6 +251,17 @@ class FilterContext:
     v2: np.ndarray
     diameter: np.ndarray
     params: dict[str, Any]
+    v1_prev: np.ndarray | None = None
+    v2_prev: np.ndarray | None = None
+    v1_max: Any = np.inf
+    v2_max: Any = np.inf
+    accel_max: Any = np.inf
+    known_failed: np.ndarray | None = None
+    commanded: np.ndarray | None = None
+    obstacle_field: Any = None
+    seen: np.ndarray | None = None
+    memory: dict[str, Any] = field(default_factory=dict)
+    stats: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass

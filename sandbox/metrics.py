@@ -393,7 +393,7 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     }
     if loop:
         out["motor"] = loop["motor"]
-    for key in ("diverged", "interrupted"):
+    for key in ("safety", "diverged", "interrupted"):
         if key in run.info:
             out[key] = run.info[key]
     from sandbox.detection import detection_metrics

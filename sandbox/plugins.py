@@ -69,6 +69,7 @@ __all__ = [
     "names",
     "register_detector",
     "register_failure",
+    "register_filter",
     "register_law",
     "register_obstacle",
     "register_reference",
@@ -278,10 +279,10 @@ KINDS: dict[str, Kind] = {
         ),
         Kind(
             "filter",
-            "",
+            "safety",
             "filter",
             "safety filter",
-            False,
+            True,
             "f(ctx: FilterContext) -> (v1 (n,) [m/s], v2 (n,) [rad/s])",
         ),
         Kind(
@@ -347,6 +348,7 @@ def _ensure_builtins() -> None:
     import sandbox.obstacles  # noqa: F401
     import sandbox.recovery  # noqa: F401
     import sandbox.references  # noqa: F401
+    import sandbox.safety  # noqa: F401
 
 
 def registry(kind: str) -> dict[str, Plugin]:
@@ -625,11 +627,12 @@ def register_filter(
     doc: str | None = None,
     check: Callable | None = None,
 ) -> Callable[[Any], Any]:
-    """Register a safety filter: ``f(ctx: FilterContext) -> (v1, v2)``, shape (n,).
+    """Register a safety filter (``safety: {filter: NAME, ...}``).
 
-    A filter sees the commands about to be applied and returns the ones to apply
-    (e.g. a control barrier function). The kind is declared for the safety features;
-    only ``none`` is built in.
+    The filter is ``f(ctx: FilterContext) -> (v1, v2)``, each of shape (n,) [m/s],
+    [rad/s]: it sees the commands about to be applied and returns the ones to apply,
+    once per control period, after the controller and before the failures. Built in:
+    ``none`` (never called) and ``cbf`` (:mod:`sandbox.safety.cbf`).
     """
     return register("filter", name, params, doc=doc, check=check)
 

@@ -304,6 +304,7 @@ def build_schema() -> dict[str, Any]:
             "metrics": _object(METRICS),
             "sensing": _object(SENSING),
             "detection": _plugin_section("detector"),
+            "safety": _plugin_section("filter"),
         },
     }
 

@@ -40,7 +40,13 @@ from sandbox.failures import FailureSchedule
 from sandbox.metrics import LoopMetrics
 from sandbox.observation import Observation, Overrides, override_rows
 from sandbox.physics import Physics
-from sandbox.plugins import LawContext, StrategyContext, get, make_law
+from sandbox.plugins import (
+    FilterContext,
+    LawContext,
+    StrategyContext,
+    get,
+    make_law,
+)
 from sandbox.recovery import NeighbourList, ObstacleField
 from sandbox.run import (
     MODE_AVOID,
@@ -126,6 +132,14 @@ class Simulation:
         self.obstacles = ObstacleField(scenario.obstacles)
         self.failures = FailureSchedule(scenario.failures, self.names)
         self.shift_motion = BackwardDifference(self.h)
+        # The safety filter (safety:); None with filter none: not called at all.
+        safety = scenario.safety
+        self._filter = (
+            None if safety.filter == "none" else get("filter", safety.filter).obj
+        )
+        self._filter_memory: dict = {}
+        self._filter_stats: dict = {}
+        self._filter_started = False
         # What the vehicles see of each other (None: the truth, see sandbox.sensing).
         self.broadcast = make_broadcast(scenario.sensing, self.h, scenario.seed)
         #: The broadcast poses received at t_k, shape (n, 3), or None without sensing.
@@ -419,6 +433,8 @@ class Simulation:
             )
         v1, v2 = flat_inputs(fleet.theta, fleet.chi, chi_dot, gains.kp, aim)
         v2 = np.clip(v2, -self._v2_max, self._v2_max)
+        if self._filter is not None:  # after the controller, before the failures
+            v1, v2 = self._safety(t, v1, v2)
         # Vehicles not driven by the controller this period.
         passive = fleet.commanded
         if self._schedules:
@@ -460,6 +476,42 @@ class Simulation:
         if external is not None:
             self._recorded_target = target
         return chi_next
+
+    def _safety(
+        self, t: float, v1: np.ndarray, v2: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The safety filter's commands for the period (``safety:``)."""
+        fleet, started = self.fleet, self._filter_started
+        self._filter_started = True
+        out = self._filter(
+            FilterContext(
+                t=t,
+                dt=self.h,
+                pos=fleet.pos,
+                theta=fleet.theta,
+                vel=fleet.vel,
+                v1=v1,
+                v2=v2,
+                diameter=fleet.diameter,
+                params=dict(self.scenario.safety.params),
+                v1_prev=fleet.v1 if started else None,
+                v2_prev=fleet.v2 if started else None,
+                v1_max=self._v1_max,
+                v2_max=self._v2_max,
+                accel_max=self._accel_max,
+                known_failed=self.known_failed,
+                commanded=fleet.commanded,
+                obstacle_field=self.obstacles,
+                seen=self.seen,
+                memory=self._filter_memory,
+                stats=self._filter_stats,
+            )
+        )
+        n = fleet.n
+        return (
+            np.broadcast_to(np.asarray(out[0], dtype=float), (n,)).copy(),
+            np.broadcast_to(np.asarray(out[1], dtype=float), (n,)).copy(),
+        )
 
     def _command_limits(self, v1: np.ndarray) -> np.ndarray:
         """User speeds within ``v1_max`` and, from the last speed, ``max_accel``."""
@@ -627,6 +679,13 @@ class Simulation:
         info["loop_metrics"] = self.tally.result()
         info["wall_time"] = time.perf_counter() - self._wall
         info["control_time"] = self._control_time
+        if self._filter is not None:
+            info["safety"] = {
+                "filter": sc.safety.filter,
+                "infeasible_steps": 0,
+                "active_steps": 0,
+                **self._filter_stats,
+            }
         info["steps"] = self.k
         self._run = Run(
             names=list(self.names),

@@ -31,6 +31,7 @@ from sandbox.scenario import (
     PLATOON,
     RECOVERY,
     REPORT_DT_BOUND,
+    SAFETY,
     SENSING,
     TOP,
     VEHICLE,
@@ -93,6 +94,7 @@ def declaration(path: str, doc: dict[str, Any]) -> Param | None:
         "recovery": ("strategy", RECOVERY, doc["recovery"].get("strategy")),
         "reference": ("reference", {}, doc["reference"]["type"]),
         "formation": ("law", {}, doc["formation"]["law"]),
+        "safety": ("filter", SAFETY, "cbf"),
     }.get(head)
     if kind is not None:
         name, own, selected = kind
@@ -122,7 +124,8 @@ def test_every_declared_key_is_documented() -> None:
     tables = [TOP, VEHICLE_PARAMS, GAINS, VEHICLE, DRIVE, PLATOON, METRICS, RECOVERY]
     tables.append(SENSING)
     tables.append(FAILURE)
-    for kind in ("law", "strategy", "failure", "reference", "obstacle"):
+    tables.append(SAFETY)
+    for kind in ("law", "strategy", "failure", "reference", "obstacle", "filter"):
         for plugin in plugins.registry(kind).values():
             if plugin.origin.startswith("built-in"):
                 tables.append(plugin.params)

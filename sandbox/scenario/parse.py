@@ -48,6 +48,7 @@ from sandbox.scenario.sections import (
     _obstacles,
     _recovery,
     _reference,
+    _safety,
     read_param,
     read_params,
 )
@@ -252,6 +253,7 @@ def parse_scenario(
     sensing = _sensing(rd, doc.get("sensing"), dt)
     detection = _detection(rd, doc.get("detection"), "detection")
     _detection_window(rd, detection, dt)
+    safety = _safety(rd, doc.get("safety"), "safety")
 
     names = [n for _, n, _ in rd.declared] + [v.name for _, v in generated]
     expect = read_expectations(rd, doc.get("expect"), "expect", names)
@@ -304,6 +306,7 @@ def parse_scenario(
             metrics=metrics,
             sensing=sensing,
             detection=detection,
+            safety=safety,
             diameter=rd.diameter,
             source=source,
             plugins=tuple(loaded),

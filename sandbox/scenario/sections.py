@@ -41,6 +41,7 @@ from sandbox.scenario.specs import (
     FormationSpec,
     RecoverySpec,
     ReferenceSpec,
+    SafetySpec,
 )
 
 
@@ -203,6 +204,11 @@ TOP: dict[str, Param] = {
         "residual (observed motion against the broadcast commands, a CUSUM; see "
         "sandbox/detection.py)",
     ),
+    "safety": Param(
+        **_section("safety"),
+        doc="A safety filter on the commands, after the controller and before the "
+        "failures (see sandbox/safety/; filter none: no filter)",
+    ),
     "randomize": Param(
         "custom",
         None,
@@ -364,6 +370,12 @@ OBSTACLE: dict[str, Param] = {
     ),
 }
 
+SAFETY: dict[str, Param] = {
+    "filter": Param(
+        "custom", "none", doc="The safety filter (registered name; none: no filter)"
+    ),
+}
+
 #: The sections by kind of plug-in they select.
 PLUGIN_SECTIONS: dict[str, dict[str, Param]] = {
     "law": FORMATION,
@@ -372,6 +384,7 @@ PLUGIN_SECTIONS: dict[str, dict[str, Param]] = {
     "reference": REFERENCE,
     "obstacle": OBSTACLE,
     "detector": DETECTION,
+    "filter": SAFETY,
 }
 
 for _kind, _own in PLUGIN_SECTIONS.items():
@@ -657,3 +670,14 @@ def _obstacles(rd: _Reader, doc: Any, path: str) -> list[tuple[str, ObstacleSpec
             spec = dataclasses.replace(spec, name=name)
         out.append((sub, spec))
     return out
+
+
+def _safety(rd: _Reader, doc: Any, path: str) -> SafetySpec:
+    """The ``safety:`` section: the filter and its values (default: none)."""
+    m = rd.mapping(doc, path)
+    if m is None:
+        return SafetySpec()
+    plugin, _, values, ok = read_plugin_section(rd, m, path, "filter")
+    if plugin is None or not ok or plugin.name == "none":
+        return SafetySpec()
+    return SafetySpec(plugin.name, values)

@@ -243,6 +243,18 @@ class SensingSpec:
     loss: float = 0.0
 
 
+@dataclass(frozen=True)
+class SafetySpec:
+    """The safety filter on the commands (``safety:``, see :mod:`sandbox.safety`).
+
+    ``filter``: the registered name (``none``: no filter, the default); ``params``:
+    its YAML values (lengths in metres, defaults filled in).
+    """
+
+    filter: str = "none"
+    params: dict[str, Any] = field(default_factory=dict)
+
+
 #: Set while the loader constructs a scenario (which it has just validated).
 _LOADER_BUILDS: ContextVar[bool] = ContextVar("loader_builds", default=False)
 
@@ -289,6 +301,8 @@ class Scenario:
     sensing: SensingSpec = SensingSpec()
     #: The ``detection:`` section (default: the oracle).
     detection: DetectionSpec = DetectionSpec()
+    #: The ``safety:`` section (filter ``none`` by default).
+    safety: SafetySpec = SafetySpec()
 
     def __post_init__(self) -> None:
         """Validate a scenario not made by the loader (the constructor, ``replace``).
@@ -419,6 +433,9 @@ class Scenario:
         if self.detection != DetectionSpec():
             doc["detection"] = {"method": self.detection.method}
             doc["detection"].update(_plain(self.detection.params, skip_none=True))
+        if self.safety != SafetySpec():
+            doc["safety"] = {"filter": self.safety.filter}
+            doc["safety"].update(_plain(self.safety.params, skip_none=True))
         if self.expect is not None:
             doc["expect"] = self.expect.to_dict()
         return doc

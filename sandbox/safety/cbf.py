@@ -1,0 +1,415 @@
+"""A control-barrier-function safety filter on the commands (``safety: {filter: cbf}``).
+
+The unicycle ``x1' = v1 cos x3, x2' = v1 sin x3, x3' = v2`` (eq. (1) of the report) is
+filtered through its look-ahead point ``p = x + l (cos x3, sin x3)``, whose velocity is
+an invertible linear map of the inputs::
+
+    p' = w = R(x3) diag(1, l) (v1, v2),
+    v1 = cos x3 w1 + sin x3 w2,   v2 = (-sin x3 w1 + cos x3 w2) / l,
+
+so ``p`` is a single integrator and every barrier below is linear in ``w``.
+
+Barriers, with ``gamma`` [1/s] and ``margin`` [m]:
+
+- **between two filtered vehicles** ``h_ij = |p_i - p_j|^2 - D^2``, ``D = (d_i + d_j)
+  / 2 + 2 l + margin``; ``h_ij >= 0`` keeps the centres ``d + margin`` apart. The
+  condition ``2 (p_i - p_j) . (w_i - w_j) >= -gamma h_ij`` is split between the two:
+  each vehicle solves alone for its own ``w_i`` with half of the budget. With
+  ``neighbour_velocity: broadcast`` (the default) each takes half of the *change*
+  of the relative velocity from the velocities of the last period ``w^_i, w^_j``
+  (which both know: the commands applied, broadcast)::
+
+      2 (p_i - p_j) . w_i >= -gamma h_ij / 2 + (p_i - p_j) . (w^_i + w^_j);
+
+  the two conditions add up to the pair's exactly, and a platoon moving together at a
+  common velocity is not slowed. With ``zero`` each treats the other as standing
+  still: ``2 (p_i - p_j) . w_i >= -gamma h_ij / 2`` (the textbook split, which brakes
+  a moving platoon whose neighbours are nearer than the barrier allows at rest);
+- **toward a vehicle the platoon believes failed** (``Simulation.known_failed``) **or
+  one driven open loop** (``drive: commands``): full responsibility, against its
+  centre ``c_j`` and its measured velocity ``c_j'``: ``h = |p_i - c_j|^2 - D'^2``,
+  ``D' = (d_i + d_j) / 2 + l + margin``, ``2 (p_i - c_j) . (w_i - c_j') >= -gamma h``;
+- **toward a static obstacle** (circles, boxes, polygons, walls of
+  :class:`~sandbox.recovery.ObstacleField`): full responsibility against the nearest
+  surface point, ``h = s(p) - (d_i / 2 + l + margin)`` with ``s`` the signed distance
+  of ``p`` to the surface and ``n`` its unit normal there: ``n . w >= -gamma h``.
+
+Input bounds are hard: ``|v1| <= v1_max`` (``0 <= v1`` with ``reverse: false``),
+``|v1 - v1(t_k-1)| <= max_accel h`` and ``|v2| <= v2_max``. Each vehicle then solves
+``min |w - w_nom|^2`` over those half-planes (:mod:`sandbox.safety.qp`, exact); when
+they have no common point the barrier conditions are relaxed by the least slack
+(counted in ``metrics.json`` as ``safety.infeasible_steps``). ``projection: speed``
+keeps the controller's ``v2`` and changes ``v1`` only.
+
+Only vehicles driven by the controller are filtered (not the open-loop ones, not those
+believed failed); the filter acts before the step API's command overrides and the
+failures (which replace the commands of the vehicles they hit).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sandbox.contexts import FilterContext
+from sandbox.plugins import Param, register_filter
+from sandbox.recovery import NeighbourList
+from sandbox.safety.qp import TOLERANCE, solve
+
+#: The speed bound used where a vehicle has no ``v1_max`` [m/s] (the loop's bound of a
+#: diverged run).
+UNLIMITED_SPEED = 1e3
+#: Shortest distance treated as a direction [m].
+MIN_DIST = 1e-9
+
+PARAMS = {
+    "gamma": Param(
+        "number",
+        2.0,
+        "1/s",
+        "Rate of the barrier condition h' >= -gamma h: near a barrier the gap may "
+        "close at about gamma times itself (a braking of about gamma v)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "margin": Param(
+        "length",
+        0.05,
+        "m",
+        "Clearance kept between the surfaces of two vehicles (and to obstacles) "
+        "beyond contact",
+        minimum=0.0,
+    ),
+    "look_ahead": Param(
+        "length",
+        0.1,
+        "m",
+        "Distance l of the filtered point ahead of the centre; D = d + 2 l + margin",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "projection": Param(
+        "choice",
+        "look_ahead",
+        doc="look_ahead: the nearest safe velocity of the look-ahead point (speed "
+        "and turn rate both change, a turn rate costing l^2 as much); speed: keep "
+        "the controller's turn rate, change only the speed",
+        choices=("look_ahead", "speed"),
+    ),
+    "neighbour_velocity": Param(
+        "choice",
+        "broadcast",
+        doc="What a vehicle assumes of a filtered neighbour: broadcast: it keeps "
+        "the velocity of the last period, and each takes half of the change; zero: "
+        "it stands still, and each takes half of the budget",
+        choices=("broadcast", "zero"),
+    ),
+    "reverse": Param(
+        "boolean", True, doc="Whether the filter may command a negative speed v1"
+    ),
+    "range": Param(
+        "length",
+        None,
+        "m",
+        "Neighbours and obstacles beyond this are not constrained (default: the "
+        "distance beyond which no barrier can bind at the vehicles' speed limits)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "max_constraints": Param(
+        "integer",
+        8,
+        doc="Most barrier conditions per vehicle and step (the most restrictive are "
+        "kept)",
+        minimum=1,
+        maximum=16,
+    ),
+}
+
+
+@dataclass
+class FilterStep:
+    """What the filter did at one step (kept in the filter's memory as ``last``).
+
+    Attributes
+    ----------
+    active : ndarray, shape (n,), bool
+        Vehicles whose commands it changed.
+    slack : ndarray, shape (n,) [m/s]
+        The least largest violation of a barrier condition (0: feasible).
+    rows : int
+        Barrier conditions that could bind (after pruning).
+    """
+
+    active: np.ndarray
+    slack: np.ndarray
+    rows: int
+
+
+def _per_vehicle(value: float | np.ndarray, n: int) -> np.ndarray:
+    return np.broadcast_to(np.asarray(value, dtype=float), (n,))
+
+
+def auto_range(
+    v1_max: np.ndarray,
+    v2_max: np.ndarray,
+    diameter: np.ndarray,
+    gamma: float,
+    margin: float,
+    look_ahead: float,
+) -> float:
+    """Distance [m] beyond which no barrier condition can bind.
+
+    Look-ahead points move at most ``s = sqrt(v1_max^2 + (l v2_max)^2)``, so a gap
+    closes at most at ``2 s``; the pair's condition ``2 r r' >= -gamma (r^2 - D^2)``
+    holds at any velocity for ``r >= 2 s / gamma + sqrt((2 s / gamma)^2 + D^2)``, and
+    each half then holds at the velocities of the last period. Plus ``l`` (the
+    conditions toward failed vehicles use their centres). Unlimited speeds give
+    ``inf``.
+
+    >>> round(auto_range(np.array([2.0]), np.array([4.0]), np.array([0.5]),
+    ...                  2.0, 0.05, 0.1), 3)
+    4.347
+    """
+    lateral = np.where(np.isfinite(v2_max), look_ahead * v2_max, v1_max)
+    s = float(np.max(np.hypot(v1_max, lateral)))
+    if not np.isfinite(s):
+        return np.inf
+    big_d = float(np.max(diameter)) + 2.0 * look_ahead + margin
+    q = 2.0 * s / gamma
+    return q + float(np.sqrt(q * q + big_d * big_d)) + look_ahead
+
+
+class CBFState:
+    """What the filter keeps between steps: parameters, limits, the neighbour index."""
+
+    def __init__(self, ctx: FilterContext) -> None:
+        p = ctx.params
+        n = len(ctx.pos)
+        self.gamma = float(p["gamma"])
+        self.margin = float(p["margin"])
+        self.look = float(p["look_ahead"])
+        self.speed_only = p["projection"] == "speed"
+        self.broadcast = p["neighbour_velocity"] == "broadcast"
+        self.reverse = bool(p["reverse"])
+        self.max_rows = int(p["max_constraints"])
+        v1_max = _per_vehicle(ctx.v1_max, n)
+        v2_max = _per_vehicle(ctx.v2_max, n)
+        self.v1_max = np.where(np.isfinite(v1_max), v1_max, UNLIMITED_SPEED)
+        # The look-ahead point's sideways speed l v2 (v1_max where v2 is unlimited).
+        self.lateral = np.where(np.isfinite(v2_max), self.look * v2_max, self.v1_max)
+        self.accel = _per_vehicle(ctx.accel_max, n).copy()
+        radius = p.get("range")
+        if radius is None:
+            radius = auto_range(
+                v1_max, v2_max, ctx.diameter, self.gamma, self.margin, self.look
+            )
+        if not np.isfinite(radius):
+            radius = auto_range(
+                self.v1_max, v2_max, ctx.diameter, self.gamma, self.margin, self.look
+            )
+        self.range = float(radius)
+        self.neighbours = NeighbourList(self.range)
+
+
+def _box(
+    state: CBFState, ctx: FilterContext, z2_nom: np.ndarray, rows: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Bounds of ``z = (v1, l v2)``: ``lo1 <= z1 <= hi1``, ``lo2 <= z2 <= hi2``."""
+    v1_max, lateral = state.v1_max[rows], state.lateral[rows]
+    lo1 = -v1_max if state.reverse else np.zeros(len(rows))
+    hi1 = v1_max
+    if ctx.v1_prev is not None:
+        step = state.accel[rows] * ctx.dt
+        prev = ctx.v1_prev[rows]
+        lo1 = np.maximum(lo1, prev - step)
+        hi1 = np.minimum(hi1, prev + step)
+        lo1 = np.minimum(lo1, hi1)
+    if state.speed_only:
+        lo2 = hi2 = z2_nom[rows]
+    else:
+        lo2, hi2 = -lateral, lateral
+    return lo1, hi1, lo2, hi2
+
+
+def barrier_rows(
+    state: CBFState, ctx: FilterContext, filtered: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every barrier condition of the step as a half-plane ``a . w <= b``.
+
+    Parameters
+    ----------
+    state : CBFState
+    ctx : FilterContext
+    filtered : ndarray, shape (n,), bool
+        Vehicles the filter drives (the others are only obstacles to them).
+
+    Returns
+    -------
+    vehicle : ndarray, shape (r,) int
+        The vehicle each condition belongs to.
+    a : ndarray, shape (r, 2)
+        Unit normal in the look-ahead velocity ``w`` [1].
+    b : ndarray, shape (r,) [m/s]
+        Offset.
+    """
+    gamma, look, margin = state.gamma, state.look, state.margin
+    pos, theta, d = ctx.pos, ctx.theta, ctx.diameter
+    heading = np.stack((np.cos(theta), np.sin(theta)), -1)
+    p = pos + look * heading
+    if ctx.seen is None:
+        centre_seen, p_seen = pos, p
+    else:
+        centre_seen = ctx.seen[:, :2]
+        seen_heading = np.stack((np.cos(ctx.seen[:, 2]), np.sin(ctx.seen[:, 2])), -1)
+        p_seen = centre_seen + look * seen_heading
+    cooperative = filtered
+    out_v, out_a, out_b = [], [], []
+
+    i, j, _ = state.neighbours.near(p_seen)
+    if len(i):
+        # Both directions of each pair: vehicle `me` toward `other`.
+        me = np.concatenate((i, j))
+        other = np.concatenate((j, i))
+        keep = np.flatnonzero(filtered[me])
+        me, other = me[keep], other[keep]
+        coop = cooperative[other]
+        target = np.where(coop[:, None], p_seen[other], centre_seen[other])
+        rel = p[me] - target
+        dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
+        big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
+        h = dist * dist - big_d * big_d
+        if state.broadcast and ctx.v1_prev is not None:
+            w_hat = heading * ctx.v1_prev[:, None]
+            w_hat += look * ctx.v2_prev[:, None] * heading[:, ::-1] * [-1.0, 1.0]
+            shared = w_hat[me] + w_hat[other]
+            share = np.einsum("kd,kd->k", rel, shared)
+        else:
+            share = np.zeros(len(me))
+        moving = np.einsum("kd,kd->k", rel, ctx.vel[other])
+        # 2 rel . w >= rhs
+        rhs = np.where(coop, -0.5 * gamma * h + share, -gamma * h + 2.0 * moving)
+        out_v.append(me)
+        out_a.append(-rel / dist[:, None])
+        out_b.append(-rhs / (2.0 * dist))
+
+    field = ctx.obstacle_field
+    if field is not None and not field.empty:
+        rows, cols = state.neighbours.obstacle_pairs(p, field)
+        keep = np.flatnonzero(filtered[rows])
+        rows, cols = rows[keep], cols[keep]
+        if len(rows):
+            signed, point = field.pair_distance(p, rows, cols)
+            away = (p[rows] - point) * np.where(signed < 0, -1.0, 1.0)[:, None]
+            norm = np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)
+            away /= norm[:, None]
+            clearance = 0.5 * d[rows] + look + margin
+            out_v.append(rows)
+            out_a.append(-away)
+            out_b.append(gamma * (signed - clearance))
+    if not out_v:
+        empty = np.zeros(0, dtype=np.intp)
+        return empty, np.zeros((0, 2)), np.zeros(0)
+    return np.concatenate(out_v), np.concatenate(out_a), np.concatenate(out_b)
+
+
+def filter_commands(
+    state: CBFState, ctx: FilterContext
+) -> tuple[np.ndarray, np.ndarray, FilterStep]:
+    """The filtered ``(v1, v2)`` of one step, and what the filter did.
+
+    Parameters
+    ----------
+    state : CBFState
+    ctx : FilterContext
+
+    Returns
+    -------
+    v1 : ndarray, shape (n,) [m/s]
+    v2 : ndarray, shape (n,) [rad/s]
+    step : FilterStep
+    """
+    n, look = len(ctx.pos), state.look
+    filtered = np.ones(n, dtype=bool)
+    if ctx.known_failed is not None:
+        filtered &= ~ctx.known_failed
+    if ctx.commanded is not None:
+        filtered &= ~ctx.commanded
+    v1 = np.array(ctx.v1, dtype=float)
+    v2 = np.array(ctx.v2, dtype=float)
+    z0 = np.stack((v1, look * v2), -1)
+    slack = np.zeros(n)
+    active = np.zeros(n, dtype=bool)
+    who = np.flatnonzero(filtered)
+    if len(who) == 0:
+        return v1, v2, FilterStep(active, slack, 0)
+    veh, a_w, b = barrier_rows(state, ctx, filtered)
+    # In z = (v1, l v2): w = R(x3) z, so a . w = (R^T a) . z and |w - w0| = |z - z0|.
+    c, s = np.cos(ctx.theta[veh]), np.sin(ctx.theta[veh])
+    a = np.stack((c * a_w[:, 0] + s * a_w[:, 1], -s * a_w[:, 0] + c * a_w[:, 1]), -1)
+    lo1, hi1, lo2, hi2 = (np.empty(n) for _ in range(4))
+    lo1[who], hi1[who], lo2[who], hi2[who] = _box(state, ctx, z0[:, 1], who)
+    # Conditions no input within the bounds can violate are dropped.
+    reach = np.maximum(a[:, 0] * lo1[veh], a[:, 0] * hi1[veh]) + np.maximum(
+        a[:, 1] * lo2[veh], a[:, 1] * hi2[veh]
+    )
+    keep = np.flatnonzero(reach > b - TOLERANCE)
+    veh, a, b = veh[keep], a[keep], b[keep]
+    # At most max_rows per vehicle, the most restrictive (smallest b) first.
+    order = np.lexsort((b, veh))
+    veh, a, b = veh[order], a[order], b[order]
+    counts = np.bincount(veh, minlength=n)
+    start = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    rank = np.arange(len(veh)) - start[veh]
+    keep = np.flatnonzero(rank < state.max_rows)
+    veh, a, b, rank = veh[keep], a[keep], b[keep], rank[keep]
+    counts = np.minimum(counts, state.max_rows)
+
+    z = z0.copy()
+    bare = who[counts[who] == 0]  # the bounds only: a clip
+    z[bare, 0] = np.clip(z0[bare, 0], lo1[bare], hi1[bare])
+    z[bare, 1] = np.clip(z0[bare, 1], lo2[bare], hi2[bare])
+    for m in np.unique(counts[who]):
+        if m == 0:
+            continue
+        group = who[counts[who] == m]
+        k = len(group)
+        slot = np.full(n, -1, dtype=np.intp)
+        slot[group] = np.arange(k)
+        mat = np.zeros((k, 4 + m, 2))
+        off = np.zeros((k, 4 + m))
+        mat[:, 0, 0], off[:, 0] = 1.0, hi1[group]
+        mat[:, 1, 0], off[:, 1] = -1.0, -lo1[group]
+        mat[:, 2, 1], off[:, 2] = 1.0, hi2[group]
+        mat[:, 3, 1], off[:, 3] = -1.0, -lo2[group]
+        mine = np.flatnonzero(slot[veh] >= 0)
+        mat[slot[veh[mine]], 4 + rank[mine]] = a[mine]
+        off[slot[veh[mine]], 4 + rank[mine]] = b[mine]
+        soft = np.zeros((k, 4 + m), dtype=bool)
+        soft[:, 4:] = True
+        z[group], slack[group] = solve(z0[group], mat, off, soft)
+    changed = np.any(z != z0, axis=1)
+    rows = np.flatnonzero(changed)
+    v1[rows] = z[rows, 0]
+    if not state.speed_only:  # else v2 is the controller's, exactly
+        v2[rows] = z[rows, 1] / look
+    active[rows] = True
+    return v1, v2, FilterStep(active, slack, len(veh))
+
+
+@register_filter("cbf", params=PARAMS)
+def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
+    """Control-barrier-function filter through the look-ahead point (sandbox/safety)."""
+    state = ctx.memory.get("cbf")
+    if state is None:
+        state = ctx.memory["cbf"] = CBFState(ctx)
+    v1, v2, step = filter_commands(state, ctx)
+    ctx.memory["last"] = step
+    stats = ctx.stats
+    stats["active_steps"] = stats.get("active_steps", 0) + int(step.active.sum())
+    bad = step.slack > TOLERANCE
+    stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + int(bad.sum())
+    worst = float(step.slack.max()) if len(step.slack) else 0.0
+    stats["max_slack"] = max(stats.get("max_slack", 0.0), worst)
+    return v1, v2
