@@ -15,6 +15,17 @@ apply to every run), and prints one row per run:
 - ``converged``: every healthy vehicle settled (``yes``/``no``), or the run's status
   when it did not finish (``diverged``).
 
+``--grid PATH=v1,v2,...`` (repeatable) also varies fields for every strategy, e.g.
+``recovery.tangential=0,1`` (a ``setting`` column; with strategy ``none`` the
+``recovery.*`` paths take their first value only). ``--columns safety`` prints the
+safety benchmark's columns instead: ``success`` (converged and no contact episode at
+all), ``collisions`` (every episode), ``min separation - d`` [m], ``deadlocks``
+(:mod:`sandbox.deadlock`), ``extra settle`` (the settling time minus that of the same
+scenario without recovery on the ideal kinematics, where vehicles pass through each
+other and the obstacles) [s], and the wall time of planning and acting per control
+step [ms], a measurement that varies from run to run (the other columns are
+deterministic).
+
 The strategy name ``file`` keeps each file's own recovery section (``sandbox compare
 scenarios/paper/fig1*.yaml --strategies file`` tabulates the section-4 figures as
 written). With strategy ``none`` the shift is zero, and so are its estimated
@@ -27,20 +38,24 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import astuple, dataclass, fields
+from dataclasses import astuple, dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 from sandbox import plugins
 from sandbox.metrics import compute_metrics
-from sandbox.run import STATUS_OK
+from sandbox.run import STATUS_OK, Run
 from sandbox.scenario import RECOVERY, Scenario, load_scenario
 from sandbox.simulation import simulate
 
 FORMATS = ("markdown", "csv")
 #: The ``strategies`` entry that keeps each scenario file's own recovery strategy.
 FILE_STRATEGY = "file"
+#: The task of a scenario's baseline (:func:`ideal_settling`), not a strategy.
+IDEAL = "<ideal>"
 
 
 @dataclass(frozen=True)
@@ -62,6 +77,23 @@ class Row:
     converged : bool
     status : str
         ``ok``, ``diverged`` or ``interrupted``.
+    setting : str
+        The ``--grid`` values of the run, ``name=value`` by the last part of each
+        path (``tangential=1``); empty without a grid.
+    success : bool
+        Converged, with status ``ok``, and no contact episode at all.
+    deadlocks : int
+        Entries of ``deadlocks`` in ``metrics.json``.
+    separation : float or None [m]
+        ``min_distance`` minus the vehicle diameter d (the largest, for mixed fleets):
+        negative when two vehicles overlapped.
+    extra_settle : float or None [s]
+        Settling time minus that of the same scenario without recovery on the ideal
+        kinematics (:class:`~sandbox.ideal.IdealKinematics`: vehicles pass through
+        each other and the obstacles); None when either never settles.
+    control_ms : float [ms]
+        Wall time of planning and acting (law, recovery, controller, filters) per
+        control step, measured in the run: not deterministic.
     """
 
     scenario: str
@@ -75,6 +107,12 @@ class Row:
     control_effort: float
     converged: bool
     status: str
+    setting: str = ""
+    success: bool = False
+    deadlocks: int = 0
+    separation: float | None = None
+    extra_settle: float | None = None
+    control_ms: float = 0.0
 
 
 def cases(
@@ -111,34 +149,121 @@ def row_from_metrics(
         for name in healthy
         if vehicles[name]["formation_error"]["max"] is not None  # it has a slot
     ]
+    total = int(metrics["collisions"]["total"])
+    converged = bool(metrics["converged"])
     return Row(
         scenario=scenario,
         strategy=strategy,
         derivatives=derivatives,
         collisions_healthy=int(metrics["collisions"]["healthy"]),
-        collisions_total=int(metrics["collisions"]["total"]),
+        collisions_total=total,
         min_distance=metrics["min_distance"],
         settling_time=None if not settle or None in settle else max(settle),
         mode_switches=sum(v["mode_switches"] for v in vehicles.values()),
         control_effort=sum(v["control_effort"] for v in vehicles.values()),
-        converged=bool(metrics["converged"]),
+        converged=converged,
         status=metrics["status"],
+        success=converged and total == 0 and metrics["status"] == STATUS_OK,
+        deadlocks=len(metrics.get("deadlocks", ())),
     )
 
 
+def latest_settling(run: Run, metrics: dict) -> float | None:
+    """The latest settling time of the healthy vehicles with a slot [s], or None."""
+    healthy = [
+        n for i, n in enumerate(run.names) if len(run.t) and not run.failed[-1, i]
+    ]
+    settle = [
+        metrics["vehicles"][n]["settling_time"]
+        for n in healthy
+        if metrics["vehicles"][n]["formation_error"]["max"] is not None
+    ]
+    return None if not settle or None in settle else max(settle)
+
+
+def ideal_settling(path: str, overrides: Sequence[str]) -> float | None:
+    """Latest settling time [s] of a scenario without recovery on the ideal kinematics.
+
+    The baseline of :attr:`Row.extra_settle`: the same vehicles, controller and
+    slots, moving by eq. (1) exactly, through each other and the obstacles.
+    """
+    from sandbox.ideal import IdealKinematics
+    from sandbox.simulation import Simulation
+
+    scenario = load_scenario(path, overrides=[*overrides, "recovery.strategy=none"])
+    run = Simulation(scenario, world=IdealKinematics(scenario)).run()
+    return latest_settling(run, compute_metrics(run))
+
+
 def run_case(
-    path: str, strategy: str, derivatives: str, overrides: Sequence[str]
+    path: str,
+    strategy: str,
+    derivatives: str,
+    overrides: Sequence[str],
+    setting: Sequence[str] = (),
 ) -> Row:
-    """Run one scenario file under one recovery setting and summarize it."""
-    scenario = _load(path, strategy, derivatives, overrides)
+    """Run one scenario file under one recovery setting and summarize it.
+
+    ``setting`` holds the grid's ``path=value`` assignments of this run (applied after
+    ``overrides``).
+    """
+    scenario = _load(path, strategy, derivatives, [*overrides, *setting])
     strategy = scenario.recovery.strategy
     run = simulate(scenario)
     healthy = [
         n for i, n in enumerate(run.names) if len(run.t) and not run.failed[-1, i]
     ]
-    return row_from_metrics(
+    row = row_from_metrics(
         scenario.name, strategy, derivatives, compute_metrics(run), healthy
     )
+    steps = max(int(run.info.get("steps", 0)), 1)
+    best = row.min_distance
+    return replace(
+        row,
+        setting=setting_text(setting),
+        separation=None if best is None else best - float(max(run.diameter)),
+        control_ms=1000.0 * float(run.info.get("control_time", 0.0)) / steps,
+    )
+
+
+def setting_text(setting: Sequence[str]) -> str:
+    """``name=value`` of each assignment by the last part of its path.
+
+    >>> setting_text(["recovery.tangential=1", "safety.filter=cbf"])
+    'tangential=1 filter=cbf'
+    """
+    out = []
+    for item in setting:
+        path, _, value = item.partition("=")
+        out.append(f"{path.rsplit('.', 1)[-1]}={value}")
+    return " ".join(out)
+
+
+def grid_settings(grid: Sequence[str], strategy: str) -> list[tuple[str, ...]]:
+    """The ``path=value`` assignments of every grid point, for one strategy.
+
+    ``grid`` holds ``PATH=v1,v2,...`` items (as ``sandbox sweep --grid``); their
+    Cartesian product, first path slowest. With strategy ``none`` the ``recovery.*``
+    paths change nothing and take their first value only.
+
+    >>> grid_settings(["recovery.tangential=0,1"], "smooth")
+    [('recovery.tangential=0',), ('recovery.tangential=1',)]
+    >>> grid_settings(["recovery.tangential=0,1"], "none")
+    [('recovery.tangential=0',)]
+    """
+    from sandbox.study.spec import SweepError, axis_from_option
+
+    axes = []
+    for item in grid:
+        try:
+            axis = axis_from_option(item, "--grid")
+        except SweepError as exc:
+            raise ValueError(str(exc)) from None
+        texts = axis.texts
+        if strategy == "none" and axis.path.startswith("recovery."):
+            texts = texts[:1]
+        axes.append([f"{axis.path}={t}" for t in texts])
+    return [tuple(c) for c in itertools.product(*axes)]
 
 
 def _load(
@@ -150,9 +275,11 @@ def _load(
     return load_scenario(path, overrides=sets)
 
 
-def _run_case_args(args: tuple[str, str, str, tuple[str, ...], tuple[str, ...]]) -> Row:
+def _run_case_args(args: tuple) -> Row | float | None:
     plugins.load_plugins(args[4])  # in a worker process too
-    return run_case(*args[:4])
+    if args[1] == IDEAL:
+        return ideal_settling(args[0], args[3])
+    return run_case(*args[:4], setting=args[5])
 
 
 def compare(
@@ -163,6 +290,7 @@ def compare(
     jobs: int = 1,
     plugin_specs: Sequence[str] = (),
     progress: Callable[[int, int], None] | None = None,
+    grid: Sequence[str] = (),
 ) -> list[Row]:
     """Run every scenario under every recovery setting; rows in (file, case) order.
 
@@ -183,6 +311,11 @@ def compare(
         Plug-in files or modules to load first (also in the worker processes).
     progress : callable, optional
         Called as ``progress(done, total)`` after each run (``total`` runs in all).
+    grid : sequence of str
+        ``PATH=v1,v2,...`` paths varied for every strategy (e.g.
+        ``recovery.tangential=0,1``), see :func:`grid_settings`. Each scenario is also
+        run once without recovery on the ideal kinematics, for
+        :attr:`Row.extra_settle`.
 
     Raises
     ------
@@ -207,26 +340,41 @@ def compare(
                 f"(expected one or more of: {', '.join(valid)})"
             )
     todo = []
+    specs = tuple(plugin_specs)
     for path in paths:
+        todo.append((str(path), IDEAL, "hold", tuple(overrides), specs, ()))
         for strategy, deriv in cases(strategies, derivatives):
             # validate everything before the first run
             scenario = _load(str(path), strategy, deriv, overrides)
             if scenario.recovery.strategy == "none" and deriv != "hold":
                 continue
-            todo.append(
-                (str(path), strategy, deriv, tuple(overrides), tuple(plugin_specs))
-            )
+            for setting in grid_settings(grid, scenario.recovery.strategy):
+                _load(str(path), strategy, deriv, [*overrides, *setting])
+                todo.append(
+                    (str(path), strategy, deriv, tuple(overrides), specs, setting)
+                )
     if jobs <= 1 or len(todo) <= 1:
-        return _collect(map(_run_case_args, todo), len(todo), progress)
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
-        return _collect(pool.map(_run_case_args, todo), len(todo), progress)
+        done = _collect(map(_run_case_args, todo), len(todo), progress)
+    else:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            done = _collect(pool.map(_run_case_args, todo), len(todo), progress)
+    rows, baseline = [], None
+    for task, result in zip(todo, done, strict=True):
+        if task[1] == IDEAL:
+            baseline = result
+            continue
+        extra = None
+        if baseline is not None and result.settling_time is not None:
+            extra = result.settling_time - baseline
+        rows.append(replace(result, extra_settle=extra))
+    return rows
 
 
 def _collect(
-    rows: Iterator[Row], total: int, progress: Callable[[int, int], None] | None
-) -> list[Row]:
+    rows: Iterator[Any], total: int, progress: Callable[[int, int], None] | None
+) -> list[Any]:
     """The rows, in order, reporting ``progress(done, total)`` as each one arrives."""
-    done: list[Row] = []
+    done: list[Any] = []
     if progress is not None:
         progress(0, total)
     for row in rows:
@@ -247,6 +395,10 @@ def _cell(value: object, column: str) -> str:
         return f"{value:.2f}"
     if column == "control_effort":
         return f"{value:.1f}"
+    if column in ("separation", "extra_settle"):
+        return f"{value:+.3f}" if column == "separation" else f"{value:+.2f}"
+    if column == "control_ms":
+        return f"{value:.2f}"
     return str(value)
 
 
@@ -264,19 +416,51 @@ HEADERS = {
 }
 
 
-def format_table(rows: Sequence[Row], fmt: str = "markdown") -> str:
-    """The rows as a Markdown table or CSV text (ending with a newline)."""
+#: Columns of ``--columns safety``: the safety benchmark (README).
+SAFETY_HEADERS = {
+    "scenario": "scenario",
+    "strategy": "strategy",
+    "setting": "setting",
+    "success": "success",
+    "collisions_total": "collisions",
+    "separation": "min separation - d [m]",
+    "deadlocks": "deadlocks",
+    "extra_settle": "extra settle [s]",
+    "control_ms": "control [ms/step, measured]",
+}
+#: Column sets of :func:`format_table`.
+COLUMNS = {"default": HEADERS, "safety": SAFETY_HEADERS}
+
+
+def format_table(
+    rows: Sequence[Row], fmt: str = "markdown", columns: str = "default"
+) -> str:
+    """The rows as a Markdown table or CSV text (ending with a newline).
+
+    ``columns`` is ``default`` (:data:`HEADERS`, plus ``setting`` when a row has one)
+    or ``safety`` (:data:`SAFETY_HEADERS`, with the measured control time: not
+    deterministic).
+    """
     if fmt not in FORMATS:
         raise ValueError(
             f"unknown format {fmt!r} (expected one of: {', '.join(FORMATS)})"
         )
-    columns = list(HEADERS)
+    if columns not in COLUMNS:
+        raise ValueError(
+            f"unknown columns {columns!r} (expected one of: {', '.join(COLUMNS)})"
+        )
+    headers = dict(COLUMNS[columns])
+    if columns == "default" and any(r.setting for r in rows):
+        headers = {"scenario": "scenario", "strategy": "strategy", "setting": "setting"}
+        headers.update({k: v for k, v in HEADERS.items() if k not in headers})
+    columns = list(headers)
     cells = []
     for row in rows:
         values = dict(zip([f.name for f in fields(Row)], astuple(row), strict=True))
         line = [_cell(values[c], c) for c in columns]
         if row.status != STATUS_OK:
-            line[columns.index("converged")] = row.status
+            key = "converged" if "converged" in columns else "success"
+            line[columns.index(key)] = row.status
         cells.append(line)
     if fmt == "csv":
         buf = io.StringIO()
@@ -284,9 +468,10 @@ def format_table(rows: Sequence[Row], fmt: str = "markdown") -> str:
         writer.writerow(columns)
         writer.writerows(cells)
         return buf.getvalue()
-    header = [HEADERS[c] for c in columns]
+    header = [headers[c] for c in columns]
     widths = [max(len(r[i]) for r in [header, *cells]) for i in range(len(columns))]
-    numeric = range(3, len(columns))  # right-aligned: counts and measures
+    text = ("scenario", "strategy", "derivatives", "setting")
+    numeric = [i for i, c in enumerate(columns) if c not in text]  # right-aligned
 
     def line(items: list[str]) -> str:
         return "| " + " | ".join(items) + " |"

@@ -12,6 +12,7 @@ by key in ``scenarios/reference.yaml``)::
         vehicle_vehicle: {at_least: 1}
         vehicle_obstacle: 0
       converged: true             # every healthy vehicle settles (metrics.json)
+      deadlocks: 0                # entries of metrics.json's deadlocks (or a bound)
       min_distance: {at_least: 0.45}        # [m] (or "0.9d")
       settling_time:                        # [s]
         at_most: 8                          #   the worst healthy vehicle, and/or
@@ -45,6 +46,7 @@ EXPECT_KEYS = (
     "status",
     "collisions",
     "converged",
+    "deadlocks",
     "min_distance",
     "settling_time",
     "formation_error",
@@ -149,6 +151,12 @@ EXPECT_SCHEMA: dict[str, Any] = {
                 "(metrics.json)",
             }
         ),
+        "deadlocks": _nullable(
+            {
+                **_COUNT_BOUND,
+                "description": "Bound on the number of deadlocks (metrics.json)",
+            }
+        ),
         "min_distance": _nullable(
             {
                 **_LENGTH_BOUND,
@@ -242,6 +250,8 @@ class Expectations:
         Bounds on collision counts, ``kind`` one of :data:`COLLISION_KINDS`.
     converged : bool or None
         Whether ``converged`` must be true or false (None: not checked).
+    deadlocks : Bound or None
+        Bound on the number of entries of ``deadlocks`` (metrics.json).
     min_distance : Bound or None
         Bound on the smallest centre distance between two vehicles [m].
     settling_time : Bound or None
@@ -256,6 +266,7 @@ class Expectations:
     status: str = "ok"
     collisions: tuple[tuple[str, Bound], ...] = ()
     converged: bool | None = None
+    deadlocks: Bound | None = None
     min_distance: Bound | None = None
     settling_time: Bound | None = None
     settling_times: tuple[tuple[str, Bound], ...] = ()
@@ -268,6 +279,8 @@ class Expectations:
             doc["collisions"] = {k: b.to_doc(exact=True) for k, b in self.collisions}
         if self.converged is not None:
             doc["converged"] = self.converged
+        if self.deadlocks is not None:
+            doc["deadlocks"] = self.deadlocks.to_doc(exact=True)
         if self.min_distance is not None:
             doc["min_distance"] = self.min_distance.to_doc()
         settle: dict[str, Any] = {}
@@ -327,6 +340,9 @@ def read_expectations(
     converged = None
     if m.get("converged") is not None:
         converged = rd.boolean(m, "converged", path, False)
+    deadlocks = None
+    if m.get("deadlocks") is not None:
+        deadlocks = _bound(rd, m["deadlocks"], f"{path}.deadlocks", "count")
     min_distance = None
     if m.get("min_distance") is not None:
         min_distance = _bound(rd, m["min_distance"], f"{path}.min_distance", "length")
@@ -368,6 +384,7 @@ def read_expectations(
         status=status,
         collisions=tuple(collisions),
         converged=converged,
+        deadlocks=deadlocks,
         min_distance=min_distance,
         settling_time=settling_time,
         settling_times=tuple(settling_times),
@@ -625,6 +642,26 @@ def evaluate(
             got += f" ({_first(why) or 'no healthy vehicle with a slot'})"
         expected = "true" if expect.converged else "false"
         out.append(Outcome("converged", expected, got, conv is expect.converged))
+    if expect.deadlocks is not None:
+        found = metrics.get("deadlocks", [])
+        got = f"{len(found)}"
+        if found:
+            shown = [
+                f"{'-'.join(d['vehicles'][:SHOWN_NAMES])} at {d['t']:.2f} s for "
+                f"{d['duration']:.2f} s"
+                for d in found[:SHOWN_EVENTS]
+            ]
+            if len(found) > SHOWN_EVENTS:
+                shown.append(f"{len(found) - SHOWN_EVENTS} more")
+            got += f" ({', '.join(shown)})"
+        out.append(
+            Outcome(
+                "deadlocks",
+                expect.deadlocks.text(),
+                got,
+                expect.deadlocks.holds(len(found)),
+            )
+        )
     if expect.min_distance is not None:
         md = metrics["min_distance"]
         if md is None:

@@ -111,3 +111,51 @@ def test_file_strategy_keeps_each_files_recovery():
     assert rows[1].control_effort == pytest.approx(
         sum(v["control_effort"] for v in m["vehicles"].values())
     )
+
+
+SWAP = SCENARIOS / "safety" / "head_on_swap.yaml"
+
+
+def test_grid_varies_a_path_per_strategy_and_none_only_once():
+    rows = compare(
+        [SWAP],
+        ["none", "continuous"],
+        ["hold"],
+        ("duration=6",),
+        grid=["recovery.tangential=0,1"],
+    )
+    assert [(r.strategy, r.setting) for r in rows] == [
+        ("none", "tangential=0"),
+        ("continuous", "tangential=0"),
+        ("continuous", "tangential=1"),
+    ]
+    stalled, passed = rows[1], rows[2]
+    # the symmetric stall of the radial field, and the way out (measured)
+    assert stalled.deadlocks == 1 and not stalled.success
+    assert stalled.extra_settle is None
+    assert passed.deadlocks == 0 and passed.converged
+    # one brief contact of the closing approach: converged, but no success
+    assert passed.collisions_total == 1 and not passed.success
+    assert passed.separation == pytest.approx(passed.min_distance - 0.5)
+    assert passed.extra_settle is not None and passed.extra_settle > 0
+    assert passed.control_ms > 0
+
+
+def test_extra_settle_is_over_the_ideal_run_without_recovery():
+    from sandbox.compare import ideal_settling
+
+    (row,) = compare([SWAP], ["continuous"], ["hold"], ("duration=6",))
+    base = ideal_settling(str(SWAP), ("duration=6",))
+    assert base is not None and row.settling_time is not None
+    assert row.extra_settle == pytest.approx(row.settling_time - base)
+
+
+def test_safety_columns_and_a_bad_grid(capsys):
+    argv = ["compare", str(SWAP), "--strategies", "continuous", "--set", "duration=4"]
+    assert main([*argv, "--grid", "recovery.tangential=1", "--columns", "safety"]) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    for name in ("success", "deadlocks", "min separation - d", "extra settle"):
+        assert name in head
+    assert "measured" in head
+    assert main([*argv, "--grid", "recovery.tangential"]) == 2
+    assert "expected PATH=v1,v2" in capsys.readouterr().err

@@ -91,3 +91,17 @@ def test_deadlock_keys_are_metrics_parameters() -> None:
     assert sc.metrics.deadlock_speed == 0.05
     with pytest.raises(ScenarioError, match="metrics.deadlock_speed"):
         load_scenario(SWAP, overrides=["metrics.deadlock_speed=0"])
+
+
+def test_expect_deadlocks_checks_the_count_and_names_the_vehicles() -> None:
+    from sandbox.testing import check_scenario
+
+    assert check_scenario(SWAP, ["duration=6"]).holds
+    stalled = check_scenario(SWAP, ["duration=6", "recovery.tangential=0"])
+    (dead,) = [o for o in stalled.failed if o.key == "deadlocks"]
+    assert dead.expected == "0"
+    assert dead.got.startswith("1 (west-east at 1.2")
+    sc = load_scenario(SWAP, overrides=["expect.deadlocks={at_most: 2}"])
+    assert sc.expect.to_dict()["deadlocks"] == {"at_most": 2}
+    with pytest.raises(ScenarioError, match="expect.deadlocks"):
+        load_scenario(SWAP, overrides=["expect.deadlocks=-1"])

@@ -36,13 +36,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
                 jobs=cap_jobs(args.jobs),
                 plugin_specs=args.plugin or [],
                 progress=bar,
+                grid=args.grid or [],
             )
     except ValueError as exc:
         if isinstance(exc, ScenarioError):
             raise
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
-    sys.stdout.write(format_table(rows, args.format))
+    sys.stdout.write(format_table(rows, args.format, args.columns))
     return EXIT_OK
 
 
@@ -56,6 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             "sandbox compare failures/follower_stop failures/obstacle_field",
             "sandbox compare scenarios/paper/fig1*.yaml --strategies file",
             "sandbox compare my.yaml --derivatives hold,estimate --jobs 2 --format csv",
+            "sandbox compare scenarios/safety/*.yaml --grid recovery.tangential=0,1 "
+            "--columns safety",
         ],
         description=(
             "Run every scenario once per recovery strategy and target-derivative mode "
@@ -85,6 +88,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="append",
         metavar="PATH=VALUE",
         help="override a field in every run (repeatable)",
+    )
+    p.add_argument(
+        "--grid",
+        action="append",
+        metavar="PATH=v1,v2,...",
+        help="also vary a field over these values for every strategy, e.g. "
+        "recovery.tangential=0,1 (repeatable: the Cartesian product; a setting column)",
+    )
+    p.add_argument(
+        "--columns",
+        choices=("default", "safety"),
+        default="default",
+        help="default, or safety: success, collisions, min separation - d, "
+        "deadlocks, extra settle and the measured control time per step",
     )
     p.add_argument(
         "--format",
