@@ -78,6 +78,46 @@ class PhysicalState:
     omega: np.ndarray
 
 
+def motor_limits(
+    command: np.ndarray,
+    measured: np.ndarray,
+    free: np.ndarray,
+    substep: float,
+    motors: World,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The tracking motors' force limits for a period (see :meth:`World._size_motors`).
+
+    Elementwise over vehicles, so that it serves one world or many stacked ones.
+
+    Parameters
+    ----------
+    command, measured : ndarray, shape (n, 3)
+        Commanded and last read velocities ``(v_x1, v_x2, omega)`` [m/s, rad/s].
+    free : ndarray, shape (n,), bool
+        Vehicles in no open contact episode.
+    substep : float [s]
+    motors : World or any object with the arrays ``_mass``, ``_moment``,
+        ``_least_force``, ``_least_torque``, ``_force``, ``_torque`` and
+        ``_tracking``, shape (n,)
+
+    Returns
+    -------
+    rows : ndarray of int
+        The vehicles whose joints must change.
+    force, torque : ndarray, shape (n,) [N], [N m]
+        Their new limits (read at ``rows``).
+    """
+    delta = command - measured
+    linear = np.where(free, np.hypot(delta[:, 0], delta[:, 1]), 0.0) / substep
+    angular = np.where(free, np.abs(delta[:, 2]), 0.0) / substep
+    m = motors
+    force = np.maximum(m._least_force, MOTOR_HEADROOM * m._mass * linear)
+    torque = np.maximum(m._least_torque, MOTOR_HEADROOM * m._moment * angular)
+    grow = (force > m._force) | (torque > m._torque)
+    shrink = (force < 0.5 * m._force) | (torque < 0.5 * m._torque)
+    return np.flatnonzero(m._tracking & (grow | shrink)), force, torque
+
+
 @dataclass
 class _Open:
     """An open contact episode: its event and whether the pair touches right now."""
@@ -278,8 +318,12 @@ class World:
         return out
 
     # ------------------------------------------------------------------ bulk I/O
-    def read_state(self) -> PhysicalState:
-        """Read every vehicle's pose and velocity from the physics (one bulk call)."""
+    def read_rows(self) -> np.ndarray:
+        """The bulk read of every body, rows in vehicle order, shape (n, 6).
+
+        Columns ``x1, x2, x3, v_x1, v_x2, omega``; a view of the read buffer, valid
+        until the next read. The velocities are kept for :meth:`_size_motors`.
+        """
         buf = self._read_buffer
         buf.clear()
         pymunk.batch.get_space_bodies(self.space, _READ, buf)
@@ -288,6 +332,11 @@ class World:
             rows = rows[self._rows]
         self._measured[:, :2] = rows[:, 3:5]
         self._measured[:, 2] = rows[:, 5]
+        return rows
+
+    def read_state(self) -> PhysicalState:
+        """Read every vehicle's pose and velocity from the physics (one bulk call)."""
+        rows = self.read_rows()
         return PhysicalState(
             pos=rows[:, 0:2].copy(),
             theta=rows[:, 2].copy(),
@@ -311,8 +360,12 @@ class World:
         out[:, 2] = v2
         if self._tracking.any():
             self._size_motors(out, dt)
+        self.write_rows(out)
+
+    def write_rows(self, velocity: np.ndarray) -> None:
+        """Set the control bodies' velocities ``(v_x1, v_x2, omega)``, shape (n, 3)."""
         rows = slice(None) if self._control_in_order else self._control_rows
-        self._write[rows] = out
+        self._write[rows] = velocity
         self._write_buffer.set_float_buf(self._write.tobytes())
         pymunk.batch.set_space_bodies(self.control_space, _WRITE, self._write_buffer)
 
@@ -327,16 +380,14 @@ class World:
         pushing into them. Joints are touched only where the limit must grow, or can
         shrink by half.
         """
-        substep = dt / self._substeps
-        delta = command - self._measured
-        free = ~self.in_contact()
-        linear = np.where(free, np.hypot(delta[:, 0], delta[:, 1]), 0.0) / substep
-        angular = np.where(free, np.abs(delta[:, 2]), 0.0) / substep
-        force = np.maximum(self._least_force, MOTOR_HEADROOM * self._mass * linear)
-        torque = np.maximum(self._least_torque, MOTOR_HEADROOM * self._moment * angular)
-        grow = (force > self._force) | (torque > self._torque)
-        shrink = (force < 0.5 * self._force) | (torque < 0.5 * self._torque)
-        for i in np.flatnonzero(self._tracking & (grow | shrink)):
+        rows, force, torque = motor_limits(
+            command,
+            self._measured,
+            ~self.in_contact(),
+            dt / self._substeps,
+            self,
+        )
+        for i in rows:
             pivot, gear = self.joints[i]
             pivot.max_force = self._force[i] = force[i]
             gear.max_force = self._torque[i] = torque[i]

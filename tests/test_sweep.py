@@ -187,19 +187,20 @@ def test_rerun_computes_only_what_is_missing(tmp_path, base, capsys):
 def test_interrupted_sweep_resumes(tmp_path, base, monkeypatch, capsys):
     out = tmp_path / "out"
     cmd = ["sweep", str(base), "--seeds", "0:5", "--out", str(out)]
-    real, calls = engine.run_task, []
+    real, calls = engine.run_tasks, []
 
-    def flaky(*job, **kw):
+    def flaky(*jobs, **kw):  # Ctrl-C while the second batch of runs is computed
         calls.append(1)
-        if len(calls) == 3:
+        if len(calls) == 2:
             raise KeyboardInterrupt
-        return real(*job, **kw)
+        return real(*jobs, **kw)
 
-    monkeypatch.setattr(engine, "run_task", flaky)
+    monkeypatch.setattr(engine, "BATCH_WORLDS", 2)
+    monkeypatch.setattr(engine, "run_tasks", flaky)
     assert main(cmd) == 130
     assert "2 of 5 runs stored" in capsys.readouterr().err
     assert len(read_csv(out / "results.csv")) == 2  # rows so far, whole
-    monkeypatch.setattr(engine, "run_task", real)
+    monkeypatch.setattr(engine, "run_tasks", real)
     assert main(cmd) == 0
     assert "3 runs computed, 2 already stored" in capsys.readouterr().out
 

@@ -1,8 +1,11 @@
 """Running the tasks of a sweep: in-process, on a local process pool, or on Dask.
 
-Every engine calls :func:`run_task` for each run, which simulates exactly what ``sandbox
-run BASE --set ...`` simulates (the same loader, loop and metrics) and returns the run's
-row and metrics. Results come back to the calling process, which alone writes the store
+Every engine simulates exactly what ``sandbox run BASE --set ...`` simulates (the same
+loader, loop and metrics) and returns each run's row and metrics. Dask calls
+:func:`run_task` for each run; in-process and on a local pool the runs go in groups to
+:func:`run_tasks`, which steps the runs of one structure together as a batch of
+independent worlds (:mod:`sandbox.study.batch`, bit-identical to single runs). Results
+come back to the calling process, which alone writes the store
 (:mod:`sandbox.study.store`): a worker that dies, or a task that some scheduler runs
 twice, can never leave a run twice or half-written in it.
 """
@@ -24,6 +27,13 @@ STATUS_INVALID = "invalid"
 STATUS_ERROR = "error"
 #: Statuses ``--retry-failed`` runs again.
 FAILED_STATUSES = ("diverged", STATUS_INVALID, STATUS_ERROR)
+#: Most runs stepped together in one batch of worlds (memory: about 0.4 MB per
+#: run of three vehicles and 1,200 samples).
+BATCH_WORLDS = 64
+#: A sweep is cut into at least this many groups per process, of at least
+#: :data:`MIN_WORLDS` runs each.
+MIN_GROUPS = 4
+MIN_WORLDS = 8
 #: How long to wait for a Dask scheduler to answer.
 CONNECT_TIMEOUT = "5s"
 
@@ -85,7 +95,14 @@ def run_task(
     should_stop : callable, optional
         Polled every step; a run it stops returns None (nothing to store).
     """
-    from sandbox.metrics import compute_metrics
+    sim = _simulation(base_doc, source, overrides)
+    if isinstance(sim, dict):
+        return sim
+    return _single(sim, should_stop)
+
+
+def _simulation(base_doc: dict[str, Any], source: str, overrides: list[str]) -> Any:
+    """The run's fresh Simulation, or its row when the scenario is invalid."""
     from sandbox.scenario import parse_scenario
     from sandbox.simulation import Simulation
 
@@ -94,18 +111,95 @@ def run_task(
     except ScenarioError as exc:
         return {"row": {"status": STATUS_INVALID}, "error": "; ".join(exc.lines)}
     try:
-        run = Simulation(scenario).run(should_stop=should_stop)
+        return Simulation(scenario)
+    except Exception as exc:  # a row with its status, never a missing row
+        return _error(exc)
+
+
+def _error(exc: BaseException) -> dict[str, Any]:
+    text = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+    return {"row": {"status": STATUS_ERROR}, "error": text}
+
+
+def _single(sim: Any, should_stop: Callable[[], bool] | None) -> dict[str, Any] | None:
+    """Run one Simulation to its row and metrics (None when stopped)."""
+    try:
+        run = sim.run(should_stop=should_stop)
         if run.status == "interrupted":
             return None
-        metrics = compute_metrics(run)
+        return _result(run)
     except Exception as exc:  # a row with its status, never a missing row
-        text = "".join(traceback.format_exception_only(type(exc), exc)).strip()
-        return {"row": {"status": STATUS_ERROR}, "error": text}
+        return _error(exc)
+
+
+def _result(run: Any) -> dict[str, Any]:
+    from sandbox.metrics import compute_metrics
+
+    metrics = compute_metrics(run)
     return {"row": row_of(run, metrics), "metrics": metrics}
+
+
+def run_tasks(
+    jobs: list[Job], should_stop: Callable[[], bool] | None = None
+) -> list[tuple[str, dict[str, Any] | None]]:
+    """Run a group of tasks in this process, as batches of independent worlds.
+
+    The tasks whose runs share their structure (:func:`sandbox.study.batch.batch_key`)
+    are stepped together (:class:`~sandbox.study.batch.Batch`, bit-identical to single
+    runs); the others, and every run of a batch that raised, run alone. Returns
+    ``(run id, result)`` for every task, the result None when ``should_stop`` stopped
+    it.
+    """
+    from sandbox.study.batch import Batch, batch_key, batch_reason
+
+    out: dict[str, dict[str, Any] | None] = {}
+    groups: dict[str, list[tuple[str, Any]]] = {}
+    stopped = False
+    for run_id, job in jobs:
+        sim = _simulation(*job)
+        if isinstance(sim, dict):
+            out[run_id] = sim
+        elif batch_reason(sim) is None:
+            groups.setdefault(batch_key(sim), []).append((run_id, sim))
+        elif stopped:
+            out[run_id] = None
+        else:
+            out[run_id] = _single(sim, should_stop)
+            stopped = out[run_id] is None
+    for members in groups.values():
+        if stopped:
+            out.update((run_id, None) for run_id, _ in members)
+            continue
+        try:
+            runs = Batch([sim for _, sim in members]).run(should_stop)
+        except Exception:  # each run again alone: its own row or error
+            runs = [_rebuilt(sim).run(should_stop=should_stop) for _, sim in members]
+            if any(r.status == "interrupted" for r in runs):
+                runs = None
+        if runs is None:
+            stopped = True
+            out.update((run_id, None) for run_id, _ in members)
+            continue
+        for (run_id, _), run in zip(members, runs, strict=True):
+            try:
+                out[run_id] = _result(run)
+            except Exception as exc:
+                out[run_id] = _error(exc)
+    return [(run_id, out[run_id]) for run_id, _ in jobs]
+
+
+def _rebuilt(sim: Any) -> Any:
+    from sandbox.simulation import Simulation
+
+    return Simulation(sim.scenario)
 
 
 def _call(job: tuple[dict[str, Any], str, list[str]]) -> dict[str, Any] | None:
     return run_task(*job)
+
+
+def _call_group(jobs: list[Job]) -> list[tuple[str, dict[str, Any] | None]]:
+    return run_tasks(jobs)
 
 
 def _ignore_interrupts() -> None:
@@ -124,16 +218,33 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
+def chunks(jobs: list[Job], workers: int, size: int | None = None) -> list[list[Job]]:
+    """The tasks in groups of at most ``size`` (default :data:`BATCH_WORLDS`).
+
+    Groups are smaller where needed so that a sweep comes in at least
+    :data:`MIN_GROUPS` groups per process (of at least :data:`MIN_WORLDS` runs): an
+    interrupted sweep keeps the groups finished so far, and progress moves.
+    """
+    size = BATCH_WORLDS if size is None else size
+    share = -(-len(jobs) // (MIN_GROUPS * max(1, workers)))
+    size = max(1, min(size, max(MIN_WORLDS, share)))
+    return [jobs[k : k + size] for k in range(0, len(jobs), size)]
+
+
 def run_local(
     jobs: list[Job], workers: int, should_stop: Callable[[], bool] | None = None
 ) -> Iterator[tuple[str, dict[str, Any] | None]]:
     """Yield ``(run id, result)`` as runs finish: in-process, or on a process pool.
 
-    In-process, ``should_stop`` also stops the run under way (its result is None).
+    Tasks go in groups (:func:`chunks`) to :func:`run_tasks`, which steps compatible
+    runs together. In-process, ``should_stop`` also stops the runs under way (their
+    results are None).
     """
     if workers <= 1 or len(jobs) <= 1:
-        for run_id, job in jobs:
-            yield run_id, run_task(*job, should_stop=should_stop)
+        for group in chunks(jobs, 1):
+            yield from run_tasks(group, should_stop=should_stop)
+            if should_stop is not None and should_stop():
+                return
         return
     import concurrent.futures as cf
     import multiprocessing as mp
@@ -144,10 +255,10 @@ def run_local(
     with cf.ProcessPoolExecutor(
         max_workers=workers, mp_context=ctx, initializer=_ignore_interrupts
     ) as pool:
-        futures = {pool.submit(_call, job): run_id for run_id, job in jobs}
+        futures = [pool.submit(_call_group, group) for group in chunks(jobs, workers)]
         try:
             for fut in cf.as_completed(futures):
-                yield futures[fut], fut.result()
+                yield from fut.result()
         except BaseException:
             pool.shutdown(wait=False, cancel_futures=True)
             raise

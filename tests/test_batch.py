@@ -1,0 +1,170 @@
+"""Batches of independent worlds (sandbox/study/batch.py): the same bytes as alone."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from helpers import PAPER, write_yaml
+
+from sandbox import compute_metrics, load_scenario
+from sandbox.cli import main
+from sandbox.simulation import Simulation
+from sandbox.study import batch as batching
+from sandbox.study import engine
+from sandbox.study.batch import Batch, batch_key, batch_reason
+
+FIELDS = ("t", "pose", "cmd", "chi", "slot", "target", "mode", "failed", "reference")
+POSE = {"uniform": [[-2.5, -2.5, -3.14159], [2.5, 2.5, 3.14159]]}
+
+
+def formup_doc() -> dict:
+    """Random form-ups without recovery (they collide), a crash, an obstacle."""
+    return {
+        "name": "batch_formup",
+        "duration": 2.5,
+        "seed": 0,
+        "vehicle": {"v1_max": 2.0, "max_accel": 5.0, "v2_max": 8.0},
+        "reference": {"type": "line", "start": [0, 0], "heading": 0, "speed": 1},
+        "formation": {"law": "rotating"},
+        "recovery": {"strategy": "continuous", "beta": 1.0, "R": "3d"},
+        "obstacles": [{"type": "circle", "center": [2.0, 2.0], "radius": 0.5}],
+        "failures": [{"vehicle": "green", "kind": "crash", "at": 1.0}],
+        "vehicles": [
+            {"name": "leader", "pose": [0, 0, 0], "leader": True},
+            {"name": "red", "pose": [1, 1, 0], "offset": [-1, 0.5]},
+            {"name": "green", "pose": [1, -1, 0], "offset": [-1, -0.5]},
+        ],
+        "randomize": {"vehicles[1].pose": POSE, "vehicles[2].pose": POSE},
+    }
+
+
+def assert_same_run(alone, batched) -> None:
+    for name in FIELDS:
+        a, b = getattr(alone, name), getattr(batched, name)
+        assert a.shape == b.shape and a.tobytes() == b.tobytes(), name
+    assert batched.status == alone.status
+    assert batched.events == alone.events
+    assert json.dumps(compute_metrics(batched)) == json.dumps(compute_metrics(alone))
+
+
+def test_a_batched_sweep_stores_the_bytes_of_single_runs(tmp_path, monkeypatch):
+    base = write_yaml(tmp_path, formup_doc(), "base.yaml")
+    cmd = ["sweep", str(base), "--grid", "recovery.beta=0,2", "--seeds", "0:4"]
+    batches = []
+    real = batching.Batch.__init__
+
+    def counted(self, sims):
+        batches.append(len(sims))
+        real(self, sims)
+
+    monkeypatch.setattr(batching.Batch, "__init__", counted)
+    assert main([*cmd, "--out", str(tmp_path / "batched")]) == 0
+    assert batches == [8]  # one batch: beta is a value, not structure
+    monkeypatch.setattr(batching, "batch_reason", lambda sim: "forced alone")
+    assert main([*cmd, "--out", str(tmp_path / "alone")]) == 0
+    assert batches == [8]
+    files = sorted(p.name for p in (tmp_path / "alone" / "runs").glob("*.json"))
+    assert len(files) == 8
+    collided = crashed = 0
+    for name in files:
+        alone = (tmp_path / "alone" / "runs" / name).read_bytes()
+        assert (tmp_path / "batched" / "runs" / name).read_bytes() == alone
+        metrics = json.loads(alone)["metrics"]
+        collided += metrics["collisions"]["total"] > 0
+        crashed += metrics["vehicles"]["green"]["failed_at"] == 1.0
+    assert collided >= 2  # contacts happened in the batch, and matched
+    assert crashed == 8
+    assert (tmp_path / "batched" / "results.csv").read_bytes() == (
+        tmp_path / "alone" / "results.csv"
+    ).read_bytes()
+
+
+def test_a_diverging_world_stops_alone(tmp_path):
+    doc = formup_doc()
+    scenarios = []
+    for seed, v1 in enumerate([1.0, 2000.0, 0.5]):  # 2000 m/s: beyond 1e3, diverges
+        failure = {"vehicle": "red", "kind": "uncontrolled", "v1": v1, "at": 0.3}
+        path = write_yaml(tmp_path, {**doc, "failures": [failure]}, f"s{seed}.yaml")
+        scenarios.append(load_scenario(path, overrides=[f"seed={seed}"]))
+    sims = [Simulation(sc) for sc in scenarios]
+    assert len({batch_key(s) for s in sims}) == 1
+    runs = Batch(sims).run()
+    assert [r.status for r in runs] == ["ok", "diverged", "ok"]
+    assert runs[1].t[-1] < runs[0].t[-1]
+    for sc, run in zip(scenarios, runs, strict=True):
+        assert_same_run(Simulation(sc).run(), run)
+
+
+@pytest.mark.parametrize(
+    "law",
+    [
+        {"law": "own_estimate"},
+        {"law": "virtual", "rotate": True},
+        {"law": "fixed"},
+    ],
+)
+def test_other_laws_and_strategies_match(tmp_path, law):
+    doc = {
+        **formup_doc(),
+        "duration": 1.5,
+        "formation": law,
+        "recovery": {
+            "strategy": "smooth",
+            "beta": 1.0,
+            "R": "3d",
+            "leader_avoids": True,
+            "target_derivatives": "estimate",
+        },
+        "reference": {"type": "circle", "center": [0, 0], "radius": 3, "speed": 1},
+    }
+    path = write_yaml(tmp_path, doc)
+    scenarios = [load_scenario(path, overrides=[f"seed={s}"]) for s in range(3)]
+    runs = Batch([Simulation(sc) for sc in scenarios]).run()
+    for sc, run in zip(scenarios, runs, strict=True):
+        assert_same_run(Simulation(sc).run(), run)
+
+
+def test_what_the_batch_does_not_implement_runs_alone(tmp_path):
+    sc = load_scenario(PAPER / "fig15_continuous_beta1.yaml", overrides=["duration=1"])
+    assert batch_reason(Simulation(sc)) is None
+    noisy = sc.with_overrides("sensing.position_noise=0.01")
+    assert batch_reason(Simulation(noisy)) == "sensing"
+    cart = {"type": "commands", "schedule": [[0.0, 0.5, 0.0]]}
+    driven = sc.with_overrides(f"vehicles[2].drive={json.dumps(cart)}")
+    assert batch_reason(Simulation(driven)) == "command schedules"
+    # The engine runs those alone, with the rows of single runs.
+    base = write_yaml(tmp_path, {**formup_doc(), "duration": 1.0}, "base.yaml")
+    doc = {**formup_doc(), "duration": 1.0}
+    jobs = [
+        ("a", (doc, str(base), ["seed=1"])),
+        ("b", (doc, str(base), ["seed=2", "sensing.position_noise=0.01"])),
+        ("c", (doc, str(base), ["seed=3"])),
+        ("d", (doc, str(base), ["seed=4", "vehicles[1].pose=[0, 0, 0]"])),  # overlaps
+    ]
+    got = dict(engine.run_tasks(jobs))
+    for run_id, job in jobs:
+        assert json.dumps(got[run_id]) == json.dumps(engine.run_task(*job))
+    assert got["d"]["row"]["status"] == "invalid"
+
+
+def test_a_stopped_batch_returns_nothing():
+    sc = load_scenario(PAPER / "fig15_continuous_beta1.yaml", overrides=["duration=1"])
+    polls = []
+
+    def stop() -> bool:
+        polls.append(1)
+        return len(polls) > 10
+
+    assert Batch([Simulation(sc), Simulation(sc)]).run(should_stop=stop) is None
+    jobs = [("a", ({"duration": 1}, "x.yaml", []))]
+    assert engine.chunks(jobs * 100, 1) == [jobs * 25] * 4
+    assert [len(c) for c in engine.chunks(jobs * 300, 2)] == [38] * 7 + [34]
+
+
+def test_stacked_motor_arrays_stay_the_worlds_own():
+    sc = load_scenario(PAPER / "fig15_continuous_beta1.yaml", overrides=["duration=1"])
+    sims = [Simulation(sc), Simulation(sc)]
+    batch = Batch(sims)
+    sims[1].world.immobilize(0)
+    assert not batch._tracking[3] and batch._tracking[0]
