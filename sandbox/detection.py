@@ -51,6 +51,12 @@ Isolation
     second or stopped faster than its motor can brake (``motor_accel``); any other
     motion against the commands (too fast, sideways) is ``uncontrolled``.
 
+Studies
+    With ``memory["trace"]`` set to a list (``Simulation.detection.memory``), every
+    window's ``(t, vehicle, l)`` is appended to it: the CUSUM of any other ``lambda``
+    can be recomputed from one run (a run is the same for every ``lambda`` up to its
+    first alarm). ``benchmarks/detection_lambda.py`` does so.
+
 Latching
     A detection stays until the same statistic run the other way,
     ``c = max(0, c - l)``, reaches ``lambda``: the vehicle has moved as commanded long
@@ -293,6 +299,13 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     z = raw / np.column_stack((np.full(len(rows), sp), sc, np.full(len(rows), sh)))
     gated = st.gate[rows] > 0
     inc = np.where(gated, 0.0, llr(np.hypot.reduce(z, axis=1), mu))
+    trace = ctx.memory.get("trace")
+    if trace is not None:  # (t, vehicle, l) of every window used, for studies
+        used = ~gated
+        trace.extend(
+            (ctx.t, int(i), float(x))
+            for i, x in zip(rows[used], inc[used], strict=True)
+        )
     observed = np.hypot(*(seen[:, :2] - st.start[rows]).T)
     seconds = st.age[rows] * ctx.dt
     for k, i in enumerate(rows):

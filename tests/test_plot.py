@@ -340,3 +340,44 @@ def test_plot_run_reports_progress_after_each_figure(tmp_path: Path) -> None:
     paths = plot.plot_run(run, tmp_path, dpi=DPI, progress=lambda *a: calls.append(a))
     assert calls == [(1, 4), (2, 4), (3, 4), (4, 4)]
     assert len(paths) == 4
+
+
+def test_formation_error_marks_detections_and_false_alarms() -> None:
+    run = make_run()
+    run.info["detection"] = {
+        "method": "residual",
+        "params": {},
+        "events": [
+            {"vehicle": "v0", "t": 1.5, "kind": "spin", "cleared": 1.8},
+            {"vehicle": "v2", "t": 2.1, "kind": "stop", "cleared": None},
+        ],
+    }
+    ax = plot.formation_error_figure(run).axes[0]
+    filled = [
+        line.get_xdata()[0]
+        for line in ax.get_lines()
+        if line.get_marker() == "^"
+        and len(line.get_xdata())
+        and line.get_markerfacecolor() != "none"
+    ]
+    hollow = [
+        line.get_xdata()[0]
+        for line in ax.get_lines()
+        if line.get_marker() == "^"
+        and len(line.get_xdata())
+        and line.get_markerfacecolor() == "none"
+    ]
+    crosses = [
+        line.get_xdata()[0]
+        for line in ax.get_lines()
+        if line.get_marker() == "x" and len(line.get_xdata())
+    ]
+    assert sorted(filled) == [1.5, 2.1] and hollow == [1.8]
+    assert crosses == [1.5]  # v0 never failed: a false alarm
+    texts = [t.get_text() for t in ax.texts]
+    assert "v0 false alarm: spin" in texts and "v2 detected: stop" in texts
+    labels = ax.get_legend_handles_labels()[1]
+    assert {"detected", "false alarm", "detection cleared"} <= set(labels)
+    # without detection (the oracle) nothing is marked
+    plain = plot.formation_error_figure(make_run()).axes[0]
+    assert not [line for line in plain.get_lines() if line.get_marker() == "^"]
