@@ -172,6 +172,19 @@ def test_bad_safety_input_is_one_line(value, message, capsys) -> None:
     assert "Traceback" not in err[0]
 
 
+def test_the_automatic_range_needs_speed_limits(tmp_path, capsys) -> None:
+    path = tmp_path / "fast.yaml"
+    path.write_text(
+        "duration: 1\nreference: {type: point, position: [0, 0]}\n"
+        "vehicles: [{name: a, pose: [0, 0, 0]}]\nsafety: {filter: cbf}\n",
+        encoding="utf-8",
+    )
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "fast.yaml:4: safety.range: needed" in err[0], err
+    assert main(["validate", str(path), "--set", "safety.range=3"]) == 0
+
+
 # ------------------------------------------------------------------ the QP solver
 def _grid_check(z0, a, b, z, tol=1e-9):
     """``z`` is feasible and no feasible grid point is nearer to ``z0``."""
@@ -285,6 +298,31 @@ def test_broadcast_velocity_leaves_a_platoon_moving_together_alone() -> None:
     ctx = _ctx(pos, theta, v1, v2, neighbour_velocity="zero")
     out1, _, step = filter_commands(CBFState(ctx), ctx)
     assert step.active[:2].all() and np.all(out1[:2] < 1.0)
+
+
+@pytest.mark.parametrize("velocity", ["broadcast", "zero"])
+def test_dropping_pairs_that_cannot_bind_changes_nothing(velocity) -> None:
+    # 60 vehicles at random in a 7 m square (some closer than D, some far), random
+    # headings and last commands; one failed: the same commands with and without the
+    # early pruning of pairs.
+    rng = np.random.default_rng(5)
+    n = 60
+    pos = rng.uniform(0, 7, (n, 2))
+    theta = rng.uniform(-np.pi, np.pi, n)
+    v1, v2 = rng.uniform(0, 2, n), rng.uniform(-4, 4, n)
+    failed = np.zeros(n, bool)
+    failed[7] = True
+    ctx = _ctx(pos, theta, v1, v2, failed=failed, neighbour_velocity=velocity)
+    ctx.v1_prev = np.clip(v1 + rng.normal(0, 0.03, n), 0, 2)
+    ctx.v2_prev = rng.uniform(-4, 4, n)
+    state = CBFState(ctx)
+    a1, a2, step = filter_commands(state, ctx)
+    b1, b2, full = filter_commands(state, ctx, prune=False)
+    assert step.active.sum() > 5
+    np.testing.assert_array_equal(a1, b1)
+    np.testing.assert_array_equal(a2, b2)
+    np.testing.assert_array_equal(step.slack, full.slack)
+    assert step.rows == full.rows
 
 
 def test_speed_projection_keeps_the_turn_rate() -> None:

@@ -272,6 +272,7 @@ def parse_scenario(
         platoon,
         recovery,
     )
+    _safety_range(rd, safety, listed + generated)
     if rd.problems:
         found = _mark_overrides(rd.problems, overridden)
         raise ScenarioError(
@@ -640,4 +641,19 @@ def _detection_window(rd: _Reader, detection: Any, dt: Any) -> None:
             f"must be a whole number of control periods dt = {dt:g} s",
             f"{window:g} s = {periods:g} periods",
             f"a multiple of {dt:g} s",
+        )
+
+
+def _safety_range(rd: _Reader, safety: Any, vehicles: list[tuple[str, Any]]) -> None:
+    """A filter's automatic ``range`` needs every vehicle's ``v1_max``."""
+    if "range" not in safety.params or safety.params["range"] is not None:
+        return
+    fast = [v.name for _, v in vehicles if v.v1_max is None]
+    if fast:
+        rd.fail(
+            "safety.range",
+            f"needed: vehicle {fast[0]} has no v1_max, and the automatic range is the "
+            "distance beyond which no barrier can bind at the speed limits",
+            "no range",
+            "a range [m], or vehicle.v1_max",
         )
