@@ -1,26 +1,33 @@
-"""Many small runs: ``sandbox sweep`` against the bare physics of the same runs.
+"""Many small runs: single runs, batches of worlds and sweeps against bare physics.
 
 The workload of a study: the Fig. 15 scenario (three vehicles, 12 s, 1,200 control
-steps of 4 substeps), ``--runs`` times (default 256), seeds 0 to runs-1.
+steps of 4 substeps), ``--runs`` times (default 256).
 
 - ``bare pymunk``: for each run, the scenario's pymunk world (the same bodies, motor
   joints and obstacles, built by :class:`sandbox.world.World`) stepped 1,200 control
   periods of ``substeps`` calls of ``Space.step`` with fixed commands: no controller,
   no law, no recovery, no recording, no metrics. The floor a sweep could reach.
+- ``single runs``: ``Simulation(scenario).run()`` and ``compute_metrics``, one run
+  after the other (``--single`` runs of them, default 16: they are slow).
+- ``batch of K``: the runs as batches of K worlds (:class:`sandbox.study.batch.Batch`;
+  building the simulations, stepping, metrics).
 - ``sweep --jobs 1`` and ``--jobs 2``: the whole ``sandbox sweep`` command, in-process
-  (``sandbox.cli.main``; scenario loading, simulation, metrics, the results store).
+  (``sandbox.cli.main``; scenario loading, batches of up to 64 worlds, metrics, the
+  results store).
 
-The ratio is bare-physics time over sweep time (1.0: the sweep runs at the physics'
-own speed). The physics is measured before and after the sweeps, in the same process,
-and the mean is used.
+Every row is timed once per repetition, in one process, interleaved with the bare
+physics; the ratio is bare-physics time per run over the row's time per run (1.0: the
+row runs at the physics' own speed), the median over ``--repeat`` repetitions (default
+3).
 
-    python benchmarks/bench_sweep.py            # 256 runs
-    python benchmarks/bench_sweep.py --runs 32  # quicker
+    python benchmarks/bench_sweep.py                      # 256 runs, 3 repetitions
+    python benchmarks/bench_sweep.py --runs 64 --repeat 1  # quicker
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import sys
 import tempfile
 import time
@@ -32,17 +39,26 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from sandbox.cli import main as sandbox_main  # noqa: E402
+from sandbox.metrics import compute_metrics  # noqa: E402
 from sandbox.scenario import load_scenario  # noqa: E402
+from sandbox.simulation import Simulation  # noqa: E402
+from sandbox.study.batch import Batch  # noqa: E402
 from sandbox.study.engine import usable_cores  # noqa: E402
 from sandbox.world import World  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper" / "fig15_continuous_beta1.yaml"
 DURATION = 12.0
+SIZES = (16, 64, 256)
+
+
+def scenario():
+    """The benchmark's scenario (fig15 cut to 12 s)."""
+    return load_scenario(SCENARIO, overrides=[f"duration={DURATION}"])
 
 
 def bare_physics(runs: int) -> float:
     """Seconds to step ``runs`` fresh worlds of the scenario for its whole duration."""
-    sc = load_scenario(SCENARIO, overrides=[f"duration={DURATION}"])
+    sc = scenario()
     steps = int(round(sc.duration / sc.dt))
     n = len(sc.vehicles)
     theta = np.array([v.pose[2] for v in sc.vehicles])
@@ -54,6 +70,26 @@ def bare_physics(runs: int) -> float:
         space, dt = world.space, h / sub
         for _ in range(steps * sub):
             space.step(dt)
+    return time.perf_counter() - t0
+
+
+def single_runs(runs: int) -> float:
+    """Seconds for ``runs`` single runs with their metrics."""
+    sc = scenario()
+    t0 = time.perf_counter()
+    for _ in range(runs):
+        compute_metrics(Simulation(sc).run())
+    return time.perf_counter() - t0
+
+
+def batched(runs: int, size: int) -> float:
+    """Seconds for ``runs`` runs as batches of ``size`` worlds, with their metrics."""
+    sc = scenario()
+    t0 = time.perf_counter()
+    for start in range(0, runs, size):
+        k = min(size, runs - start)
+        for run in Batch([Simulation(sc) for _ in range(k)]).run():
+            compute_metrics(run)
     return time.perf_counter() - t0
 
 
@@ -72,35 +108,61 @@ def sweep(runs: int, jobs: int, out: Path) -> float:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--runs", type=int, default=256, help="runs per measurement")
+    p.add_argument("--single", type=int, default=16, help="single runs measured")
+    p.add_argument("--repeat", type=int, default=3, help="repetitions (median)")
     args = p.parse_args(argv)
-    runs = args.runs
-    cores = usable_cores()
+    runs, cores = args.runs, usable_cores()
+    rows: dict[str, tuple[int, list[float]]] = {}
+    ratios: dict[str, list[float]] = {}
+
+    def measure(name: str, count: int, seconds: float, phys: float) -> None:
+        rows.setdefault(name, (count, []))[1].append(seconds)
+        ratios.setdefault(name, []).append((phys / runs) / (seconds / count))
+
     with tempfile.TemporaryDirectory() as tmp:
-        phys_a = bare_physics(runs)
-        one = sweep(runs, 1, Path(tmp) / "jobs1")
-        two = sweep(runs, min(2, cores), Path(tmp) / "jobs2") if cores > 1 else None
-        phys_b = bare_physics(runs)
-    phys = (phys_a + phys_b) / 2
+        for rep in range(args.repeat):
+            timed = []
+            phys_a = bare_physics(runs)
+            timed.append(
+                ("single runs (Simulation.run)", args.single, single_runs(args.single))
+            )
+            for size in SIZES:
+                if size <= runs:
+                    timed.append((f"batch of {size} worlds", runs, batched(runs, size)))
+            out = Path(tmp) / f"rep{rep}"
+            timed.append(("sandbox sweep --jobs 1", runs, sweep(runs, 1, out / "j1")))
+            if cores > 1:
+                timed.append(
+                    ("sandbox sweep --jobs 2", runs, sweep(runs, 2, out / "j2"))
+                )
+            phys = (phys_a + bare_physics(runs)) / 2
+            measure("bare pymunk (same bodies, joints, steps)", runs, phys, phys)
+            for name, count, seconds in timed:
+                measure(name, count, seconds, phys)
     print(
         f"{runs} runs of fig15 ({DURATION:g} s, 1,200 steps x 4 substeps), "
-        f"{cores} usable cores"
+        f"{cores} usable cores, median of {args.repeat}"
     )
     print()
-    print("| engine | wall [s] | per run [ms] | runs/s | physics / engine |")
+    print("| engine | runs | per run [ms] | runs/s | physics / engine |")
     print("|---|---:|---:|---:|---:|")
-    rows = [("bare pymunk (same bodies, joints, steps)", phys)]
-    rows.append(("sandbox sweep --jobs 1", one))
-    if two is not None:
-        rows.append(("sandbox sweep --jobs 2", two))
-    for name, t in rows:
+    for name, (count, times) in rows.items():
+        per = statistics.median(times) / count
         print(
-            f"| {name} | {t:.2f} | {1000 * t / runs:.1f} | {runs / t:.1f} | "
-            f"{phys / t:.3f} |"
+            f"| {name} | {count} | {1000 * per:.1f} | {1 / per:.1f} | "
+            f"{statistics.median(ratios[name]):.3f} |"
         )
     print()
-    print(f"bare physics before / after the sweeps: {phys_a:.2f} s / {phys_b:.2f} s")
-    if two is not None:
-        print(f"--jobs 2 speed-up over --jobs 1: {one / two:.2f}x")
+    if "sandbox sweep --jobs 2" in ratios:
+        speedup = [
+            b / a
+            for a, b in zip(
+                ratios["sandbox sweep --jobs 1"],
+                ratios["sandbox sweep --jobs 2"],
+                strict=True,
+            )
+        ]
+        print(f"--jobs 2 over --jobs 1: {statistics.median(speedup):.2f}x (median)")
     return 0
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pymunk
@@ -76,6 +77,100 @@ class PhysicalState:
     theta: np.ndarray
     vel: np.ndarray
     omega: np.ndarray
+
+
+class _BodyIterator:
+    """``pymunk.batch``'s bulk read or write of one space's bodies, set up once.
+
+    ``pymunk.batch.get_space_bodies`` and ``set_space_bodies`` build their C call
+    data anew at every call; here it is built once and the same C iterator is called
+    (the same values, read or written, a few microseconds sooner per call). The read
+    returns a view of the buffer's memory, made again only when Chipmunk moves it. If
+    this pymunk lacks the internals used, the public functions are called instead.
+    """
+
+    def __init__(
+        self,
+        space: pymunk.Space,
+        fields: pymunk.batch.BodyFields,
+        buffer: pymunk.batch.Buffer,
+        write: bool,
+    ) -> None:
+        self.space, self.fields, self.buffer = space, fields, buffer
+        self._call = None
+        self._view = np.zeros(0)
+        self._ptr = None
+        try:
+            from pymunk._chipmunk import ffi, lib
+
+            data = ffi.new("pmBatchedData *")
+            data.fields = fields.value
+            data.floatArray = buffer._float_arr
+            data.intArray = buffer._int_arr
+            name = "pmSpaceBody%sIteratorFuncBatched" % ("Set" if write else "Get")
+            func = ffi.addressof(lib, name)
+            each, handle = lib.cpSpaceEachBody, space._space
+            self._data, self._floats, self._ints = data, buffer._float_arr, None
+            self._ints = buffer._int_arr
+            self._ffi = ffi
+            self._call = lambda: each(handle, func, data)
+        except (ImportError, AttributeError, TypeError):  # pragma: no cover
+            self._call = None
+
+    def read(self) -> np.ndarray:
+        """Every body's fields, shape (bodies, 6) (a view, valid until the next)."""
+        if self._call is None:  # pragma: no cover - the public path
+            self.buffer.clear()
+            pymunk.batch.get_space_bodies(self.space, self.fields, self.buffer)
+            return np.frombuffer(self.buffer.float_buf(), np.float64).reshape(-1, 6)
+        floats = self._floats
+        floats.num = 0
+        self._ints.num = 0
+        self._call()
+        if floats.arr != self._ptr or floats.num != self._view.size:
+            raw = self._ffi.buffer(floats.arr, 8 * floats.num)
+            self._view = np.frombuffer(raw, np.float64)
+            self._ptr = floats.arr
+        return self._view.reshape(-1, 6)
+
+    def write(self) -> None:
+        """Write the buffer's values to the bodies."""
+        if self._call is None:  # pragma: no cover - the public path
+            pymunk.batch.set_space_bodies(self.space, self.fields, self.buffer)
+            return
+        floats = self._floats
+        num, floats.num = floats.num, 0
+        self._call()
+        floats.num = num
+
+
+def _space_stepper(space: pymunk.Space) -> tuple[Any, tuple | None]:
+    """``space.step`` without its Python bookkeeping, once that is not needed.
+
+    ``Space.step`` checks newly added bodies (once), and around Chipmunk's
+    ``cpSpaceStep`` handles additions and removals made by callbacks; the world's
+    callbacks make none, so after the first step the C function is called directly
+    (the same computation). Returns the step function and ``(cpSpaceStep, space
+    handle, bodies still to check)`` for callers that loop over many worlds (None
+    if this pymunk lacks those internals).
+    """
+    try:
+        from pymunk._chipmunk import lib
+
+        c_step, handle = lib.cpSpaceStep, space._space
+        pending = space._bodies_to_check
+    except (ImportError, AttributeError):  # pragma: no cover
+        return space.step, None
+    if space.threaded:  # pragma: no cover
+        return space.step, None
+
+    def step(dt: float) -> None:
+        if pending:  # bodies added since the last step: pymunk checks them
+            space.step(dt)
+            return
+        c_step(handle, dt)
+
+    return step, (c_step, handle, pending)
 
 
 def motor_limits(
@@ -185,6 +280,12 @@ class World:
             self._control_rows, np.arange(len(self.controls))
         )
         self._write = np.zeros((len(self.controls), 3))
+        self._get = _BodyIterator(self.space, _READ, self._read_buffer, write=False)
+        self._set = _BodyIterator(
+            self.control_space, _WRITE, self._write_buffer, write=True
+        )
+        self.bind_commands(self._write)
+        self._step_space, self.c_step = _space_stepper(self.space)
         n = len(self.bodies)
         # The motors: per vehicle, the joints' current force limits [N], [N m], and
         # the tracking motor's least ones; the velocities last read.
@@ -318,20 +419,19 @@ class World:
         return out
 
     # ------------------------------------------------------------------ bulk I/O
-    def read_rows(self) -> np.ndarray:
+    def read_rows(self, measure: bool = True) -> np.ndarray:
         """The bulk read of every body, rows in vehicle order, shape (n, 6).
 
         Columns ``x1, x2, x3, v_x1, v_x2, omega``; a view of the read buffer, valid
-        until the next read. The velocities are kept for :meth:`_size_motors`.
+        until the next read. The velocities are kept for :meth:`_size_motors` unless
+        ``measure`` is False (the caller keeps ``_measured`` itself).
         """
-        buf = self._read_buffer
-        buf.clear()
-        pymunk.batch.get_space_bodies(self.space, _READ, buf)
-        rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 6)
+        rows = self._get.read()
         if not self._rows_in_order:
             rows = rows[self._rows]
-        self._measured[:, :2] = rows[:, 3:5]
-        self._measured[:, 2] = rows[:, 5]
+        if measure:
+            self._measured[:, :2] = rows[:, 3:5]
+            self._measured[:, 2] = rows[:, 5]
         return rows
 
     def read_state(self) -> PhysicalState:
@@ -362,12 +462,24 @@ class World:
             self._size_motors(out, dt)
         self.write_rows(out)
 
-    def write_rows(self, velocity: np.ndarray) -> None:
-        """Set the control bodies' velocities ``(v_x1, v_x2, omega)``, shape (n, 3)."""
-        rows = slice(None) if self._control_in_order else self._control_rows
-        self._write[rows] = velocity
-        self._write_buffer.set_float_buf(self._write.tobytes())
-        pymunk.batch.set_space_bodies(self.control_space, _WRITE, self._write_buffer)
+    def write_rows(self, velocity: np.ndarray | None = None) -> None:
+        """Set the control bodies' velocities ``(v_x1, v_x2, omega)``, shape (n, 3).
+
+        None: the rows already in the array given to :meth:`bind_commands`.
+        """
+        if velocity is not None:
+            rows = slice(None) if self._control_in_order else self._control_rows
+            self._write[rows] = velocity
+        self._set.write()
+
+    def bind_commands(self, array: np.ndarray) -> None:
+        """Read the control bodies' velocities from ``array`` (n, 3) from now on.
+
+        ``array`` is C-contiguous float64, rows in the control space's body order
+        (vehicle order when ``_control_in_order``); it is used in place, not copied.
+        """
+        self._write = array
+        self._write_buffer.set_float_buf(array)
 
     def _size_motors(self, command: np.ndarray, dt: float) -> None:
         """Force limits of the tracking motors for the period about to start.
@@ -400,9 +512,10 @@ class World:
         """
         h = dt / substeps
         self._substeps = substeps
+        step = self._step_space
         for s in range(substeps):
             self.time = t0 + s * h
-            self.space.step(h)
+            step(h)
             if self._open:
                 self._update_episodes(t0 + (s + 1) * h)
 

@@ -316,6 +316,14 @@ class Batch:
         self._failing = np.zeros(N, dtype=bool)
         self.plan: tuple | None = None
         self._shared_motors(sims)
+        self._live_list = list(range(K))
+        self._rows = np.empty((K, n, 6))
+        # The control bodies read their velocities straight from the stacked commands.
+        self._out = np.zeros((N, 3))
+        self._bound = [w._control_in_order for w in self.worlds]
+        for k, world in enumerate(self.worlds):
+            if self._bound[k]:
+                world.bind_commands(self._out[k * n : (k + 1) * n])
         self._tally = _Tally(K, n, self.h)
         self._record_setup(first)
         self._control_time = 0.0
@@ -358,11 +366,13 @@ class Batch:
 
     # ------------------------------------------------------------------ stages
     def _sense(self) -> None:
-        """Read every live world's state; a world that diverged stops (alone)."""
+        """Take every live world's state; a world that diverged stops (alone)."""
         K, n = self.K, self.n
-        rows = np.empty((K, n, 6))
-        for w in np.flatnonzero(self.live):
-            rows[w] = self.worlds[w].read_rows()
+        rows = self._rows  # read by _advance
+        measured = self._measured.reshape(K, n, 3)
+        measured[..., :2] = rows[..., 3:5]
+        measured[..., 2] = rows[..., 5]
+        rows = rows.copy()
         dead = ~self.live
         if dead.any():  # stopped worlds: a harmless state, never used again
             rows[dead] = 0.0
@@ -387,6 +397,7 @@ class Batch:
             }
             self._record(np.array([w]), undefined=True)
             self.live[w] = False
+            self._live_list = [int(k) for k in np.flatnonzero(self.live)]
             self._dead_runs[w] = self._close(w)
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
@@ -509,8 +520,9 @@ class Batch:
             chi_next[frozen] = v1[frozen, None] * heading[frozen]
         self.v1, self.v2, self.failed = v1, v2, failed
         n = self.n
-        for w in np.flatnonzero(self.live):
-            self.worlds[w].failed = failed[w * n : (w + 1) * n]
+        worlds = self.worlds
+        for w in self._live_list:
+            worlds[w].failed = failed[w * n : (w + 1) * n]
         mode = np.full(self.N, MODE_FORMATION, dtype=np.int8)
         mode[active] = MODE_AVOID
         mode[failed] = MODE_FAILED
@@ -591,7 +603,7 @@ class Batch:
         h, n = self.h, self.n
         self.chi = chi_next
         heading = self.theta + 0.5 * self.v2 * h
-        out = np.empty((self.N, 3))
+        out = self._out
         out[:, 0] = self.v1 * np.cos(heading)
         out[:, 1] = self.v1 * np.sin(heading)
         out[:, 2] = self.v2
@@ -604,11 +616,28 @@ class Batch:
                 pivot, gear = self.worlds[w].joints[i]
                 pivot.max_force = self._force[r] = force[r]
                 gear.max_force = self._torque[r] = torque[r]
-        t0 = self.k * h
-        for w in np.flatnonzero(self.live):
-            world = self.worlds[w]
-            world.write_rows(out[w * n : (w + 1) * n])
-            world.step(h, self.substeps, t0)
+        # One pass over the worlds: write, step (World.step's loop, Chipmunk called
+        # directly: the same calls and times), read the state of t_k+1.
+        t0, substeps = self.k * h, self.substeps
+        hh = h / substeps
+        times = [t0 + s * hh for s in range(substeps)]
+        ends = [t0 + (s + 1) * hh for s in range(substeps)]
+        worlds, rows = self.worlds, self._rows
+        for w in self._live_list:
+            world = worlds[w]
+            world.write_rows(None if self._bound[w] else out[w * n : (w + 1) * n])
+            fast = world.c_step
+            if fast is None or fast[2]:
+                world.step(h, substeps, t0)
+            else:
+                c_step, handle = fast[0], fast[1]
+                world._substeps = substeps
+                for s in range(substeps):
+                    world.time = times[s]
+                    c_step(handle, hh)
+                    if world._open:
+                        world._update_episodes(ends[s])
+            rows[w] = world.read_rows(measure=False)
         self.k += 1
 
     # ------------------------------------------------------------------ results
