@@ -43,6 +43,7 @@ from sandbox.control.formation import (
 from sandbox.metrics import MOTOR_ABS_TOL, MOTOR_REL_TOL
 from sandbox.plugins import FailureContext, LawContext, StrategyContext, make_law
 from sandbox.recovery import BRUTE_FORCE_MAX, NeighbourList
+from sandbox.references import CircleReference, LineReference, PointReference
 from sandbox.run import (
     MODE_AVOID,
     MODE_FAILED,
@@ -63,6 +64,8 @@ BATCH_LAWS = (
     LeaderReferenceFormation,
     OwnEstimateFormation,
 )
+#: References evaluated for all step times at once (elementwise in t).
+TABULATED_REFERENCES = (PointReference, LineReference, CircleReference)
 #: The built-in strategies (functions of :mod:`sandbox.recovery`).
 BATCH_STRATEGIES = ("none", "discontinuous", "continuous", "smooth")
 #: Most vehicles per world: all pairs are then the neighbour candidates, as alone.
@@ -288,6 +291,12 @@ class Batch:
         # Parameters shared by the batch (equal in every world by batch_key).
         self.leader = first.leader
         self.reference = first.reference
+        # References that are elementwise in t: evaluated once for every step time
+        # (each row the bits of the scalar evaluation at t_k = k h).
+        self._ref_table = None
+        if type(self.reference) in TABULATED_REFERENCES:
+            times = np.array([k * self.h for k in range(self.steps + 1)])
+            self._ref_table = self.reference.evaluate(times)
         spec = first.scenario.formation
         self.law = (
             make_law(spec.law, spec.params, self.offset, self.h) if spec else None
@@ -403,7 +412,12 @@ class Batch:
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
         """Slots, reference point and the law's ``x_ref'``, ``x_ref''`` (as alone)."""
         K, n, N = self.K, self.n, self.N
-        ref = self.reference.evaluate(t) if self.reference is not None else None
+        if self._ref_table is not None:
+            ref = tuple(a[self.k] for a in self._ref_table)
+        elif self.reference is not None:
+            ref = self.reference.evaluate(t)
+        else:
+            ref = None
         if self.law is not None:
             lead = self.leader
             pos3 = self.pos.reshape(K, n, 2)
