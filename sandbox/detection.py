@@ -44,12 +44,21 @@ The CUSUM
     move vehicles against their commands and are known to the world.
 
 Isolation
-    At an alarm the residuals accumulated since ``g`` last left 0 name the kind: a
-    heading residual dominating with the vehicle (almost) still is a ``spin``, with the
-    vehicle moving a ``stuck_steering``; an along-track deficit with the vehicle still
-    is a ``stop``, or a ``crash`` when the vehicle was in contact within the last
-    second or stopped faster than its motor can brake (``motor_accel``); any other
-    motion against the commands (too fast, sideways) is ``uncontrolled``.
+    At an alarm the residuals accumulated since ``g`` last left 0 name the kind
+    (which component dominates by the summed magnitudes; deficit or excess by the
+    sign of the along-track sum). A heading residual dominating with the vehicle
+    covering less than half its predicted travel is a ``spin``; with the vehicle
+    moving, a ``stuck_steering``, or ``uncontrolled`` when the along-track sum is
+    beyond 2 standard deviations too. An along-track deficit with the vehicle (nearly)
+    still is a ``stop``, or a ``crash`` when the vehicle was in contact within the last
+    second or stopped faster than its motor can brake (``motor_accel``). Any other
+    motion against the commands (too fast, sideways) is ``uncontrolled``. A
+    ``stuck_steering`` is watched ``isolation`` seconds more (default 0.3 s): if the
+    speed departs from the commands too it becomes ``uncontrolled`` (a runaway whose
+    speed happens to be near the commanded one looks like a stuck steering at
+    first). A stop or a spin is plain at once; a spinning vehicle's controller soon
+    turns with it (its turn-rate anti-windup follows the heading), so later windows
+    show only the missing translation.
 
 Studies
     With ``memory["trace"]`` set to a list (``Simulation.detection.memory``), every
@@ -106,6 +115,14 @@ RESIDUAL_PARAMS = {
         minimum=0.0,
         exclusive=True,
     ),
+    "isolation": Param(
+        "number",
+        0.3,
+        "s",
+        "How long after an alarm the residuals still go into the kind (the "
+        "detection itself is at the alarm)",
+        minimum=0.0,
+    ),
     "noise_floor": Param(
         "number",
         0.001,
@@ -158,11 +175,13 @@ class DetectorState:
     g: np.ndarray  # the CUSUM (n,)
     clear: np.ndarray  # the clearing CUSUM of detected vehicles (n,)
     acc: np.ndarray  # normalised residuals summed since g left 0 (n, 3)
+    acc_abs: np.ndarray  # their magnitudes summed (n, 3)
     acc_raw: np.ndarray  # raw residuals summed since g left 0 (n, 3)
     acc_obs: np.ndarray  # observed travel since g left 0 (n,) [m]
     acc_pred: np.ndarray  # predicted travel since g left 0 (n,) [m]
     acc_t: np.ndarray  # time since g left 0 (n,) [s]
     detected: np.ndarray  # latched (n,) bool
+    isolating: np.ndarray  # until when the kind is still read (n,) [s]
     kinds: list  # the kind of each latched detection (n,)
 
 
@@ -182,11 +201,13 @@ def _start(ctx: DetectorContext) -> DetectorState:
         g=z.copy(),
         clear=z.copy(),
         acc=np.zeros((n, 3)),
+        acc_abs=np.zeros((n, 3)),
         acc_raw=np.zeros((n, 3)),
         acc_obs=z.copy(),
         acc_pred=z.copy(),
         acc_t=z.copy(),
         detected=np.zeros(n, dtype=bool),
+        isolating=np.full(n, -np.inf),
         kinds=[""] * n,
     )
 
@@ -218,7 +239,10 @@ def _advance_model(st: DetectorState, ctx: DetectorContext) -> None:
 
 def _isolate(st: DetectorState, i: int, t: float, ctx: DetectorContext) -> str:
     """The kind of the alarm of vehicle ``i`` from its accumulated residuals."""
-    za, zc, zh = np.abs(st.acc[i])
+    # Which component dominates: summed magnitudes (a spinning vehicle's heading
+    # residual changes sign as its controller turns against it); the sign of the
+    # along-track sum says deficit or excess.
+    za, zc, zh = st.acc_abs[i]
     duration = max(st.acc_t[i], ctx.dt)
     # Still, or covering less than half the predicted travel.
     slow = st.acc_obs[i] < max(STILL_SPEED * duration, 0.5 * st.acc_pred[i])
@@ -227,7 +251,8 @@ def _isolate(st: DetectorState, i: int, t: float, ctx: DetectorContext) -> str:
         if slow:
             return "spin"
         # Moving: the speed is off the commands too (beyond 2 sigma) when uncontrolled.
-        return "uncontrolled" if za > 2.0 * np.sqrt(windows) else "stuck_steering"
+        speed_off = abs(st.acc[i, 0]) > 2.0 * np.sqrt(windows)
+        return "uncontrolled" if speed_off else "stuck_steering"
     if st.acc[i, 0] < 0 and za >= zc and slow:
         if t - st.last_contact[i] <= CRASH_CONTACT_WINDOW:
             return "crash"
@@ -312,6 +337,17 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         if gated[k]:
             continue
         if st.detected[i]:
+            if ctx.t <= st.isolating[i] + 1e-9:  # the kind from more residuals
+                st.acc[i] += z[k]
+                st.acc_abs[i] += np.abs(z[k])
+                st.acc_raw[i] += raw[k]
+                st.acc_obs[i] += observed[k]
+                st.acc_pred[i] += travel[k]
+                st.acc_t[i] += seconds[k]
+                # A turn-rate fault of a moving vehicle whose speed departs from the
+                # commands too is a runaway (a stop or spin is plain at once).
+                if st.kinds[i] == "stuck_steering":
+                    st.kinds[i] = _isolate(st, i, ctx.t, ctx)
             st.clear[i] = max(0.0, st.clear[i] - inc[k])
             if st.clear[i] >= lam:
                 st.detected[i] = False
@@ -320,11 +356,13 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
             continue
         if st.g[i] <= 0.0:
             st.acc[i] = 0.0
+            st.acc_abs[i] = 0.0
             st.acc_raw[i] = 0.0
             st.acc_obs[i] = st.acc_pred[i] = st.acc_t[i] = 0.0
         st.g[i] = max(0.0, st.g[i] + inc[k])
         if st.g[i] > 0.0:
             st.acc[i] += z[k]
+            st.acc_abs[i] += np.abs(z[k])
             st.acc_raw[i] += raw[k]
             st.acc_obs[i] += observed[k]
             st.acc_pred[i] += travel[k]
@@ -332,6 +370,7 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         if st.g[i] >= lam:
             st.detected[i] = True
             st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+            st.isolating[i] = ctx.t + float(p["isolation"])
             st.g[i] = 0.0
             st.clear[i] = 0.0
     st.pending[rows] = True  # the next window starts at the next observation
@@ -433,6 +472,10 @@ class Detection:
             event["cleared"] = None
             self.events.append(event)
             self._open[int(i)] = event
+        if kinds is not None:  # a kind still being read is updated in its event
+            for i, event in self._open.items():
+                if known[i] and kinds[i]:
+                    event["kind"] = kinds[i]
         for i in np.flatnonzero(~known & self._known):
             event = self._open.pop(int(i), None)
             if event is not None:
