@@ -90,6 +90,28 @@ def test_a_vehicle_stops_short_of_a_failed_one() -> None:
     assert abs(r.cmd[-1, 0, 0]) < 1e-3
 
 
+def test_the_right_hand_rule_passes_the_stopped_vehicle() -> None:
+    # The same case with safety.pass_right: held back nose to nose, a turns right,
+    # passes b and settles on its slot, still without contact.
+    doc = point_doc(
+        [
+            {"name": "a", "pose": [-3, 0, 0], "offset": [3, 0]},
+            {"name": "b", "pose": [0, 0, 0], "offset": [0, 0]},
+        ],
+        duration=8.0,
+        failures=[{"vehicle": "b", "at": 0.0, "kind": "stop"}],
+        safety={"filter": "cbf", "pass_right": 0.5},
+    )
+    r, m = run(doc)
+    assert m["collisions"]["total"] == 0
+    assert centre_distances(r).min() >= 0.74
+    assert m["vehicles"]["a"]["settling_time"] is not None
+    assert m["vehicles"]["a"]["formation_error"]["final"] < 0.01
+    # It went round on its right: below the line (negative x2) while passing.
+    passing = np.abs(r.pose[:, 0, 0]) < 0.3
+    assert np.all(r.pose[passing, 0, 1] < -0.5)
+
+
 def test_a_vehicle_dodges_a_runaway_driving_at_it() -> None:
     # r is driven open loop at 1 m/s straight at a, which holds its slot at the origin:
     # a neighbour that does not filter is the filter's full responsibility.

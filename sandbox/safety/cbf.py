@@ -108,6 +108,15 @@ PARAMS = {
     "reverse": Param(
         "boolean", True, doc="Whether the filter may command a negative speed v1"
     ),
+    "pass_right": Param(
+        "number",
+        0.0,
+        "m/s",
+        "The right-hand rule out of symmetric stalls: a vehicle the filter holds back "
+        "adds up to this speed to the right of its nominal velocity, in proportion to "
+        "how much it is held back (0: none)",
+        minimum=0.0,
+    ),
     "range": Param(
         "length",
         None,
@@ -194,6 +203,7 @@ class CBFState:
         self.broadcast = p["neighbour_velocity"] == "broadcast"
         self.reverse = bool(p["reverse"])
         self.max_rows = int(p["max_constraints"])
+        self.pass_right = float(p.get("pass_right") or 0.0)
         v1_max = _per_vehicle(ctx.v1_max, n)
         v2_max = _per_vehicle(ctx.v2_max, n)
         self.v1_max = np.where(np.isfinite(v1_max), v1_max, UNLIMITED_SPEED)
@@ -436,7 +446,22 @@ def filter_commands(
         off[slot[veh[mine]], 4 + rank[mine]] = b[mine]
         soft = np.zeros((k, 4 + m), dtype=bool)
         soft[:, 4:] = True
-        z[group], slack[group] = solve(z0[group], mat, off, soft)
+        zg, sg = solve(z0[group], mat, off, soft)
+        if state.pass_right > 0 and not state.speed_only:
+            # The right-hand rule: a vehicle held back by the filter adds a velocity
+            # to the right of its nominal one, in proportion to how much it is held
+            # back, and solves again (the barriers are the same).
+            norm = np.hypot(z0[group, 0], z0[group, 1])
+            held = np.hypot(zg[:, 0] - z0[group, 0], zg[:, 1] - z0[group, 1])
+            turn = np.flatnonzero((held > TOLERANCE) & (norm > TOLERANCE))
+            if len(turn):
+                frac = np.minimum(held[turn] / norm[turn], 1.0) * state.pass_right
+                unit = z0[group[turn]] / norm[turn, None]
+                nominal = z0[group[turn]] + frac[:, None] * np.stack(
+                    (unit[:, 1], -unit[:, 0]), -1
+                )
+                zg[turn], sg[turn] = solve(nominal, mat[turn], off[turn], soft[turn])
+        z[group], slack[group] = zg, sg
     changed = np.any(z != z0, axis=1)
     rows = np.flatnonzero(changed)
     v1[rows] = z[rows, 0]
