@@ -36,6 +36,10 @@ Definitions (the keys of ``metrics.json``):
   kind was right; ``false_alarms`` counts detections on a vehicle without an active
   failure.
 - ``warnings``: what a user should know about the numbers (a saturated motor).
+- ``reassignments`` and ``leader_changes`` (only with ``reconfigure`` or
+  ``on_leader_failure``, see :mod:`sandbox.reconfigure`): ``{t, assignment}``, the
+  formation slot each vehicle tracks from then on (null: none), and ``{t, from, to,
+  mode}`` (``to`` null: the virtual leader).
 
 Formation errors, settling and mode switches read the recorded samples (at the
 resolution of ``record_every``); the rest comes from the loop (``Run.info
@@ -393,7 +397,7 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     }
     if loop:
         out["motor"] = loop["motor"]
-    for key in ("safety", "diverged", "interrupted"):
+    for key in ("safety", "diverged", "interrupted", "reassignments", "leader_changes"):
         if key in run.info:
             out[key] = run.info[key]
     from sandbox.detection import detection_metrics

@@ -30,6 +30,7 @@ from sandbox.scenario import (
     METRICS,
     PLATOON,
     PLUGIN_SECTIONS,
+    RECONFIGURE,
     SENSING,
     TOP,
     VEHICLE,
@@ -64,6 +65,7 @@ def sections() -> dict[str, dict[str, Param]]:
         "platoon": PLATOON,
         "metrics": METRICS,
         "sensing": SENSING,
+        "reconfigure": RECONFIGURE,
     }
     for kind, own in PLUGIN_SECTIONS.items():
         section = KINDS[kind].section
@@ -305,6 +307,7 @@ def build_schema() -> dict[str, Any]:
             "sensing": _object(SENSING),
             "detection": _plugin_section("detector"),
             "safety": _plugin_section("filter"),
+            "reconfigure": _object(RECONFIGURE),
         },
     }
 

@@ -47,6 +47,7 @@ from sandbox.plugins import (
     get,
     make_law,
 )
+from sandbox.reconfigure import Reconfiguration
 from sandbox.recovery import NeighbourList, ObstacleField
 from sandbox.run import (
     MODE_AVOID,
@@ -201,6 +202,8 @@ class Simulation:
         self._wall = time.perf_counter()
         #: Wall time spent planning and acting (law, recovery, controller, filters).
         self._control_time = 0.0
+        # Slot reassignment and leader handover on events (None: keep every slot).
+        self.reconfiguration = Reconfiguration.build(self)
         if self._sense():
             self._plan()
 
@@ -355,6 +358,8 @@ class Simulation:
         if self.detection is not None:  # else what the detector has found
             known = self.detection.update(self, t, failing)
         self.known_failed = known
+        if self.reconfiguration is not None:  # re-forms when `known` changes
+            self.reconfiguration.react(self, t, known)
         may_avoid = self._avoid_candidates & ~known
         shift, active = self.strategy(
             StrategyContext(

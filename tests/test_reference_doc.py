@@ -29,6 +29,7 @@ from sandbox.scenario import (
     MAX_VEHICLES,
     METRICS,
     PLATOON,
+    RECONFIGURE,
     RECOVERY,
     REPORT_DT_BOUND,
     SAFETY,
@@ -81,6 +82,7 @@ def declaration(path: str, doc: dict[str, Any]) -> Param | None:
         "platoon": PLATOON,
         "metrics": METRICS,
         "sensing": SENSING,
+        "reconfigure": RECONFIGURE,
     }.get(head)
     if parts[-2] == "gains":
         return GAINS.get(key)
@@ -123,6 +125,7 @@ def default_matches(stated: str, p: Param) -> bool:
 def test_every_declared_key_is_documented() -> None:
     tables = [TOP, VEHICLE_PARAMS, GAINS, VEHICLE, DRIVE, PLATOON, METRICS, RECOVERY]
     tables.append(SENSING)
+    tables.append(RECONFIGURE)
     tables.append(FAILURE)
     tables.append(SAFETY)
     for kind in ("law", "strategy", "failure", "reference", "obstacle", "filter"):

@@ -133,6 +133,18 @@ class FormationLaw:
         """Return ``slot, v_ref, a_ref``, each of shape (n, 2)."""
         raise NotImplementedError
 
+    def reseed(self) -> None:
+        """Forget every estimate: each :class:`BackwardDifference` starts afresh.
+
+        Called when another vehicle leads or the offsets change
+        (:mod:`sandbox.reconfigure`), whose jump eqs. (8)-(9) and (18)-(19) would
+        otherwise read as a velocity and an acceleration (1 m in h = 0.01 s: 100 m/s
+        and 1e4 m/s^2).
+        """
+        for value in vars(self).values():
+            if isinstance(value, BackwardDifference):
+                value.reset()
+
     def _reference_offsets(self, reference: Triple) -> np.ndarray:
         """Offsets in the world frame, rotated by the reference's tangent if asked."""
         if not self.rotate:

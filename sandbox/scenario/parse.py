@@ -38,6 +38,8 @@ from sandbox.scenario.sections import (
     METRICS,
     METRICS_KEYS,
     PLUGIN_SECTIONS,
+    RECONFIGURE,
+    RECONFIGURE_KEYS,
     SENSING,
     SENSING_KEYS,
     TOP,
@@ -54,6 +56,7 @@ from sandbox.scenario.sections import (
 )
 from sandbox.scenario.specs import (
     MetricsSpec,
+    ReconfigureSpec,
     Scenario,
     SensingSpec,
     VehicleSpec,
@@ -254,6 +257,10 @@ def parse_scenario(
     detection = _detection(rd, doc.get("detection"), "detection")
     _detection_window(rd, detection, dt)
     safety = _safety(rd, doc.get("safety"), "safety")
+    reconfigure = _reconfigure(rd, doc.get("reconfigure"))
+    on_leader_failure = read_param(
+        rd, doc, "on_leader_failure", "", TOP["on_leader_failure"]
+    )[0]
 
     names = [n for _, n, _ in rd.declared] + [v.name for _, v in generated]
     expect = read_expectations(rd, doc.get("expect"), "expect", names)
@@ -273,6 +280,13 @@ def parse_scenario(
         recovery,
     )
     _safety_range(rd, safety, listed + generated)
+    _check_handover(
+        rd,
+        on_leader_failure,
+        [v for _, v in listed + generated],
+        formation.law if formation is not None else None,
+        reference,
+    )
     if rd.problems:
         found = _mark_overrides(rd.problems, overridden)
         raise ScenarioError(
@@ -308,6 +322,8 @@ def parse_scenario(
             sensing=sensing,
             detection=detection,
             safety=safety,
+            reconfigure=reconfigure,
+            on_leader_failure=on_leader_failure or "keep",
             diameter=rd.diameter,
             source=source,
             plugins=tuple(loaded),
@@ -482,6 +498,7 @@ def _allowed_keys(parents: list[str], node: dict[Any, Any]) -> tuple[str, ...]:
         "platoon": PLATOON_KEYS,
         "metrics": METRICS_KEYS,
         "sensing": SENSING_KEYS,
+        "reconfigure": RECONFIGURE_KEYS,
         "drive": DRIVE_KEYS,
     }
     if head in table:
@@ -656,4 +673,49 @@ def _safety_range(rd: _Reader, safety: Any, vehicles: list[tuple[str, Any]]) -> 
             "distance beyond which no barrier can bind at the speed limits",
             "no range",
             "a range [m], or vehicle.v1_max",
+        )
+
+
+def _reconfigure(rd: _Reader, doc: Any) -> ReconfigureSpec:
+    """The ``reconfigure:`` section; ``close_gap`` needs ``assign: hungarian``."""
+    m = rd.mapping(doc, "reconfigure") or {}
+    rd.keys(m, RECONFIGURE_KEYS, "reconfigure")
+    read, ok = read_params(rd, m, "reconfigure", RECONFIGURE)
+    values = {k: RECONFIGURE[k].default if v is None else v for k, v in read.items()}
+    if not ok:
+        return ReconfigureSpec()
+    if values["close_gap"] and values["assign"] == "none":
+        rd.fail(
+            "reconfigure.close_gap",
+            "closes gaps only when slots are reassigned",
+            "true with assign: none",
+            "assign: hungarian, or close_gap: false",
+        )
+    return ReconfigureSpec(**values)
+
+
+def _check_handover(
+    rd: _Reader,
+    mode: Any,
+    vehicles: list[VehicleSpec],
+    law: str | None,
+    reference: Any,
+) -> None:
+    """``on_leader_failure`` other than keep: a leader to replace, a reference."""
+    if mode in (None, "keep") or (law is not None and law not in plugins.names("law")):
+        return
+    has_leader = any(v.leader for v in vehicles)
+    needs_leader = law is not None and plugins.get("law", law).options["needs_leader"]
+    if not (has_leader and needs_leader):
+        rd.warn(
+            "on_leader_failure",
+            f"{mode} has no effect: the formation follows no leader"
+            + (f" (law {law})" if law is not None and has_leader else ""),
+        )
+    elif reference is None:
+        rd.fail(
+            "on_leader_failure",
+            f"{mode} needs a reference for the formation to follow",
+            "no reference section",
+            "a reference, or on_leader_failure: keep",
         )

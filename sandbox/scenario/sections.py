@@ -209,6 +209,19 @@ TOP: dict[str, Param] = {
         doc="A safety filter on the commands, after the controller and before the "
         "failures (see sandbox/safety/; filter none: no filter)",
     ),
+    "reconfigure": Param(
+        **_section("reconfigure"),
+        doc="Who tracks which slot once a vehicle is believed failed (see "
+        "sandbox/reconfigure.py; default: everyone keeps their slot)",
+    ),
+    "on_leader_failure": Param(
+        "choice",
+        "keep",
+        doc="When the leader is believed failed: keep (the followers keep following "
+        "it), virtual (the formation follows the reference itself, section 3.4) or "
+        "elect (the healthy vehicle nearest the leader's slot leads)",
+        choices=("keep", "virtual", "elect"),
+    ),
     "randomize": Param(
         "custom",
         None,
@@ -312,6 +325,24 @@ SENSING: dict[str, Param] = {
     ),
 }
 
+RECONFIGURE: dict[str, Param] = {
+    "assign": Param(
+        "choice",
+        "none",
+        doc="none: every vehicle keeps its slot; hungarian: at each change of the "
+        "believed failures the healthy vehicles are reassigned to slots by minimum "
+        "total squared distance",
+        choices=("none", "hungarian"),
+    ),
+    "close_gap": Param(
+        "boolean",
+        False,
+        doc="With hungarian: the slots are the formation's first ones, one per "
+        "healthy vehicle (a column closes up); false: a failed vehicle's slot stays "
+        "empty",
+    ),
+}
+
 #: The own keys of the sections that select a plug-in (the plug-in's parameters are
 #: declared by its registration).
 FORMATION: dict[str, Param] = {
@@ -395,6 +426,8 @@ TOP_KEYS = tuple(TOP)
 METRICS_KEYS = tuple(METRICS)
 
 SENSING_KEYS = tuple(SENSING)
+
+RECONFIGURE_KEYS = tuple(RECONFIGURE)
 
 
 def _length_default(rd: _Reader, value: Any) -> Any:

@@ -255,6 +255,19 @@ class SafetySpec:
     params: dict[str, Any] = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class ReconfigureSpec:
+    """Slot reassignment after failures (``reconfigure:``, :mod:`sandbox.reconfigure`).
+
+    ``assign``: ``none`` (every vehicle keeps its slot) or ``hungarian``;
+    ``close_gap``: whether the slots are the formation's first ones (one per healthy
+    vehicle) rather than all but the failed vehicles' slots.
+    """
+
+    assign: str = "none"
+    close_gap: bool = False
+
+
 #: Set while the loader constructs a scenario (which it has just validated).
 _LOADER_BUILDS: ContextVar[bool] = ContextVar("loader_builds", default=False)
 
@@ -303,6 +316,10 @@ class Scenario:
     detection: DetectionSpec = DetectionSpec()
     #: The ``safety:`` section (filter ``none`` by default).
     safety: SafetySpec = SafetySpec()
+    #: The ``reconfigure:`` section (default: every vehicle keeps its slot).
+    reconfigure: ReconfigureSpec = ReconfigureSpec()
+    #: The ``on_leader_failure:`` key: keep, virtual or elect.
+    on_leader_failure: str = "keep"
 
     def __post_init__(self) -> None:
         """Validate a scenario not made by the loader (the constructor, ``replace``).
@@ -436,6 +453,10 @@ class Scenario:
         if self.safety != SafetySpec():
             doc["safety"] = {"filter": self.safety.filter}
             doc["safety"].update(_plain(self.safety.params, skip_none=True))
+        if self.reconfigure != ReconfigureSpec():
+            doc["reconfigure"] = _plain(self.reconfigure)
+        if self.on_leader_failure != "keep":
+            doc["on_leader_failure"] = self.on_leader_failure
         if self.expect is not None:
             doc["expect"] = self.expect.to_dict()
         return doc
