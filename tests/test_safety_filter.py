@@ -170,6 +170,21 @@ def test_filter_none_is_the_run_without_the_section() -> None:
     assert "safety" not in load_scenario(HEAD_ON, overrides=doc_sets).to_dict()
 
 
+def test_the_filtered_run_is_deterministic_and_works_with_sensing() -> None:
+    sets = ["duration=3", "recovery.strategy=none", "safety.filter=cbf"]
+    a, ma = run(HEAD_ON, *sets)
+    b, mb = run(HEAD_ON, *sets)
+    np.testing.assert_array_equal(a.pose, b.pose)
+    np.testing.assert_array_equal(a.cmd, b.cmd)
+    assert ma["safety"] == mb["safety"]
+    # With a noisy, delayed broadcast each vehicle filters against what it receives.
+    noisy = [*sets, "sensing.position_noise=0.01", "sensing.delay=0.02"]
+    r, m = run(HEAD_ON, *noisy)
+    assert m["collisions"]["total"] == 0
+    assert m["min_distance"] >= D + 0.02
+    assert not np.array_equal(r.cmd, a.cmd)
+
+
 def test_the_section_round_trips_through_to_dict() -> None:
     sc = load_scenario(HEAD_ON, overrides=["safety={filter: cbf, gamma: 3.0}"])
     doc = sc.to_dict()
