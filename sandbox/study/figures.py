@@ -1,14 +1,16 @@
 """Figures of a sweep (matplotlib, Agg): rates against a varied path, heatmaps over two.
 
 - ``rates_<x>.png``: left, the rate of runs with a healthy collision, with its Wilson
-  95 % interval; right, the worst healthy settling time (median, and the quartiles as
-  a band) of the settled runs; both against the varied path ``x``, one line per value
-  of the other varied paths;
+  95 % interval; middle, the rate of runs not settled by the end, likewise; right, the
+  worst healthy settling time (median, and the quartiles as a band) of the settled
+  runs; all against the varied path ``x``, one line per value of the other varied
+  paths;
 - ``heatmap_<x>_<y>.png`` (two or more varied paths): the collision rate and the
   unsettled rate over ``x`` and ``y``, one pair of panels per value of the other paths.
 
 The zipped paths vary together, so they are one axis of the figures, named by their
-paths joined with `` & `` (its values likewise); ``--by`` any of them selects it.
+paths joined with `` & `` (its values likewise), unless ``--by`` names them: a path
+named by ``--by`` is an axis of its own.
 """
 
 from __future__ import annotations
@@ -40,6 +42,11 @@ def _numeric(values: list[str]) -> list[float] | None:
 
 def _slug(path: str) -> str:
     return re.sub(r"[^A-Za-z0-9]+", "_", path).strip("_")
+
+
+def _tick(value: str) -> str:
+    """A tick label: the values of zipped paths one above the other."""
+    return value.replace(AXIS_JOIN, "\n")
 
 
 def _order(values: list[str]) -> list[str]:
@@ -74,15 +81,20 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
         raise SweepError(f"{root}: not a sweep directory ({exc})") from None
     if not axes:
         raise SweepError(f"{root}: the sweep varies no path: nothing to plot against")
-    named = {AXIS_JOIN.join(a): a for a in axes}
-    axis_of = {p: name for name, a in named.items() for p in a}
-    paths = list(named)
-    chosen = []
-    for p in by or paths:
-        if p not in axis_of and p not in named:
+    every = [p for a in axes for p in a]
+    for p in by or []:
+        if p not in every:
             raise SweepError(f"--by {p}: not a varied path of {root}")
-        chosen.append(axis_of.get(p, p))
-    by = list(dict.fromkeys(chosen))
+    # The paths named by --by are axes of their own; of the others, the zipped ones
+    # vary together and make one axis.
+    chosen = list(dict.fromkeys(by or []))
+    named = {p: (p,) for p in chosen}
+    for a in axes:
+        left = tuple(p for p in a if p not in named)
+        if left:
+            named[AXIS_JOIN.join(left)] = left
+    paths = list(named)
+    by = chosen or paths[:1]
     rows = [
         {**r, **{n: AXIS_JOIN.join(r[p] for p in a) for n, a in named.items()}}
         for r in rows
@@ -99,7 +111,9 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
     xpos = xnum if xnum is not None else list(range(len(xs)))
     combos = list(dict.fromkeys(tuple(r[p] for p in others) for r in rows))
 
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    fig, (ax1, ax3, ax2) = plt.subplots(
+        1, 3, figsize=(15, 4.4), constrained_layout=True
+    )
     for k, combo in enumerate(combos):
         label = ", ".join(f"{p}={v}" for p, v in zip(others, combo, strict=True))
         color = f"C{k % 10}"
@@ -108,18 +122,19 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
         if not pts:
             continue
         px = np.array([p for p, _ in pts], dtype=float)
-        rate = np.array([s["collision_rate"] for _, s in pts])
-        lo = np.array([s["collision_low"] for _, s in pts])
-        hi = np.array([s["collision_high"] for _, s in pts])
-        ax1.errorbar(
-            px,
-            100 * rate,
-            yerr=100 * np.clip(np.vstack((rate - lo, hi - rate)), 0, None),
-            marker="o",
-            capsize=3,
-            color=color,
-            label=label or None,
-        )
+        for ax, key in ((ax1, "collision"), (ax3, "unsettled")):
+            rate = np.array([s[f"{key}_rate"] for _, s in pts])
+            lo = np.array([s[f"{key}_low"] for _, s in pts])
+            hi = np.array([s[f"{key}_high"] for _, s in pts])
+            ax.errorbar(
+                px,
+                100 * rate,
+                yerr=100 * np.clip(np.vstack((rate - lo, hi - rate)), 0, None),
+                marker="o",
+                capsize=3,
+                color=color,
+                label=label or None,
+            )
         med = np.array([s["settling_median"] for _, s in pts])
         q1 = np.array([s["settling_q1"] for _, s in pts])
         q3 = np.array([s["settling_q3"] for _, s in pts])
@@ -133,17 +148,23 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
         fontsize=9,
     )
     ax1.set_ylabel("collision rate [%]")
-    ax1.set_ylim(-2, 102)
+    ax3.set_title(
+        f"runs not settled by the end (Wilson 95 %; {each} runs per point)",
+        fontsize=9,
+    )
+    ax3.set_ylabel("unsettled rate [%]")
+    for ax in (ax1, ax3):
+        ax.set_ylim(-2, 102)
     ax2.set_title(
         "worst healthy settling time of the settled runs (median, quartiles)",
         fontsize=9,
     )
     ax2.set_ylabel("settling time [s]")
-    for ax in (ax1, ax2):
+    for ax in (ax1, ax3, ax2):
         ax.set_xlabel(x)
         ax.grid(alpha=0.3)
         if xnum is None:
-            ax.set_xticks(xpos, xs)
+            ax.set_xticks(xpos, [_tick(v) for v in xs], fontsize=7)
         if combos != [()]:
             ax.legend(fontsize=7)
     path = out / f"rates_{_slug(x)}.png"
@@ -195,8 +216,8 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
                             color="white" if v < 60 else "black",
                             fontsize=8,
                         )
-                ax.set_xticks(range(len(xs)), xs, fontsize=7)
-                ax.set_yticks(range(len(ys)), ys, fontsize=7)
+                ax.set_xticks(range(len(xs)), [_tick(v) for v in xs], fontsize=7)
+                ax.set_yticks(range(len(ys)), [_tick(v) for v in ys], fontsize=7)
                 ax.set_xlabel(x)
                 ax.set_ylabel(y)
                 extra = ", ".join(f"{p}={v}" for p, v in zip(more, combo, strict=True))
