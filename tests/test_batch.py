@@ -133,6 +133,9 @@ def test_what_the_batch_does_not_implement_runs_alone(tmp_path):
     cart = {"type": "commands", "schedule": [[0.0, 0.5, 0.0]]}
     driven = sc.with_overrides(f"vehicles[2].drive={json.dumps(cart)}")
     assert batch_reason(Simulation(driven)) == "command schedules"
+    for key in ("safety.filter=cbf", "detection.method=residual"):
+        reason = batch_reason(Simulation(sc.with_overrides(key)))
+        assert reason is not None and key.split(".")[0] in reason
     # The engine runs those alone, with the rows of single runs.
     base = write_yaml(tmp_path, {**formup_doc(), "duration": 1.0}, "base.yaml")
     doc = {**formup_doc(), "duration": 1.0}
@@ -159,7 +162,8 @@ def test_a_stopped_batch_returns_nothing():
     assert Batch([Simulation(sc), Simulation(sc)]).run(should_stop=stop) is None
     jobs = [("a", ({"duration": 1}, "x.yaml", []))]
     assert engine.chunks(jobs * 100, 1) == [jobs * 25] * 4
-    assert [len(c) for c in engine.chunks(jobs * 300, 2)] == [38] * 7 + [34]
+    assert [len(c) for c in engine.chunks(jobs * 300, 2)] == [64] * 4 + [44]
+    assert [len(c) for c in engine.chunks(jobs * 100, 2)] == [25] * 4
 
 
 def test_stacked_motor_arrays_stay_the_worlds_own():

@@ -17,9 +17,10 @@ computed exactly as alone), neighbour pairs never cross worlds and are summed in
 single run's order, each world keeps its own law memory (backward differences stack
 elementwise), failure schedule and contact episodes, and a world that diverges stops
 alone. What the batch does not implement is refused by :func:`batch_reason` and runs
-on the single-run path: a plug-in law or strategy, sensing noise, open-loop command
-schedules, more than :data:`MAX_VEHICLES` vehicles, a record spilled to disk, and any
-scenario key this module does not know (a newer section set to a non-default value).
+on the single-run path: a plug-in law or strategy, sensing noise, a safety filter, a
+failure detector, open-loop command schedules, more than :data:`MAX_VEHICLES`
+vehicles, a record spilled to disk, and any scenario key this module does not know (a
+newer section set to a non-default value).
 """
 
 from __future__ import annotations
@@ -119,6 +120,10 @@ def batch_reason(sim: Simulation) -> str | None:
             return f"the {f.name!r} section"
     if sim.broadcast is not None:
         return "sensing"
+    if getattr(sim, "_filter", None) is not None:
+        return "the safety filter"
+    if getattr(sim, "detection", None) is not None:
+        return "detection"
     if sc.plugins:
         return "plug-ins"
     if sim.fleet.commanded.any():

@@ -30,9 +30,10 @@ FAILED_STATUSES = ("diverged", STATUS_INVALID, STATUS_ERROR)
 #: Most runs stepped together in one batch of worlds (memory: about 0.4 MB per
 #: run of three vehicles and 1,200 samples).
 BATCH_WORLDS = 64
-#: A sweep is cut into at least this many groups per process, of at least
-#: :data:`MIN_WORLDS` runs each.
+#: A sweep is cut into at least this many groups in-process, and per worker of a
+#: pool, of at least :data:`MIN_WORLDS` runs each.
 MIN_GROUPS = 4
+MIN_GROUPS_PER_WORKER = 2
 MIN_WORLDS = 8
 #: How long to wait for a Dask scheduler to answer.
 CONNECT_TIMEOUT = "5s"
@@ -222,11 +223,13 @@ def chunks(jobs: list[Job], workers: int, size: int | None = None) -> list[list[
     """The tasks in groups of at most ``size`` (default :data:`BATCH_WORLDS`).
 
     Groups are smaller where needed so that a sweep comes in at least
-    :data:`MIN_GROUPS` groups per process (of at least :data:`MIN_WORLDS` runs): an
-    interrupted sweep keeps the groups finished so far, and progress moves.
+    :data:`MIN_GROUPS` groups in-process (an interrupted sweep keeps the groups
+    finished so far, and progress moves) or :data:`MIN_GROUPS_PER_WORKER` per worker
+    of a pool, of at least :data:`MIN_WORLDS` runs each.
     """
     size = BATCH_WORLDS if size is None else size
-    share = -(-len(jobs) // (MIN_GROUPS * max(1, workers)))
+    groups = MIN_GROUPS if workers <= 1 else MIN_GROUPS_PER_WORKER * workers
+    share = -(-len(jobs) // groups)
     size = max(1, min(size, max(MIN_WORLDS, share)))
     return [jobs[k : k + size] for k in range(0, len(jobs), size)]
 
