@@ -84,6 +84,31 @@ def test_the_column_closes_to_four_slots_within_10_s_without_contact() -> None:
     assert np.isnan(run.slot[-1, run.names.index("red")]).all()  # no slot any more
 
 
+def test_the_column_closes_when_the_detector_finds_the_stop_under_noise() -> None:
+    # what the platoon believes, not the truth: the event is the detection
+    run, m = result(
+        "column_close",
+        "detection.method=residual",
+        "sensing.position_noise=0.01",
+        "sensing.heading_noise=0.005",
+    )
+    (found,) = m["detections"]
+    assert found["vehicle"] == "red" and 3.0 < found["t"] < 3.5
+    (event,) = m["reassignments"]
+    assert event["t"] == found["t"]
+    assert event["assignment"] == {
+        "leader": 0,
+        "red": None,
+        "green": 1,
+        "orange": 2,
+        "purple": 3,
+    }
+    assert m["collisions"]["total"] == 0
+    late = window(run, 13.0)
+    for name in ("green", "orange", "purple"):
+        assert slot_error(run, name)[late].max() < 0.1, name
+
+
 @pytest.mark.parametrize(("mode", "heir"), [("virtual", None), ("elect", "red")])
 def test_after_a_leader_crash_the_formation_settles_again(mode, heir) -> None:
     run, m = result(f"leader_crash_{mode}")
