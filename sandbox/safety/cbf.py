@@ -35,11 +35,14 @@ Barriers, with ``gamma`` [1/s] and ``margin`` [m]:
   of ``p`` to the surface and ``n`` its unit normal there: ``n . w >= -gamma h``.
 
 Input bounds are hard: ``|v1| <= v1_max`` (``0 <= v1`` with ``reverse: false``),
-``|v1 - v1(t_k-1)| <= max_accel h`` and ``|v2| <= v2_max``. Each vehicle then solves
-``min |w - w_nom|^2`` over those half-planes (:mod:`sandbox.safety.qp`, exact); when
-they have no common point the barrier conditions are relaxed by the least slack
-(counted in ``metrics.json`` as ``safety.infeasible_steps``). ``projection: speed``
-keeps the controller's ``v2`` and changes ``v1`` only.
+``|v1 - v1(t_k-1)| <= max_accel h`` and ``|v2| <= v2_max``; where a vehicle has no
+``v2_max`` the sideways speed of its look-ahead point ``l |v2|`` is bounded by its
+``v1_max`` instead (an automatic ``range`` needs every ``v1_max``; the loader says so).
+Each vehicle then solves ``min |w - w_nom|^2`` over those half-planes
+(:mod:`sandbox.safety.qp`, exact); when they have no common point the barrier
+conditions are relaxed by the least slack (counted in ``metrics.json`` as
+``safety.infeasible_steps``). ``projection: speed`` keeps the controller's ``v2`` and
+changes ``v1`` only; ``pass_right`` adds the right-hand rule out of stalls.
 
 Only vehicles driven by the controller are filtered (not the open-loop ones, not those
 believed failed); the filter acts before the step API's command overrides and the
