@@ -185,12 +185,14 @@ def ideal_settling(path: str, overrides: Sequence[str]) -> float | None:
     """Latest settling time [s] of a scenario without recovery on the ideal kinematics.
 
     The baseline of :attr:`Row.extra_settle`: the same vehicles, controller and
-    slots, moving by eq. (1) exactly, through each other and the obstacles.
+    slots, moving by eq. (1) exactly, through each other and the obstacles, with no
+    safety filter either.
     """
     from sandbox.ideal import IdealKinematics
     from sandbox.simulation import Simulation
 
-    scenario = load_scenario(path, overrides=[*overrides, "recovery.strategy=none"])
+    off = [*overrides, "recovery.strategy=none", "safety.filter=none"]
+    scenario = load_scenario(path, overrides=off)
     run = Simulation(scenario, world=IdealKinematics(scenario)).run()
     return latest_settling(run, compute_metrics(run))
 
