@@ -148,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         zip(SAVED, (hours, theory, measured, mean_delay, max_delay), strict=True)
     )
     numbers["lambda"] = list(LAMBDAS)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(
         json.dumps(numbers, indent=1) + "\n", encoding="utf-8"
     )

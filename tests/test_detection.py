@@ -61,7 +61,9 @@ def test_no_more_healthy_collisions_than_under_the_oracle(name, vehicle, kind):
 def test_a_runaway_is_told_from_a_stuck_steering_by_its_speed():
     # In its first window green's runaway looks like a stuck steering (its speed is
     # near what its controller asks for); within `isolation` its speed departs too.
-    _, m = result("detect_uncontrolled_into_leader", "detection.isolation=0")
+    _, m = result(
+        "detect_uncontrolled_into_leader", "detection.isolation=0", duration=4
+    )
     assert m["detections"][0]["kind"] == "stuck_steering"
     assert result("detect_uncontrolled_into_leader")[1]["detections"][0]["kind"] == (
         "uncontrolled"
@@ -142,3 +144,18 @@ def test_the_llr_is_a_likelihood_ratio():
 def test_bad_detection_values_name_the_field(sets, field):
     with pytest.raises(ScenarioError, match=field.replace(".", r"\.")):
         load_scenario(FAILURES / "follower_stop.yaml", overrides=sets)
+
+
+@pytest.mark.parametrize(
+    ("sets", "least"),
+    [(["sensing.delay=0.05"], 0.05), (["sensing.loss=0.2"], 0.0)],
+)
+def test_delayed_and_lost_packets(sets, least):
+    # The commands travel with the poses: a delayed broadcast is compared with the
+    # commands of its own time (the detection comes the delay later); a lost packet
+    # stretches the window to the next one received.
+    _, m = run_scenario(FAILURES / "detect_follower_stop.yaml", *sets, duration=4.5)
+    (failure,) = m["detection"]["failures"]
+    assert failure["detected_kind"] == "stop"
+    assert least + 0.05 <= failure["delay"] <= least + 0.25
+    assert m["detection"]["false_alarms"] == 0
