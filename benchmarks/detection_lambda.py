@@ -189,9 +189,14 @@ def _figure(out, hours, theory, measured, mean_delay, max_delay) -> None:
         label="mean delay, rate from theory (none seen)",
     )
     left.plot(x, max_delay, "s--", color="tab:orange", ms=5, label="max delay")
-    for lv, xv, yv in zip(lam, x, mean_delay, strict=True):
+    for k, (lv, xv, yv) in enumerate(zip(lam, x, mean_delay, strict=True)):
+        # alternate above and below: neighbouring points sit close on the log axis
         left.annotate(
-            f"{lv:g}", (xv, yv), textcoords="offset points", xytext=(4, 4), fontsize=8
+            f"{lv:g}",
+            (xv, yv),
+            textcoords="offset points",
+            xytext=(3, 5 if k % 2 else -12),
+            fontsize=8,
         )
     left.axvline(1.0, color="tab:red", lw=0.8, ls="--")
     left.set_xscale("log")
