@@ -137,8 +137,8 @@ def test_what_the_batch_does_not_implement_runs_alone(tmp_path):
         reason = batch_reason(Simulation(sc.with_overrides(key)))
         assert reason is not None and key.split(".")[0] in reason
     # The engine runs those alone, with the rows of single runs.
-    base = write_yaml(tmp_path, {**formup_doc(), "duration": 1.0}, "base.yaml")
-    doc = {**formup_doc(), "duration": 1.0}
+    base = write_yaml(tmp_path, {**formup_doc(), "duration": 1.5}, "base.yaml")
+    doc = {**formup_doc(), "duration": 1.5}
     jobs = [
         ("a", (doc, str(base), ["seed=1"])),
         ("b", (doc, str(base), ["seed=2", "sensing.position_noise=0.01"])),
@@ -148,7 +148,7 @@ def test_what_the_batch_does_not_implement_runs_alone(tmp_path):
     got = dict(engine.run_tasks(jobs))
     for run_id, job in jobs:
         assert json.dumps(got[run_id]) == json.dumps(engine.run_task(*job))
-    assert got["d"]["row"]["status"] == "invalid"
+    assert [got[k]["row"]["status"] for k in "abcd"] == ["ok", "ok", "ok", "invalid"]
 
 
 def test_a_stopped_batch_returns_nothing():
@@ -172,3 +172,18 @@ def test_stacked_motor_arrays_stay_the_worlds_own():
     batch = Batch(sims)
     sims[1].world.immobilize(0)
     assert not batch._tracking[3] and batch._tracking[0]
+
+
+def test_a_batch_that_raises_gives_the_single_runs(tmp_path, monkeypatch):
+    base = write_yaml(tmp_path, {**formup_doc(), "duration": 1.5}, "base.yaml")
+    doc = {**formup_doc(), "duration": 1.5}
+    jobs = [(str(k), (doc, str(base), [f"seed={k}"])) for k in (1, 2, 3)]
+
+    def broken(self, should_stop=None):
+        raise RuntimeError("a bug in the batch")
+
+    monkeypatch.setattr(batching.Batch, "run", broken)
+    got = dict(engine.run_tasks(jobs))
+    for run_id, job in jobs:
+        assert got[run_id]["row"]["status"] == "ok"
+        assert json.dumps(got[run_id]) == json.dumps(engine.run_task(*job))
