@@ -268,3 +268,15 @@ def test_a_handover_without_a_leader_warns_that_it_has_no_effect() -> None:
     doc = column(on_leader_failure="elect", formation={"law": "virtual"})
     sc = load_scenario(doc)
     assert any("on_leader_failure" in w and "no effect" in w for w in sc.warnings)
+
+
+def test_a_sweep_batch_leaves_reconfiguration_to_the_single_run_path() -> None:
+    # the batch engine does not implement reconfiguration: it must refuse it, never
+    # run such a scenario with every slot kept
+    from sandbox.study.batch import batch_reason
+
+    sim = Simulation(load_scenario(FAILURES / "column_close.yaml"))
+    assert batch_reason(sim) == "the 'reconfigure' section"
+    sim = Simulation(load_scenario(column(on_leader_failure="elect")))
+    assert batch_reason(sim) == "the 'on_leader_failure' section"
+    assert batch_reason(Simulation(load_scenario(column()))) is None
