@@ -80,7 +80,13 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             print("interrupted", file=sys.stderr)
             status = EXIT_INTERRUPTED
-        if signals.lost and status == EXIT_OK:  # an interrupt Python could not raise
+        except Exception:
+            if not signals.received:
+                raise
+            status = None  # an error the interrupt caused on its way out
+        if status != EXIT_INTERRUPTED and (
+            signals.received or (signals.lost and status == EXIT_OK)
+        ):
             print("interrupted", file=sys.stderr)
             status = EXIT_INTERRUPTED
     forget_caught_interrupt()

@@ -175,19 +175,28 @@ class command_signals:  # noqa: N801 - used as a context manager, like a functio
     An interrupt that lands where Python cannot raise it (a ``__del__`` method, a
     weakref callback) would otherwise be printed as "Exception ignored" and lost; it
     is recorded instead (:attr:`lost`), and ``main`` then exits with status 130 too.
+    So it does when the interrupt, on its way out, turned into another error (a module
+    left half imported raises ``ImportError`` at its next import): whatever a command
+    ends with once a signal has arrived (:attr:`received`) is the interrupt.
     """
 
     def __enter__(self) -> command_signals:
         self._old: dict[int, Any] = {}
         self.lost = False
+        #: Whether SIGINT or SIGTERM arrived while the command ran.
+        self.received = False
         for sig in (signal.SIGINT, signal.SIGTERM):
             try:
-                self._old[sig] = signal.signal(sig, _interrupt)
+                self._old[sig] = signal.signal(sig, self._interrupt)
             except (ValueError, OSError):  # not the main thread
                 pass
         self._old_hook = sys.unraisablehook
         sys.unraisablehook = self._unraisable
         return self
+
+    def _interrupt(self, signum: int, frame: FrameType | None) -> None:
+        self.received = True
+        raise KeyboardInterrupt
 
     def _unraisable(self, info: Any) -> None:
         if isinstance(info.exc_value, KeyboardInterrupt):
@@ -199,10 +208,6 @@ class command_signals:  # noqa: N801 - used as a context manager, like a functio
         sys.unraisablehook = self._old_hook
         for sig, old in self._old.items():
             signal.signal(sig, old)
-
-
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt
 
 
 def forget_caught_interrupt() -> None:
