@@ -159,3 +159,27 @@ def test_delayed_and_lost_packets(sets, least):
     assert failure["detected_kind"] == "stop"
     assert least + 0.05 <= failure["delay"] <= least + 0.25
     assert m["detection"]["false_alarms"] == 0
+
+
+@pytest.mark.parametrize(
+    ("name", "vehicle"),
+    [
+        ("column_close", "red"),
+        ("leader_crash_elect", "leader"),
+        ("leader_crash_virtual", "leader"),
+    ],
+)
+def test_reconfiguration_reacts_to_the_detection(name, vehicle):
+    # The reconfiguration scenarios under 1 cm / 0.005 rad noise: the failure is
+    # detected within 0.5 s, the platoon re-forms as under the oracle, with no more
+    # collisions between healthy vehicles; a leader change waits for the detection.
+    noise = ("sensing.position_noise=0.01", "sensing.heading_noise=0.005")
+    _, m = result(name, *noise, "detection.method=residual")
+    _, o = result(name, *noise, ORACLE)
+    (failure,) = m["detection"]["failures"]
+    assert failure["vehicle"] == vehicle and failure["delay"] <= 0.5
+    assert m["detection"]["false_alarms"] == 0
+    assert m["collisions"]["healthy"] <= o["collisions"]["healthy"]
+    assert m["converged"] and o["converged"]
+    for change in m.get("leader_changes", []):
+        assert change["t"] == pytest.approx(failure["detected_at"])
