@@ -207,7 +207,7 @@ def profile_phases(
     for name in ("extension_rate", "advance_extension", "flat_inputs"):
         timers.wrap(simulation, name, "controller, eqs. (5)-(6)")
     timers.wrap(FailureSchedule, "apply", "failures")
-    timers.wrap(simulation, "_diverged", "divergence check")
+    timers.wrap(simulation, "diverged", "divergence check")
     every = scenario.record_every
     timers.wrap(Recorder, "append", f"recording (every {every} steps)")
     sim = Simulation(scenario)

@@ -36,6 +36,7 @@ from sandbox.control.flatness import (
 )
 from sandbox.control.formation import BackwardDifference
 from sandbox.detection import Detection
+from sandbox.divergence import diverged
 from sandbox.failures import FailureSchedule
 from sandbox.metrics import LoopMetrics
 from sandbox.observation import Observation, Overrides, override_rows
@@ -60,16 +61,11 @@ from sandbox.run import (
     Recorder,
     Run,
 )
+from sandbox.run_info import run_description
 from sandbox.scenario import Scenario
 from sandbox.sensing import make_broadcast
 from sandbox.state import Fleet
 from sandbox.world import World
-
-#: A state beyond these bounds is reported as ``diverged`` [m], [m/s].
-DIVERGED_POSITION = 1e6
-DIVERGED_SPEED = 1e3
-#: Samples of the reference path kept for drawing.
-REFERENCE_PATH_SAMPLES = 400
 
 
 class Simulation:
@@ -191,7 +187,7 @@ class Simulation:
         self.detection = Detection.make(scenario, self.names)
         self.k = 0
         self.status = STATUS_OK
-        self.info = self._info()
+        self.info = run_description(scenario, self.reference)
         self.failed_at: dict[str, float] = {}
         self.recorder = Recorder(self.steps // scenario.record_every + 1, n)
         self.tally = LoopMetrics(n, self.h)  # effort, closest approach, motor check
@@ -265,47 +261,6 @@ class Simulation:
         point = ref[0] if ref is not None else np.full(2, np.nan)
         return slot, v_ref, a_ref, point
 
-    def _info(self) -> dict:
-        sc = self.scenario
-        obstacles = []
-        for o in sc.obstacles:
-            if o.type == "circle":
-                obstacles.append(
-                    {
-                        "type": "circle",
-                        "center": list(o.center),
-                        "radius": o.radius,
-                        "name": o.name,
-                    }
-                )
-            else:
-                obstacles.append(
-                    {"type": "polygon", "points": o.outline(), "name": o.name}
-                )
-        info = {
-            "scenario_name": sc.name,
-            "law": sc.formation.law if sc.formation else None,
-            "recovery": {
-                "strategy": sc.recovery.strategy,
-                "beta": sc.recovery.beta,
-                "R": sc.recovery.R,
-                "r": sc.recovery.r,
-                "leader_avoids": sc.recovery.leader_avoids,
-                "target_derivatives": sc.recovery.target_derivatives,
-            },
-            "obstacles": obstacles,
-            "failures": [
-                {"vehicle": f.vehicle, "kind": f.kind, "at": f.at, "until": f.until}
-                for f in sc.failures
-            ],
-            "dt": sc.dt,
-            "record_every": sc.record_every,
-        }
-        if self.reference is not None:
-            times = np.linspace(0.0, sc.duration, REFERENCE_PATH_SAMPLES)
-            info["reference_path"] = self.reference.evaluate(times)[0].round(6).tolist()
-        return info
-
     # ------------------------------------------------------------------ stages
     def _sense(self) -> bool:
         """Read the fleet state from the physics at ``t_k``; False if it diverged.
@@ -316,7 +271,7 @@ class Simulation:
         fleet, t = self.fleet, self.k * self.h
         state = self.world.read_state()
         fleet.pos, fleet.theta, fleet.vel = state.pos, state.theta, state.vel
-        bad = _diverged(fleet)
+        bad = diverged(fleet)
         if bad is None:
             if self.broadcast is not None:
                 self.seen = self.broadcast.update(fleet.pos, fleet.theta)
@@ -785,34 +740,6 @@ def _uniform(values: np.ndarray) -> float | np.ndarray:
     """``values[0]`` as a scalar when every entry equals it, else ``values`` itself."""
     first = values[0]
     return float(first) if np.all(values == first) else values
-
-
-def _diverged(fleet: Fleet) -> tuple[int, str] | None:
-    """First vehicle whose state is non-finite or beyond the bounds, with the reason."""
-    # Fast path, one reduction per array: clearly healthy (NaN fails every comparison).
-    vel, chi = fleet.vel, fleet.chi
-    speed2 = (0.999 * DIVERGED_SPEED) ** 2
-    if (
-        np.max(np.abs(fleet.pos)) <= DIVERGED_POSITION
-        and np.max(np.abs(fleet.theta)) < np.inf
-        and np.max(vel[:, 0] * vel[:, 0] + vel[:, 1] * vel[:, 1]) <= speed2
-        and np.max(chi[:, 0] * chi[:, 0] + chi[:, 1] * chi[:, 1]) <= speed2
-    ):
-        return None
-    finite = (
-        np.isfinite(fleet.pos).all(axis=1)
-        & np.isfinite(fleet.theta)
-        & np.isfinite(fleet.chi).all(axis=1)
-    )
-    if not finite.all():
-        return int(np.flatnonzero(~finite)[0]), "non-finite state"
-    far = np.abs(fleet.pos).max(axis=1) > DIVERGED_POSITION
-    fast = np.hypot(fleet.vel[:, 0], fleet.vel[:, 1]) > DIVERGED_SPEED
-    bad = far | fast | (np.hypot(fleet.chi[:, 0], fleet.chi[:, 1]) > DIVERGED_SPEED)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        return i, "position beyond 1e6 m" if far[i] else "speed beyond 1e3 m/s"
-    return None
 
 
 def simulate(scenario: Scenario, **kwargs) -> Run:

@@ -41,6 +41,7 @@ from sandbox.control.formation import (
     RotatingFormation,
     VirtualLeaderFormation,
 )
+from sandbox.divergence import diverged
 from sandbox.metrics import MOTOR_ABS_TOL, MOTOR_REL_TOL
 from sandbox.plugins import FailureContext, LawContext, StrategyContext, make_law
 from sandbox.recovery import BRUTE_FORCE_MAX, NeighbourList
@@ -54,7 +55,7 @@ from sandbox.run import (
     Run,
 )
 from sandbox.scenario import Scenario
-from sandbox.simulation import Simulation, _diverged
+from sandbox.simulation import Simulation
 from sandbox.world import World, motor_limits
 
 #: The laws the batch evaluates (the built-in classes; a plug-in runs alone).
@@ -394,12 +395,12 @@ class Batch:
         rows = rows.reshape(self.N, 6)
         self.pos, self.theta = rows[:, 0:2].copy(), rows[:, 2].copy()
         self.vel = rows[:, 3:5].copy()
-        if _diverged(self) is None:
+        if diverged(self) is None:
             return
         t = self.k * self.h
         for w in np.flatnonzero(self.live):
             part = _WorldView(self, w)
-            bad = _diverged(part)
+            bad = diverged(part)
             if bad is None:
                 continue
             sim = self.sims[w]
@@ -715,7 +716,7 @@ class Batch:
 
 
 class _WorldView:
-    """One world's rows of the stacked state, for ``simulation._diverged``."""
+    """One world's rows of the stacked state, for ``divergence.diverged``."""
 
     def __init__(self, batch: Batch, w: int) -> None:
         rows = slice(w * batch.n, (w + 1) * batch.n)
