@@ -11,8 +11,9 @@ from sandbox import compute_metrics, load_scenario
 from sandbox.cli import main
 from sandbox.simulation import Simulation
 from sandbox.study import batch as batching
-from sandbox.study import engine
-from sandbox.study.batch import Batch, batch_key, batch_reason
+from sandbox.study import batchable, engine
+from sandbox.study.batch import Batch
+from sandbox.study.batchable import batch_key, batch_reason
 
 FIELDS = ("t", "pose", "cmd", "chi", "slot", "target", "mode", "failed", "reference")
 POSE = {"uniform": [[-2.5, -2.5, -3.14159], [2.5, 2.5, 3.14159]]}
@@ -61,7 +62,7 @@ def test_a_batched_sweep_stores_the_bytes_of_single_runs(tmp_path, monkeypatch):
     monkeypatch.setattr(batching.Batch, "__init__", counted)
     assert main([*cmd, "--out", str(tmp_path / "batched")]) == 0
     assert batches == [8]  # one batch: beta is a value, not structure
-    monkeypatch.setattr(batching, "batch_reason", lambda sim: "forced alone")
+    monkeypatch.setattr(batchable, "batch_reason", lambda sim: "forced alone")
     assert main([*cmd, "--out", str(tmp_path / "alone")]) == 0
     assert batches == [8]
     files = sorted(p.name for p in (tmp_path / "alone" / "runs").glob("*.json"))

@@ -273,7 +273,7 @@ def test_a_handover_without_a_leader_warns_that_it_has_no_effect() -> None:
 def test_a_sweep_batch_leaves_reconfiguration_to_the_single_run_path() -> None:
     # the batch engine does not implement reconfiguration: it must refuse it, never
     # run such a scenario with every slot kept
-    from sandbox.study.batch import batch_reason
+    from sandbox.study.batchable import batch_reason
 
     sim = Simulation(load_scenario(FAILURES / "column_close.yaml"))
     assert batch_reason(sim) == "the 'reconfigure' section"

@@ -145,13 +145,14 @@ def run_tasks(
 ) -> list[tuple[str, dict[str, Any] | None]]:
     """Run a group of tasks in this process, as batches of independent worlds.
 
-    The tasks whose runs share their structure (:func:`sandbox.study.batch.batch_key`)
-    are stepped together (:class:`~sandbox.study.batch.Batch`, bit-identical to single
-    runs); the others, and every run of a batch that raised, run alone. Returns
-    ``(run id, result)`` for every task, the result None when ``should_stop`` stopped
-    it.
+    The tasks whose runs share their structure (the same
+    :func:`~sandbox.study.batchable.batch_key`) are stepped together
+    (:class:`~sandbox.study.batch.Batch`, bit-identical to single runs); the others,
+    and every run of a batch that raised, run alone. Returns ``(run id, result)`` for
+    every task, the result None when ``should_stop`` stopped it.
     """
-    from sandbox.study.batch import Batch, batch_key, batch_reason
+    from sandbox.study.batch import Batch
+    from sandbox.study.batchable import batch_key, batch_reason
 
     out: dict[str, dict[str, Any] | None] = {}
     groups: dict[str, list[tuple[str, Any]]] = {}
