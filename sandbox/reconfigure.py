@@ -58,7 +58,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sandbox.plugins import LawContext, get, make_law
+from sandbox.plugins import get, make_law
 
 if TYPE_CHECKING:
     from sandbox.simulation import Simulation
@@ -280,29 +280,9 @@ class Reconfiguration:
 
 
 def _law_context(sim: Simulation, t: float, offset: np.ndarray, memory: dict):
-    """What the law sees at ``t`` with ``offset``, as :meth:`Simulation._targets`."""
-    fleet, lead = sim.fleet, sim.leader
+    """What the law sees at ``t`` with ``offset`` and ``memory``."""
     ref = sim.reference.evaluate(t) if sim.reference is not None else None
-    if lead < 0:
-        leader_pos = leader_theta = None
-    elif sim.seen is None:
-        leader_pos, leader_theta = fleet.pos[lead], float(fleet.theta[lead])
-    else:  # the followers read the leader's broadcast pose
-        leader_pos, leader_theta = sim.seen[lead, :2], float(sim.seen[lead, 2])
-    return LawContext(
-        t=t,
-        dt=sim.h,
-        pos=fleet.pos,
-        theta=fleet.theta,
-        vel=fleet.vel,
-        offset=offset,
-        leader=lead,
-        leader_pos=leader_pos,
-        leader_theta=leader_theta,
-        reference=ref,
-        params=sim.law_params,
-        memory=memory,
-    )
+    return sim.law_context(t, ref, offset, memory)
 
 
 def _positions(sim: Simulation) -> np.ndarray:

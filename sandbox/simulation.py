@@ -220,33 +220,47 @@ class Simulation:
         v1[self._schedule_rows] = self._scheduled[:, 0]
         v2[self._schedule_rows] = self._scheduled[:, 1]
 
+    def law_context(
+        self,
+        t: float,
+        ref: tuple[np.ndarray, ...] | None,
+        offset: np.ndarray | None = None,
+        memory: dict | None = None,
+    ) -> LawContext:
+        """What the formation law sees at ``t``, the reference ``ref`` evaluated there.
+
+        The followers read the leader's broadcast pose (the truth without sensing).
+        ``offset`` and ``memory`` default to the fleet's offsets and the law's memory;
+        a reconfiguration passes others to try or re-seed the law.
+        """
+        fleet, lead, seen = self.fleet, self.leader, self.seen
+        if lead < 0:
+            leader_pos = leader_theta = None
+        elif seen is None:
+            leader_pos, leader_theta = fleet.pos[lead], float(fleet.theta[lead])
+        else:
+            leader_pos, leader_theta = seen[lead, :2], float(seen[lead, 2])
+        return LawContext(
+            t=t,
+            dt=self.h,
+            pos=fleet.pos,
+            theta=fleet.theta,
+            vel=fleet.vel,
+            offset=fleet.offset if offset is None else offset,
+            leader=lead,
+            leader_pos=leader_pos,
+            leader_theta=leader_theta,
+            reference=ref,
+            params=self.law_params,
+            memory=self.law_memory if memory is None else memory,
+        )
+
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
         """Slots, reference point, and the law's ``x_ref'``, ``x_ref''`` at ``t``."""
-        fleet, n = self.fleet, self.fleet.n
+        n = self.fleet.n
         ref = self.reference.evaluate(t) if self.reference is not None else None
         if self.law is not None:
-            lead, seen = self.leader, self.seen
-            if lead < 0:
-                leader_pos = leader_theta = None
-            elif seen is None:
-                leader_pos, leader_theta = fleet.pos[lead], float(fleet.theta[lead])
-            else:  # the followers read the leader's broadcast pose
-                leader_pos, leader_theta = seen[lead, :2], float(seen[lead, 2])
-            inputs = LawContext(
-                t=t,
-                dt=self.h,
-                pos=fleet.pos,
-                theta=fleet.theta,
-                vel=fleet.vel,
-                offset=fleet.offset,
-                leader=lead,
-                leader_pos=leader_pos,
-                leader_theta=leader_theta,
-                reference=ref,
-                params=self.law_params,
-                memory=self.law_memory,
-            )
-            triple = self.law.targets(inputs)
+            triple = self.law.targets(self.law_context(t, ref))
         else:
             triple = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
         tr, cmd = self._track_rows, self._commanded_rows
