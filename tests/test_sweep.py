@@ -80,6 +80,7 @@ def test_grid_zip_seeds_make_the_product_on_common_seeds(tmp_path, base, capsys)
         "converged",
         "settling_time",
         "effort",
+        "deadlocks",
     ]
     assert len(rows) == 2 * 2 * 3
     assert len({r["run_id"] for r in rows}) == 12
@@ -486,6 +487,27 @@ def test_zipped_paths_are_one_axis_of_the_figures(tmp_path, base):
     assert main(["sweep", "plot", str(out), "--by", "vehicles[2].offset"]) == 0
     assert (out / "figures" / "rates_vehicles_2_offset.png").is_file()
     assert (out / "figures" / "heatmap_vehicles_2_offset_recovery_beta.png").is_file()
+
+
+def test_deadlocks_are_a_column_and_a_rate(tmp_path, capsys):
+    swap = REPO / "scenarios" / "safety" / "head_on_swap.yaml"
+    out = tmp_path / "out"
+    argv = ["sweep", str(swap), "--set", "duration=6", "--seeds", "0:1"]
+    argv += ["--grid", "recovery.tangential=0,1", "--out", str(out)]
+    assert main(argv) == 0
+    rows = read_csv(out / "results.csv")
+    # measured: kappa 0 stalls nose to nose (one deadlock), kappa 1 passes
+    assert [(r["recovery.tangential"], r["deadlocks"]) for r in rows] == [
+        ("0", "1"),
+        ("1", "0"),
+    ]
+    capsys.readouterr()
+    assert main(["sweep", "table", str(out), "--format", "csv"]) == 0
+    table = list(csv.DictReader(capsys.readouterr().out.splitlines()))
+    assert [(t["deadlocked"], t["deadlocked_rate"]) for t in table] == [
+        ("1", "1.0"),
+        ("0", "0.0"),
+    ]
 
 
 def test_bundled_study_files_validate(capsys):

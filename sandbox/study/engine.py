@@ -74,6 +74,7 @@ def row_of(run: Any, metrics: dict[str, Any]) -> dict[str, Any]:
         "converged": metrics["converged"],
         "settling_time": worst_settling(run, metrics),
         "effort": sum(m["control_effort"] for m in metrics["vehicles"].values()),
+        "deadlocks": len(metrics.get("deadlocks", ())),
     }
 
 

@@ -42,6 +42,7 @@ MEASURED = (
     "converged",
     "settling_time",
     "effort",
+    "deadlocks",
 )
 FORMAT = 1
 
@@ -229,7 +230,7 @@ def _write_parquet(
     types = (
         [pa.string()] * (1 + n_paths)
         + [pa.int64(), pa.string(), pa.int64(), pa.int64(), pa.int64()]
-        + [pa.float64(), pa.bool_(), pa.float64(), pa.float64()]
+        + [pa.float64(), pa.bool_(), pa.float64(), pa.float64(), pa.int64()]
     )
     table = pa.table(
         {

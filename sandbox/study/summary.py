@@ -13,7 +13,9 @@ them, i.e. one group per grid point). Per group:
 - ``settling_median``, ``settling_q1``, ``settling_q3``: quartiles of the worst healthy
   settling time over the settled runs [s];
 - ``min_distance_min``: the smallest centre distance over the group's runs [m];
-  ``effort_median``: median total effort [m/s].
+  ``effort_median``: median total effort [m/s];
+- ``deadlocked``, ``deadlocked_rate``: the runs with at least one deadlock (see
+  :mod:`sandbox.deadlock`), and their share.
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ COLUMNS = (
     "settling_q3",
     "min_distance_min",
     "effort_median",
+    "deadlocked",
+    "deadlocked_rate",
 )
 MEASURED_STATUSES = ("ok", "diverged")
 
@@ -96,6 +100,8 @@ def summarize(rows: Sequence[dict[str, str]]) -> dict[str, Any]:
     n = len(measured)
     hits = sum(1 for r in measured if int(r["collisions.healthy"] or 0) > 0)
     unsettled = sum(1 for r in measured if r["converged"] != "true")
+    # Runs with a deadlock (stores written before the column existed count none).
+    stuck = sum(1 for r in measured if int(r.get("deadlocks") or 0) > 0)
     settle = np.array(
         [float(r["settling_time"]) for r in measured if r["settling_time"] != ""]
     )
@@ -121,6 +127,8 @@ def summarize(rows: Sequence[dict[str, str]]) -> dict[str, Any]:
         "settling_q3": float(q[2]),
         "min_distance_min": min(dmin) if dmin else math.nan,
         "effort_median": float(np.median(effort)) if effort else math.nan,
+        "deadlocked": stuck,
+        "deadlocked_rate": stuck / n if n else math.nan,
     }
 
 
