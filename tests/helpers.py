@@ -11,6 +11,7 @@ puts ``tests/`` on the import path through ``conftest.py``).
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,27 @@ from sandbox import Run, compute_metrics, load_scenario, simulate
 REPO = Path(__file__).resolve().parent.parent
 SCENARIOS = REPO / "scenarios"
 PAPER = SCENARIOS / "paper"
+
+#: Two vehicles driven open loop head-on at 1 m/s each from 2 m apart: contact when
+#: their centres are d = 0.5 m apart, at t = (2 - 0.5) / 2 = 0.75 s.
+HEADON: dict[str, Any] = {
+    "name": "headon",
+    "duration": 1.5,
+    "formation": {"law": "virtual"},
+    "reference": {"type": "point", "position": [0, 5]},
+    "vehicles": [
+        {
+            "name": "east",
+            "pose": [-1, 0, 0],
+            "drive": {"type": "commands", "schedule": [[0, 1.0, 0]]},
+        },
+        {
+            "name": "west",
+            "pose": [1, 0, math.pi],
+            "drive": {"type": "commands", "schedule": [[0, 1.0, 0]]},
+        },
+    ],
+}
 
 
 def write_yaml(

@@ -9,7 +9,7 @@ from functools import cache
 
 import jsonschema
 import pytest
-from helpers import PAPER
+from helpers import HEADON, PAPER
 
 from sandbox import compute_metrics, load_scenario, simulate
 from sandbox.errors import ScenarioError
@@ -21,26 +21,6 @@ from sandbox.expectations import (
 )
 from sandbox.schema import build_schema
 
-#: Two vehicles driven head-on at 1 m/s each from 2 m apart: contact when their
-#: centres are d = 0.5 m apart, at t = (2 - 0.5) / 2 = 0.75 s.
-HEADON = {
-    "name": "headon",
-    "duration": 1.5,
-    "formation": {"law": "virtual"},
-    "reference": {"type": "point", "position": [0, 5]},
-    "vehicles": [
-        {
-            "name": "east",
-            "pose": [-1, 0, 0],
-            "drive": {"type": "commands", "schedule": [[0, 1.0, 0]]},
-        },
-        {
-            "name": "west",
-            "pose": [1, 0, math.pi],
-            "drive": {"type": "commands", "schedule": [[0, 1.0, 0]]},
-        },
-    ],
-}
 FULL = {
     "status": "ok",
     "collisions": {"healthy": 0, "total": {"at_most": 3}, "vehicle_obstacle": 0},

@@ -6,37 +6,20 @@ plugin is active because sandbox is installed (entry point ``pytest11``).
 
 from __future__ import annotations
 
-import math
 import re
 from pathlib import Path
 
 import pytest
 import yaml
+from helpers import HEADON as HEADON_RUN
 from PIL import Image
 
 pytest_plugins = ["pytester"]
 #: Options of the inner sessions: no cache folder, none of the plugins they do not need.
 QUIET = ("-p", "no:cacheprovider", "-p", "no:hypothesispytest")
 
-#: Two vehicles driven head-on at 1 m/s each from 2 m apart: they touch at 0.75 s.
-HEADON = {
-    "name": "headon",
-    "duration": 1.2,
-    "formation": {"law": "virtual"},
-    "reference": {"type": "point", "position": [0, 5]},
-    "vehicles": [
-        {
-            "name": "east",
-            "pose": [-1, 0, 0],
-            "drive": {"type": "commands", "schedule": [[0, 1.0, 0]]},
-        },
-        {
-            "name": "west",
-            "pose": [1, 0, math.pi],
-            "drive": {"type": "commands", "schedule": [[0, 1.0, 0]]},
-        },
-    ],
-}
+#: The head-on pair of the helpers, shorter: they touch at 0.75 s.
+HEADON = dict(HEADON_RUN, duration=1.2)
 
 
 @pytest.fixture(autouse=True, scope="module")
