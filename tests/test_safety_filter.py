@@ -80,7 +80,8 @@ def test_a_vehicle_stops_short_of_a_failed_one() -> None:
     )
     _, bare = run({**doc, "safety": {"filter": "none"}})
     assert bare["collisions"]["vehicle_vehicle"] == 1
-    r, m = run({**doc, "safety": {"filter": "cbf"}})
+    # The barrier alone (the right-hand rule off): a stops at it, for ever.
+    r, m = run({**doc, "safety": {"filter": "cbf", "pass_right": 0}})
     assert m["collisions"]["total"] == 0
     gap = centre_distances(r)
     # Against b's centre: |p_a - c_b| >= d + l + margin = 0.65 m, so the centres stay
@@ -91,8 +92,9 @@ def test_a_vehicle_stops_short_of_a_failed_one() -> None:
 
 
 def test_the_right_hand_rule_passes_the_stopped_vehicle() -> None:
-    # The same case with safety.pass_right: held back nose to nose, a turns right,
-    # passes b and settles on its slot, still without contact.
+    # The same case with the filter's defaults (pass_right pi/2): held back nose to
+    # nose, a turns its nominal velocity right, passes b and settles on its slot,
+    # still without contact.
     doc = point_doc(
         [
             {"name": "a", "pose": [-3, 0, 0], "offset": [3, 0]},
@@ -100,7 +102,7 @@ def test_the_right_hand_rule_passes_the_stopped_vehicle() -> None:
         ],
         duration=8.0,
         failures=[{"vehicle": "b", "at": 0.0, "kind": "stop"}],
-        safety={"filter": "cbf", "pass_right": 0.5},
+        safety={"filter": "cbf"},
     )
     r, m = run(doc)
     assert m["collisions"]["total"] == 0
@@ -139,10 +141,18 @@ def test_a_wall_is_respected() -> None:
     )
     _, bare = run({**doc, "safety": {"filter": "none"}})
     assert bare["collisions"]["vehicle_obstacle"] == 1
-    r, m = run({**doc, "safety": {"filter": "cbf"}})
+    r, m = run({**doc, "safety": {"filter": "cbf", "pass_right": 0}})
     assert m["collisions"]["total"] == 0
     # p stays d/2 + l + margin = 0.4 m off the wall's face at x = -0.05 m.
     assert r.pose[:, 0, 0].max() <= -0.05 - 0.25 - 0.04
+    # With the right-hand rule (the default) it goes round the wall's southern end,
+    # still 0.4 m off every face, and reaches its slot.
+    r, m = run({**doc, "safety": {"filter": "cbf"}}, "duration=10")
+    assert m["collisions"]["total"] == 0
+    x, y = r.pose[:, 0, 0], r.pose[:, 0, 1]
+    beside = np.abs(x) <= 0.05 + 0.25
+    assert np.all(y[beside] < -2.0 - 0.25)
+    assert m["vehicles"]["a"]["formation_error"]["final"] < 0.05
 
 
 def test_infeasible_steps_are_counted_in_the_metrics() -> None:

@@ -42,7 +42,24 @@ Each vehicle then solves ``min |w - w_nom|^2`` over those half-planes
 (:mod:`sandbox.safety.qp`, exact); when they have no common point the barrier
 conditions are relaxed by the least slack (counted in ``metrics.json`` as
 ``safety.infeasible_steps``). ``projection: speed`` keeps the controller's ``v2`` and
-changes ``v1`` only; ``pass_right`` adds the right-hand rule out of stalls.
+changes ``v1`` only.
+
+**The right-hand rule out of stalls** (``pass_right``, an angle [rad], default pi/2):
+the filter's own deadlock is a look-ahead point in the corner of two barriers whose
+nominal velocity points into the polar cone of that corner, so the nearest safe
+velocity is 0 (the exact ring swaps: every vehicle cornered by its two neighbours). A
+vehicle whose filtered speed keeps less than half of its nominal speed turns its
+nominal velocity to the right, by up to ``pass_right`` as the cut grows (a smoothstep
+from half to a tenth kept; in proportion to the nominal speed below 0.2 m/s, so a
+vehicle at its slot is never turned) and is filtered again toward that (the barriers
+and bounds unchanged, so is safety). The corner of two barriers with unit normals at
+``+-a`` from the way out admits exactly the velocities within ``90 deg - a`` of it, so
+a nominal pointing straight into the corner is freed only by a turn of more than
+``a``; a ring of ``N`` jammed at its centre has ``a = 90 deg - 180 deg / N``, so a
+right angle is the least turn that frees every ring. The same rule for every vehicle,
+deterministic, breaks a symmetric stall the same way for all, like the rule of the
+road (Grover et al.'s right-hand rotation of the nominal command at a CBF deadlock;
+Wang, Ames and Egerstedt's perturbation when the filtered velocity collapses).
 
 Only vehicles driven by the controller are filtered (not the open-loop ones, not those
 believed failed); the filter acts before the step API's command overrides and the
@@ -65,6 +82,14 @@ from sandbox.safety.qp import TOLERANCE, solve
 UNLIMITED_SPEED = 1e3
 #: Shortest distance treated as a direction [m].
 MIN_DIST = 1e-9
+#: The right-hand rule (``pass_right``): a vehicle is stalled when its filtered
+#: look-ahead speed keeps less than STALL_START of its nominal speed, fully at
+#: STALL_FULL [1]; the turn fades in proportion below a nominal speed STALL_SPEED
+#: [m/s]. MIN_SPEED [m/s] guards the division.
+STALL_START = 0.5
+STALL_FULL = 0.1
+STALL_SPEED = 0.2
+MIN_SPEED = 1e-9
 
 PARAMS = {
     "gamma": Param(
@@ -113,12 +138,15 @@ PARAMS = {
     ),
     "pass_right": Param(
         "number",
-        0.0,
-        "m/s",
-        "The right-hand rule out of symmetric stalls: a vehicle the filter holds back "
-        "adds up to this speed to the right of its nominal velocity, in proportion to "
-        "how much it is held back (0: none)",
+        1.5708,
+        "rad",
+        "The right-hand rule out of stalls: a vehicle whose nominal look-ahead "
+        "velocity the filter cuts to less than half turns that velocity to its right "
+        "by up to this angle, ramped with the cut, and is filtered again (default "
+        "pi/2 = 1.5708, the least turn that leaves every corner of two barriers; "
+        "0: off)",
         minimum=0.0,
+        maximum=1.5708,
     ),
     "range": Param(
         "length",
@@ -206,7 +234,8 @@ class CBFState:
         self.broadcast = p["neighbour_velocity"] == "broadcast"
         self.reverse = bool(p["reverse"])
         self.max_rows = int(p["max_constraints"])
-        self.pass_right = float(p.get("pass_right") or 0.0)
+        # at most a right angle (1.5708 is pi / 2 as written)
+        self.pass_right = min(float(p.get("pass_right") or 0.0), np.pi / 2)
         v1_max = _per_vehicle(ctx.v1_max, n)
         v2_max = _per_vehicle(ctx.v2_max, n)
         self.v1_max = np.where(np.isfinite(v1_max), v1_max, UNLIMITED_SPEED)
@@ -363,6 +392,66 @@ def barrier_rows(
     return np.concatenate(out_v), np.concatenate(out_a), np.concatenate(out_b)
 
 
+def stall_turn(z0: np.ndarray, z: np.ndarray, angle: float) -> np.ndarray:
+    """The right-hand rule's turn [rad] of each nominal velocity, from the cut.
+
+    A vehicle is stalled by the filter when the filtered velocity of its look-ahead
+    point keeps less than :data:`STALL_START` of the nominal speed: the turn ramps
+    smoothly (a smoothstep) from 0 there to ``angle`` at :data:`STALL_FULL`, and in
+    proportion to the nominal speed below :data:`STALL_SPEED` (a vehicle at its slot,
+    whose nominal speed vanishes, is never turned).
+
+    Parameters
+    ----------
+    z0, z : ndarray, shape (k, 2) [m/s]
+        Nominal and filtered ``(v1, l v2)``.
+    angle : float [rad]
+        The largest turn (``pass_right``).
+
+    Returns
+    -------
+    ndarray, shape (k,) [rad]
+
+    >>> z0 = np.array([[1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.1, 0.0]])
+    >>> z = np.array([[0.6, 0.0], [0.3, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    >>> np.round(stall_turn(z0, z, np.pi / 2), 4).tolist()
+    [0.0, 0.7854, 1.5708, 0.7854]
+    """
+    nominal = np.hypot(z0[:, 0], z0[:, 1])
+    kept = np.hypot(z[:, 0], z[:, 1])
+    cut = 1.0 - kept / np.maximum(nominal, MIN_SPEED)
+    x = np.clip((cut - (1.0 - STALL_START)) / (STALL_START - STALL_FULL), 0.0, 1.0)
+    ramp = x * x * (3.0 - 2.0 * x)
+    return angle * ramp * np.minimum(nominal / STALL_SPEED, 1.0)
+
+
+def _pass_right(
+    state: CBFState,
+    z0: np.ndarray,
+    z: np.ndarray,
+    slack: np.ndarray,
+    mat: np.ndarray,
+    off: np.ndarray,
+    soft: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Filter again, toward the nominal velocities turned right where stalled.
+
+    The barriers and bounds are the same (``mat``, ``off``, ``soft``), so is safety;
+    only the point the nearest safe velocity is sought to moves.
+    """
+    turn = stall_turn(z0, z, state.pass_right)
+    rows = np.flatnonzero(turn > 0)
+    if len(rows) == 0:
+        return z, slack
+    c, s = np.cos(turn[rows]), np.sin(turn[rows])
+    zr = z0[rows]
+    # clockwise by the turn: (v1, l v2) rotated toward (0, -|z0|), the right
+    nominal = np.stack((c * zr[:, 0] + s * zr[:, 1], c * zr[:, 1] - s * zr[:, 0]), -1)
+    z, slack = z.copy(), slack.copy()
+    z[rows], slack[rows] = solve(nominal, mat[rows], off[rows], soft[rows])
+    return z, slack
+
+
 def filter_commands(
     state: CBFState, ctx: FilterContext, prune: bool = True
 ) -> tuple[np.ndarray, np.ndarray, FilterStep]:
@@ -451,19 +540,7 @@ def filter_commands(
         soft[:, 4:] = True
         zg, sg = solve(z0[group], mat, off, soft)
         if state.pass_right > 0 and not state.speed_only:
-            # The right-hand rule: a vehicle held back by the filter adds a velocity
-            # to the right of its nominal one, in proportion to how much it is held
-            # back, and solves again (the barriers are the same).
-            norm = np.hypot(z0[group, 0], z0[group, 1])
-            held = np.hypot(zg[:, 0] - z0[group, 0], zg[:, 1] - z0[group, 1])
-            turn = np.flatnonzero((held > TOLERANCE) & (norm > TOLERANCE))
-            if len(turn):
-                frac = np.minimum(held[turn] / norm[turn], 1.0) * state.pass_right
-                unit = z0[group[turn]] / norm[turn, None]
-                nominal = z0[group[turn]] + frac[:, None] * np.stack(
-                    (unit[:, 1], -unit[:, 0]), -1
-                )
-                zg[turn], sg[turn] = solve(nominal, mat[turn], off[turn], soft[turn])
+            zg, sg = _pass_right(state, z0[group], zg, sg, mat, off, soft)
         z[group], slack[group] = zg, sg
     changed = np.any(z != z0, axis=1)
     rows = np.flatnonzero(changed)
