@@ -15,10 +15,12 @@ steps of 4 substeps), ``--runs`` times (default 256).
   (``sandbox.cli.main``; scenario loading, batches of up to 64 worlds, metrics, the
   results store).
 
-Every row is timed once per repetition, in one process, interleaved with the bare
-physics; the ratio is bare-physics time per run over the row's time per run (1.0: the
-row runs at the physics' own speed), the median over ``--repeat`` repetitions (default
-3).
+Every row is timed once per repetition, in one process, with the bare physics timed
+just before and just after it (``--bare`` runs each time, default 64): the ratio is
+the bare-physics time per run over the row's time per run (1.0: the row runs at the
+physics' own speed), the median over ``--repeat`` repetitions (default 3). Timing the
+floor beside each row keeps the ratios fair on a machine whose load changes while the
+benchmark runs; the load averages before and after are printed with the table.
 
     python benchmarks/bench_sweep.py                      # 256 runs, 3 repetitions
     python benchmarks/bench_sweep.py --runs 64 --repeat 1  # quicker
@@ -27,6 +29,7 @@ row runs at the physics' own speed), the median over ``--repeat`` repetitions (d
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import tempfile
@@ -109,44 +112,59 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--runs", type=int, default=256, help="runs per measurement")
     p.add_argument("--single", type=int, default=16, help="single runs measured")
+    p.add_argument("--bare", type=int, default=64, help="bare runs beside each row")
     p.add_argument("--repeat", type=int, default=3, help="repetitions (median)")
     args = p.parse_args(argv)
-    runs, cores = args.runs, usable_cores()
+    runs, cores, bare_runs = args.runs, usable_cores(), min(args.bare, args.runs)
     rows: dict[str, tuple[int, list[float]]] = {}
     ratios: dict[str, list[float]] = {}
+    floor = "bare pymunk (same bodies, joints, steps)"
 
-    def measure(name: str, count: int, seconds: float, phys: float) -> None:
+    def measure(name: str, count: int, run) -> None:
+        before = bare_physics(bare_runs)
+        seconds = run()
+        after = bare_physics(bare_runs)
+        phys = (before + after) / (2 * bare_runs)  # per run
+        rows.setdefault(floor, (bare_runs, []))[1].extend((before, after))
         rows.setdefault(name, (count, []))[1].append(seconds)
-        ratios.setdefault(name, []).append((phys / runs) / (seconds / count))
+        ratios.setdefault(name, []).append(phys / (seconds / count))
 
+    load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         for rep in range(args.repeat):
-            timed = []
-            phys_a = bare_physics(runs)
-            timed.append(
-                ("single runs (Simulation.run)", args.single, single_runs(args.single))
+            out = Path(tmp) / f"rep{rep}"
+            measure(
+                "single runs (Simulation.run)",
+                args.single,
+                lambda: single_runs(args.single),
             )
             for size in SIZES:
                 if size <= runs:
-                    timed.append((f"batch of {size} worlds", runs, batched(runs, size)))
-            out = Path(tmp) / f"rep{rep}"
-            timed.append(("sandbox sweep --jobs 1", runs, sweep(runs, 1, out / "j1")))
+                    measure(
+                        f"batch of {size} worlds", runs, lambda s=size: batched(runs, s)
+                    )
+            measure(
+                "sandbox sweep --jobs 1", runs, lambda o=out: sweep(runs, 1, o / "j1")
+            )
             if cores > 1:
-                timed.append(
-                    ("sandbox sweep --jobs 2", runs, sweep(runs, 2, out / "j2"))
+                measure(
+                    "sandbox sweep --jobs 2",
+                    runs,
+                    lambda o=out: sweep(runs, 2, o / "j2"),
                 )
-            phys = (phys_a + bare_physics(runs)) / 2
-            measure("bare pymunk (same bodies, joints, steps)", runs, phys, phys)
-            for name, count, seconds in timed:
-                measure(name, count, seconds, phys)
+    load_after = os.getloadavg()
     print(
         f"{runs} runs of fig15 ({DURATION:g} s, 1,200 steps x 4 substeps), "
-        f"{cores} usable cores, median of {args.repeat}"
+        f"{cores} usable cores, median of {args.repeat}; load average (1, 5, 15 min) "
+        f"{_load(load_before)} before, {_load(load_after)} after"
     )
     print()
     print("| engine | runs | per run [ms] | runs/s | physics / engine |")
     print("|---|---:|---:|---:|---:|")
-    for name, (count, times) in rows.items():
+    ratios[floor] = [1.0]
+    for name, (count, times) in [(floor, rows[floor])] + [
+        item for item in rows.items() if item[0] != floor
+    ]:
         per = statistics.median(times) / count
         print(
             f"| {name} | {count} | {1000 * per:.1f} | {1 / per:.1f} | "
@@ -164,6 +182,10 @@ def main(argv: list[str] | None = None) -> int:
         ]
         print(f"--jobs 2 over --jobs 1: {statistics.median(speedup):.2f}x (median)")
     return 0
+
+
+def _load(avg: tuple[float, float, float]) -> str:
+    return ", ".join(f"{x:.2f}" for x in avg)
 
 
 if __name__ == "__main__":

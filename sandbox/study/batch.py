@@ -38,7 +38,6 @@ from sandbox.control.formation import (
     BackwardDifference,
 )
 from sandbox.divergence import diverged
-from sandbox.metrics import MOTOR_ABS_TOL, MOTOR_REL_TOL
 from sandbox.plugins import FailureContext, LawContext, StrategyContext, make_law
 from sandbox.recovery import NeighbourList
 from sandbox.run import (
@@ -51,11 +50,13 @@ from sandbox.run import (
 )
 from sandbox.scenario import Scenario
 from sandbox.simulation import Simulation
+from sandbox.study.batch_metrics import BatchTally
 from sandbox.study.batchable import (
     TABULATED_REFERENCES,
     batch_key,
     batch_reason,
 )
+from sandbox.study.stepping import WorldStepper
 from sandbox.world import World, motor_limits
 
 
@@ -76,14 +77,24 @@ class _Pairs:
         self._i = (base + i).ravel().astype(np.intp)
         self._j = (base + j).ravel().astype(np.intp)
         self._obstacles = NeighbourList(radius)
+        self._last: tuple[np.ndarray, np.ndarray] | None = None
 
     def near(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Pairs closer than ``radius``, with ``pos[i] - pos[j]`` (as alone)."""
         rel = np.take(pos, self._i, axis=0)
         rel -= np.take(pos, self._j, axis=0)
         d2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
+        self._last = (pos, d2)
         keep = np.flatnonzero(d2 < self.radius * self.radius)
         return self._i.take(keep), self._j.take(keep), np.take(rel, keep, axis=0)
+
+    def distances(self, pos: np.ndarray) -> np.ndarray | None:
+        """Squared distances of every pair, world after world (else None).
+
+        Those of the last :meth:`near`, if it ran on this very array.
+        """
+        last = self._last
+        return last[1] if last is not None and last[0] is pos else None
 
     def pairs(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pairs closer than ``radius``."""
@@ -147,6 +158,10 @@ class Batch:
     >>> [r.pose.shape for r in runs]
     [(51, 1, 3), (51, 1, 3), (51, 1, 3)]
     """
+
+    #: Step the worlds' physics with :class:`~sandbox.study.stepping.WorldStepper`
+    #: (False: world by world in Python; the same numbers, slower).
+    fast_stepping = True
 
     def __init__(self, sims: Sequence[Simulation]) -> None:
         first = sims[0]
@@ -215,7 +230,15 @@ class Batch:
         for k, world in enumerate(self.worlds):
             if self._bound[k]:
                 world.bind_commands(self._out[k * n : (k + 1) * n])
-        self._tally = _Tally(K, n, self.h)
+        self._stepper: WorldStepper | None = None
+        # Each world's failure flags are a view of one array, updated in place.
+        self._failed_now = np.zeros(N, dtype=bool)
+        for k, world in enumerate(self.worlds):
+            world.failed = self._failed_now[k * n : (k + 1) * n]
+        self._episodes = [w._open for w in self.worlds]
+        #: Whether every position is finite (the last divergence check passed).
+        self.finite = bool(np.isfinite(self.pos).all())
+        self._tally = BatchTally(K, n, self.h)
         self._record_setup(first)
         self._control_time = 0.0
         self._dead_runs: dict[int, Run] = {}
@@ -271,7 +294,8 @@ class Batch:
         rows = rows.reshape(self.N, 6)
         self.pos, self.theta = rows[:, 0:2].copy(), rows[:, 2].copy()
         self.vel = rows[:, 3:5].copy()
-        if diverged(self) is None:
+        self.finite = diverged(self) is None
+        if self.finite:
             return
         t = self.k * self.h
         for w in np.flatnonzero(self.live):
@@ -289,6 +313,8 @@ class Batch:
             self._record(np.array([w]), undefined=True)
             self.live[w] = False
             self._live_list = [int(k) for k in np.flatnonzero(self.live)]
+            if self._stepper is not None:
+                self._stepper.live(self._live_list)
             self._dead_runs[w] = self._close(w)
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
@@ -415,10 +441,7 @@ class Batch:
             heading = np.stack((np.cos(th), np.sin(th)), -1)
             chi_next[frozen] = v1[frozen, None] * heading[frozen]
         self.v1, self.v2, self.failed = v1, v2, failed
-        n = self.n
-        worlds = self.worlds
-        for w in self._live_list:
-            worlds[w].failed = failed[w * n : (w + 1) * n]
+        self._failed_now[:] = failed  # the worlds' views (World.failed)
         mode = np.full(self.N, MODE_FORMATION, dtype=np.int8)
         mode[active] = MODE_AVOID
         mode[failed] = MODE_FAILED
@@ -454,6 +477,8 @@ class Batch:
 
     def _in_contact(self) -> np.ndarray:
         out = np.zeros(self.N, dtype=bool)
+        if not any(self._episodes):  # no open contact episode in any world
+            return out
         n = self.n
         for w, world in enumerate(self.worlds):
             if world._open:
@@ -498,10 +523,14 @@ class Batch:
         """Write every live world's commands and step it (``Simulation._advance``)."""
         h, n = self.h, self.n
         self.chi = chi_next
-        heading = self.theta + 0.5 * self.v2 * h
         out = self._out
-        out[:, 0] = self.v1 * np.cos(heading)
-        out[:, 1] = self.v1 * np.sin(heading)
+        commanded = self._tally.commanded
+        if commanded is not None and self._tally.commanded_at == self.k:
+            out[:, :2] = commanded  # the same numbers, computed by the loop metrics
+        else:
+            heading = self.theta + 0.5 * self.v2 * h
+            out[:, 0] = self.v1 * np.cos(heading)
+            out[:, 1] = self.v1 * np.sin(heading)
         out[:, 2] = self.v2
         if self._tracking.any():
             rows, force, torque = motor_limits(
@@ -512,9 +541,13 @@ class Batch:
                 pivot, gear = self.worlds[w].joints[i]
                 pivot.max_force = self._force[r] = force[r]
                 gear.max_force = self._torque[r] = torque[r]
+        t0, substeps = self.k * h, self.substeps
+        if self._stepper is not None:  # every world at once (sandbox.study.stepping)
+            self._stepper.advance(t0, h)
+            self.k += 1
+            return
         # One pass over the worlds: write, step (World.step's loop, Chipmunk called
         # directly: the same calls and times), read the state of t_k+1.
-        t0, substeps = self.k * h, self.substeps
         hh = h / substeps
         times = [t0 + s * hh for s in range(substeps)]
         ends = [t0 + (s + 1) * hh for s in range(substeps)]
@@ -535,6 +568,12 @@ class Batch:
                         world._update_episodes(ends[s])
             rows[w] = world.read_rows(measure=False)
         self.k += 1
+        if self.k == 1 and self.fast_stepping:  # every body is checked in now
+            self._stepper = WorldStepper.build(
+                self.worlds, self._out, self._rows, substeps
+            )
+            if self._stepper is not None:
+                self._stepper.live(self._live_list)
 
     # ------------------------------------------------------------------ results
     def _close(self, w: int) -> Run:
@@ -619,108 +658,6 @@ class _Result:
 
     def result(self) -> dict[str, Any]:
         return self._result
-
-
-class _Tally:
-    """:class:`~sandbox.metrics.LoopMetrics` of K worlds, stacked (the same numbers)."""
-
-    def __init__(self, K: int, n: int, h: float) -> None:
-        self.K, self.n, self.h = K, n, h
-        self.effort_v1 = np.zeros(K * n)
-        self.effort_v2 = np.zeros(K * n)
-        self.best = np.full(K, np.inf)
-        self.max_speed_error = np.zeros(K)
-        self.max_velocity_error = np.zeros(K)
-        self.free_periods = np.zeros(K, dtype=np.int64)
-        self.saturated_periods = np.zeros(K, dtype=np.int64)
-        self._prev: tuple[np.ndarray, np.ndarray] | None = None
-        self._commanded: np.ndarray | None = None
-        self._was_free: np.ndarray | None = None
-        i, j = np.triu_indices(n, 1)
-        self._i, self._j = i, j
-
-    def update(self, b: Batch, contact: np.ndarray, worlds: np.ndarray | None) -> None:
-        """``LoopMetrics.update`` for all worlds (or only ``worlds``)."""
-        K, n = self.K, self.n
-        if worlds is None:
-            ws = slice(None)
-            vs = slice(None)
-        else:
-            ws = worlds
-            vs = (worlds[:, None] * n + np.arange(n)).ravel()
-        pos3 = b.pos.reshape(K, n, 2)[ws]
-        kw = len(pos3)
-        if n >= 2:
-            finite = np.isfinite(pos3).reshape(kw, -1).all(axis=1)
-            d = pos3[:, self._i] - pos3[:, self._j]
-            d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
-            best = np.sqrt(np.min(d2, axis=1))
-            self.best[ws] = np.where(
-                finite, np.minimum(self.best[ws], best), self.best[ws]
-            )
-        v1, v2 = b.v1[vs], b.v2[vs]
-        if self._prev is not None:
-            self.effort_v1[vs] += np.abs(v1 - self._prev[0][vs])
-            self.effort_v2[vs] += np.abs(v2 - self._prev[1][vs])
-        if self._prev is None:
-            self._prev = (np.array(b.v1, dtype=float), np.array(b.v2, dtype=float))
-        else:
-            self._prev[0][vs] = v1
-            self._prev[1][vs] = v2
-        free = ~contact[vs]
-        vel = b.vel[vs]
-        if self._commanded is not None:
-            check = free & self._was_free[vs] & np.all(np.isfinite(vel), axis=1)
-            if check.any():
-                cmd, got = self._commanded[vs], vel
-                want = np.hypot(cmd[:, 0], cmd[:, 1])
-                err = np.hypot(got[:, 0] - cmd[:, 0], got[:, 1] - cmd[:, 1])
-                speed_err = np.abs(np.hypot(got[:, 0], got[:, 1]) - want)
-                check2 = check.reshape(kw, n)
-                some = check2.any(axis=1)
-                worst = np.where(check2, err.reshape(kw, n), -np.inf).max(axis=1)
-                self.max_velocity_error[ws] = np.where(
-                    some,
-                    np.maximum(self.max_velocity_error[ws], worst),
-                    self.max_velocity_error[ws],
-                )
-                worst = np.where(check2, speed_err.reshape(kw, n), -np.inf).max(axis=1)
-                self.max_speed_error[ws] = np.where(
-                    some,
-                    np.maximum(self.max_speed_error[ws], worst),
-                    self.max_speed_error[ws],
-                )
-                tol = np.maximum(MOTOR_REL_TOL * want, MOTOR_ABS_TOL)
-                self.free_periods[ws] += check2.sum(axis=1)
-                self.saturated_periods[ws] += (
-                    (check & (err > tol)).reshape(kw, n).sum(axis=1)
-                )
-        heading = b.theta[vs] + 0.5 * v2 * self.h
-        commanded = np.stack((v1 * np.cos(heading), v1 * np.sin(heading)), -1)
-        if self._commanded is None:
-            self._commanded, self._was_free = commanded, free
-        else:
-            self._commanded[vs] = commanded
-            self._was_free[vs] = free
-
-    def result(self, w: int) -> dict[str, Any]:
-        """World ``w``'s values, as ``LoopMetrics.result``."""
-        rows = slice(w * self.n, (w + 1) * self.n)
-        best = self.best[w]
-        free = int(self.free_periods[w])
-        return {
-            "effort_v1": [float(x) for x in self.effort_v1[rows]],
-            "effort_v2": [float(x) for x in self.effort_v2[rows]],
-            "min_distance": float(best) if np.isfinite(best) else None,
-            "motor": {
-                "max_speed_error_free": float(self.max_speed_error[w]),
-                "max_velocity_error_free": float(self.max_velocity_error[w]),
-                "free_periods": free,
-                "saturated_fraction": int(self.saturated_periods[w]) / free
-                if free
-                else 0.0,
-            },
-        }
 
 
 def _tile(value: float | np.ndarray, K: int) -> float | np.ndarray:
