@@ -306,6 +306,9 @@ class DetectorContext:
         The detector's YAML values.
     memory : dict
         Kept from one step to the next.
+    brake_accel : ndarray (n,) [m/s^2], optional
+        The hardest a vehicle's drive brakes: the least of its ``max_accel`` and
+        ``motor_accel`` (inf: neither declared; None: as ``motor_accel``).
     """
 
     t: float
@@ -325,3 +328,4 @@ class DetectorContext:
     turn_accel: np.ndarray
     params: dict[str, Any]
     memory: dict[str, Any]
+    brake_accel: np.ndarray | None = None

@@ -51,7 +51,9 @@ Isolation
     moving, a ``stuck_steering``, or ``uncontrolled`` when the along-track sum is
     beyond 2 standard deviations too. An along-track deficit with the vehicle (nearly)
     still is a ``stop``, or a ``crash`` when the vehicle was in contact within the last
-    second or stopped faster than its motor can brake (``motor_accel``). Any other
+    second or stopped faster than its drive can brake (the least of its declared
+    ``max_accel`` and ``motor_accel``: a failed drive brakes within these, a wreck
+    stops within a substep; see :mod:`sandbox.failures`). Any other
     motion against the commands (too fast, sideways) is ``uncontrolled``. A
     ``stuck_steering`` is watched ``isolation`` seconds more (default 0.3 s): if the
     speed departs from the commands too it becomes ``uncontrolled`` (a runaway whose
@@ -86,6 +88,8 @@ KINDS = ("stop", "spin", "stuck_steering", "uncontrolled", "crash")
 STILL_SPEED = 0.1
 #: How long after a contact a stop counts as a crash [s].
 CRASH_CONTACT_WINDOW = 1.0
+#: How much of the observed track the crash-or-stop fit reads [s].
+SHAPE_HISTORY = 1.0
 #: Angular motor limit as a multiple of ``motor_accel / radius`` (as the physics).
 ANGULAR_MOTOR_FACTOR = 4.0
 
@@ -164,7 +168,8 @@ class DetectorState:
     """What the residual detector keeps between control periods, per vehicle."""
 
     pose: np.ndarray  # predicted pose since the window's start (n, 3)
-    start: np.ndarray  # observed position at the window's start (n, 2) [m]
+    start: np.ndarray  # observed pose at the window's start (n, 3) [m, m, rad]
+    v_start: np.ndarray  # the model body's speed at the window's start (n,) [m/s]
     vel: np.ndarray  # the model body's velocity (n, 2) [m/s]
     rate: np.ndarray  # the model body's turn rate (n,) [rad/s]
     age: np.ndarray  # periods since the window's start (n,)
@@ -180,9 +185,14 @@ class DetectorState:
     acc_obs: np.ndarray  # observed travel since g left 0 (n,) [m]
     acc_pred: np.ndarray  # predicted travel since g left 0 (n,) [m]
     acc_t: np.ndarray  # time since g left 0 (n,) [s]
+    acc_rot: np.ndarray  # observed rotation since g left 0 (n,) [rad]
+    acc_rot0: np.ndarray  # that of the first window (n,) [rad]
+    acc_n: np.ndarray  # windows summed since g left 0 (n,)
+    acc_v0: np.ndarray  # the model's speed when g left 0 (n,) [m/s]
     detected: np.ndarray  # latched (n,) bool
     isolating: np.ndarray  # until when the kind is still read (n,) [s]
     kinds: list  # the kind of each latched detection (n,)
+    history: object = None  # the last SHAPE_HISTORY s of (t, seen xy, fresh)
 
 
 def _start(ctx: DetectorContext) -> DetectorState:
@@ -190,7 +200,8 @@ def _start(ctx: DetectorContext) -> DetectorState:
     z = np.zeros(n)
     return DetectorState(
         pose=ctx.seen.copy(),
-        start=ctx.seen[:, :2].copy(),
+        start=ctx.seen.copy(),
+        v_start=np.hypot(*np.asarray(ctx.vel, dtype=float).T),
         vel=np.array(ctx.vel, dtype=float),
         rate=z.copy(),
         age=np.zeros(n, dtype=int),
@@ -206,6 +217,10 @@ def _start(ctx: DetectorContext) -> DetectorState:
         acc_obs=z.copy(),
         acc_pred=z.copy(),
         acc_t=z.copy(),
+        acc_rot=z.copy(),
+        acc_rot0=z.copy(),
+        acc_n=np.zeros(n, dtype=int),
+        acc_v0=z.copy(),
         detected=np.zeros(n, dtype=bool),
         isolating=np.full(n, -np.inf),
         kinds=[""] * n,
@@ -237,6 +252,101 @@ def _advance_model(st: DetectorState, ctx: DetectorContext) -> None:
     st.travel += np.hypot(*(st.pose[:, :2] - start).T)
 
 
+def _accumulate(st: DetectorState, i: int, k: int, sums: tuple) -> None:
+    """Add window ``k`` (of the due rows) to vehicle ``i``'s sums for isolation."""
+    z, raw, observed, travel, seconds, rotation = sums
+    st.acc[i] += z[k]
+    st.acc_abs[i] += np.abs(z[k])
+    st.acc_raw[i] += raw[k]
+    st.acc_obs[i] += observed[k]
+    st.acc_pred[i] += travel[k]
+    st.acc_t[i] += seconds[k]
+    if st.acc_n[i] == 0:
+        st.acc_rot0[i] = rotation[k]
+    st.acc_rot[i] += rotation[k]
+    st.acc_n[i] += 1
+
+
+def braked_travel(v0: float, brake: float, duration: float) -> float:
+    """Distance [m] a vehicle at ``v0`` [m/s] covers braking at ``brake`` [m/s^2].
+
+    Within ``duration`` [s]; 0 for an unlimited brake (``brake`` inf).
+
+    >>> braked_travel(1.0, 5.0, 1.0), braked_travel(1.0, 5.0, 0.1)
+    (0.1, 0.075)
+    """
+    if not np.isfinite(brake):
+        return 0.0
+    t = min(duration, v0 / brake)
+    return round(v0 * t - 0.5 * brake * t * t, 12)
+
+
+def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]:
+    """How well a crash and a braked stop explain a track (least squares).
+
+    Parameters
+    ----------
+    t : ndarray (m,) [s]
+        Times of the observed positions.
+    s : ndarray (m,) [m]
+        The positions along the direction of travel.
+    brake : float [m/s^2]
+        The drive's braking limit (finite).
+
+    Returns
+    -------
+    crash, stop : float [m^2]
+        The least sum of squared residuals of the two models, each fitted over a
+        grid of onsets ``tau`` (the sample times) and speeds ``v``, with a free
+        offset: a crash moves at ``v`` until ``tau`` and is at rest after it; a stop
+        moves at ``v`` until ``tau`` and then brakes at ``brake`` to rest (reached at
+        ``tau + v / brake``, after ``v^2 / (2 brake)``).
+
+    >>> t = np.arange(0.0, 1.0, 0.01)
+    >>> crash, stop = stop_fits(t, np.minimum(t, 0.5), 5.0)
+    >>> bool(crash < stop)
+    True
+    """
+    t = np.asarray(t, dtype=float) - t[0]
+    s = np.asarray(s, dtype=float)
+    lag = min(10, len(t) - 1)
+    speed = np.abs(s[lag:] - s[:-lag]) / np.maximum(t[lag:] - t[:-lag], 1e-9)
+    v = np.linspace(0.0, 1.5 * float(speed.max()), 61)[:, None, None]
+    tau = t[None, :, None]
+    tt = t[None, None, :]
+    run = np.minimum(tt, tau)
+    crash = v * run
+    braking = np.clip(tt - tau, 0.0, v / brake)
+    stop = v * (run + braking) - 0.5 * brake * braking**2
+
+    def ssr(model: np.ndarray) -> float:
+        r = s - model
+        r = r - r.mean(axis=-1, keepdims=True)
+        return float((r * r).sum(axis=-1).min())
+
+    return ssr(crash), ssr(stop)
+
+
+def _stopped_by_impact(st: DetectorState, i: int, brake: float) -> bool:
+    """Whether vehicle ``i``'s observed track fits a crash better than a stop.
+
+    Without a finite braking limit the two move alike: no.
+    """
+    if not np.isfinite(brake) or st.history is None:
+        return False
+    rows = [(t, xy[i]) for t, xy, fresh in st.history if fresh[i]]
+    if len(rows) < 10:
+        return False
+    t = np.array([r[0] for r in rows])
+    xy = np.array([r[1] for r in rows])
+    chord = xy[-5:].mean(axis=0) - xy[:5].mean(axis=0)
+    norm = float(np.hypot(*chord))
+    if norm < 1e-9:
+        return False
+    crash, stop = stop_fits(t, (xy - xy[0]) @ (chord / norm), brake)
+    return crash < stop
+
+
 def _isolate(st: DetectorState, i: int, t: float, ctx: DetectorContext) -> str:
     """The kind of the alarm of vehicle ``i`` from its accumulated residuals."""
     # Which component dominates: summed magnitudes (a spinning vehicle's heading
@@ -244,29 +354,34 @@ def _isolate(st: DetectorState, i: int, t: float, ctx: DetectorContext) -> str:
     # along-track sum says deficit or excess.
     za, zc, zh = st.acc_abs[i]
     duration = max(st.acc_t[i], ctx.dt)
-    # Still, or covering less than half the predicted travel.
-    slow = st.acc_obs[i] < max(STILL_SPEED * duration, 0.5 * st.acc_pred[i])
     windows = max(1.0, st.acc_t[i] / max(ctx.params["window"], ctx.dt))
+    brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
+    brake = float(brakes[i])
+    # A failed drive brakes to rest at its limit from the speed it had (the model's,
+    # when the sums began): that travel is the stop's, and only what lies beyond it
+    # says whether the vehicle still moves.
+    braked = braked_travel(float(st.acc_v0[i]), brake, duration)
+    beyond = max(st.acc_pred[i] - braked, 0.0)
+    slow = st.acc_obs[i] < braked + max(STILL_SPEED * duration, 0.5 * beyond)
+    # Whether the observed heading turns, beyond 4 standard deviations of the sum of
+    # the windows' noisy heading differences: after the first window once there are
+    # more (the first one holds the turn the vehicle made before the fault).
+    sh = np.sqrt(2.0 * ctx.heading_noise**2 + ctx.params["heading_floor"] ** 2)
+    late = int(st.acc_n[i]) - 1
+    rot = st.acc_rot[i] - st.acc_rot0[i] if late > 0 else st.acc_rot[i]
+    turned = abs(rot) > 4.0 * sh * np.sqrt(max(late, 1))
+    if slow and turned:
+        return "spin"
+    if slow and st.acc[i, 0] < 0 and (za >= zc or zh >= zc):
+        # At rest without turning: the commanded turn did not happen either.
+        if t - st.last_contact[i] <= CRASH_CONTACT_WINDOW:
+            return "crash"
+        # Stopped harder than the drive can brake: an impact.
+        return "crash" if _stopped_by_impact(st, i, brake) else "stop"
     if zh >= max(za, zc):
-        if slow:
-            return "spin"
         # Moving: the speed is off the commands too (beyond 2 sigma) when uncontrolled.
         speed_off = abs(st.acc[i, 0]) > 2.0 * np.sqrt(windows)
         return "uncontrolled" if speed_off else "stuck_steering"
-    if st.acc[i, 0] < 0 and za >= zc and slow:
-        if t - st.last_contact[i] <= CRASH_CONTACT_WINDOW:
-            return "crash"
-        brake = ctx.motor_accel[i]
-        if np.isfinite(brake):
-            # The least travel a motor-braked stop allows from the predicted speed.
-            v0 = st.acc_pred[i] / duration
-            least = min(st.acc_pred[i], 0.5 * v0 * v0 / brake)
-            sigma = np.sqrt(
-                2.0 * ctx.position_noise**2 + ctx.params["noise_floor"] ** 2
-            )
-            if st.acc_obs[i] < least - 3.0 * sigma:
-                return "crash"
-        return "stop"
     return "uncontrolled"
 
 
@@ -285,6 +400,11 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         st = ctx.memory["state"] = _start(ctx)
         return st.detected.copy(), list(st.kinds)
     p = ctx.params
+    if st.history is None:
+        from collections import deque
+
+        st.history = deque(maxlen=int(round(SHAPE_HISTORY / ctx.dt)) + 1)
+    st.history.append((ctx.t, ctx.seen[:, :2].copy(), ctx.fresh.copy()))
     mu, lam = float(p["shift"]), float(p["lambda"])
     window = max(1, int(round(p["window"] / ctx.dt)))
     sp = np.sqrt(2.0 * ctx.position_noise**2 + p["noise_floor"] ** 2)
@@ -296,7 +416,8 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     restart = st.pending & ctx.fresh
     if np.any(restart):
         st.pose[restart] = ctx.seen[restart]
-        st.start[restart] = ctx.seen[restart, :2]
+        st.start[restart] = ctx.seen[restart]
+        st.v_start[restart] = np.hypot(*st.vel[restart].T)
         st.age[restart] = 0
         st.travel[restart] = 0.0
         st.pending &= ~restart
@@ -331,23 +452,20 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
             (ctx.t, int(i), float(x))
             for i, x in zip(rows[used], inc[used], strict=True)
         )
-    observed = np.hypot(*(seen[:, :2] - st.start[rows]).T)
+    observed = np.hypot(*(seen[:, :2] - st.start[rows, :2]).T)
+    rotation = _wrap(seen[:, 2] - st.start[rows, 2])
     seconds = st.age[rows] * ctx.dt
+    window_sums = (z, raw, observed, travel, seconds, rotation)
     for k, i in enumerate(rows):
         if gated[k]:
             continue
         if st.detected[i]:
             if ctx.t <= st.isolating[i] + 1e-9:  # the kind from more residuals
-                st.acc[i] += z[k]
-                st.acc_abs[i] += np.abs(z[k])
-                st.acc_raw[i] += raw[k]
-                st.acc_obs[i] += observed[k]
-                st.acc_pred[i] += travel[k]
-                st.acc_t[i] += seconds[k]
-                # A turn-rate fault of a moving vehicle whose speed departs from the
-                # commands too is a runaway (a stop or spin is plain at once).
-                if st.kinds[i] == "stuck_steering":
-                    st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+                _accumulate(st, i, k, window_sums)
+                # The kind from all residuals so far: a vehicle still braking (a
+                # stop or a spin) or a runaway whose speed is near the commanded one
+                # is plain only once its drive has reached its faulty command.
+                st.kinds[i] = _isolate(st, i, ctx.t, ctx)
             st.clear[i] = max(0.0, st.clear[i] - inc[k])
             if st.clear[i] >= lam:
                 st.detected[i] = False
@@ -358,15 +476,12 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
             st.acc[i] = 0.0
             st.acc_abs[i] = 0.0
             st.acc_raw[i] = 0.0
-            st.acc_obs[i] = st.acc_pred[i] = st.acc_t[i] = 0.0
+            st.acc_obs[i] = st.acc_pred[i] = st.acc_t[i] = st.acc_rot[i] = 0.0
+            st.acc_n[i] = 0
+            st.acc_v0[i] = st.v_start[i]
         st.g[i] = max(0.0, st.g[i] + inc[k])
         if st.g[i] > 0.0:
-            st.acc[i] += z[k]
-            st.acc_abs[i] += np.abs(z[k])
-            st.acc_raw[i] += raw[k]
-            st.acc_obs[i] += observed[k]
-            st.acc_pred[i] += travel[k]
-            st.acc_t[i] += seconds[k]
+            _accumulate(st, i, k, window_sums)
         if st.g[i] >= lam:
             st.detected[i] = True
             st.kinds[i] = _isolate(st, i, ctx.t, ctx)
@@ -412,6 +527,12 @@ class Detection:
         )
         radius = np.array([v.diameter / 2.0 for v in scenario.vehicles])
         self.motor_accel = accel
+        # The hardest the drive brakes: its declared acceleration limit, within the
+        # motor's (a failure's speed moves by at most max_accel h per period).
+        declared = np.array(
+            [np.inf if v.max_accel is None else v.max_accel for v in scenario.vehicles]
+        )
+        self.brake_accel = np.minimum(accel, declared)
         self.turn_accel = ANGULAR_MOTOR_FACTOR * accel / radius
         #: The commands the controllers asked for in the last period (n, 2).
         self.intended: np.ndarray | None = None
@@ -460,6 +581,7 @@ class Detection:
             turn_accel=self.turn_accel,
             params=self.params,
             memory=self.memory,
+            brake_accel=self.brake_accel,
         )
         out = self.func(ctx)
         kinds = None

@@ -5,14 +5,23 @@ really applies. Kinds:
 
 - ``stuck_steering``: v2 frozen (at its value at onset, or the given ``v2``); v1 still
   controlled;
-- ``stop``: motors stop, v1 = v2 = 0: the vehicle brakes with its motor's force
-  (mass x ``motor_accel``, not the controller's ``max_accel``), and can still be shoved
-  by a contact stronger than that (measured: a pusher with twice the motor force moves
-  it at the pusher's own speed, one with an equal force at about half of it, one with
-  half the force not at all);
+- ``stop``: the drive stops, v1 = v2 = 0: the vehicle brakes to rest within its own
+  limits (see below), and can still be shoved by a contact stronger than its motor
+  (mass x ``motor_accel``; measured: a pusher with twice the motor force moves it at
+  the pusher's own speed, one with an equal force at about half of it, one with half
+  the force not at all);
 - ``spin``: v1 = 0, v2 = the given rate (default 1 rad/s);
 - ``uncontrolled``: constant commands ``v1``, ``v2`` (default 0);
 - ``crash``: the vehicle is wrecked: it stops at once and becomes immovable (permanent).
+
+Every kind but a ``crash`` is a fault of the vehicle's controller or drive, and the
+drive executes what the failure asks for as it executes any command: the speed v1 it
+applies moves from the last period's by at most ``max_accel h`` (the vehicle's declared
+acceleration limit; at once when it declares none, as the report's robot), and the
+physical motor (``motor_accel``) bounds it further. A stop from 1 m/s at ``max_accel:
+5`` therefore takes 0.2 s and 0.1 m. A ``crash`` is an impact, not a command: the
+vehicle stops within one physics substep, a deceleration no drive makes, which is how
+a detector tells a crash from a stop (:mod:`sandbox.detection`).
 
 When a failure clears (``until``), the vehicle resumes its law from where it is.
 """
@@ -69,6 +78,17 @@ def crash(ctx: FailureContext) -> tuple[float, float]:
     return 0.0, 0.0
 
 
+def within_drive(v1: float, last_v1: float, step: float) -> float:
+    """The speed [m/s] a drive applies when a failure asks for ``v1`` [m/s].
+
+    Within ``step`` = ``max_accel h`` [m/s] of the last period's ``last_v1``.
+
+    >>> within_drive(0.0, 1.0, 0.05), within_drive(0.0, 1.0, float("inf"))
+    (0.95, 0.0)
+    """
+    return min(max(v1, last_v1 - step), last_v1 + step)
+
+
 class FailureSchedule:
     """The failures of a scenario, resolved to vehicle indices.
 
@@ -114,7 +134,12 @@ class FailureSchedule:
         return new
 
     def apply(
-        self, t: float, v1: np.ndarray, v2: np.ndarray
+        self,
+        t: float,
+        v1: np.ndarray,
+        v2: np.ndarray,
+        last_v1: np.ndarray | None = None,
+        accel_step: float | np.ndarray = np.inf,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Apply the active failures to the fleet's commands.
 
@@ -123,6 +148,12 @@ class FailureSchedule:
         t : float [s]
         v1, v2 : ndarray, shape (n,)
             The controller's commands.
+        last_v1 : ndarray, shape (n,), optional
+            The speeds applied in the last period [m/s] (None: no limit).
+        accel_step : float or ndarray (n,)
+            The most the drive changes v1 in one period [m/s], ``max_accel h``
+            (inf: unlimited). A failure's v1 is held within ``last_v1 +-
+            accel_step``, except for an immovable kind (a crash).
 
         Returns
         -------
@@ -152,6 +183,9 @@ class FailureSchedule:
                 params=dict(spec.params),
             )
             v1[i], v2[i] = kind.obj(ctx)
+            if last_v1 is not None and not kind.options["immovable"]:
+                step = float(np.broadcast_to(accel_step, (self.n,))[i])
+                v1[i] = within_drive(float(v1[i]), float(last_v1[i]), step)
             failed[i] = True
             frozen[i] |= not kind.options["controlled_speed"]
         return v1, v2, failed, frozen

@@ -427,7 +427,10 @@ class Simulation:
             external = mask if external is None else external | mask
         if self.detection is not None:  # what the controllers ask for, broadcast
             self.detection.intended = np.column_stack((v1, v2))
-        v1, v2, failed, frozen = self.failures.apply(t, v1, v2)
+        # The drive executes a failure within its acceleration limit (a crash aside).
+        v1, v2, failed, frozen = self.failures.apply(
+            t, v1, v2, fleet.v1, self._accel_max * h
+        )
         if self.detection is not None:
             # A failed controller does not know: it keeps its own state until the
             # failure ends (then it resumes from the applied velocity).

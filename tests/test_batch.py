@@ -85,6 +85,8 @@ def test_a_batched_sweep_stores_the_bytes_of_single_runs(tmp_path, monkeypatch):
 
 def test_a_diverging_world_stops_alone(tmp_path):
     doc = formup_doc()
+    # No max_accel: the failed drive reaches its speed at once (else at 5 m/s^2).
+    doc["vehicle"] = {"v1_max": 2.0, "v2_max": 8.0}
     scenarios = []
     for seed, v1 in enumerate([1.0, 2000.0, 0.5]):  # 2000 m/s: beyond 1e3, diverges
         failure = {"vehicle": "red", "kind": "uncontrolled", "v1": v1, "at": 0.3}

@@ -96,6 +96,8 @@ def test_collisions_and_effort_are_charged_to_the_vehicles_involved() -> None:
     doc = dict(PLATOON, duration=3.0)
     doc["vehicles"] = [dict(v) for v in PLATOON["vehicles"]]
     doc["vehicles"][2]["pose"] = [-1.5, -0.9, np.pi / 2]
+    # red is wrecked where it is at 0.5 s (a stop would brake on past green's path)
+    doc["failures"] = [{"vehicle": "red", "at": 0.5, "kind": "crash"}]
     hits = VehicleEnv(doc, agent="green", weights=Weights(0.0, 1.0, 0.0))
     effort = VehicleEnv(doc, agent="green", weights=Weights(0.0, 0.0, 1.0))
     totals = []

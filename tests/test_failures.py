@@ -2,7 +2,9 @@
 
 Kinds: ``stop`` (brakes; a stronger push can shove it), ``crash`` (immovable), ``spin``
 (turns in place at v2), ``stuck_steering`` (v2 frozen, v1 controlled), ``uncontrolled``
-(constant commands); ``until`` clears a fault and the vehicle resumes its law.
+(constant commands); ``until`` clears a fault and the vehicle resumes its law. The
+drive reaches a failure's speed within the vehicle's ``max_accel`` (5 m/s^2 here: from
+the platoon's 1 m/s to rest in 0.2 s); a crash stops within a substep.
 """
 
 from __future__ import annotations
@@ -64,10 +66,18 @@ def test_stop_brakes_to_rest_and_marks_the_vehicle_failed(tmp_path):
     failing = rows(run, 2.0)
     assert run.failed[failing, 1].all() and not run.failed[~failing, 1].any()
     assert (run.mode[failing, 1] == MODE_FAILED).all()
-    assert not run.cmd[failing, 1].any()  # v1 = v2 = 0 applied from the onset
+    assert not run.cmd[failing, 1, 1].any()  # v2 = 0 applied from the onset
+    # v1 brakes at max_accel = 5 m/s^2 (0.05 m/s a period) from the 1 m/s before
+    v1 = run.cmd[failing, 1, 0]
+    before = run.cmd[np.flatnonzero(failing)[0] - 1, 1, 0]
+    assert before == pytest.approx(1.0, abs=0.01)
+    assert v1[0] == pytest.approx(before - 0.05)
+    assert np.all(np.diff(v1) >= -0.05 - 1e-12) and np.all(np.diff(v1) <= 0.0)
+    assert v1[19] == pytest.approx(max(0.0, before - 1.0), abs=1e-9)
+    assert not v1[20:].any()  # at rest command from 2.2 s
     assert speed(run, 1)[195] > 0.9  # driving at the platoon's 1 m/s just before
-    at_rest = rows(run, 2.2)[1:]
-    assert np.max(speed(run, 1)[at_rest]) < 1e-3  # at rest within 0.2 s
+    at_rest = rows(run, 2.21)[1:]
+    assert np.max(speed(run, 1)[at_rest]) < 1e-3  # at rest 0.2 s after the onset
     assert m["vehicles"]["red"]["failed_at"] == pytest.approx(2.0)
     assert m["vehicles"]["green"]["failed_at"] is None
     # red no longer follows, but it is failed: convergence is judged on the healthy
@@ -131,8 +141,10 @@ def test_spin_keeps_the_position_and_turns_at_v2():
     run, m = run_doc(
         platoon([{"vehicle": "red", "at": 2.0, "kind": "spin", "v2": 1.5}])
     )
-    spinning = rows(run, 2.2)
-    assert np.all(run.cmd[rows(run, 2.0), 1] == [0.0, 1.5])
+    spinning = rows(run, 2.21)
+    assert np.all(run.cmd[rows(run, 2.0), 1, 1] == 1.5)  # turning from the onset
+    v1 = run.cmd[rows(run, 2.0), 1, 0]  # braking at 5 m/s^2 from 1 m/s
+    assert v1[0] == pytest.approx(0.95, abs=0.01) and not v1[20:].any()
     pos = run.pose[spinning, 1, :2]
     assert np.max(np.abs(pos - pos[0])) < 1e-3  # stays in place
     theta = run.pose[spinning, 1, 2]  # unwrapped heading
@@ -181,7 +193,10 @@ def test_uncontrolled_applies_constant_commands_and_drives_an_arc():
     )
     run, _ = run_doc(doc)
     loose = rows(run, 2.0)
-    assert np.all(run.cmd[loose, 1] == [1.5, 0.3])
+    assert np.all(run.cmd[loose, 1, 1] == 0.3)
+    # from 1 m/s to 1.5 m/s at max_accel = 5 m/s^2: 0.1 s
+    assert run.cmd[loose, 1, 0][0] == pytest.approx(1.05, abs=0.01)
+    assert np.all(run.cmd[rows(run, 2.1), 1, 0] == 1.5)
     # the motion is the unicycle arc of radius v1/v2 = 5 m: heading turns at 0.3 rad/s
     settled = rows(run, 2.3)
     rate = np.polyfit(run.t[settled], run.pose[settled, 1, 2], 1)[0]
@@ -207,7 +222,7 @@ def test_a_cleared_fault_resumes_the_law_and_resettles():
 def test_a_leader_failure_leaves_the_followers_in_formation_around_it():
     run, m = run_doc(platoon([{"vehicle": "leader", "at": 2.0, "kind": "stop"}]))
     assert m["vehicles"]["leader"]["failed_at"] == pytest.approx(2.0)
-    assert np.max(speed(run, 0)[rows(run, 2.2)[1:]]) < 1e-3
+    assert np.max(speed(run, 0)[rows(run, 2.21)[1:]]) < 1e-3  # braked in 0.2 s
     # the followers' slots are defined around the stopped leader: they settle there
     for name in ("red", "green"):
         assert m["vehicles"][name]["settling_time"] is not None

@@ -145,7 +145,11 @@ def test_failures_apply_on_top_of_user_commands() -> None:
     run = sim.result()
     red = run.names.index("red")
     after = run.t > 3.0 + 1e-9
-    assert np.all(run.cmd[after, red] == 0.0)  # stopped: v1 = v2 = 0
+    # stopped: v2 = 0 at once, v1 braked at max_accel = 5 m/s^2 (0.05 m/s a period)
+    assert np.all(run.cmd[after, red, 1] == 0.0)
+    periods = np.round((run.t[after] - 3.0) / 0.01) + 1  # braking periods so far
+    braked = np.maximum(0.8 - 0.05 * periods, 0.0)  # from the user's 0.8 m/s
+    np.testing.assert_allclose(run.cmd[after, red, 0], braked, atol=1e-12)
     assert np.all(run.mode[after, red] == MODE_FAILED)
     assert np.all(
         run.mode[(run.t < 3.0 - 1e-9) & (run.t < run.t[-1]), red] == MODE_EXTERNAL

@@ -38,6 +38,7 @@ from sandbox.control.formation import (
     BackwardDifference,
 )
 from sandbox.divergence import diverged
+from sandbox.failures import within_drive
 from sandbox.plugins import FailureContext, LawContext, StrategyContext, make_law
 from sandbox.recovery import NeighbourList
 from sandbox.run import (
@@ -471,6 +472,9 @@ class Batch:
                 params=dict(fs.params[k]),
             )
             v1[i], v2[i] = fs.kinds[k].obj(ctx)
+            if not fs.immovable[k]:  # within the drive's max_accel, as alone
+                step = float(np.broadcast_to(self.accel_max, (N,))[i]) * self.h
+                v1[i] = within_drive(float(v1[i]), float(self.v1[i]), step)
             failed[i] = True
             frozen[i] |= not fs.controlled[k]
         return v1, v2, failed, frozen
