@@ -39,7 +39,9 @@ Definitions (the keys of ``metrics.json``):
 - ``reassignments`` and ``leader_changes`` (only with ``reconfigure`` or
   ``on_leader_failure``, see :mod:`sandbox.reconfigure`): ``{t, assignment}``, the
   formation slot each vehicle tracks from then on (null: none), and ``{t, from, to,
-  mode}`` (``to`` null: the virtual leader).
+  mode}`` (``to`` null: the virtual leader); ``slots``, each vehicle's slots over
+  time (``{vehicle: [[t, slot], ...]}``, held from ``t``; see
+  :attr:`sandbox.run.Run.slot_index`).
 
 Formation errors, settling and mode switches read the recorded samples (at the
 resolution of ``record_every``); the rest comes from the loop (``Run.info
@@ -397,7 +399,8 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     }
     if loop:
         out["motor"] = loop["motor"]
-    for key in ("safety", "diverged", "interrupted", "reassignments", "leader_changes"):
+    keys = ("safety", "diverged", "interrupted", "reassignments", "leader_changes")
+    for key in (*keys, "slots"):
         if key in run.info:
             out[key] = run.info[key]
     from sandbox.detection import detection_metrics

@@ -48,7 +48,11 @@ controller saturates its speed, acceleration and turn rate
 (:func:`~sandbox.control.flatness.advance_extension`). The events are recorded in the
 run's ``info`` as ``reassignments`` (``{t, assignment}``, the slot of each vehicle,
 null for none) and ``leader_changes`` (``{t, from, to, mode}``, ``to`` null for the
-virtual leader); ``metrics.json`` lists them.
+virtual leader); ``metrics.json`` lists them. Each vehicle's slots over time are
+recorded too, as ``slots``: ``{vehicle: [[t, slot], ...]}``, the slot it holds from
+``t`` on (null: none), starting at 0 with the formation order and with an entry only
+where it changes; ``t`` is the first period of the new configuration, the event's
+``t + dt``. :attr:`sandbox.run.Run.slot_index` gives it per recorded sample.
 """
 
 from __future__ import annotations
@@ -102,6 +106,11 @@ class Reconfiguration:
         self.leader_changes: list[dict[str, Any]] = []
         sim.info["reassignments"] = self.reassignments
         sim.info["leader_changes"] = self.leader_changes
+        #: Each vehicle's slots over time: ``[[t, slot or None], ...]`` by name.
+        self.slots: dict[str, list[list]] = {
+            name: [[0.0, _slot(self.slot_of[i])]] for i, name in enumerate(sim.names)
+        }
+        sim.info["slots"] = self.slots
 
     @classmethod
     def build(cls, sim: Simulation) -> Reconfiguration | None:
@@ -150,6 +159,7 @@ class Reconfiguration:
             changed = True
         if changed:
             self._apply(sim, t)
+            self._record_slots(sim, t)
 
     # ------------------------------------------------------------------ handover
     def _hand_over(self, sim: Simulation, t: float, lead: int) -> bool:
@@ -259,6 +269,14 @@ class Reconfiguration:
             slot[self.leader_slot] = ctx.reference[0]  # the leader's: the reference
         return slot
 
+    def _record_slots(self, sim: Simulation, t: float) -> None:
+        """Append the slots that changed, held from the next period ``t + dt``."""
+        start = round(t + sim.h, 9)
+        for i, name in enumerate(sim.names):
+            slot = _slot(self.slot_of[i])
+            if self.slots[name][-1][1] != slot:
+                self.slots[name].append([start, slot])
+
     # ------------------------------------------------------------------ applying
     def _apply(self, sim: Simulation, t: float) -> None:
         """Offsets from the assignment; the estimators re-seeded on them at ``t``."""
@@ -283,6 +301,11 @@ def _law_context(sim: Simulation, t: float, offset: np.ndarray, memory: dict):
     """What the law sees at ``t`` with ``offset`` and ``memory``."""
     ref = sim.reference.evaluate(t) if sim.reference is not None else None
     return sim.law_context(t, ref, offset, memory)
+
+
+def _slot(k: int) -> int | None:
+    """A slot index as recorded: an int, or None for no slot (-1)."""
+    return int(k) if k >= 0 else None
 
 
 def _positions(sim: Simulation) -> np.ndarray:

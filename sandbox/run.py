@@ -171,6 +171,48 @@ class Run:
             (c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]), -1
         )
 
+    @property
+    def slot_index(self) -> np.ndarray:
+        """The formation slot each vehicle holds at each sample, shape (T, n), int.
+
+        Slot ``k`` is ``vehicles[k].offset`` (the formation order); -1: no slot. With
+        ``reconfigure`` or ``on_leader_failure`` it follows the reassignments and
+        leader changes (``info["slots"]``: each vehicle's ``[[t, slot], ...]``, held
+        from ``t``); without them vehicle ``k`` holds slot ``k`` throughout (one driven
+        by a command schedule none).
+        """
+        T, n = len(self.t), self.n_vehicles
+        timeline = self.info.get("slots")
+        if timeline is None:
+            out = np.broadcast_to(np.arange(n), (T, n)).copy()
+            if self.scenario is not None:
+                for i, v in enumerate(self.scenario.vehicles):
+                    if v.drive.type == "commands":
+                        out[:, i] = -1
+            return out
+        out = np.full((T, n), -1, dtype=int)
+        for i, name in enumerate(self.names):
+            for start, slot in timeline[name]:
+                out[self.t >= start - 1e-9, i] = -1 if slot is None else slot
+        return out
+
+    def slot_changes(self) -> list[dict[str, Any]]:
+        """Every change of slot, in time order: ``{t, vehicle, from, to}``.
+
+        ``t`` [s] is the first period the vehicle holds slot ``to`` (None: no slot);
+        empty without reconfiguration.
+        """
+        timeline = self.info.get("slots") or {}
+        changes = []
+        for name in self.names:
+            steps = timeline.get(name, [])
+            changes += [
+                {"t": b[0], "vehicle": name, "from": a[1], "to": b[1]}
+                for a, b in zip(steps[:-1], steps[1:], strict=True)
+            ]
+        order = {name: i for i, name in enumerate(self.names)}
+        return sorted(changes, key=lambda c: (c["t"], order[c["vehicle"]]))
+
     def vehicle(self, name: str) -> VehicleTrack:
         """One vehicle's arrays by name: ``run.vehicle("red").x1``.
 

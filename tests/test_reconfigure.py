@@ -109,6 +109,50 @@ def test_the_column_closes_when_the_detector_finds_the_stop_under_noise() -> Non
         assert slot_error(run, name)[late].max() < 0.1, name
 
 
+def test_the_run_records_who_holds_which_slot() -> None:
+    # red stops at 3 s; from the next period everyone behind it holds the slot ahead
+    run, m = result("column_close")
+    assert m["slots"] == {
+        "leader": [[0.0, 0]],
+        "red": [[0.0, 1], [3.01, None]],
+        "green": [[0.0, 2], [3.01, 1]],
+        "orange": [[0.0, 3], [3.01, 2]],
+        "purple": [[0.0, 4], [3.01, 3]],
+    }
+    index = run.slot_index
+    assert (index[window(run, 0.0, 3.01)] == [0, 1, 2, 3, 4]).all()
+    assert (index[window(run, 3.01)] == [0, -1, 1, 2, 3]).all()
+    # the slot recorded is the one driven to: its offset from the reference point
+    offsets = np.array([v.offset for v in run.scenario.vehicles])
+    for i in (2, 3, 4):
+        where = run.reference[-1] + offsets[index[-1, i]]
+        np.testing.assert_allclose(run.pose[-1, i, :2], where, atol=0.1)
+    # and where the recorded slot positions are defined, they agree with the index
+    assert np.isnan(run.slot[window(run, 3.01), 1]).all()
+    changes = run.slot_changes()
+    assert [(c["vehicle"], c["from"], c["to"]) for c in changes] == [
+        ("red", 1, None),
+        ("green", 2, 1),
+        ("orange", 3, 2),
+        ("purple", 4, 3),
+    ]
+    assert {c["t"] for c in changes} == {3.01}
+
+
+@pytest.mark.parametrize("mode", ["virtual", "elect"])
+def test_a_leader_change_is_in_the_slot_record(mode) -> None:
+    # Either way red ends in slot 0 (elect: as the leader; virtual: the reference's
+    # own slot, offset 0), orange takes red's slot 1 and green keeps its slot 2.
+    run, m = result(f"leader_crash_{mode}")
+    assert m["slots"] == {
+        "leader": [[0.0, 0], [3.01, None]],
+        "red": [[0.0, 1], [3.01, 0]],
+        "green": [[0.0, 2]],
+        "orange": [[0.0, 3], [3.01, 1]],
+    }
+    assert run.slot_index[-1].tolist() == [-1, 0, 2, 1]
+
+
 @pytest.mark.parametrize(("mode", "heir"), [("virtual", None), ("elect", "red")])
 def test_after_a_leader_crash_the_formation_settles_again(mode, heir) -> None:
     run, m = result(f"leader_crash_{mode}")
@@ -220,7 +264,9 @@ def test_the_defaults_are_bit_identical_to_no_keys() -> None:
     for key in ("pose", "cmd", "chi", "slot", "target", "mode"):
         assert np.array_equal(getattr(a, key), getattr(b, key), equal_nan=True), key
     assert ma == mb
-    assert "reassignments" not in ma
+    assert "reassignments" not in ma and "slots" not in ma
+    # without reconfiguration vehicle k holds slot k throughout
+    assert (a.slot_index == np.arange(a.n_vehicles)).all() and a.slot_changes() == []
 
 
 def test_the_keys_round_trip_through_the_resolved_scenario() -> None:
