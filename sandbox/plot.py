@@ -21,9 +21,11 @@ deterministic). It reads a :class:`sandbox.run.Run` only.
 - ``formation_error`` (:func:`formation_error_figure`): distance of each vehicle to
   its slot against time, failures as vertical dashed lines (dotted where they end),
   collisions as red stars, detections (``detection: residual``) as triangles on the
-  time axis. A failed vehicle's error while it is failed (it grows
-  without bound for a stopped vehicle) is drawn apart, on a lower panel with its own
-  scale, so that it does not flatten the healthy curves;
+  time axis, reassignments and leader changes (``reconfigure``,
+  ``on_leader_failure``) as marks on its top edge (:mod:`sandbox.plot_marks`). A
+  failed vehicle's error while it is failed (it grows without bound for a stopped
+  vehicle) is drawn apart, on a lower panel with its own scale, so that it does not
+  flatten the healthy curves;
 - ``commands`` (:func:`commands_figure`): ``v1`` and ``v2`` against time.
 
 Fleets of more than :data:`LEGEND_MAX` vehicles have no per-vehicle legend; their time
@@ -45,6 +47,7 @@ from matplotlib.colors import is_color_like
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 
+from sandbox.plot_marks import TITLE_PAD, detection_marks, reconfiguration_marks
 from sandbox.plot_parts import (
     draw_bands,
     fit_box,
@@ -503,59 +506,6 @@ def _failed_mask(run: Run, idx: np.ndarray) -> np.ndarray:
     return failed
 
 
-def _detection_marks(ax: Axes, run: Run, colors: list[str]) -> None:
-    """Detections (``detection: residual``) as triangles on the time axis.
-
-    A filled triangle in the vehicle's colour where it was detected (labelled with the
-    kind detected), a hollow one where the detection was withdrawn, a black cross on
-    the triangle where a detection was a false alarm (the vehicle had no active
-    failure then).
-    """
-    block = _info(run, "detection")
-    if not isinstance(block, dict) or not block.get("events"):
-        return
-    from sandbox.detection import detection_metrics
-
-    listed = _info(run, "failures")
-    marked = detection_metrics(run.info, listed if isinstance(listed, list) else [])
-    index = {name: k for k, name in enumerate(run.names)}
-    axis = ax.get_xaxis_transform()  # x in data, y in axes fraction
-    mark = {"transform": axis, "clip_on": False, "ls": "none", "ms": 9}
-    seen = {"detected": False, "false alarm": False, "detection cleared": False}
-    for d in marked["detections"]:
-        i = index.get(d["vehicle"])
-        if i is None:
-            continue
-        ax.plot(d["t"], 0.0, marker="^", color=colors[i], zorder=6, **mark)
-        seen["detected"] = True
-        what = "false alarm" if d["false_alarm"] else "detected"
-        if d["false_alarm"]:
-            ax.plot(d["t"], 0.0, marker="x", color="black", zorder=7, **mark)
-            seen["false alarm"] = True
-        ax.annotate(
-            f"{d['vehicle']} {what}: {d['kind']}",
-            (d["t"], 0.04),
-            xycoords=axis,
-            xytext=(3, 3),
-            textcoords="offset points",
-            va="bottom",
-            fontsize=7,
-            rotation=90,
-        )
-        if d.get("cleared") is not None:
-            ax.plot(d["cleared"], 0.0, marker="^", mfc="none", color=colors[i], **mark)
-            seen["detection cleared"] = True
-    # Legend entries in grey: the colour is the vehicle's.
-    styles = {
-        "detected": {"marker": "^"},
-        "false alarm": {"marker": "x"},
-        "detection cleared": {"marker": "^", "mfc": "none"},
-    }
-    for label, shown in seen.items():
-        if shown:
-            ax.plot([], [], ls="none", ms=9, color="0.35", label=label, **styles[label])
-
-
 def _side_legend(fig: Figure, ax: Axes, run: Run) -> None:
     """Legend outside the axes on the right (one entry per vehicle, or the bands)."""
     handles, labels = ax.get_legend_handles_labels()
@@ -581,7 +531,9 @@ def formation_error_figure(run: Run) -> Figure:
         when a vehicle fails, a second axes with the error of failed vehicles while
         they are failed. Failures are vertical dashed lines in the vehicle's colour
         (dotted at their end), collisions are red stars, detections triangles on
-        the time axis (hollow: withdrawn; with a black cross: a false alarm).
+        the time axis (hollow: withdrawn; with a black cross: a false alarm),
+        reassignments grey down-triangles on the top edge (labelled with the slots
+        that changed) and leader changes diamonds there in the new leader's colour.
     """
     colors = _colors(run)
     idx = _thin(run)
@@ -643,14 +595,15 @@ def formation_error_figure(run: Run) -> Figure:
             )
     if marks[True] and not marks[False]:
         ax.plot([], [], "r*", ls="none", ms=10, label="collision")
-    _detection_marks(ax, run, colors)
+    detection_marks(ax, run, colors)
+    marked = reconfiguration_marks(ax, run, colors)
     bottom = low if low is not None else ax
     bottom.set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0)
     bottom.set_xlabel("t [s]")
     ax.set_ylim(bottom=0.0)
     ax.set_ylabel("formation error [m]")
     ax.grid(True, lw=0.4, alpha=0.5)
-    ax.set_title(_title(run, "Distance to slot"))
+    ax.set_title(_title(run, "Distance to slot"), pad=TITLE_PAD if marked else None)
     _side_legend(fig, ax, run)
     return fig
 

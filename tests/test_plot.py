@@ -381,3 +381,49 @@ def test_formation_error_marks_detections_and_false_alarms() -> None:
     # without detection (the oracle) nothing is marked
     plain = plot.formation_error_figure(make_run()).axes[0]
     assert not [line for line in plain.get_lines() if line.get_marker() == "^"]
+
+
+def test_formation_error_marks_reassignments_and_leader_changes() -> None:
+    # v2 fails at 2 s: at 2.0 s v0 (the leader) hands over to v1, and v2 loses its
+    # slot; at 3.0 s a reassignment alone (v1 and v2 swap back, say)
+    run = make_run()
+    run.info["reassignments"] = [
+        {"t": 2.0, "assignment": {"v0": None, "v1": 0, "v2": None}},
+        {"t": 3.0, "assignment": {"v0": None, "v1": 0, "v2": 2}},
+    ]
+    run.info["leader_changes"] = [
+        {"t": 2.0, "from": "v0", "to": "v1", "mode": "elect"}
+    ]
+    run.info["slots"] = {
+        "v0": [[0.0, 0], [2.05, None]],
+        "v1": [[0.0, 1], [2.05, 0]],
+        "v2": [[0.0, 2], [2.05, None], [3.05, 2]],
+    }
+    fig = plot.formation_error_figure(run)
+    ax = fig.axes[0]
+
+    def at(marker: str) -> list[float]:
+        return [
+            float(line.get_xdata()[0])
+            for line in ax.get_lines()
+            if line.get_marker() == marker and len(line.get_xdata())
+        ]
+
+    assert at("D") == [2.0] and at("v") == [3.0]  # one mark per event time
+    diamond = next(line for line in ax.get_lines() if line.get_marker() == "D")
+    assert diamond.get_color() == "red"  # the new leader's colour
+    texts = [t.get_text() for t in ax.texts]
+    assert "lead: v1; slots: v0\u2192none, v1\u21920, v2\u2192none" in texts
+    assert "slots: v2\u21922" in texts  # only what changed
+    labels = ax.get_legend_handles_labels()[1]
+    assert {"reassigned", "leader change"} <= set(labels)
+    FigureCanvasAgg(fig).draw()
+    # the virtual leader: a grey diamond labelled "lead: reference"
+    run.info["leader_changes"][0]["to"] = None
+    ax = plot.formation_error_figure(run).axes[0]
+    assert "lead: reference; slots: v0\u2192none, v1\u21920, v2\u2192none" in [
+        t.get_text() for t in ax.texts
+    ]
+    # without reconfiguration nothing is marked
+    plain = plot.formation_error_figure(make_run()).axes[0]
+    assert not [line for line in plain.get_lines() if line.get_marker() in "Dv"]
