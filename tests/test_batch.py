@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 
 import numpy as np
@@ -12,7 +14,7 @@ from sandbox import compute_metrics, load_scenario
 from sandbox.cli import main
 from sandbox.simulation import Simulation
 from sandbox.study import batch as batching
-from sandbox.study import batchable, engine
+from sandbox.study import batchable, engine, store
 from sandbox.study.batch import Batch
 from sandbox.study.batch_metrics import row_reduce, row_sum
 from sandbox.study.batchable import batch_key, batch_reason
@@ -226,3 +228,27 @@ def test_column_reductions_equal_numpys(m):
     mask = rng.random((50, m)) < 0.5
     assert row_reduce(np.logical_or, mask).tolist() == mask.any(axis=1).tolist()
     assert row_sum(mask).tolist() == mask.sum(axis=1).tolist()
+
+
+def test_results_parquet_holds_the_rows_python_values(tmp_path):
+    pa = pytest.importorskip("pyarrow")
+    pq = pytest.importorskip("pyarrow.parquet")
+    header = ["run_id", "recovery.beta", "seed", *store.MEASURED]
+    rows = [
+        ["a1", "1", 0, "ok", 3, 2, 1, 0.1 + 0.2, True, 3.21, 1e-300, 0],
+        ["b2", '[1, "x"]', 1, "invalid", *[None] * 8],
+        ["c3", "", 2, "diverged", 0, 0, 0, 5e-324, False, None, 1.7e308, 2],
+    ]
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(header)
+    for r in rows:
+        writer.writerow([store.cell_text(v) for v in r])
+    path = tmp_path / "results.parquet"
+    store._write_parquet(path, header, buf.getvalue(), 1)
+    types = store.parquet_types(1)
+    columns = zip(header, zip(*rows, strict=True), types, strict=True)
+    want = pa.table({h: pa.array(list(c), type=t) for h, c, t in columns})
+    assert pq.read_table(path).equals(want)
+    store._write_parquet(path, header, buf.getvalue().splitlines()[0] + "\n", 1)
+    assert pq.read_table(path).num_rows == 0
