@@ -51,7 +51,7 @@ from sandbox.world import World  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper" / "fig15_continuous_beta1.yaml"
 DURATION = 12.0
-SIZES = (16, 64, 256)
+SIZES = (16, 64, 128, 256)
 
 
 def scenario():

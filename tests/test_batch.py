@@ -168,9 +168,11 @@ def test_a_stopped_batch_returns_nothing():
 
     assert Batch([Simulation(sc), Simulation(sc)]).run(should_stop=stop) is None
     jobs = [("a", ({"duration": 1}, "x.yaml", []))]
-    assert engine.chunks(jobs * 100, 1) == [jobs * 25] * 4
-    assert [len(c) for c in engine.chunks(jobs * 300, 2)] == [64] * 4 + [44]
-    assert [len(c) for c in engine.chunks(jobs * 100, 2)] == [25] * 4
+    assert engine.chunks(jobs * 100, 1) == [jobs * 50] * 2
+    assert [len(c) for c in engine.chunks(jobs * 300, 1)] == [128, 128, 44]
+    assert [len(c) for c in engine.chunks(jobs * 300, 2)] == [75] * 4
+    assert [len(c) for c in engine.chunks(jobs * 1000, 2)] == [128] * 7 + [104]
+    assert [len(c) for c in engine.chunks(jobs * 10, 2)] == [8, 2]
 
 
 def test_stacked_motor_arrays_stay_the_worlds_own():

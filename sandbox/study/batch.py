@@ -287,9 +287,9 @@ class Batch:
         measured = self._measured.reshape(K, n, 3)
         measured[..., :2] = rows[..., 3:5]
         measured[..., 2] = rows[..., 5]
-        rows = rows.copy()
-        dead = ~self.live
-        if dead.any():  # stopped worlds: a harmless state, never used again
+        if len(self._live_list) < K:  # stopped worlds: a harmless state, never used
+            rows = rows.copy()
+            dead = ~self.live
             rows[dead] = 0.0
             self.chi.reshape(K, n, 2)[dead] = 0.0
         rows = rows.reshape(self.N, 6)
@@ -501,6 +501,22 @@ class Batch:
             return
         K, n = self.K, self.n
         b, c = self._buf, self._count
+        if worlds is None and not undefined:  # every world: straight into the record
+            b["t"][c] = self.k * self.h
+            pose, cmd = b["pose"][c], b["cmd"][c]
+            pose[..., :2] = self.pos.reshape(K, n, 2)
+            pose[..., 2] = self.theta.reshape(K, n)
+            cmd[..., 0] = self.v1.reshape(K, n)
+            cmd[..., 1] = self.v2.reshape(K, n)
+            slot, target, _, _, point, _, _ = self.plan
+            b["chi"][c] = self.chi.reshape(K, n, 2)
+            b["slot"][c] = slot.reshape(K, n, 2)
+            b["target"][c] = target.reshape(K, n, 2)
+            b["mode"][c] = self.mode.reshape(K, n)
+            b["failed"][c] = self.failed.reshape(K, n)
+            b["reference"][c] = point
+            self._count = c + 1
+            return
         pose = np.concatenate((self.pos, self.theta[:, None]), axis=1).reshape(K, n, 3)
         cmd = np.stack((self.v1, self.v2), axis=1).reshape(K, n, 2)
         if undefined:

@@ -28,11 +28,13 @@ STATUS_ERROR = "error"
 #: Statuses ``--retry-failed`` runs again.
 FAILED_STATUSES = ("diverged", STATUS_INVALID, STATUS_ERROR)
 #: Most runs stepped together in one batch of worlds (memory: about 0.4 MB per
-#: run of three vehicles and 1,200 samples).
-BATCH_WORLDS = 64
+#: run of three vehicles and 1,200 samples). The numpy pass of a step costs about
+#: 0.25 ms for the whole batch plus a few microseconds per world: 128 worlds share
+#: it at about half the cost per run of 32 (``benchmarks/bench_sweep.py``).
+BATCH_WORLDS = 128
 #: A sweep is cut into at least this many groups in-process, and per worker of a
 #: pool, of at least :data:`MIN_WORLDS` runs each.
-MIN_GROUPS = 4
+MIN_GROUPS = 2
 MIN_GROUPS_PER_WORKER = 2
 MIN_WORLDS = 8
 #: How long to wait for a Dask scheduler to answer.
