@@ -37,6 +37,8 @@ BATCH_WORLDS = 128
 MIN_GROUPS = 2
 MIN_GROUPS_PER_WORKER = 2
 MIN_WORLDS = 8
+#: Modules a local pool's fork server imports before it forks the workers.
+PRELOAD = ["sandbox.study.batch", "sandbox.metrics", "sandbox.scenario"]
 #: How long to wait for a Dask scheduler to answer.
 CONNECT_TIMEOUT = "5s"
 
@@ -259,6 +261,10 @@ def run_local(
     ctx = mp.get_context(
         "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
     )
+    if ctx.get_start_method() == "forkserver":
+        # The server imports the simulation once; every worker forked from it starts
+        # with it imported (instead of a third of a second each).
+        ctx.set_forkserver_preload(PRELOAD)
     with cf.ProcessPoolExecutor(
         max_workers=workers, mp_context=ctx, initializer=_ignore_interrupts
     ) as pool:
