@@ -540,7 +540,10 @@ def formation_error_figure(run: Run) -> Figure:
     t = np.asarray(run.t, dtype=float)
     err = np.linalg.norm(run.pose[idx, :, :2] - run.slot[idx], axis=-1)  # (T', n) [m]
     failed = _failed_mask(run, idx)
-    who_failed = np.flatnonzero(failed.any(axis=0)).tolist()
+    # A failed vehicle whose slot was taken away (reconfiguration) has no distance to
+    # draw while failed: it gets no lower panel.
+    while_failed = np.isfinite(np.where(failed, err, np.nan)).sum(axis=0)
+    who_failed = np.flatnonzero(while_failed > 1).tolist()
     if who_failed:
         fig = Figure(figsize=(9.0, 6.0), layout="constrained")
         ax, low = fig.subplots(2, 1, sharex=True, height_ratios=(2.2, 1.0))

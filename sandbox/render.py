@@ -250,6 +250,14 @@ class _Scene:
         self._prepare_events(step)
         label = run.info.get("scenario_name") if isinstance(run.info, dict) else None
         self.hud_prefix = str(label) if label else ""
+        # Reconfiguration on the heads-up line: who leads (after a handover) and how
+        # many reassignments so far (runs without them draw neither).
+        info = run.info if isinstance(run.info, dict) else {}
+        leads = info.get("leader_changes") or []
+        self.lead_t = np.array([c["t"] for c in leads], dtype=float)
+        self.lead_to = [c["to"] or "reference" for c in leads]
+        moves = info.get("reassignments") or []
+        self.reassign_t = np.array([e["t"] for e in moves], dtype=float)
         self.background = (
             None if self.track is not None else self._background(self.camera)
         )
@@ -478,7 +486,10 @@ class _Scene:
     def _draw_hud(
         self, draw: ImageDraw.ImageDraw, img: Image.Image, now: float
     ) -> None:
-        """The heads-up line: scenario, time, collisions so far, recovery strategy."""
+        """The heads-up line: scenario, time, collisions, lead, recovery strategy.
+
+        The lead and the number of reassignments so far only with such events.
+        """
         hits = int(np.searchsorted(self.event_t, now, side="right"))
         draw.rectangle([0, 0, self.size - 1, self.bands.top - 1], fill=WHITE)
         x, y = max(4, int(0.02 * self.size)), 3
@@ -488,6 +499,12 @@ class _Scene:
         x = self.stamps.paste_number(img, (x, y), f"{now:.2f}", BLACK)
         x = self.stamps.paste(img, (x, y), " s", BLACK)
         x = self.stamps.paste(img, (x, y), f"collisions: {hits}", BLACK)
+        led = int(np.searchsorted(self.lead_t, now, side="right"))
+        if led:
+            x = self.stamps.paste(img, (x, y), f"lead: {self.lead_to[led - 1]}", BLACK)
+        if len(self.reassign_t):
+            moved = int(np.searchsorted(self.reassign_t, now, side="right"))
+            x = self.stamps.paste(img, (x, y), f"reassigned: {moved}", BLACK)
         last = f"recovery: {self.strategy}"
         if x + self.stamps.mask(last).width <= self.size:  # whole, or not at all
             self.stamps.paste(img, (x, y), last, BLACK)

@@ -216,6 +216,7 @@ def test_reconfiguration_reacts_to_the_detection(name, vehicle):
     _, o = result(name, *noise, ORACLE)
     (failure,) = m["detection"]["failures"]
     assert failure["vehicle"] == vehicle and failure["delay"] <= 0.5
+    assert failure["kind_right"]  # the stop a stop, the crashes crashes
     assert m["detection"]["false_alarms"] == 0
     assert m["collisions"]["healthy"] <= o["collisions"]["healthy"]
     assert m["converged"] and o["converged"]

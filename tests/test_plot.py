@@ -427,3 +427,12 @@ def test_formation_error_marks_reassignments_and_leader_changes() -> None:
     # without reconfiguration nothing is marked
     plain = plot.formation_error_figure(make_run()).axes[0]
     assert not [line for line in plain.get_lines() if line.get_marker() in "Dv"]
+
+
+def test_a_failed_vehicle_without_a_slot_gets_no_lower_panel() -> None:
+    # Reconfiguration takes the failed vehicle's slot away: nothing to draw while
+    # failed, so one panel; with its slot kept, the lower panel shows its distance.
+    run = make_run()
+    assert len(plot.formation_error_figure(run).axes) == 2
+    run.slot[run.t >= 2.0 + 0.05, 2] = np.nan
+    assert len(plot.formation_error_figure(run).axes) == 1

@@ -320,3 +320,29 @@ def test_write_gif_reports_progress_up_to_every_planned_frame(tmp_path: Path) ->
     assert calls[-1] == (total, total)
     assert [d for d, _ in calls] == sorted({d for d, _ in calls})  # increasing
     assert 1 <= len(calls) <= 101
+
+
+def test_the_heads_up_line_names_the_new_leader_after_a_handover() -> None:
+    # A leader change (and reassignment) at 1 s and one at 1.9 s: the frames at 0.5 s
+    # are the same, at 1.5 s the first reads "lead: v1  reassigned: 1" and the second
+    # "reassigned: 0"; below the heads-up line nothing differs.
+    def handed(at: float) -> Run:
+        run = make_run()
+        run.info["leader_changes"] = [
+            {"t": at, "from": "v0", "to": "v1", "mode": "elect"}
+        ]
+        run.info["reassignments"] = [{"t": at, "assignment": {"v0": None, "v1": 0}}]
+        return run
+
+    soon, late = handed(1.0), handed(1.9)
+    hud = render_overlay.font_px(640) + 6
+    k = int(np.searchsorted(soon.t, 0.5))
+    assert np.array_equal(render.render_frame(soon, k), render.render_frame(late, k))
+    k = int(np.searchsorted(soon.t, 1.5))
+    a, b = render.render_frame(soon, k), render.render_frame(late, k)
+    assert not np.array_equal(a[:hud], b[:hud])
+    assert np.array_equal(a[hud:], b[hud:])
+    # a run without reconfiguration draws neither
+    plain = render.render_frame(make_run(), k)
+    assert not np.array_equal(plain[:hud], b[:hud])  # "reassigned: 0" is drawn
+    assert np.array_equal(plain[hud:], b[hud:])
