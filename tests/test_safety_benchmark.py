@@ -13,6 +13,7 @@ filter's own stalls) no case has a contact or a deadlock.
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from helpers import SCENARIOS, run_scenario
 
@@ -39,12 +40,12 @@ OUTCOMES = [
     ("circle_swap_8_jittered", (KAPPA,), 0, None, True),
     ("circle_swap_20_jittered", (), 0, None, True),
     ("circle_swap_20_jittered", (KAPPA,), 0, None, True),
-    ("platoons_crossing", (), 1, None, False),
-    ("platoons_crossing", (KAPPA,), 0, None, True),
+    ("platoons_crossing", ("duration=12",), 1, None, False),
+    ("platoons_crossing", (KAPPA, "duration=12"), 0, None, True),
     ("platoons_head_on", (), 1, None, False),
     ("platoons_head_on", (KAPPA,), 0, None, True),
-    ("door", (), 1, None, False),
-    ("door", (KAPPA,), 0, None, True),
+    ("door", ("duration=20",), 1, None, False),
+    ("door", (KAPPA, "duration=20"), 0, None, True),
     # the mover touches the stopped vehicle once, then stalls pressed into it (or,
     # with the tangential term, goes around it)
     ("slot_beyond_stopped", (), 1, 1, False),
@@ -53,18 +54,18 @@ OUTCOMES = [
     ("obstacle_field_random", (KAPPA,), 0, 0, True),
     ("obstacle_field_random", ("recovery.strategy=none",), 0, None, True),
     # the recommended configuration: the tangential term and the CBF filter with its
-    # right-hand rule out of stalls (pass_right pi/2, the default). No contact and no
-    # deadlock anywhere; the exact rings settle; the crossing platoons settle after
-    # their file's end (13.3 s of 12 s) and the door much later (57 s of 20 s)
+    # right-hand rule out of stalls (pass_right pi/2, the default): success in every
+    # case, no contact, no deadlock, every vehicle settled by the end of its file (the
+    # door in 57.2 s of its 60, the crossing platoons in 13.3 s of 20)
     ("circle_swap_3", REC, 0, 0, True),
     ("circle_swap_8", REC, 0, 0, True),
     ("circle_swap_20", REC, 0, 0, True),
     ("circle_swap_3_jittered", REC, 0, 0, True),
     ("circle_swap_8_jittered", REC, 0, 0, True),
     ("circle_swap_20_jittered", REC, 0, 0, True),
-    ("platoons_crossing", REC, 0, 0, False),
+    ("platoons_crossing", REC, 0, 0, True),
     ("platoons_head_on", REC, 0, 0, True),
-    ("door", (*REC, "duration=10"), 0, 0, False),
+    # the door: test_the_door_under_the_recommended_configuration
     ("slot_beyond_stopped", REC, 0, 0, True),
     ("obstacle_field_random", REC, 0, 0, True),
     ("head_on_swap", (*REC, "duration=8"), 0, 0, True),
@@ -114,6 +115,29 @@ def test_the_stall_short_of_a_slot_beyond_a_stopped_vehicle() -> None:
     )
     (touch,) = m["collisions"]["events"]
     assert touch["end"] is None and not touch["healthy"]  # the stopped one has failed
+
+
+def test_the_door_under_the_recommended_configuration() -> None:
+    # a_k and b_k start symmetric about the door's centre and cannot both pass the gap
+    # at once; they wait until the rounding of the physics breaks the tie: one pair
+    # passes the door, the other four vehicles drive round the ends of the wall, 6 m
+    # from it (measured: b0 at 25.3 s and a0 at 27.9 s through the door; a1 and b1
+    # round the ends at 35.5 s, a2 at 49.0 s, b2 at 52.0 s; the last settles at 57.2 s)
+    run, m = run_scenario(SAFETY / "door.yaml", *REC)
+    through, around = {}, {}
+    for name in ("a0", "a1", "a2", "b0", "b1", "b2"):
+        v = run.vehicle(name)
+        cross = np.flatnonzero(np.sign(v.x1[1:]) != np.sign(v.x1[:-1]))
+        for k in cross:
+            (through if abs(v.x2[k]) < 0.5 else around)[name] = run.t[k]
+    assert sorted(through) == ["a0", "b0"]
+    assert through["b0"] == pytest.approx(25.3, abs=0.1)
+    assert through["a0"] == pytest.approx(27.9, abs=0.1)
+    assert sorted(around) == ["a1", "a2", "b1", "b2"]
+    assert m["collisions"]["total"] == 0 and m["deadlocks"] == []
+    assert m["converged"]
+    last = max(v["settling_time"] for v in m["vehicles"].values())
+    assert last == pytest.approx(57.2, abs=0.1)
 
 
 def test_the_jittered_files_draw_their_starts_near_the_exact_ones() -> None:
