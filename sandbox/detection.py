@@ -44,23 +44,25 @@ The CUSUM
     move vehicles against their commands and are known to the world.
 
 Isolation
-    At an alarm the residuals accumulated since ``g`` last left 0 name the kind
-    (which component dominates by the summed magnitudes; deficit or excess by the
-    sign of the along-track sum). A heading residual dominating with the vehicle
-    covering less than half its predicted travel is a ``spin``; with the vehicle
-    moving, a ``stuck_steering``, or ``uncontrolled`` when the along-track sum is
-    beyond 2 standard deviations too. An along-track deficit with the vehicle (nearly)
-    still is a ``stop``, or a ``crash`` when the vehicle was in contact within the last
-    second or stopped faster than its drive can brake (the least of its declared
-    ``max_accel`` and ``motor_accel``: a failed drive brakes within these, a wreck
-    stops within a substep; see :mod:`sandbox.failures`). Any other
-    motion against the commands (too fast, sideways) is ``uncontrolled``. A
-    ``stuck_steering`` is watched ``isolation`` seconds more (default 0.3 s): if the
-    speed departs from the commands too it becomes ``uncontrolled`` (a runaway whose
-    speed happens to be near the commanded one looks like a stuck steering at
-    first). A stop or a spin is plain at once; a spinning vehicle's controller soon
-    turns with it (its turn-rate anti-windup follows the heading), so later windows
-    show only the missing translation.
+    At an alarm the residuals accumulated since ``g`` last left 0 name the kind, and
+    they are read again with every window for ``isolation`` seconds more (default
+    0.3 s; the detection time stays the alarm's): a failed drive reaches its faulty
+    command within its limits, so a braking stop or spin, or a runaway whose speed is
+    near the commanded one, is plain only after a few windows. A vehicle is *slow*
+    when its observed travel is within what braking to rest at its limit explains
+    (:func:`braked_travel` from the model's speed when the sums began, at the least
+    of its declared ``max_accel`` and ``motor_accel``) plus half of the predicted
+    travel beyond that. Slow and turning (the observed heading change after the first
+    window, beyond 4 standard deviations) is a ``spin``; slow, not turning and short
+    of its predicted travel is a ``stop``, or a ``crash`` when the vehicle was in
+    contact within the last second or its last :data:`SHAPE_HISTORY` seconds of
+    observed track fit a crash better than a braked stop (:func:`stop_fits`: a wreck
+    stops within a substep, a deceleration no drive makes; see
+    :mod:`sandbox.failures`). Without a declared limit the two move alike and a crash
+    in free space reads as a stop. A moving vehicle whose heading residual dominates
+    (by summed magnitudes) is a ``stuck_steering``, or ``uncontrolled`` when the
+    along-track sum is beyond 2 standard deviations too. Any other motion against the
+    commands (too fast, sideways) is ``uncontrolled``.
 
 Studies
     With ``memory["trace"]`` set to a list (``Simulation.detection.memory``), every

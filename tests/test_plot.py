@@ -391,9 +391,7 @@ def test_formation_error_marks_reassignments_and_leader_changes() -> None:
         {"t": 2.0, "assignment": {"v0": None, "v1": 0, "v2": None}},
         {"t": 3.0, "assignment": {"v0": None, "v1": 0, "v2": 2}},
     ]
-    run.info["leader_changes"] = [
-        {"t": 2.0, "from": "v0", "to": "v1", "mode": "elect"}
-    ]
+    run.info["leader_changes"] = [{"t": 2.0, "from": "v0", "to": "v1", "mode": "elect"}]
     run.info["slots"] = {
         "v0": [[0.0, 0], [2.05, None]],
         "v1": [[0.0, 1], [2.05, 0]],
