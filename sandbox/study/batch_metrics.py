@@ -2,9 +2,14 @@
 
 :class:`BatchTally` accumulates, for K worlds of ``n`` vehicles each stepped together by
 :class:`~sandbox.study.batch.Batch`, exactly the numbers ``LoopMetrics`` accumulates
-for each world alone: control effort, closest approach, the motor check. Reductions
-over a world's vehicles run column by column (:func:`row_reduce`), which gives the same
-values as numpy's reductions over a short axis at a fraction of their cost.
+for each world alone: control effort, closest approach, the motor check. A period only
+copies what these need (commands, pair distances, velocities, contact flags) into
+buffers of :data:`CHUNK` periods; :meth:`BatchTally.flush` then accounts for the
+buffered periods at once, in arrays over periods and vehicles: the same elementwise
+operations, the sums taken period after period in the order of the loop, and minima,
+maxima and counts (exact whatever the order). Reductions over a world's vehicles run
+column by column (:func:`row_reduce`), the same values as numpy's reductions over a
+short axis at a fraction of their cost.
 """
 
 from __future__ import annotations
@@ -15,12 +20,22 @@ import numpy as np
 
 from sandbox.metrics import MOTOR_ABS_TOL, MOTOR_REL_TOL
 
+#: Periods buffered before :meth:`BatchTally.flush` accounts for them.
+CHUNK = 64
+
 
 class BatchTally:
     """:class:`~sandbox.metrics.LoopMetrics` of K worlds, stacked (the same numbers)."""
 
     def __init__(self, K: int, n: int, h: float) -> None:
         self.K, self.n, self.h = K, n, h
+        N, pairs = K * n, n * (n - 1) // 2
+        self._m = 0  # periods buffered
+        self._buf_d2 = np.empty((CHUNK, K, pairs))
+        self._buf_v = np.empty((CHUNK, 2, N))
+        self._buf_vel = np.empty((CHUNK, N, 2))
+        self._buf_cmd = np.empty((CHUNK, N, 2))
+        self._buf_free = np.empty((CHUNK, N), dtype=bool)
         self.effort_v1 = np.zeros(K * n)
         self.effort_v2 = np.zeros(K * n)
         self.best = np.full(K, np.inf)
@@ -41,10 +56,93 @@ class BatchTally:
     def update(self, b: Any, contact: np.ndarray, worlds: np.ndarray | None) -> None:
         """``LoopMetrics.update`` for all worlds (or only ``worlds``).
 
-        Reductions over a world's few vehicles go column by column
-        (:func:`row_reduce`; the same values), and the pair distances of the
-        neighbour search of this period are reused where it ran on these positions.
+        With every world and every position finite the period is buffered (see the
+        module docstring); else the buffer is accounted for and the period at once.
+        The pair distances of the neighbour search of this period are reused where it
+        ran on these positions.
         """
+        if worlds is None and b.finite:
+            self._buffer(b, contact)
+            return
+        self.flush()
+        self._update_now(b, contact, worlds)
+
+    def _buffer(self, b: Any, contact: np.ndarray) -> None:
+        """Copy what period ``b.k`` accounts for into the buffers."""
+        K, n, m = self.K, self.n, self._m
+        if n >= 2:
+            d2 = b.neighbours.distances(b.pos)
+            if d2 is None:
+                pos3 = b.pos.reshape(K, n, 2)
+                d = pos3[:, self._i] - pos3[:, self._j]
+                d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
+            self._buf_d2[m] = d2.reshape(K, -1)
+        self._buf_v[m, 0] = b.v1
+        self._buf_v[m, 1] = b.v2
+        self._buf_vel[m] = b.vel
+        np.logical_not(contact, out=self._buf_free[m])
+        heading = b.theta + 0.5 * b.v2 * self.h
+        commanded = np.stack((b.v1 * np.cos(heading), b.v1 * np.sin(heading)), -1)
+        self._buf_cmd[m] = commanded
+        self.commanded, self.commanded_at = commanded, b.k
+        self._m = m + 1
+        if self._m == CHUNK:
+            self.flush()
+
+    def flush(self) -> None:
+        """Account for the buffered periods, as period after period would."""
+        m, K, n = self._m, self.K, self.n
+        if not m:
+            return
+        self._m = 0
+        if n >= 2:
+            d2 = self._buf_d2[:m].reshape(m * K, -1)
+            best = np.sqrt(row_reduce(np.minimum, d2)).reshape(m, K)
+            self.best = np.minimum(self.best, np.minimum.reduce(best, axis=0))
+        v = self._buf_v[:m]
+        first = 0
+        if self._prev is None:
+            self._prev = (v[0, 0].copy(), v[0, 1].copy())
+            first = 1
+        prev = np.concatenate((np.stack(self._prev)[None], v[:-1]))
+        step = np.abs(v - prev)
+        for r in range(first, m):  # period after period, as the loop adds them
+            self.effort_v1 += step[r, 0]
+            self.effort_v2 += step[r, 1]
+        self._prev = (v[m - 1, 0].copy(), v[m - 1, 1].copy())
+        free, vel, cmd_now = self._buf_free[:m], self._buf_vel[:m], self._buf_cmd[:m]
+        if self._commanded is not None:
+            cmd = np.concatenate((self._commanded[None], cmd_now[:-1]))
+            was_free = np.concatenate((self._was_free[None], free[:-1]))
+            self._account_motors(free & was_free, vel, cmd, m)
+        elif m > 1:
+            self._account_motors(free[1:] & free[:-1], vel[1:], cmd_now[:-1], m - 1)
+        self._commanded = cmd_now[m - 1].copy()
+        self._was_free = free[m - 1].copy()
+
+    def _account_motors(
+        self, check: np.ndarray, vel: np.ndarray, cmd: np.ndarray, m: int
+    ) -> None:
+        """The motor check of ``m`` periods: velocities read against commanded."""
+        K, n = self.K, self.n
+        check = check & np.isfinite(vel[..., 0]) & np.isfinite(vel[..., 1])
+        want = np.hypot(cmd[..., 0], cmd[..., 1])
+        err = np.hypot(vel[..., 0] - cmd[..., 0], vel[..., 1] - cmd[..., 1])
+        speed_err = np.abs(np.hypot(vel[..., 0], vel[..., 1]) - want)
+        check3 = check.reshape(m, K, n)
+        worst = np.where(check3, err.reshape(m, K, n), -np.inf).max(axis=(0, 2))
+        self.max_velocity_error = np.maximum(self.max_velocity_error, worst)
+        worst = np.where(check3, speed_err.reshape(m, K, n), -np.inf).max(axis=(0, 2))
+        self.max_speed_error = np.maximum(self.max_speed_error, worst)
+        tol = np.maximum(MOTOR_REL_TOL * want, MOTOR_ABS_TOL)
+        self.free_periods += check3.sum(axis=(0, 2))
+        saturated = (check & (err > tol)).reshape(m, K, n)
+        self.saturated_periods += saturated.sum(axis=(0, 2))
+
+    def _update_now(
+        self, b: Any, contact: np.ndarray, worlds: np.ndarray | None
+    ) -> None:
+        """One period accounted for at once (some worlds, or a non-finite state)."""
         K, n = self.K, self.n
         if worlds is None:
             ws = vs = slice(None)
@@ -124,6 +222,7 @@ class BatchTally:
 
     def result(self, w: int) -> dict[str, Any]:
         """World ``w``'s values, as ``LoopMetrics.result``."""
+        self.flush()
         rows = slice(w * self.n, (w + 1) * self.n)
         best = self.best[w]
         free = int(self.free_periods[w])
