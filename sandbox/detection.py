@@ -46,23 +46,24 @@ The CUSUM
 Isolation
     At an alarm the residuals accumulated since ``g`` last left 0 name the kind, and
     they are read again with every window for ``isolation`` seconds more (default
-    0.3 s; the detection time stays the alarm's): a failed drive reaches its faulty
-    command within its limits, so a braking stop or spin, or a runaway whose speed is
-    near the commanded one, is plain only after a few windows. A vehicle is *slow*
-    when its observed travel is within what braking to rest at its limit explains
-    (:func:`braked_travel` from the model's speed when the sums began, at the least
-    of its declared ``max_accel`` and ``motor_accel``) plus half of the predicted
-    travel beyond that. Slow and turning (the observed heading change after the first
-    window, beyond 4 standard deviations) is a ``spin``; slow, not turning and short
-    of its predicted travel is a ``stop``, or a ``crash`` when the vehicle was in
-    contact within the last second or its last :data:`SHAPE_HISTORY` seconds of
-    observed track fit a crash better than a braked stop (:func:`stop_fits`: a wreck
-    stops within a substep, a deceleration no drive makes; see
-    :mod:`sandbox.failures`). Without a declared limit the two move alike and a crash
-    in free space reads as a stop. A moving vehicle whose heading residual dominates
-    (by summed magnitudes) is a ``stuck_steering``, or ``uncontrolled`` when the
-    along-track sum is beyond 2 standard deviations too. Any other motion against the
-    commands (too fast, sideways) is ``uncontrolled``.
+    0.3 s), and at least until a failed drive could have braked to rest from the
+    commanded speed at its limit (the least of its declared ``max_accel`` and
+    ``motor_accel``) plus a window; the detection time stays the alarm's. A failed
+    drive reaches its faulty command within its limits, so a braking stop or spin,
+    or a runaway whose speed is near the commanded one, is plain only after a few
+    windows. A vehicle is *slow* when its speed observed lately (a line fitted to
+    its last :data:`RECENT_SPEED_WINDOW` s of broadcast positions) is below half the
+    model's, the commanded speed (or below ``STILL_SPEED``). Slow and turning (the
+    observed heading change after the first window, beyond 4 standard deviations) is
+    a ``spin``; slow, not turning and short of its predicted travel is a ``stop``,
+    or a ``crash`` when the vehicle was in contact within the last second or its
+    last :data:`SHAPE_HISTORY` seconds of observed track fit a crash better than a
+    braked stop (:func:`stop_fits`: a wreck stops within a substep, a deceleration
+    no drive makes; see :mod:`sandbox.failures`). Without a declared limit the two
+    move alike and a crash in free space reads as a stop. A moving vehicle whose
+    heading residual dominates (by summed magnitudes) is a ``stuck_steering``, or
+    ``uncontrolled`` when the along-track sum is beyond 2 standard deviations too.
+    Any other motion against the commands (too fast, sideways) is ``uncontrolled``.
 
 Studies
     With ``memory["trace"]`` set to a list (``Simulation.detection.memory``), every
@@ -90,6 +91,8 @@ KINDS = ("stop", "spin", "stuck_steering", "uncontrolled", "crash")
 STILL_SPEED = 0.1
 #: How long after a contact a stop counts as a crash [s].
 CRASH_CONTACT_WINDOW = 1.0
+#: Over how long the speed observed lately is fitted, for isolation [s].
+RECENT_SPEED_WINDOW = 0.2
 #: How much of the observed track the crash-or-stop fit reads [s].
 SHAPE_HISTORY = 1.0
 #: Angular motor limit as a multiple of ``motor_accel / radius`` (as the physics).
@@ -125,8 +128,9 @@ RESIDUAL_PARAMS = {
         "number",
         0.3,
         "s",
-        "How long after an alarm the residuals still go into the kind (the "
-        "detection itself is at the alarm)",
+        "How long after an alarm the residuals still go into the kind, at least "
+        "(and at least until a failed drive could have braked to rest from the "
+        "commanded speed, plus a window); the detection itself is at the alarm",
         minimum=0.0,
     ),
     "noise_floor": Param(
@@ -171,7 +175,6 @@ class DetectorState:
 
     pose: np.ndarray  # predicted pose since the window's start (n, 3)
     start: np.ndarray  # observed pose at the window's start (n, 3) [m, m, rad]
-    v_start: np.ndarray  # the model body's speed at the window's start (n,) [m/s]
     vel: np.ndarray  # the model body's velocity (n, 2) [m/s]
     rate: np.ndarray  # the model body's turn rate (n,) [rad/s]
     age: np.ndarray  # periods since the window's start (n,)
@@ -190,7 +193,6 @@ class DetectorState:
     acc_rot: np.ndarray  # observed rotation since g left 0 (n,) [rad]
     acc_rot0: np.ndarray  # that of the first window (n,) [rad]
     acc_n: np.ndarray  # windows summed since g left 0 (n,)
-    acc_v0: np.ndarray  # the model's speed when g left 0 (n,) [m/s]
     detected: np.ndarray  # latched (n,) bool
     isolating: np.ndarray  # until when the kind is still read (n,) [s]
     kinds: list  # the kind of each latched detection (n,)
@@ -203,7 +205,6 @@ def _start(ctx: DetectorContext) -> DetectorState:
     return DetectorState(
         pose=ctx.seen.copy(),
         start=ctx.seen.copy(),
-        v_start=np.hypot(*np.asarray(ctx.vel, dtype=float).T),
         vel=np.array(ctx.vel, dtype=float),
         rate=z.copy(),
         age=np.zeros(n, dtype=int),
@@ -222,7 +223,6 @@ def _start(ctx: DetectorContext) -> DetectorState:
         acc_rot=z.copy(),
         acc_rot0=z.copy(),
         acc_n=np.zeros(n, dtype=int),
-        acc_v0=z.copy(),
         detected=np.zeros(n, dtype=bool),
         isolating=np.full(n, -np.inf),
         kinds=[""] * n,
@@ -267,20 +267,6 @@ def _accumulate(st: DetectorState, i: int, k: int, sums: tuple) -> None:
         st.acc_rot0[i] = rotation[k]
     st.acc_rot[i] += rotation[k]
     st.acc_n[i] += 1
-
-
-def braked_travel(v0: float, brake: float, duration: float) -> float:
-    """Distance [m] a vehicle at ``v0`` [m/s] covers braking at ``brake`` [m/s^2].
-
-    Within ``duration`` [s]; 0 for an unlimited brake (``brake`` inf).
-
-    >>> braked_travel(1.0, 5.0, 1.0), braked_travel(1.0, 5.0, 0.1)
-    (0.1, 0.075)
-    """
-    if not np.isfinite(brake):
-        return 0.0
-    t = min(duration, v0 / brake)
-    return round(v0 * t - 0.5 * brake * t * t, 12)
 
 
 def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]:
@@ -329,6 +315,29 @@ def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]
     return ssr(crash), ssr(stop)
 
 
+def _recent_speed(st: DetectorState, i: int) -> float | None:
+    """Vehicle ``i``'s speed over the last :data:`RECENT_SPEED_WINDOW` s [m/s].
+
+    The slope of a straight line fitted to its fresh broadcast positions; None with
+    fewer than 5 of them.
+    """
+    if st.history is None or not st.history:
+        return None
+    now = st.history[-1][0]
+    rows = [
+        (t, xy[i])
+        for t, xy, fresh in st.history
+        if fresh[i] and t >= now - RECENT_SPEED_WINDOW - 1e-9
+    ]
+    if len(rows) < 5:
+        return None
+    t = np.array([r[0] for r in rows])
+    xy = np.array([r[1] for r in rows])
+    t = t - t.mean()
+    slope = (t[:, None] * (xy - xy.mean(axis=0))).sum(axis=0) / (t * t).sum()
+    return float(np.hypot(*slope))
+
+
 def _stopped_by_impact(st: DetectorState, i: int, brake: float) -> bool:
     """Whether vehicle ``i``'s observed track fits a crash better than a stop.
 
@@ -359,12 +368,16 @@ def _isolate(st: DetectorState, i: int, t: float, ctx: DetectorContext) -> str:
     windows = max(1.0, st.acc_t[i] / max(ctx.params["window"], ctx.dt))
     brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
     brake = float(brakes[i])
-    # A failed drive brakes to rest at its limit from the speed it had (the model's,
-    # when the sums began): that travel is the stop's, and only what lies beyond it
-    # says whether the vehicle still moves.
-    braked = braked_travel(float(st.acc_v0[i]), brake, duration)
-    beyond = max(st.acc_pred[i] - braked, 0.0)
-    slow = st.acc_obs[i] < braked + max(STILL_SPEED * duration, 0.5 * beyond)
+    # Slow: the speed observed lately (a line fitted to the last RECENT_SPEED_WINDOW s
+    # of broadcast positions) is below half the model's, the commanded one: a
+    # stopped or spinning vehicle once its drive has braked (an integral over the
+    # sums would count the travel before the onset, and the braking, as moving).
+    recent = _recent_speed(st, i)
+    commanded = float(np.hypot(*st.vel[i]))
+    if recent is None:  # too few observations: the sums since g left 0
+        slow = st.acc_obs[i] < max(STILL_SPEED * duration, 0.5 * st.acc_pred[i])
+    else:
+        slow = recent < max(STILL_SPEED, 0.5 * commanded)
     # Whether the observed heading turns, beyond 4 standard deviations of the sum of
     # the windows' noisy heading differences: after the first window once there are
     # more (the first one holds the turn the vehicle made before the fault).
@@ -419,7 +432,6 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     if np.any(restart):
         st.pose[restart] = ctx.seen[restart]
         st.start[restart] = ctx.seen[restart]
-        st.v_start[restart] = np.hypot(*st.vel[restart].T)
         st.age[restart] = 0
         st.travel[restart] = 0.0
         st.pending &= ~restart
@@ -480,14 +492,19 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
             st.acc_raw[i] = 0.0
             st.acc_obs[i] = st.acc_pred[i] = st.acc_t[i] = st.acc_rot[i] = 0.0
             st.acc_n[i] = 0
-            st.acc_v0[i] = st.v_start[i]
         st.g[i] = max(0.0, st.g[i] + inc[k])
         if st.g[i] > 0.0:
             _accumulate(st, i, k, window_sums)
         if st.g[i] >= lam:
             st.detected[i] = True
             st.kinds[i] = _isolate(st, i, ctx.t, ctx)
-            st.isolating[i] = ctx.t + float(p["isolation"])
+            # Read on at least until a failed drive could have braked to rest from
+            # the commanded speed, and one window more.
+            brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
+            braking = float(np.hypot(*st.vel[i])) / float(brakes[i])
+            st.isolating[i] = ctx.t + max(
+                float(p["isolation"]), braking + window * ctx.dt
+            )
             st.g[i] = 0.0
             st.clear[i] = 0.0
     st.pending[rows] = True  # the next window starts at the next observation

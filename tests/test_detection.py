@@ -9,7 +9,7 @@ import pytest
 from helpers import SCENARIOS, run_scenario
 
 from sandbox import Simulation, load_scenario, simulate
-from sandbox.detection import braked_travel, llr, stop_fits
+from sandbox.detection import llr, stop_fits
 from sandbox.errors import ScenarioError
 
 FAILURES = SCENARIOS / "failures"
@@ -80,8 +80,7 @@ def test_without_an_acceleration_limit_a_crash_moves_as_a_stop():
 
 
 def test_the_stop_and_crash_fits():
-    # A track braked at 5 m/s^2 fits the stop, one stopped at once the crash; the
-    # braking distance v^2 / (2 a).
+    # A track braked at 5 m/s^2 fits the stop, one stopped at once the crash.
     t = np.arange(0.0, 1.0, 0.01)
     rng = np.random.default_rng(0)
     ramp = np.clip(t - 0.4, 0.0, 0.2)
@@ -91,18 +90,16 @@ def test_the_stop_and_crash_fits():
     assert stop < crash
     crash, stop = stop_fits(t, np.minimum(t, 0.5) + noise, 5.0)
     assert crash < stop
-    assert braked_travel(1.0, 5.0, 1.0) == pytest.approx(0.1)
-    assert braked_travel(1.0, 5.0, 0.1) == pytest.approx(0.075)
-    assert braked_travel(1.0, np.inf, 1.0) == 0.0
 
 
 def test_a_runaway_is_told_from_a_stuck_steering_by_its_speed():
-    # In its first window green's runaway looks like a stuck steering (its speed is
-    # near what its controller asks for); within `isolation` its speed departs too.
-    _, m = result(
-        "detect_uncontrolled_into_leader", "detection.isolation=0", duration=4
-    )
-    assert m["detections"][0]["kind"] == "stuck_steering"
+    # At the alarm green's runaway looks like a stuck steering (its speed is near what
+    # its controller asks for); read on through the isolation time its speed departs
+    # too, and the detection's kind becomes uncontrolled.
+    sim = Simulation(load_scenario(FAILURES / "detect_uncontrolled_into_leader.yaml"))
+    while not sim.detection.events:
+        sim.step()
+    assert sim.detection.events[0]["kind"] == "stuck_steering"
     assert result("detect_uncontrolled_into_leader")[1]["detections"][0]["kind"] == (
         "uncontrolled"
     )
