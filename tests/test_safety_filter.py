@@ -19,7 +19,13 @@ from sandbox.cli import main
 from sandbox.contexts import FilterContext
 from sandbox.metrics import compute_metrics
 from sandbox.recovery import ObstacleField
-from sandbox.safety.cbf import PARAMS, CBFState, barrier_rows, filter_commands
+from sandbox.safety.cbf import (
+    PARAMS,
+    CBFState,
+    barrier_rows,
+    filter_commands,
+    stall_turn,
+)
 from sandbox.safety.qp import min_violation, solve
 from sandbox.scenario import ObstacleSpec
 from sandbox.simulation import Simulation
@@ -397,3 +403,44 @@ def test_an_infeasible_step_is_relaxed_and_counted() -> None:
     assert step.slack[0] > 0
     assert ctx.stats["infeasible_steps"] == 1
     assert v1[0] == pytest.approx(2.0 - 5.0 * 0.01)  # braking as hard as it can
+
+
+def _jammed_ring(n: int, **params):
+    # n vehicles heading to the centre, at rest, whose look-ahead points are D apart
+    # (every neighbouring barrier binds, h = 0), each asking for 1 m/s inward.
+    chord = D + 2 * 0.1 + 0.05 + 1e-9
+    r_p = chord / (2 * np.sin(np.pi / n))
+    angle = 2 * np.pi * np.arange(n) / n
+    pos = (r_p + 0.1) * np.stack((np.cos(angle), np.sin(angle)), -1)
+    ctx = _ctx(pos, angle + np.pi, np.ones(n), np.zeros(n), **params)
+    ctx.v1_prev, ctx.v2_prev = np.zeros(n), np.zeros(n)
+    return ctx
+
+
+@pytest.mark.parametrize("n", [3, 8, 20])
+def test_the_right_hand_rule_frees_a_ring_jammed_in_its_corners(n) -> None:
+    # The corner of two barriers whose normals lie at +-a from the way out admits
+    # the velocities within 90 deg - a of it; the ring has a = 90 - 180 / n degrees,
+    # so the nominal velocity (straight into the corner) must turn by more than a.
+    a = np.pi / 2 - np.pi / n
+    for turn, free in ((0.0, False), (a - 0.05, False), (np.pi / 2, True)):
+        ctx = _jammed_ring(n, pass_right=turn)
+        v1, v2, step = filter_commands(CBFState(ctx), ctx)
+        speed = np.hypot(v1, 0.1 * v2)
+        if free:
+            assert np.all(speed > 0.05), (n, turn)
+            # every vehicle the same, turned to its right (clockwise: v2 < 0)
+            np.testing.assert_allclose(speed, speed[0], rtol=1e-9)
+            assert np.all(v2 < 0)
+        else:
+            assert np.all(speed < 1e-6), (n, turn)
+        assert np.all(step.slack <= 1e-9)
+
+
+def test_the_right_hand_rule_leaves_a_vehicle_at_its_slot_alone() -> None:
+    # stall_turn: nothing below half kept, a right angle at a tenth kept, and in
+    # proportion to the nominal speed below 0.2 m/s.
+    z0 = np.array([[1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.1, 0.0], [0.0, 0.0]])
+    z = np.array([[0.6, 0.0], [0.3, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    turn = stall_turn(z0, z, np.pi / 2)
+    np.testing.assert_allclose(turn, [0.0, np.pi / 4, np.pi / 2, np.pi / 4, 0.0])
