@@ -12,7 +12,7 @@ steps of 4 substeps), ``--runs`` times (default 256).
 - ``batch of K``: the runs as batches of K worlds (:class:`sandbox.study.batch.Batch`;
   building the simulations, stepping, metrics).
 - ``sweep --jobs 1`` and ``--jobs 2``: the whole ``sandbox sweep`` command, in-process
-  (``sandbox.cli.main``; scenario loading, batches of up to 64 worlds, metrics, the
+  (``sandbox.cli.main``; scenario loading, batches of up to 128 worlds, metrics, the
   results store).
 
 Every row is timed once per repetition, in one process, with the bare physics timed
