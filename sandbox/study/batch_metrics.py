@@ -189,21 +189,11 @@ class BatchTally:
                 speed_err = np.abs(np.hypot(got[:, 0], got[:, 1]) - want)
                 check2 = check.reshape(kw, n)
                 some = row_reduce(np.logical_or, check2)
-                worst = row_reduce(
-                    np.maximum, np.where(check2, err.reshape(kw, n), -np.inf)
+                self.max_velocity_error[ws] = _raised_max(
+                    self.max_velocity_error[ws], some, check2, err.reshape(kw, n)
                 )
-                self.max_velocity_error[ws] = np.where(
-                    some,
-                    np.maximum(self.max_velocity_error[ws], worst),
-                    self.max_velocity_error[ws],
-                )
-                worst = row_reduce(
-                    np.maximum, np.where(check2, speed_err.reshape(kw, n), -np.inf)
-                )
-                self.max_speed_error[ws] = np.where(
-                    some,
-                    np.maximum(self.max_speed_error[ws], worst),
-                    self.max_speed_error[ws],
+                self.max_speed_error[ws] = _raised_max(
+                    self.max_speed_error[ws], some, check2, speed_err.reshape(kw, n)
                 )
                 tol = np.maximum(MOTOR_REL_TOL * want, MOTOR_ABS_TOL)
                 self.free_periods[ws] += row_sum(check2)
@@ -270,3 +260,15 @@ def row_sum(mask: np.ndarray) -> np.ndarray:
     for c in range(1, m):
         out += mask[:, c]
     return out
+
+
+def _raised_max(
+    current: np.ndarray, some: np.ndarray, check: np.ndarray, values: np.ndarray
+) -> np.ndarray:
+    """Each world's running maximum raised by its checked values of this period.
+
+    ``check`` and ``values`` are (worlds, vehicles); ``some`` says which worlds have a
+    checked vehicle at all. Worlds without one keep ``current``.
+    """
+    worst = row_reduce(np.maximum, np.where(check, values, -np.inf))
+    return np.where(some, np.maximum(current, worst), current)
