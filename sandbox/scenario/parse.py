@@ -21,6 +21,7 @@ from sandbox.expectations import allowed_keys as expect_keys
 from sandbox.expectations import read_expectations
 from sandbox.plugins import (
     KINDS,
+    Param,
     PluginError,
 )
 from sandbox.scenario.checks import _check_consistency
@@ -623,42 +624,50 @@ def load_scenario(
 
 def _sensing(rd: _Reader, doc: Any, dt: Any) -> SensingSpec:
     """The ``sensing:`` section: bounds, and a delay of whole control periods."""
-    m = rd.mapping(doc, "sensing") or {}
-    rd.keys(m, SENSING_KEYS, "sensing")
-    read, ok = read_params(rd, m, "sensing", SENSING)
-    values = {k: SENSING[k].default if v is None else v for k, v in read.items()}
+    values, ok = _section_values(rd, doc, "sensing", SENSING)
     if not ok:
         return SensingSpec()
     if values["loss"] >= 1:
         rd.fail(
             "sensing.loss", "must be below 1", f"{values['loss']:g}", "0 <= loss < 1"
         )
-    delay = values["delay"]
-    if isinstance(dt, int | float) and dt > 0 and delay > 0:
-        periods = delay / dt
-        if abs(periods - round(periods)) > 1e-9 * max(1.0, periods):
-            rd.fail(
-                "sensing.delay",
-                f"must be a whole number of control periods dt = {dt:g} s",
-                f"{delay:g} s = {periods:g} periods",
-                f"a multiple of {dt:g} s",
-            )
+    if values["delay"] > 0:
+        _whole_periods(rd, "sensing.delay", values["delay"], dt, minimum=0)
     return SensingSpec(**values)
+
+
+def _section_values(
+    rd: _Reader, doc: Any, name: str, params: dict[str, Param]
+) -> tuple[dict[str, Any], bool]:
+    """A flat section's values, its defaults where unset, and whether all were valid."""
+    m = rd.mapping(doc, name) or {}
+    rd.keys(m, tuple(params), name)
+    read, ok = read_params(rd, m, name, params)
+    return {k: params[k].default if v is None else v for k, v in read.items()}, ok
+
+
+def _whole_periods(
+    rd: _Reader, field: str, value: float, dt: Any, minimum: int
+) -> None:
+    """A duration [s] that must be a whole number of control periods, >= ``minimum``."""
+    if not (isinstance(dt, int | float) and dt > 0):
+        return
+    periods = value / dt
+    whole = abs(periods - round(periods)) <= 1e-9 * max(1.0, periods)
+    if periods < minimum - 1e-9 or not whole:
+        rd.fail(
+            field,
+            f"must be a whole number of control periods dt = {dt:g} s",
+            f"{value:g} s = {periods:g} periods",
+            f"a multiple of {dt:g} s",
+        )
 
 
 def _detection_window(rd: _Reader, detection: Any, dt: Any) -> None:
     """A detector's ``window`` [s], if it has one, is a whole number of periods."""
     window = detection.params.get("window")
-    if not (isinstance(dt, int | float) and dt > 0 and isinstance(window, float)):
-        return
-    periods = window / dt
-    if periods < 1 - 1e-9 or abs(periods - round(periods)) > 1e-9 * max(1.0, periods):
-        rd.fail(
-            "detection.window",
-            f"must be a whole number of control periods dt = {dt:g} s",
-            f"{window:g} s = {periods:g} periods",
-            f"a multiple of {dt:g} s",
-        )
+    if isinstance(window, float):
+        _whole_periods(rd, "detection.window", window, dt, minimum=1)
 
 
 def _safety_range(rd: _Reader, safety: Any, vehicles: list[tuple[str, Any]]) -> None:
@@ -678,10 +687,7 @@ def _safety_range(rd: _Reader, safety: Any, vehicles: list[tuple[str, Any]]) -> 
 
 def _reconfigure(rd: _Reader, doc: Any) -> ReconfigureSpec:
     """The ``reconfigure:`` section; ``close_gap`` needs ``assign: hungarian``."""
-    m = rd.mapping(doc, "reconfigure") or {}
-    rd.keys(m, RECONFIGURE_KEYS, "reconfigure")
-    read, ok = read_params(rd, m, "reconfigure", RECONFIGURE)
-    values = {k: RECONFIGURE[k].default if v is None else v for k, v in read.items()}
+    values, ok = _section_values(rd, doc, "reconfigure", RECONFIGURE)
     if not ok:
         return ReconfigureSpec()
     if values["close_gap"] and values["assign"] == "none":
