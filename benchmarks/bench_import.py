@@ -44,8 +44,8 @@ CASES = {
         "from sandbox.cli import main\nmain(['validate', {small!r}])",
         True,
     ),
-    "import sandbox.simulation": ("import sandbox.simulation", False),
-    "import sandbox.plot": ("import sandbox.plot", False),
+    "import sandbox.loop.simulation": ("import sandbox.loop.simulation", False),
+    "import sandbox.render.figures": ("import sandbox.render.figures", False),
 }
 
 

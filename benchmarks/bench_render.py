@@ -21,8 +21,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sandbox import render  # noqa: E402
-from sandbox.run import MODE_AVOID, MODE_FAILED, CollisionEvent, Run  # noqa: E402
+from sandbox.render import animation as render  # noqa: E402
+from sandbox.run.record import MODE_AVOID, MODE_FAILED, CollisionEvent, Run  # noqa: E402
 
 TARGET_MS = 5.0  # [ms] per frame, 10 vehicles at 640 px, drawing + encoding
 

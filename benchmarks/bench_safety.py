@@ -38,9 +38,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sandbox.metrics import compute_metrics  # noqa: E402
+from sandbox.loop.simulation import Simulation  # noqa: E402
+from sandbox.run.metrics import compute_metrics  # noqa: E402
 from sandbox.scenario import load_scenario  # noqa: E402
-from sandbox.simulation import Simulation  # noqa: E402
 
 #: Vehicle counts and control steps timed for each.
 STEPS = {3: 1000, 100: 300, 1000: 100}

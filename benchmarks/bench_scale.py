@@ -4,11 +4,11 @@ Run ``python benchmarks/bench_scale.py`` (about 1.5 minutes on a 2-core machine;
 ``--quick`` skips N = 10,000 and repeats less, about 40 s). For N = 10, 100, 1,000 and
 10,000 vehicles it prints, each row measured in a fresh subprocess:
 
-- ``sim``: control steps per second of :class:`sandbox.simulation.Simulation` on the
+- ``sim``: control steps per second of :class:`sandbox.loop.simulation.Simulation` on the
   workload below (controller, formation law, ``continuous`` recovery with its neighbour
   search, recording every 10 steps), timed over the simulation loop only (the
   ``wall_time`` the run reports; building the scenario and the world is not timed);
-- ``physics``: control steps per second of the same :class:`sandbox.world.World` (the
+- ``physics``: control steps per second of the same :class:`sandbox.physics.world.World` (the
   same bodies, shapes and joints) stepped with fixed commands and nothing else: the
   physics engine's own speed, the limit of the simulation;
 - ``ratio``: sim / physics (target: at least 0.5);
@@ -51,9 +51,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from sandbox.loop.simulation import Simulation  # noqa: E402
+from sandbox.physics.world import World  # noqa: E402
 from sandbox.scenario import load_scenario  # noqa: E402
-from sandbox.simulation import Simulation  # noqa: E402
-from sandbox.world import World  # noqa: E402
 
 NS = (10, 100, 1000, 10000)
 DT = 0.01  # [s]
@@ -185,12 +185,12 @@ def profile_phases(
     """
     import yaml
 
-    import sandbox.recovery as recovery
-    import sandbox.simulation as simulation
-    from sandbox.failures import FailureSchedule
-    from sandbox.metrics import compute_metrics
-    from sandbox.output import write_csv
-    from sandbox.run import Recorder
+    import sandbox.behaviour.recovery as recovery
+    import sandbox.loop.simulation as simulation
+    from sandbox.model.failures import FailureSchedule
+    from sandbox.run.metrics import compute_metrics
+    from sandbox.run.output import write_csv
+    from sandbox.run.record import Recorder
 
     if path is None:
         scenario = load_scenario(scenario_doc(n, steps))

@@ -4,7 +4,7 @@ The workload of a study: the Fig. 15 scenario (three vehicles, 12 s, 1,200 contr
 steps of 4 substeps), ``--runs`` times (default 256).
 
 - ``bare pymunk``: for each run, the scenario's pymunk world (the same bodies, motor
-  joints and obstacles, built by :class:`sandbox.world.World`) stepped 1,200 control
+  joints and obstacles, built by :class:`sandbox.physics.world.World`) stepped 1,200 control
   periods of ``substeps`` calls of ``Space.step`` with fixed commands: no controller,
   no law, no recovery, no recording, no metrics. The floor a sweep could reach.
 - ``single runs``: ``Simulation(scenario).run()`` and ``compute_metrics``, one run
@@ -42,12 +42,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from sandbox.cli import main as sandbox_main  # noqa: E402
-from sandbox.metrics import compute_metrics  # noqa: E402
+from sandbox.loop.simulation import Simulation  # noqa: E402
+from sandbox.physics.world import World  # noqa: E402
+from sandbox.run.metrics import compute_metrics  # noqa: E402
 from sandbox.scenario import load_scenario  # noqa: E402
-from sandbox.simulation import Simulation  # noqa: E402
 from sandbox.study.batch import Batch  # noqa: E402
 from sandbox.study.engine import usable_cores  # noqa: E402
-from sandbox.world import World  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper" / "fig15_continuous_beta1.yaml"
 DURATION = 12.0

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from sandbox import Simulation, load_scenario
-from sandbox.observation import Observation
+from sandbox.loop.observation import Observation
 from sandbox.render import write_gif
 
 SCENARIO = Path(__file__).with_name("pure_pursuit.yaml")

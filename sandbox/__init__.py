@@ -18,24 +18,29 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 import sandbox._startup  # noqa: F401  (first: quiet Ctrl-C while the command starts)
+from sandbox._moved import install as _install_moved_paths
 
 __version__ = "0.1.0"
 
+_install_moved_paths()  # the v0.2 module paths, for one release (sandbox._moved)
+
 #: Public name -> (module, attribute) it is imported from on first use.
 _EXPORTS = {
-    "Run": ("sandbox.run", "Run"),
+    "Observation": ("sandbox.loop.observation", "Observation"),
+    "Run": ("sandbox.run.record", "Run"),
     "SandboxError": ("sandbox.errors", "SandboxError"),
     "Scenario": ("sandbox.scenario", "Scenario"),
     "ScenarioError": ("sandbox.errors", "ScenarioError"),
-    "Simulation": ("sandbox.simulation", "Simulation"),
-    "VehicleTrack": ("sandbox.analysis", "VehicleTrack"),
-    "compute_metrics": ("sandbox.metrics", "compute_metrics"),
-    "load_run": ("sandbox.output", "load_run_dir"),
+    "Simulation": ("sandbox.loop.simulation", "Simulation"),
+    "VehicleTrack": ("sandbox.run.analysis", "VehicleTrack"),
+    "compute_metrics": ("sandbox.run.metrics", "compute_metrics"),
+    "load_run": ("sandbox.run.output", "load_run_dir"),
     "load_scenario": ("sandbox.scenario", "load_scenario"),
-    "simulate": ("sandbox.simulation", "simulate"),
+    "simulate": ("sandbox.loop.simulation", "simulate"),
 }
 
 __all__ = [
+    "Observation",
     "Run",
     "SandboxError",
     "Scenario",
@@ -49,13 +54,14 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports lazily
-    from sandbox.analysis import VehicleTrack
     from sandbox.errors import SandboxError, ScenarioError
-    from sandbox.metrics import compute_metrics
-    from sandbox.output import load_run_dir as load_run
-    from sandbox.run import Run
+    from sandbox.loop.observation import Observation
+    from sandbox.loop.simulation import Simulation, simulate
+    from sandbox.run.analysis import VehicleTrack
+    from sandbox.run.metrics import compute_metrics
+    from sandbox.run.output import load_run_dir as load_run
+    from sandbox.run.record import Run
     from sandbox.scenario import Scenario, load_scenario
-    from sandbox.simulation import Simulation, simulate
 
 
 def __getattr__(name: str) -> Any:

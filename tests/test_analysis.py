@@ -12,9 +12,9 @@ import pytest
 from helpers import PAPER
 
 import sandbox
-from sandbox.analysis import COLUMNS
 from sandbox.cli import main
-from sandbox.run import MODE_NAMES
+from sandbox.run.analysis import COLUMNS
+from sandbox.run.record import MODE_NAMES
 
 
 @pytest.fixture(scope="module")
@@ -108,7 +108,7 @@ def test_parquet_holds_the_same_table_and_is_deterministic(
 
 def test_parquet_in_several_row_groups(tmp_path: Path, monkeypatch) -> None:
     pq = pytest.importorskip("pyarrow.parquet")
-    from sandbox import analysis
+    from sandbox.run import analysis
 
     run = sandbox.simulate(
         sandbox.load_scenario(PAPER / "rotating_circle.yaml", ["duration=1"])

@@ -12,7 +12,7 @@ from helpers import PAPER, write_yaml
 
 from sandbox import compute_metrics, load_scenario
 from sandbox.cli import main
-from sandbox.simulation import Simulation
+from sandbox.loop.simulation import Simulation
 from sandbox.study import batch as batching
 from sandbox.study import batchable, engine, store
 from sandbox.study.batch import Batch

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from helpers import SCENARIOS
 
-from sandbox import bundled
+from sandbox.scenario import bundled
 from sandbox.cli import main
 
 

@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import sandbox.output as output_module
-import sandbox.render as render
-import sandbox.simulation as simulation_module
+import sandbox.loop.simulation as simulation_module
+import sandbox.render.animation as render
+import sandbox.run.output as output_module
 from sandbox.cli import main
-from sandbox.run import Recorder, remove_dead_records
+from sandbox.run.record import Recorder, remove_dead_records
 
 TINY = {
     "name": "tiny",
@@ -190,7 +190,7 @@ def test_a_gif_on_a_full_or_read_only_disk_names_the_users_path(
 def test_a_full_disk_while_writing_a_run_names_the_run_directory(
     src: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
 ) -> None:
-    import sandbox.output as output
+    import sandbox.run.output as output
 
     def full(*args):
         raise OSError(28, "No space left on device")

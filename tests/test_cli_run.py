@@ -14,7 +14,7 @@ import yaml
 from helpers import PAPER, REPO, SCENARIOS
 
 from sandbox.cli import main
-from sandbox.output import load_run_dir
+from sandbox.run.output import load_run_dir
 
 HEADER = "t,vehicle,x1,x2,x3,v1,v2,chi1,chi2,mode,failed"
 BUNDLED = sorted(SCENARIOS.rglob("*.yaml"))

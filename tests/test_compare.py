@@ -9,7 +9,7 @@ import pytest
 from helpers import PAPER, SCENARIOS, run_scenario
 
 from sandbox.cli import main
-from sandbox.compare import cases, compare, format_table
+from sandbox.study.compare import cases, compare, format_table
 
 FIG13 = PAPER / "fig13_discontinuous_beta1.yaml"
 STOP = SCENARIOS / "failures" / "follower_stop.yaml"
@@ -142,7 +142,7 @@ def test_grid_varies_a_path_per_strategy_and_none_only_once():
 
 
 def test_extra_settle_is_over_the_ideal_run_without_recovery():
-    from sandbox.compare import ideal_settling
+    from sandbox.study.compare import ideal_settling
 
     (row,) = compare([SWAP], ["continuous"], ["hold"], ("duration=6",))
     base = ideal_settling(str(SWAP), ("duration=6",))

@@ -15,8 +15,8 @@ from helpers import PAPER, SCENARIOS, run_scenario, write_yaml
 
 from sandbox import load_scenario
 from sandbox.errors import ScenarioError
+from sandbox.physics.world import CONTACT_RELEASE, World
 from sandbox.scenario import ObstacleSpec, VehicleSpec
-from sandbox.world import CONTACT_RELEASE, World
 
 H = 0.01  # control period [s]
 SUBSTEPS = 4

@@ -20,7 +20,7 @@ import pytest
 
 from sandbox.cli import main
 from sandbox.errors import OutputError
-from sandbox.output import load_run_dir
+from sandbox.run.output import load_run_dir
 
 SCENARIO = {
     "name": "tiny",

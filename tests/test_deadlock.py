@@ -13,8 +13,8 @@ import pytest
 from helpers import SCENARIOS, run_scenario
 
 from sandbox import load_scenario
-from sandbox.deadlock import find_deadlocks, stuck_samples
 from sandbox.errors import ScenarioError
+from sandbox.run.deadlock import find_deadlocks, stuck_samples
 
 SWAP = SCENARIOS / "safety" / "head_on_swap.yaml"
 T = np.round(np.arange(0.0, 10.001, 0.1), 6)

@@ -9,7 +9,7 @@ import pytest
 from helpers import SCENARIOS, run_scenario
 
 from sandbox import Simulation, load_scenario, simulate
-from sandbox.detection import llr, stop_fits
+from sandbox.behaviour.detection import llr, stop_fits
 from sandbox.errors import ScenarioError
 
 FAILURES = SCENARIOS / "failures"

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from sandbox.dynamics import unicycle_rates, unicycle_step, wrap_angle
+from sandbox.model.dynamics import unicycle_rates, unicycle_step, wrap_angle
 
 
 @pytest.mark.parametrize(

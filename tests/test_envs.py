@@ -20,7 +20,7 @@ from pettingzoo.test import parallel_api_test  # noqa: E402
 
 from sandbox import load_scenario  # noqa: E402
 from sandbox.envs import FormationEnv, VehicleEnv, Weights  # noqa: E402
-from sandbox.simulation import Simulation  # noqa: E402
+from sandbox.loop.simulation import Simulation  # noqa: E402
 
 #: The failures platoon (leader, red, green, orange), 1 s long, red stopping at 0.5 s.
 PLATOON = yaml.safe_load((SCENARIOS / "failures" / "follower_stop.yaml").read_text())

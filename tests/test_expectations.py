@@ -13,13 +13,13 @@ from helpers import HEADON, PAPER
 
 from sandbox import compute_metrics, load_scenario, simulate
 from sandbox.errors import ScenarioError
-from sandbox.expectations import (
+from sandbox.run.expectations import (
     Bound,
     Expectations,
     closest_approach,
     evaluate,
 )
-from sandbox.schema import build_schema
+from sandbox.scenario.schema import build_schema
 
 FULL = {
     "status": "ok",

@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from sandbox import load_scenario, simulate
-from sandbox.metrics import compute_metrics
-from sandbox.output import write_run_dir
 from sandbox.plugins import names, register_failure
-from sandbox.run import MODE_FAILED
+from sandbox.run.metrics import compute_metrics
+from sandbox.run.output import write_run_dir
+from sandbox.run.record import MODE_FAILED
 
 # d = 0.5 m; wheel speeds up to 2 m/s: v1 <= 2 m/s and v2 <= 2 * 2 / 0.5 = 8 rad/s.
 LIMITS = {"diameter": 0.5, "v1_max": 2.0, "max_accel": 5.0, "v2_max": 8.0}

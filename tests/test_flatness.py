@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from sandbox.control.flatness import (
+from sandbox.model.flatness import (
     CHI_HOLD,
     CHI_REG,
     Gains,

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from sandbox.control.formation import (
+from sandbox.model.laws import (
     LAWS,
     BackwardDifference,
     FormationLaw,

@@ -9,7 +9,7 @@ import imageio.v3 as iio
 from helpers import run_scenario, write_yaml
 
 from sandbox.cli import main
-from sandbox.gallery import MAX_GIF_BYTES, camera_follow
+from sandbox.render.gallery import MAX_GIF_BYTES, camera_follow
 
 LINE = {
     "name": "line",

@@ -200,7 +200,7 @@ def test_list_shows_a_huge_integer_file_as_invalid(
     root = tmp_path / "scenarios"
     root.mkdir()
     write(root, f"record_every: {BIG}\n" + POINT + "vehicles: [{pose: [1, 0, 0]}]\n")
-    monkeypatch.setattr("sandbox.bundled.scenarios_dir", lambda: root)
+    monkeypatch.setattr("sandbox.scenario.bundled.scenarios_dir", lambda: root)
     assert main(["list"]) == 0
     assert "(invalid: " in capsys.readouterr().out
 

@@ -13,7 +13,7 @@ from helpers import PAPER, run_scenario, write_yaml
 
 from sandbox import load_scenario
 from sandbox.errors import ScenarioError
-from sandbox.metrics import ClosestApproach, settling_time
+from sandbox.run.metrics import ClosestApproach, settling_time
 
 
 def test_an_oscillation_ending_at_a_zero_crossing_has_not_settled() -> None:

@@ -14,8 +14,8 @@ import pytest
 from helpers import PAPER, run_scenario, write_yaml
 
 from sandbox.cli import main
+from sandbox.physics.world import World
 from sandbox.scenario import VehicleSpec
-from sandbox.world import World
 
 H = 0.01  # [s]
 #: The report's idealization: no speed, acceleration or turn-rate limit.

@@ -15,8 +15,8 @@ import pytest
 from helpers import PAPER, collisions
 
 from sandbox import load_scenario, simulate
-from sandbox.metrics import compute_metrics
-from sandbox.recovery import ObstacleField
+from sandbox.model.obstacle_field import ObstacleField
+from sandbox.run.metrics import compute_metrics
 from sandbox.scenario import ObstacleSpec
 
 D = 0.5  # vehicle diameter [m]
@@ -189,7 +189,7 @@ def test_nearest_matches_the_physics_for_every_type():
     # static shapes the vehicles really hit (over a grid of points around them).
     import pymunk
 
-    from sandbox.world import World
+    from sandbox.physics.world import World
 
     for obstacle in OBSTACLES.values():
         scenario = load_scenario(rammer(obstacle, [[0.0, 0.0, 0.0]]))

@@ -14,14 +14,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sandbox import output
+from sandbox.run import output
 from sandbox.cli import main
 from sandbox.errors import OutputError
-from sandbox.metrics import compute_metrics
-from sandbox.output import load_run_dir, write_json, write_run_dir
-from sandbox.run import Run
+from sandbox.loop.simulation import Simulation
+from sandbox.run.metrics import compute_metrics
+from sandbox.run.output import load_run_dir, write_json, write_run_dir
+from sandbox.run.record import Run
 from sandbox.scenario import load_scenario
-from sandbox.simulation import Simulation
 
 DOC = {
     "name": "small",
@@ -193,10 +193,10 @@ KILLED_WHILE_WRITING = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    import sandbox.output as output
-    from sandbox.metrics import compute_metrics
+    import sandbox.run.output as output
+    from sandbox.run.metrics import compute_metrics
     from sandbox.scenario import load_scenario
-    from sandbox.simulation import Simulation
+    from sandbox.loop.simulation import Simulation
 
     def half_then_hang(run, path):
         Path(path).write_text("t,vehicle,x1\\n0.000000,leader,", encoding="utf-8")
@@ -279,7 +279,7 @@ def test_damaged_run_directories_give_clear_errors(
 def test_a_gif_is_replaced_whole_or_not_at_all(
     run: Run, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from sandbox import render
+    from sandbox.render import animation as render
 
     gif = tmp_path / "run.gif"
     render.write_gif(run, gif, fps=10, size=64)

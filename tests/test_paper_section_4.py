@@ -2,7 +2,7 @@
 
 Every figure's variants share one set of initial conditions (see the files' headers),
 chosen so that the report's ideal kinematics (eq. (1) exactly, no limits, no contacts:
-:func:`sandbox.ideal.ideal_encounters`) and this product agree that forming without
+:func:`sandbox.study.ideal.ideal_encounters`) and this product agree that forming without
 recovery collides: one encounter (red cuts through the leader) in the ideal model, on
 the limited robot and on the unlimited one. Each test states the report's claim and
 asserts what is measured; counts are contact episodes (encounters).
@@ -28,8 +28,8 @@ from pathlib import Path
 import pytest
 
 from sandbox import load_scenario, simulate
-from sandbox.ideal import ideal_encounters
-from sandbox.metrics import compute_metrics
+from sandbox.run.metrics import compute_metrics
+from sandbox.study.ideal import ideal_encounters
 
 PAPER = Path(__file__).resolve().parent.parent / "scenarios" / "paper"
 #: The report's idealization: vehicles without speed, acceleration or turn-rate limits.

@@ -12,7 +12,7 @@ import pytest
 from helpers import PAPER, run_scenario, window
 
 from sandbox import Run, load_scenario
-from sandbox.control.flatness import Gains
+from sandbox.model.flatness import Gains
 
 #: The section 2-3 scenarios (the folder also holds section 4's figures).
 SECTION_2_3 = (

@@ -17,13 +17,13 @@ from scipy.spatial.distance import pdist
 
 from sandbox import load_scenario
 from sandbox.errors import ScenarioError
+from sandbox.loop.simulation import Simulation
 from sandbox.scenario import (
     PLATOON_PATTERNS,
     PlatoonSpec,
     parse_scenario,
     platoon_offsets,
 )
-from sandbox.simulation import Simulation
 
 LINE_REF = {"type": "line", "start": [0, 0], "heading": 0.0, "speed": 1.0}
 

@@ -1,4 +1,4 @@
-"""Tests of ``sandbox.plot``: the four report figures, headless and atomic.
+"""Tests of ``sandbox.render.figures``: the four report figures, headless and atomic.
 
 Runs are synthetic, so these tests need no simulator.
 """
@@ -14,8 +14,9 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from PIL import Image
 
-from sandbox import plot, plot_parts
-from sandbox.run import CollisionEvent, Run
+from sandbox.render import figures as plot
+from sandbox.render import figure_parts as plot_parts
+from sandbox.run.record import CollisionEvent, Run
 
 DPI = 40  # small figures keep the tests fast
 

@@ -17,6 +17,7 @@ import pytest
 import yaml
 
 from sandbox import plugins
+from sandbox.plugins import registration
 from sandbox.cli import main
 from sandbox.errors import ScenarioError
 from sandbox.scenario import load_scenario
@@ -27,7 +28,7 @@ from sandbox.scenario import load_scenario
 PLUGIN = '''
 """Test plug-ins (a user's file)."""
 import numpy as np
-from sandbox.obstacles import ObstacleSpec
+from sandbox.model.obstacles import ObstacleSpec
 from sandbox.plugins import (
     Param, register_failure, register_law, register_obstacle, register_reference,
     register_strategy,
@@ -91,15 +92,15 @@ def post(ctx):
 @pytest.fixture
 def registry_snapshot():
     """Restore the registry (and the loaded-file cache) after a test."""
-    plugins._ensure_builtins()
-    saved = {k: dict(v) for k, v in plugins._REGISTRY.items()}
-    loaded = dict(plugins._LOADED)
+    registration._ensure_builtins()
+    saved = {k: dict(v) for k, v in registration._REGISTRY.items()}
+    loaded = dict(registration._LOADED)
     yield
     for k, v in saved.items():
-        plugins._REGISTRY[k].clear()
-        plugins._REGISTRY[k].update(v)
-    plugins._LOADED.clear()
-    plugins._LOADED.update(loaded)
+        registration._REGISTRY[k].clear()
+        registration._REGISTRY[k].update(v)
+    registration._LOADED.clear()
+    registration._LOADED.update(loaded)
 
 
 def scenario_doc(**recovery) -> dict:
@@ -210,7 +211,7 @@ def test_law_failure_reference_and_obstacle_plugins_act_in_a_run(
     sc = load_scenario(write(tmp_path, doc))
     assert sc.obstacles[0].type == "box" and sc.obstacles[0].size == (0.4, 0.4)
     assert sc.reference.build().evaluate(2.0)[0].tolist() == [0.5, 0.0]
-    from sandbox.simulation import Simulation
+    from sandbox.loop.simulation import Simulation
 
     sim = Simulation(sc)
     run = sim.run()
@@ -283,9 +284,10 @@ def test_every_kind_is_declared_with_a_builtin() -> None:
 
 
 def test_the_strategy_context_pairs_and_obstacles() -> None:
-    from sandbox.obstacles import ObstacleSpec
+    from sandbox.geometry.neighbours import NeighbourList
+    from sandbox.model.obstacle_field import ObstacleField
+    from sandbox.model.obstacles import ObstacleSpec
     from sandbox.plugins import StrategyContext
-    from sandbox.recovery import NeighbourList, ObstacleField
 
     pos = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0]])
     field = ObstacleField(
@@ -430,7 +432,7 @@ def test_installed_packages_plug_in_through_the_entry_point_group(
         "[sandbox.plugins]\ndemo = ep_demo_plugins\n", encoding="utf-8"
     )
     monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setattr(plugins, "_ENTRY_POINTS_LOADED", [])
+    monkeypatch.setattr(registration, "_ENTRY_POINTS_LOADED", [])
     assert main(["plugins", "--kind", "failure"]) == 0
     listing = capsys.readouterr().out
     assert "ep_demo_halt" in listing and "entry point demo" in listing
@@ -438,7 +440,7 @@ def test_installed_packages_plug_in_through_the_entry_point_group(
     # a broken entry point is one clear error naming it
     (tmp_path / "ep_demo_plugins.py").write_text("raise RuntimeError('no')\n", "utf-8")
     plugins.unregister("failure", "ep_demo_halt")
-    monkeypatch.setattr(plugins, "_ENTRY_POINTS_LOADED", [])
+    monkeypatch.setattr(registration, "_ENTRY_POINTS_LOADED", [])
     assert main(["plugins"]) == 2
     err = capsys.readouterr().err
     assert "plug-in demo (entry point ep_demo_plugins) failed to import" in err

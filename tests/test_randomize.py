@@ -12,8 +12,8 @@ from helpers import write_yaml
 
 from sandbox.cli import main
 from sandbox.errors import ScenarioError
-from sandbox.randomize import MAX_ATTEMPTS
 from sandbox.scenario import load_scenario
+from sandbox.scenario.randomize import MAX_ATTEMPTS
 
 POSE = {"uniform": [[-3, -3, -3.14159], [3, 3, 3.14159]]}
 

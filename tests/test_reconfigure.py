@@ -16,9 +16,9 @@ from helpers import SCENARIOS, run_scenario, window, write_yaml
 
 from sandbox import load_scenario
 from sandbox.cli import main
-from sandbox.control.formation import FormationLaw
 from sandbox.errors import ScenarioError
-from sandbox.simulation import Simulation
+from sandbox.loop.simulation import Simulation
+from sandbox.model.laws import FormationLaw
 
 FAILURES = SCENARIOS / "failures"
 #: The robot of the failure scenarios: v1_max [m/s], max_accel [m/s^2], v2_max [rad/s].

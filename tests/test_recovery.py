@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 
 from sandbox import load_scenario, simulate
-from sandbox.control.formation import LAWS, BackwardDifference
-from sandbox.metrics import compute_metrics
+from sandbox.behaviour.recovery import WEIGHTS, avoidance_shift
+from sandbox.model.laws import LAWS, BackwardDifference
+from sandbox.model.obstacle_field import ObstacleField
 from sandbox.plugins import register_strategy
-from sandbox.recovery import WEIGHTS, ObstacleField, avoidance_shift
-from sandbox.run import MODE_AVOID
+from sandbox.run.metrics import compute_metrics
+from sandbox.run.record import MODE_AVOID
 from sandbox.scenario import ObstacleSpec
 
 R, r = 1.5, 0.75  # R = 3d and r = R/2 for d = 0.5 m

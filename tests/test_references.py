@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from sandbox.references import (
+from sandbox.model.references import (
     CircleReference,
     LemniscateReference,
     LineReference,

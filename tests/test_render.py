@@ -1,4 +1,4 @@
-"""Tests of ``sandbox.render``: GIF timing, geometry, colours and markers.
+"""Tests of ``sandbox.render.animation``: GIF timing, geometry, colours and markers.
 
 Runs are synthetic (built by :func:`make_run`), so these tests need no simulator.
 """
@@ -14,8 +14,12 @@ import numpy as np
 import pytest
 from PIL import Image, ImageColor
 
-from sandbox import gif_stream, render, render_camera, render_overlay, render_palette
-from sandbox.run import MODE_AVOID, CollisionEvent, Run
+from sandbox.render import gif_stream
+from sandbox.render import animation as render
+from sandbox.render import camera as render_camera
+from sandbox.render import overlay as render_overlay
+from sandbox.render import palette as render_palette
+from sandbox.run.record import MODE_AVOID, CollisionEvent, Run
 
 
 def make_run(

@@ -1,5 +1,5 @@
-"""Tests of the frames' text bands (``sandbox.render_overlay``), the automatic camera
-of ``sandbox run --gif`` and MP4 output (``sandbox.video``)."""
+"""Tests of the frames' text bands (``sandbox.render.overlay``), the automatic camera
+of ``sandbox run --gif`` and MP4 output (``sandbox.render.video``)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,14 @@ from helpers import write_yaml
 from PIL import ImageColor
 from test_render import make_run
 
-from sandbox import render, render_camera, render_overlay, render_palette, video
+from sandbox.render import animation as render
+from sandbox.render import camera as render_camera
+from sandbox.render import overlay as render_overlay
+from sandbox.render import palette as render_palette
+from sandbox.render import video
 from sandbox.cli import main
-from sandbox.output import load_run_dir
-from sandbox.run import MODE_AVOID, CollisionEvent
+from sandbox.run.output import load_run_dir
+from sandbox.run.record import MODE_AVOID, CollisionEvent
 
 LINE = {
     "name": "line",

@@ -19,7 +19,7 @@ import pytest
 
 from sandbox import __version__
 from sandbox.cli import main
-from sandbox.output import MANIFEST, read_manifest
+from sandbox.run.output import MANIFEST, read_manifest
 
 SCENARIO = {
     "name": "tiny",

@@ -23,12 +23,12 @@ import pytest
 import yaml
 
 from sandbox.cli import main
-from sandbox.dynamics import wrap_angle
-from sandbox.metrics import compute_metrics
-from sandbox.output import CSV_HEADER, load_run_dir, write_run_dir
+from sandbox.loop.simulation import Simulation
+from sandbox.model.dynamics import wrap_angle
+from sandbox.physics.world import PhysicalState, World
+from sandbox.run.metrics import compute_metrics
+from sandbox.run.output import CSV_HEADER, load_run_dir, write_run_dir
 from sandbox.scenario import load_scenario
-from sandbox.simulation import Simulation
-from sandbox.world import PhysicalState, World
 
 # Gains of the wrong sign, given explicitly, with the report's dt = 0.01 s: the error
 # poles are s = 4.14 and -24.1 [1/s], so the error grows like exp(4.14 t). Validation

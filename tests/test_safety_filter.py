@@ -15,20 +15,20 @@ import numpy as np
 import pytest
 
 from sandbox import load_scenario
-from sandbox.cli import main
-from sandbox.contexts import FilterContext
-from sandbox.metrics import compute_metrics
-from sandbox.recovery import ObstacleField
-from sandbox.safety.cbf import (
+from sandbox.behaviour.safety.cbf import (
     PARAMS,
     CBFState,
     barrier_rows,
     filter_commands,
     stall_turn,
 )
-from sandbox.safety.qp import min_violation, solve
+from sandbox.behaviour.safety.qp import min_violation, solve
+from sandbox.cli import main
+from sandbox.loop.simulation import Simulation
+from sandbox.model.obstacle_field import ObstacleField
+from sandbox.plugins.contexts import FilterContext
+from sandbox.run.metrics import compute_metrics
 from sandbox.scenario import ObstacleSpec
-from sandbox.simulation import Simulation
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAD_ON = ROOT / "scenarios" / "safety" / "head_on_swap.yaml"
@@ -396,7 +396,7 @@ def test_an_infeasible_step_is_relaxed_and_counted() -> None:
     wall = ObstacleSpec("wall", "w", start=(0.0, -2.0), end=(0.0, 2.0), thickness=0.1)
     x = -0.05 - 0.4 - 0.1 + 0.05  # the centre; p = x + 0.1
     ctx = _ctx([[x, 0.0]], [0.0], [2.0], [0.0], obstacles=[wall])
-    from sandbox.safety.cbf import cbf
+    from sandbox.behaviour.safety.cbf import cbf
 
     v1, _ = cbf(ctx)
     step = ctx.memory["last"]

@@ -13,7 +13,7 @@ import yaml
 
 from sandbox.cli import main
 from sandbox.scenario import _YAMLLoader, load_scenario, parse_scenario
-from sandbox.schema import (
+from sandbox.scenario.schema import (
     LENGTH_PATTERN,
     NAME_PATTERN,
     POSITIVE_LENGTH_PATTERN,
@@ -166,7 +166,7 @@ def test_every_declared_key_is_documented_and_in_the_schema() -> None:
 
 def test_the_schema_says_the_dt_bound_the_loader_enforces() -> None:
     # The drift this design removes: the schema once said 0.2 s, the loader 0.1 s.
-    from sandbox.control.flatness import Gains, max_control_period
+    from sandbox.model.flatness import Gains, max_control_period
 
     bound = max_control_period(Gains().k1, Gains().k2)
     text = build_schema()["properties"]["dt"]["description"]

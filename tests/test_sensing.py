@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from sandbox import load_scenario
-from sandbox.control.formation import BackwardDifference
+from sandbox.behaviour.sensing import Broadcast
 from sandbox.errors import ScenarioError
-from sandbox.sensing import Broadcast
-from sandbox.simulation import Simulation
+from sandbox.loop.simulation import Simulation
+from sandbox.model.laws import BackwardDifference
 
 
 def _doc(**sensing: float) -> dict:
@@ -128,8 +128,9 @@ def test_bad_sensing_values_name_the_field(sensing: dict, field: str) -> None:
 
 
 def test_recovery_uses_the_own_true_and_the_others_seen_positions() -> None:
+    from sandbox.behaviour.recovery import continuous, weighted_shift
+    from sandbox.model.obstacle_field import ObstacleField
     from sandbox.plugins import StrategyContext
-    from sandbox.recovery import ObstacleField, continuous, weighted_shift
 
     pos = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0]])
 

@@ -9,11 +9,11 @@ import pytest
 from helpers import SCENARIOS
 
 from sandbox import load_scenario
-from sandbox.output import write_csv
+from sandbox.loop.simulation import Simulation
+from sandbox.physics.world import PhysicalState
 from sandbox.render import render_frames
-from sandbox.run import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, MODE_FORMATION
-from sandbox.simulation import Simulation
-from sandbox.world import PhysicalState
+from sandbox.run.output import write_csv
+from sandbox.run.record import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, MODE_FORMATION
 
 ARRAYS = ("t", "pose", "cmd", "chi", "slot", "target", "mode", "failed", "reference")
 
@@ -245,7 +245,7 @@ def test_stepping_past_the_end_raises_and_an_early_result_is_interrupted() -> No
 
 
 def test_divergence_ends_a_stepped_run(monkeypatch: pytest.MonkeyPatch) -> None:
-    from sandbox.world import World
+    from sandbox.physics.world import World
 
     read = World.read_state
     calls = {"n": 0}

@@ -14,8 +14,9 @@ import pytest
 from helpers import PAPER, SCENARIOS, run_scenario
 
 from sandbox import load_scenario
+from sandbox.behaviour.recovery import avoidance_shift
 from sandbox.errors import ScenarioError
-from sandbox.recovery import ObstacleField, avoidance_shift
+from sandbox.model.obstacle_field import ObstacleField
 from sandbox.scenario import ObstacleSpec
 
 SWAP = SCENARIOS / "safety" / "head_on_swap.yaml"

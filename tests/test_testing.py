@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from helpers import PAPER
 
-from sandbox.metrics import compute_metrics
+from sandbox.run.metrics import compute_metrics
 from sandbox.testing import (
     assert_converged,
     assert_expectations,

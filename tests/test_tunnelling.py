@@ -7,7 +7,7 @@ from helpers import PAPER, SCENARIOS, write_yaml
 
 from sandbox import load_scenario
 from sandbox.cli import main
-from sandbox.tunnelling import peak_gain_speed
+from sandbox.model.tunnelling import peak_gain_speed
 
 
 def head_on(speed: float, diameter: float = 0.2) -> dict:

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from helpers import PAPER, run_scenario
 
-from sandbox.control.flatness import limit_turn
-from sandbox.control.formation import LAWS, REST_SPEED, LawInputs
-from sandbox.dynamics import wrap_angle
+from sandbox.model.dynamics import wrap_angle
+from sandbox.model.flatness import limit_turn
+from sandbox.model.laws import LAWS, REST_SPEED, LawInputs
 
 #: The robot of the report's sections 2-3 files: 2 m/s, 3 rad/s, 10 m/s^2.
 ROBOT = {"diameter": 0.5, "mass": 10.0, "v1_max": 2.0, "v2_max": 3.0, "max_accel": 10.0}

@@ -23,9 +23,9 @@ import yaml
 
 from sandbox.cli import main
 from sandbox.errors import ScenarioError
+from sandbox.loop.simulation import Simulation
 from sandbox.scenario import load_scenario, parse_scenario
 from sandbox.scenario.specs import _from_loader
-from sandbox.simulation import Simulation
 
 BAD = Path(__file__).parent / "bad_scenarios"
 CORPUS = sorted(BAD.glob("*.yaml"))

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from helpers import PAPER, run_scenario
 
-from sandbox.dynamics import unicycle_step
+from sandbox.model.dynamics import unicycle_step
+from sandbox.physics.world import World
 from sandbox.scenario import ObstacleSpec, VehicleSpec
-from sandbox.world import World
 
 H = 0.01  # control period [s]
 SUBSTEPS = 4

@@ -18,19 +18,19 @@ from sandbox.cli.common import (
 from sandbox.errors import ScenarioError
 
 if TYPE_CHECKING:  # the testing layer imports numpy: only when a command runs
-    from sandbox.testing import CheckResult
+    from sandbox.testing.assertions import CheckResult
 
 
 def _check(args: tuple[str, tuple[str, ...]]) -> CheckResult:
     """Check one file, without keeping its run (worker processes send results back)."""
-    from sandbox.testing import check_scenario
+    from sandbox.testing.assertions import check_scenario
 
     return check_scenario(args[0], args[1], keep_run=False)
 
 
 def cmd_check(args: argparse.Namespace) -> int:
     """``sandbox check FILE...``: exit 0 if every expectation holds, 1 if one fails."""
-    from sandbox.testing import load_checked
+    from sandbox.testing.assertions import load_checked
 
     overrides = tuple(args.set or ())
     invalid = False

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 from sandbox.errors import OutputError, SandboxError
 
 if TYPE_CHECKING:  # the CLI imports numpy and the simulation only when a command runs
-    from sandbox.run import Run
+    from sandbox.run.record import Run
 
 EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -29,10 +29,10 @@ def scenario_file(text: str) -> Path:
     """A scenario argument as a file: the file if it exists, else the bundled one.
 
     ``sandbox run paper/rotating_circle`` (with or without ``.yaml``) therefore works
-    from any directory; see :mod:`sandbox.bundled`. Raises
+    from any directory; see :mod:`sandbox.scenario.bundled`. Raises
     :class:`~sandbox.errors.ScenarioError` (one line, exit status 2) for neither.
     """
-    from sandbox.bundled import resolve
+    from sandbox.scenario.bundled import resolve
 
     return resolve(text)
 
@@ -72,7 +72,7 @@ class Progress:
                 bar.write(f"{f}: ok")  # a line printed above the bar
 
     ``bar(done, total)`` sets the position instead, so a ``Progress`` can be passed
-    as the ``progress`` callback of :meth:`sandbox.simulation.Simulation.run`. The bar
+    as the ``progress`` callback of :meth:`sandbox.loop.simulation.Simulation.run`. The bar
     is drawn by tqdm while :func:`progress_enabled` holds; otherwise every call does
     nothing (and tqdm is not even imported). Leaving the ``with`` block erases the bar
     line, so what the command prints next starts on a clean line.
@@ -230,7 +230,7 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
     camera, following the leader of a run spread along a line), ``leader`` or
     ``whole`` (frame the whole run).
     """
-    from sandbox.render import write_gif
+    from sandbox.render.animation import write_gif
 
     follow = None if args.follow == "whole" else args.follow
     options = {
@@ -242,7 +242,7 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
     }
     outputs = [("gif", args.gif, write_gif)]
     if getattr(args, "mp4", None):
-        from sandbox.video import write_mp4
+        from sandbox.render.video import write_mp4
 
         outputs.append(("mp4", args.mp4, write_mp4))
     for kind, target, write in outputs:
@@ -267,7 +267,7 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
 def check_mp4(args: argparse.Namespace) -> None:
     """Before a run: refuse ``--mp4`` when MP4 output cannot work here."""
     if getattr(args, "mp4", None):
-        from sandbox.video import require_video
+        from sandbox.render.video import require_video
 
         require_video()
 

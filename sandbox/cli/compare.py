@@ -20,7 +20,7 @@ from sandbox.errors import ScenarioError
 
 def cmd_compare(args: argparse.Namespace) -> int:
     """``sandbox compare FILE...``: a table of metrics per scenario and strategy."""
-    from sandbox.compare import compare, format_table
+    from sandbox.study.compare import compare, format_table
 
     def names(text: str) -> list[str]:
         return [x.strip() for x in text.split(",") if x.strip()]

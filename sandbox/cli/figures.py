@@ -23,7 +23,7 @@ from sandbox.cli.common import (
 
 def cmd_render(args: argparse.Namespace) -> int:
     """``sandbox render RUN_DIR --gif PATH [--mp4 PATH]``: a GIF (and/or MP4)."""
-    from sandbox.output import load_run_dir
+    from sandbox.run.output import load_run_dir
 
     if not (args.gif or args.mp4):
         print(
@@ -41,7 +41,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def _gallery_folder(text: str) -> Path:
     """A gallery folder argument: the folder if it exists, else a bundled one."""
-    from sandbox.bundled import scenarios_dir
+    from sandbox.scenario.bundled import scenarios_dir
 
     given = Path(text)
     if given.is_dir():
@@ -52,7 +52,7 @@ def _gallery_folder(text: str) -> Path:
 
 def cmd_gallery(args: argparse.Namespace) -> int:
     """``sandbox gallery``: run and render every scenario of the given folders."""
-    from sandbox.gallery import render_gallery, scenario_files
+    from sandbox.render.gallery import render_gallery, scenario_files
 
     folders = [_gallery_folder(f) for f in (args.folders or ["paper", "failures"])]
     missing = [str(f) for f in folders if not f.is_dir()]
@@ -71,8 +71,8 @@ def cmd_gallery(args: argparse.Namespace) -> int:
 
 def cmd_plot(args: argparse.Namespace) -> int:
     """``sandbox plot RUN_DIR``: the four report figures, in ``RUN_DIR/figures/``."""
-    from sandbox.output import load_run_dir
-    from sandbox.plot import plot_run
+    from sandbox.render.figures import plot_run
+    from sandbox.run.output import load_run_dir
 
     run = load_run_dir(Path(args.run_dir))
     out = Path(args.out) if args.out else Path(args.run_dir) / "figures"
@@ -83,7 +83,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-#: Resolutions ``--dpi`` accepts, as :data:`sandbox.plot.DPI_RANGE` (a test checks
+#: Resolutions ``--dpi`` accepts, as :data:`sandbox.render.figures.DPI_RANGE` (a test checks
 #: they agree; not imported from there, since matplotlib is slow to import).
 DPI_RANGE = (10, 1200)
 

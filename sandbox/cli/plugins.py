@@ -10,7 +10,7 @@ from sandbox.cli.common import EXIT_OK, add_command, add_plugin_option
 
 
 def _param_text(key: str, p) -> str:  # noqa: ANN001 - a sandbox.plugins.Param
-    from sandbox.plugins import REQUIRED
+    from sandbox.plugins.registration import REQUIRED
 
     default = "REQUIRED" if p.default is REQUIRED else p.default
     if isinstance(default, tuple):
@@ -32,7 +32,7 @@ def _param_text(key: str, p) -> str:  # noqa: ANN001 - a sandbox.plugins.Param
 
 def _kind(text: str) -> str:
     """An argparse type: a plug-in kind (the registry is imported only here)."""
-    from sandbox.plugins import KINDS
+    from sandbox.plugins.registration import KINDS
 
     if text not in KINDS:
         raise argparse.ArgumentTypeError(

@@ -27,14 +27,14 @@ from sandbox.errors import Problem, ScenarioError
 
 def cmd_run(args: argparse.Namespace) -> int:
     """``sandbox run FILE``: simulate, write the run directory, print a summary."""
-    from sandbox.metrics import compute_metrics
-    from sandbox.output import check_out_dir, write_run_dir
-    from sandbox.run import STATUS_DIVERGED, STATUS_INTERRUPTED
+    from sandbox.loop.simulation import Simulation
+    from sandbox.run.metrics import compute_metrics
+    from sandbox.run.output import check_out_dir, write_run_dir
+    from sandbox.run.record import STATUS_DIVERGED, STATUS_INTERRUPTED
     from sandbox.scenario import load_scenario
-    from sandbox.simulation import Simulation
 
     if args.format == "parquet":
-        from sandbox.analysis import require
+        from sandbox.run.analysis import require
 
         require("pyarrow", "--format parquet")  # before simulating, not after
     overrides = list(args.set or [])
@@ -111,7 +111,7 @@ def _blame_duration_option(exc: ScenarioError, duration: float | None) -> Scenar
 
 
 def _print_summary(name: str, metrics: dict, out_dir: Path, fmt: str) -> None:
-    from sandbox.metrics import summary_rows
+    from sandbox.run.metrics import summary_rows
 
     col = metrics["collisions"]
     md = metrics["min_distance"]

@@ -11,8 +11,8 @@ from sandbox.errors import ScenarioError
 
 def cmd_list(args: argparse.Namespace) -> int:
     """``sandbox list``: the bundled scenarios' names, each with its description."""
-    from sandbox.bundled import REFERENCE, names, scenarios_dir
     from sandbox.scenario import load_scenario
+    from sandbox.scenario.bundled import REFERENCE, names, scenarios_dir
     from sandbox.study.sweep import SweepError, check_sweep_file
 
     root = scenarios_dir()
@@ -41,7 +41,7 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def cmd_copy(args: argparse.Namespace) -> int:
     """``sandbox copy NAME [DEST]``: an editable copy of a bundled scenario."""
-    from sandbox.bundled import copy
+    from sandbox.scenario.bundled import copy
 
     target = copy(args.name, args.dest)
     print(f"{target} (edit it, then: sandbox run {target})")

@@ -55,8 +55,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 def cmd_schema(args: argparse.Namespace) -> int:
     """``sandbox schema [--out FILE]``: the JSON Schema of the scenario format."""
-    from sandbox.output import write_text_atomic
-    from sandbox.schema import schema_json
+    from sandbox.run.output import write_text_atomic
+    from sandbox.scenario.schema import schema_json
 
     text = schema_json()
     if not args.out:

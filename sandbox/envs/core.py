@@ -1,6 +1,6 @@
 """What both environments share: episodes, observations, actions, rewards, frames.
 
-Pure numpy over the step-wise API of :class:`~sandbox.simulation.Simulation`; the
+Pure numpy over the step-wise API of :class:`~sandbox.loop.simulation.Simulation`; the
 Gymnasium and PettingZoo classes (``vehicle.py``, ``formation.py``) only wrap it in
 their interfaces.
 
@@ -22,7 +22,7 @@ Action of an agent, two numbers in ``[-1, 1]``:
 
 - ``action="commands"``: ``(v1, v2) = (a0 v1_max, a1 v2_max)`` [m/s, rad/s], the
   vehicle's own limits (or ``max_command``), given to
-  :meth:`~sandbox.simulation.Simulation.step` as ``commands``;
+  :meth:`~sandbox.loop.simulation.Simulation.step` as ``commands``;
 - ``action="shift"``: a displacement ``max_shift (a0, a1)`` [m] of the target the
   built-in law and recovery computed, given as ``shifts`` (the law's feed-forward is
   kept, so the zero action drives exactly as the scenario's own controller).
@@ -48,11 +48,11 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.observation import Observation
-from sandbox.render import render_frame
-from sandbox.run import MODE_EXTERNAL, MODE_FAILED, Run
+from sandbox.loop.observation import Observation
+from sandbox.loop.simulation import Simulation
+from sandbox.render.animation import render_frame
+from sandbox.run.record import MODE_EXTERNAL, MODE_FAILED, Run
 from sandbox.scenario import Scenario, load_scenario
-from sandbox.simulation import Simulation
 
 #: Action kinds, the ``action`` argument of both environments.
 ACTIONS = ("commands", "shift")
@@ -369,7 +369,7 @@ class Task:
         return render_frame(run, size=self.render_size, follow=follow)
 
     def episode_run(self) -> Run:
-        """The episode so far as a :class:`~sandbox.run.Run` of its observations."""
+        """The episode so far as a :class:`~sandbox.run.record.Run` of its observations."""
         sim = self.sim
         obs = [o for o, _ in self.history]
         n = len(self.names)

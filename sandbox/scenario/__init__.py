@@ -23,7 +23,7 @@ written in metres (``0.75``) or as multiples of the default vehicle diameter (``
 ``1.5d``).
 """
 
-from sandbox.obstacles import ObstacleSpec
+from sandbox.model.obstacles import ObstacleSpec
 from sandbox.scenario.checks import _overlapping_pairs
 from sandbox.scenario.parse import load_scenario, parse_scenario
 from sandbox.scenario.reader import (

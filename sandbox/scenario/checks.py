@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 
 from sandbox import plugins
-from sandbox.control.flatness import (
+from sandbox.model.flatness import (
     error_poles,
     max_control_period,
 )
-from sandbox.obstacles import ObstacleSpec
+from sandbox.model.obstacles import ObstacleSpec
 from sandbox.scenario.reader import (
     _BYTES_PER_SAMPLE,
     MAX_RECORD_BYTES,
@@ -219,7 +219,7 @@ def _check_gains(
     with the chi of the period's start, so the tracking error obeys ``e+ = e + dt c``,
     ``c+ = c + dt (k_pos e + k_vel c)``: its poles are ``z = 1 + dt s`` for the poles
     ``s`` of ``s^2 - k_vel s - k_pos``. The bound is
-    :func:`~sandbox.control.flatness.max_control_period` (``|z| < 1`` and ``Re z > 0``;
+    :func:`~sandbox.model.flatness.max_control_period` (``|z| < 1`` and ``Re z > 0``;
     0.1 s for the report's gains). Gains unstable for every period are a warning (a
     deliberate experiment); stable gains with too long a period are an error. The
     heading loop ``e3+ = (1 - dt kp) e3`` needs ``dt kp < 2``.

@@ -15,15 +15,17 @@ from typing import Any
 
 import yaml
 
-from sandbox import plugins, randomize
+from sandbox import plugins
 from sandbox.errors import Problem, ScenarioError
-from sandbox.expectations import allowed_keys as expect_keys
-from sandbox.expectations import read_expectations
-from sandbox.plugins import (
+from sandbox.model.tunnelling import tunnelling_warning
+from sandbox.plugins.registration import (
     KINDS,
     Param,
     PluginError,
 )
+from sandbox.run.expectations import allowed_keys as expect_keys
+from sandbox.run.expectations import read_expectations
+from sandbox.scenario import randomize
 from sandbox.scenario.checks import _check_consistency
 from sandbox.scenario.reader import (
     _BAD_TEXT,
@@ -85,7 +87,6 @@ from sandbox.scenario.yamlfile import (
     _yaml_problem,
     _YAMLLoader,
 )
-from sandbox.tunnelling import tunnelling_warning
 
 
 def parse_scenario(

@@ -17,7 +17,7 @@ from collections.abc import Iterator, Mapping
 from typing import Any
 
 from sandbox.errors import Problem
-from sandbox.plugins import (
+from sandbox.plugins.registration import (
     REQUIRED,
 )
 

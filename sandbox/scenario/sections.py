@@ -5,7 +5,7 @@ own keys of the sections that select a plug-in, and, in :mod:`.vehicles`, those 
 vehicles); a plug-in's keys are declared by its registration. :func:`read_param` reads
 a key from its declaration, :func:`read_plugin_section` a section that selects a
 plug-in by name (reference, formation, recovery, failures, obstacles). The JSON Schema
-(:mod:`sandbox.schema`) and the documentation checks derive from the same tables.
+(:mod:`sandbox.scenario.schema`) and the documentation checks derive from the same tables.
 """
 
 from __future__ import annotations
@@ -14,17 +14,18 @@ import dataclasses
 from typing import Any
 
 from sandbox import plugins
-from sandbox.control.flatness import (
+from sandbox.model.flatness import (
     Gains,
     max_control_period,
 )
-from sandbox.expectations import EXPECT_SCHEMA
-from sandbox.obstacles import SHAPES, ObstacleSpec
-from sandbox.plugins import (
+from sandbox.model.obstacles import SHAPES, ObstacleSpec
+from sandbox.plugins.registration import (
     KINDS,
     ObstacleContext,
     Param,
+    reserve_section_keys,
 )
+from sandbox.run.expectations import EXPECT_SCHEMA
 from sandbox.scenario.reader import (
     _LENGTH,
     _REQUIRED,
@@ -46,7 +47,7 @@ from sandbox.scenario.specs import (
 
 
 # Every key of the format is declared once, here or in the plug-in that uses it: the
-# reader below, the JSON Schema (sandbox.schema) and the documentation checks of
+# reader below, the JSON Schema (sandbox.scenario.schema) and the documentation checks of
 # scenarios/reference.yaml (tests/test_reference_doc.py) are derived from these tables.
 def _section(name: str) -> dict[str, Any]:
     return {"type": "custom", "default": None, "schema": {"$ref": f"#/$defs/{name}"}}
@@ -69,7 +70,7 @@ _BOUND = {
 
 _PAIR = {"type": "array", "items": _BOUND, "minItems": 2, "maxItems": 2}
 
-#: The schema of ``randomize:`` (read by :mod:`sandbox.randomize`).
+#: The schema of ``randomize:`` (read by :mod:`sandbox.scenario.randomize`).
 _RANDOMIZE_SCHEMA = {
     "type": "object",
     "additionalProperties": {
@@ -419,7 +420,7 @@ PLUGIN_SECTIONS: dict[str, dict[str, Param]] = {
 }
 
 for _kind, _own in PLUGIN_SECTIONS.items():
-    plugins.reserve_section_keys(_kind, tuple(_own))
+    reserve_section_keys(_kind, tuple(_own))
 
 TOP_KEYS = tuple(TOP)
 

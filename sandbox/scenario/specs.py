@@ -18,17 +18,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sandbox import plugins
-from sandbox.control.flatness import (
+from sandbox.errors import Problem, ScenarioError
+from sandbox.model.flatness import (
     Gains,
 )
-from sandbox.errors import Problem, ScenarioError
-from sandbox.obstacles import ObstacleSpec
-from sandbox.plugins import (
+from sandbox.model.obstacles import ObstacleSpec
+from sandbox.plugins.registration import (
     ReferenceContext,
 )
 
 if TYPE_CHECKING:
-    from sandbox.expectations import Expectations
+    from sandbox.run.expectations import Expectations
 
 PLATOON_PATTERNS = ("grid", "line", "wedge", "ring")
 
@@ -204,7 +204,7 @@ class MetricsSpec:
     gap between two surfaces that ends a contact episode; ``deadlock_speed`` [m/s],
     ``deadlock_time`` [s], ``deadlock_distance`` [m]: a healthy vehicle slower than
     ``deadlock_speed`` for ``deadlock_time`` while farther than ``deadlock_distance``
-    from its slot is in a deadlock (:mod:`sandbox.deadlock`).
+    from its slot is in a deadlock (:mod:`sandbox.run.deadlock`).
     """
 
     settle_tol: float = 0.05
@@ -217,7 +217,7 @@ class MetricsSpec:
 
 @dataclass(frozen=True)
 class DetectionSpec:
-    """How the platoon learns of failures (``detection:``, :mod:`sandbox.detection`).
+    """How the platoon learns of failures (``detection:``, :mod:`sandbox.behaviour.detection`).
 
     ``method``: the registered detector (``oracle``: the truth at once, the default;
     ``residual``: a CUSUM on the residual of the observed motion against the
@@ -230,7 +230,7 @@ class DetectionSpec:
 
 @dataclass(frozen=True)
 class SensingSpec:
-    """What the vehicles see of each other (``sensing:``, see :mod:`sandbox.sensing`).
+    """What the vehicles see of each other (``sensing:``, see :mod:`sandbox.behaviour.sensing`).
 
     ``position_noise`` [m] and ``heading_noise`` [rad]: standard deviations of the
     broadcast noise; ``delay`` [s]: the latency, a whole number of control periods;
@@ -245,7 +245,7 @@ class SensingSpec:
 
 @dataclass(frozen=True)
 class SafetySpec:
-    """The safety filter on the commands (``safety:``, see :mod:`sandbox.safety`).
+    """The safety filter on the commands (``safety:``, see :mod:`sandbox.behaviour.safety`).
 
     ``filter``: the registered name (``none``: no filter, the default); ``params``:
     its YAML values (lengths in metres, defaults filled in).
@@ -257,7 +257,7 @@ class SafetySpec:
 
 @dataclass(frozen=True)
 class ReconfigureSpec:
-    """Slot reassignment after failures (``reconfigure:``, :mod:`sandbox.reconfigure`).
+    """Slot reassignment after failures (``reconfigure:``, :mod:`sandbox.behaviour.reconfigure`).
 
     ``assign``: ``none`` (every vehicle keeps its slot) or ``hungarian``;
     ``close_gap``: whether the slots are the formation's first ones (one per healthy
@@ -308,7 +308,7 @@ class Scenario:
     source: str | None = None
     warnings: tuple[str, ...] = ()
     plugins: tuple[str, ...] = ()
-    #: The ``expect:`` section (see :mod:`sandbox.expectations`), or None.
+    #: The ``expect:`` section (see :mod:`sandbox.run.expectations`), or None.
     expect: Expectations | None = None
     #: The ``sensing:`` section (all 0 by default: the truth).
     sensing: SensingSpec = SensingSpec()

@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 
 from sandbox import plugins
-from sandbox.control.flatness import (
+from sandbox.model.flatness import (
     Gains,
 )
-from sandbox.plugins import (
+from sandbox.plugins.registration import (
     Param,
 )
 from sandbox.scenario.reader import (

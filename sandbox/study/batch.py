@@ -4,8 +4,8 @@ A sweep's runs usually differ only in values (starts, offsets, ``beta``, failure
 seeds), not in structure (vehicle count, law, strategy, reference, obstacles). For
 such runs the fixed cost of a control step (about 200 numpy calls, 0.19 ms for three
 vehicles, against 0.01 ms of physics) is paid once per step for the whole batch:
-:class:`Batch` keeps K worlds, each its own pymunk :class:`~sandbox.world.World`, and
-evaluates the loop of :class:`~sandbox.simulation.Simulation` (reference, formation
+:class:`Batch` keeps K worlds, each its own pymunk :class:`~sandbox.physics.world.World`, and
+evaluates the loop of :class:`~sandbox.loop.simulation.Simulation` (reference, formation
 law, failures, recovery, the flatness controller of eqs. (5)-(6), limits, the motor
 sizing, the loop metrics, the record) on stacked arrays of all ``K * n`` vehicles in
 one pass per step. Only the physics itself (bulk read, bulk write, ``Space.step``) is
@@ -33,15 +33,23 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.control.flatness import advance_extension, extension_rate, flat_inputs
-from sandbox.control.formation import (
+from sandbox.geometry.neighbours import NeighbourList
+from sandbox.loop.divergence import diverged
+from sandbox.loop.simulation import Simulation
+from sandbox.model.failures import within_drive
+from sandbox.model.flatness import advance_extension, extension_rate, flat_inputs
+from sandbox.model.laws import (
     BackwardDifference,
 )
-from sandbox.divergence import diverged
-from sandbox.failures import within_drive
-from sandbox.plugins import FailureContext, LawContext, StrategyContext, make_law
-from sandbox.recovery import NeighbourList
-from sandbox.run import (
+from sandbox.physics.stepping import WorldStepper
+from sandbox.physics.world import World, motor_limits
+from sandbox.plugins.registration import (
+    FailureContext,
+    LawContext,
+    StrategyContext,
+    make_law,
+)
+from sandbox.run.record import (
     MODE_AVOID,
     MODE_FAILED,
     MODE_FORMATION,
@@ -50,15 +58,12 @@ from sandbox.run import (
     Run,
 )
 from sandbox.scenario import Scenario
-from sandbox.simulation import Simulation
 from sandbox.study.batch_metrics import BatchTally
 from sandbox.study.batchable import (
     TABULATED_REFERENCES,
     batch_key,
     batch_reason,
 )
-from sandbox.study.stepping import WorldStepper
-from sandbox.world import World, motor_limits
 
 
 class _Pairs:
@@ -67,7 +72,7 @@ class _Pairs:
     Every pair of a world is a candidate (as alone, up to :data:`MAX_VEHICLES`), in
     the single run's ``(i, j)`` order, world after world; so the sums over pairs add
     each vehicle's terms in the order it adds them alone. Obstacle candidates come from
-    a :class:`~sandbox.recovery.NeighbourList` over all vehicles (a superset of the
+    a :class:`~sandbox.behaviour.recovery.NeighbourList` over all vehicles (a superset of the
     pairs in range; the others weigh exactly 0).
     """
 
@@ -160,7 +165,7 @@ class Batch:
     [(51, 1, 3), (51, 1, 3), (51, 1, 3)]
     """
 
-    #: Step the worlds' physics with :class:`~sandbox.study.stepping.WorldStepper`
+    #: Step the worlds' physics with :class:`~sandbox.physics.stepping.WorldStepper`
     #: (False: world by world in Python; the same numbers, slower).
     fast_stepping = True
 
@@ -562,7 +567,7 @@ class Batch:
                 pivot.max_force = self._force[r] = force[r]
                 gear.max_force = self._torque[r] = torque[r]
         t0, substeps = self.k * h, self.substeps
-        if self._stepper is not None:  # every world at once (sandbox.study.stepping)
+        if self._stepper is not None:  # every world at once (sandbox.physics.stepping)
             self._stepper.advance(t0, h)
             self.k += 1
             return
@@ -660,7 +665,7 @@ class _WorldView:
 
 
 class _Record:
-    """A finished record (the ``arrays()`` of :class:`~sandbox.run.Recorder`)."""
+    """A finished record (the ``arrays()`` of :class:`~sandbox.run.record.Recorder`)."""
 
     def __init__(self, arrays: dict[str, np.ndarray]) -> None:
         self._arrays = arrays

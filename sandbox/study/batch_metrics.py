@@ -1,4 +1,4 @@
-"""The loop metrics of a batch of worlds: :class:`~sandbox.metrics.LoopMetrics` stacked.
+"""The loop metrics of a batch of worlds: :class:`~sandbox.run.metrics.LoopMetrics` stacked.
 
 :class:`BatchTally` accumulates, for K worlds of ``n`` vehicles each stepped together by
 :class:`~sandbox.study.batch.Batch`, exactly the numbers ``LoopMetrics`` accumulates
@@ -18,14 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.metrics import MOTOR_ABS_TOL, MOTOR_REL_TOL
+from sandbox.run.metrics import MOTOR_ABS_TOL, MOTOR_REL_TOL
 
 #: Periods buffered before :meth:`BatchTally.flush` accounts for them.
 CHUNK = 64
 
 
 class BatchTally:
-    """:class:`~sandbox.metrics.LoopMetrics` of K worlds, stacked (the same numbers)."""
+    """:class:`~sandbox.run.metrics.LoopMetrics` of K worlds, stacked (the same numbers)."""
 
     def __init__(self, K: int, n: int, h: float) -> None:
         self.K, self.n, self.h = K, n, h

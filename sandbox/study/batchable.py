@@ -11,17 +11,17 @@ from __future__ import annotations
 
 import dataclasses
 
-from sandbox.control.formation import (
+from sandbox.geometry.neighbours import BRUTE_FORCE_MAX
+from sandbox.loop.simulation import Simulation
+from sandbox.model.laws import (
     FixedFormation,
     LeaderReferenceFormation,
     OwnEstimateFormation,
     RotatingFormation,
     VirtualLeaderFormation,
 )
-from sandbox.recovery import BRUTE_FORCE_MAX
-from sandbox.references import CircleReference, LineReference, PointReference
-from sandbox.simulation import Simulation
-from sandbox.world import World
+from sandbox.model.references import CircleReference, LineReference, PointReference
+from sandbox.physics.world import World
 
 #: The laws the batch evaluates (the built-in classes; a plug-in runs alone).
 BATCH_LAWS = (
@@ -33,7 +33,7 @@ BATCH_LAWS = (
 )
 #: References evaluated for all step times at once (elementwise in t).
 TABULATED_REFERENCES = (PointReference, LineReference, CircleReference)
-#: The built-in strategies (functions of :mod:`sandbox.recovery`).
+#: The built-in strategies (functions of :mod:`sandbox.behaviour.recovery`).
 BATCH_STRATEGIES = ("none", "discontinuous", "continuous", "smooth")
 #: Most vehicles per world: all pairs are then the neighbour candidates, as alone.
 MAX_VEHICLES = BRUTE_FORCE_MAX
@@ -68,7 +68,7 @@ KNOWN_FIELDS = frozenset(
 def batch_reason(sim: Simulation) -> str | None:
     """Why ``sim`` cannot run in a batch, or None when it can.
 
-    ``sim`` is a freshly built :class:`~sandbox.simulation.Simulation` (step 0 sensed
+    ``sim`` is a freshly built :class:`~sandbox.loop.simulation.Simulation` (step 0 sensed
     and planned, nothing stepped).
     """
     sc = sim.scenario
@@ -99,11 +99,11 @@ def batch_reason(sim: Simulation) -> str | None:
     strategy = sc.recovery.strategy
     if (
         strategy not in BATCH_STRATEGIES
-        or sim.strategy.__module__ != "sandbox.recovery"
+        or sim.strategy.__module__ != "sandbox.behaviour.recovery"
     ):
         return f"the strategy {strategy!r}"
     for kind in sim.failures.kinds:
-        if kind.obj.__module__ != "sandbox.failures":
+        if kind.obj.__module__ != "sandbox.model.failures":
             return f"the failure {kind.name!r}"
     if sim.fleet.n > MAX_VEHICLES:
         return f"more than {MAX_VEHICLES} vehicles"

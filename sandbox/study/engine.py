@@ -38,7 +38,7 @@ MIN_GROUPS = 2
 MIN_GROUPS_PER_WORKER = 2
 MIN_WORLDS = 8
 #: Modules a local pool's fork server imports before it forks the workers.
-PRELOAD = ["sandbox.study.batch", "sandbox.metrics", "sandbox.scenario"]
+PRELOAD = ["sandbox.study.batch", "sandbox.run.metrics", "sandbox.scenario"]
 #: How long to wait for a Dask scheduler to answer.
 CONNECT_TIMEOUT = "5s"
 
@@ -109,8 +109,8 @@ def run_task(
 
 def _simulation(base_doc: dict[str, Any], source: str, overrides: list[str]) -> Any:
     """The run's fresh Simulation, or its row when the scenario is invalid."""
+    from sandbox.loop.simulation import Simulation
     from sandbox.scenario import parse_scenario
-    from sandbox.simulation import Simulation
 
     try:
         scenario = parse_scenario(base_doc, source=source, overrides=overrides)
@@ -139,7 +139,7 @@ def _single(sim: Any, should_stop: Callable[[], bool] | None) -> dict[str, Any] 
 
 
 def _result(run: Any) -> dict[str, Any]:
-    from sandbox.metrics import compute_metrics
+    from sandbox.run.metrics import compute_metrics
 
     metrics = compute_metrics(run)
     return {"row": row_of(run, metrics), "metrics": metrics}
@@ -196,7 +196,7 @@ def run_tasks(
 
 
 def _rebuilt(sim: Any) -> Any:
-    from sandbox.simulation import Simulation
+    from sandbox.loop.simulation import Simulation
 
     return Simulation(sim.scenario)
 

@@ -15,7 +15,7 @@ them, i.e. one group per grid point). Per group:
 - ``min_distance_min``: the smallest centre distance over the group's runs [m];
   ``effort_median``: median total effort [m/s];
 - ``deadlocked``, ``deadlocked_rate``: the runs with at least one deadlock (see
-  :mod:`sandbox.deadlock`), and their share.
+  :mod:`sandbox.run.deadlock`), and their share.
 """
 
 from __future__ import annotations

@@ -9,15 +9,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sandbox.control.flatness import (
+from sandbox.model.dynamics import wrap_angle
+from sandbox.model.flatness import (
     CHI_HOLD,
     Gains,
     advance_extension,
     extension_rate,
     flat_inputs,
 )
-from sandbox.control.formation import BackwardDifference, rotate_offsets
-from sandbox.dynamics import wrap_angle
+from sandbox.model.laws import BackwardDifference, rotate_offsets
 
 #: Physically meaningful magnitudes (no overflow of squares: warnings are errors).
 BIG = 1e6

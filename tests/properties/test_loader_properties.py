@@ -23,9 +23,9 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from sandbox.errors import ScenarioError
+from sandbox.loop.simulation import Simulation
 from sandbox.scenario import Scenario, _YAMLLoader, load_scenario, parse_scenario
-from sandbox.schema import build_schema
-from sandbox.simulation import Simulation
+from sandbox.scenario.schema import build_schema
 
 REPO = Path(__file__).resolve().parents[2]
 #: Bundled scenarios small enough to be parsed hundreds of times (big platoons are not);

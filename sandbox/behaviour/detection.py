@@ -1,0 +1,699 @@
+"""Failure detection without an oracle: the ``residual`` detector (``detection:``).
+
+With ``detection: {method: oracle}`` (the default) the platoon knows every failure at
+once, as in v0.1. With ``method: residual`` it has to find them: each vehicle's
+observed motion (its broadcast poses, :attr:`Simulation.seen`, or the truth without
+sensing) is compared with what the commands its controller broadcasts predict, and a
+one-sided CUSUM per vehicle decides when the difference is too large to be noise.
+
+The prediction
+    Every control period each vehicle broadcasts the commands ``(v1, v2)`` its
+    controller asks for (a failed vehicle's controller does not know it has failed:
+    it goes on asking for what its law wants). The detector integrates the unicycle
+    of eq. (1) with these commands through the motor model of the physics: in each
+    of the ``substeps`` substeps of a period the position and heading advance with the
+    body's current velocity, and then the velocity moves toward the command (the
+    world-frame vector ``v1 (cos, sin)(x3 + v2 h / 2)`` and the rate ``v2``) by at most
+    the motor's acceleration limit (``motor_accel``, and ``4 motor_accel / radius`` for
+    the turn rate; a vehicle without ``motor_accel`` reaches its command within one
+    substep). The predicted pose starts every ``window`` seconds from the last
+    observed pose; the residual of a window is the observed pose at its end minus the
+    predicted one, in the frame of the predicted heading: along-track ``r_a``,
+    cross-track ``r_c`` [m] and heading ``r_h`` [rad].
+
+Normalisation
+    Each end of a window carries the broadcast noise, so ``r_a`` and ``r_c`` have a
+    standard deviation ``sqrt(2 sigma_p^2 + floor_p^2)`` (``r_c`` also
+    ``L sigma_h`` for a travel ``L`` over the window, the start heading's error) and
+    ``r_h`` ``sqrt(2 sigma_h^2 + floor_h^2)``, with ``sigma_p, sigma_h`` the
+    ``sensing`` noise and ``floor_p = 1 mm``, ``floor_h = 1 mrad`` by default
+    (``noise_floor``, ``heading_floor``): what the prediction misses without any noise
+    (the residual of a healthy platoon seen through the truth stays below a tenth of
+    that). ``z`` is the residual divided by these.
+
+The CUSUM
+    Under no fault ``z`` is close to a standard normal vector in 3-D. The alternative
+    is a mean shift of ``shift`` standard deviations in an unknown direction; the
+    log-likelihood ratio of one window, averaged over the directions, is
+    ``l(z) = log(sinh(mu |z|) / (mu |z|)) - mu^2 / 2`` with ``mu = shift``, and the
+    detector runs ``g = max(0, g + l)`` per vehicle, alarming at ``g >= lambda``.
+    For independent windows Lorden's bound gives a mean time between false alarms of
+    at least ``e^lambda`` windows; consecutive windows share an end point, and the
+    README reports the rate measured on fault-free runs. A window during which the
+    vehicle was in a contact episode (or one window after it) is skipped: contacts
+    move vehicles against their commands and are known to the world.
+
+Isolation
+    At an alarm the residuals accumulated since ``g`` last left 0 name the kind, and
+    they are read again with every window for ``isolation`` seconds more (default
+    0.3 s), and at least until a failed drive could have braked to rest from the
+    commanded speed at its limit (the least of its declared ``max_accel`` and
+    ``motor_accel``) plus a window; the detection time stays the alarm's. A failed
+    drive reaches its faulty command within its limits, so a braking stop or spin,
+    or a runaway whose speed is near the commanded one, is plain only after a few
+    windows. A vehicle is *slow* when its speed observed lately (a line fitted to
+    its last :data:`RECENT_SPEED_WINDOW` s of broadcast positions) is below half the
+    model's, the commanded speed (or below ``STILL_SPEED``). Slow and turning (the
+    observed heading change after the first window, beyond 4 standard deviations) is
+    a ``spin``; slow, not turning and short of its predicted travel is a ``stop``,
+    or a ``crash`` when the vehicle was in contact within the last second or its
+    last :data:`SHAPE_HISTORY` seconds of observed track fit a crash better than a
+    braked stop (:func:`stop_fits`: a wreck stops within a substep, a deceleration
+    no drive makes; see :mod:`sandbox.model.failures`). Without a declared limit the two
+    move alike and a crash in free space reads as a stop. A moving vehicle whose
+    heading residual dominates (by summed magnitudes) is a ``stuck_steering``, or
+    ``uncontrolled`` when the along-track sum is beyond 2 standard deviations too.
+    Any other motion against the commands (too fast, sideways) is ``uncontrolled``.
+
+Studies
+    With ``memory["trace"]`` set to a list (``Simulation.detection.memory``), every
+    window's ``(t, vehicle, l)`` is appended to it: the CUSUM of any other ``lambda``
+    can be recomputed from one run (a run is the same for every ``lambda`` up to its
+    first alarm). ``benchmarks/detection_lambda.py`` does so.
+
+Latching
+    A detection stays until the same statistic run the other way,
+    ``c = max(0, c - l)``, reaches ``lambda``: the vehicle has moved as commanded long
+    enough (a cleared failure); the detection is then reported cleared.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sandbox.plugins.registration import DetectorContext, Param, register_detector
+
+#: The kinds a detection names (failure kinds of :mod:`sandbox.model.failures`).
+KINDS = ("stop", "spin", "stuck_steering", "uncontrolled", "crash")
+#: Speed below which a vehicle counts as still, for isolation [m/s].
+STILL_SPEED = 0.1
+#: How long after a contact a stop counts as a crash [s].
+CRASH_CONTACT_WINDOW = 1.0
+#: Over how long the speed observed lately is fitted, for isolation [s].
+RECENT_SPEED_WINDOW = 0.2
+#: How much of the observed track the crash-or-stop fit reads [s].
+SHAPE_HISTORY = 1.0
+#: Angular motor limit as a multiple of ``motor_accel / radius`` (as the physics).
+ANGULAR_MOTOR_FACTOR = 4.0
+
+RESIDUAL_PARAMS = {
+    "lambda": Param(
+        "number",
+        12.0,
+        doc="CUSUM threshold [nats]: a false alarm about every e^lambda windows in "
+        "theory (independent windows)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "window": Param(
+        "number",
+        0.1,
+        "s",
+        "Length of one residual: the prediction restarts from the observed pose "
+        "every window (a whole number of control periods)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "shift": Param(
+        "number",
+        4.0,
+        doc="The fault the CUSUM is tuned to: a residual of this many noise standard "
+        "deviations",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "isolation": Param(
+        "number",
+        0.3,
+        "s",
+        "How long after an alarm the residuals still go into the kind, at least "
+        "(and at least until a failed drive could have braked to rest from the "
+        "commanded speed, plus a window); the detection itself is at the alarm",
+        minimum=0.0,
+    ),
+    "noise_floor": Param(
+        "number",
+        0.001,
+        "m",
+        "Least position noise assumed (what the prediction misses without noise)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "heading_floor": Param(
+        "number",
+        0.001,
+        "rad",
+        "Least heading noise assumed",
+        minimum=0.0,
+        exclusive=True,
+    ),
+}
+
+
+def llr(z_norm: np.ndarray, mu: float) -> np.ndarray:
+    """Log-likelihood ratio of a mean shift ``mu`` in an unknown 3-D direction.
+
+    ``log E_u[exp(mu u.z - mu^2/2)]`` over unit vectors ``u``, uniform on the
+    sphere: ``log(sinh(mu r) / (mu r)) - mu^2 / 2`` for ``r = |z|``.
+
+    >>> round(float(llr(np.array([0.0]), 2.0)[0]), 6)
+    -2.0
+    """
+    x = mu * np.asarray(z_norm, dtype=float)
+    # log(sinh(x)/x), stable for small and large x.
+    small = x < 1e-4
+    safe = np.where(small, 1.0, x)
+    big = safe + np.log1p(-np.exp(-2.0 * safe)) - np.log(2.0 * safe)
+    return np.where(small, x * x / 6.0, big) - 0.5 * mu * mu
+
+
+@dataclass
+class DetectorState:
+    """What the residual detector keeps between control periods, per vehicle."""
+
+    pose: np.ndarray  # predicted pose since the window's start (n, 3)
+    start: np.ndarray  # observed pose at the window's start (n, 3) [m, m, rad]
+    vel: np.ndarray  # the model body's velocity (n, 2) [m/s]
+    rate: np.ndarray  # the model body's turn rate (n,) [rad/s]
+    age: np.ndarray  # periods since the window's start (n,)
+    pending: np.ndarray  # the next window starts at the next observation (n,) bool
+    travel: np.ndarray  # predicted travel over the window (n,) [m]
+    gate: np.ndarray  # periods of the window in or just after contact (n,)
+    last_contact: np.ndarray  # time of the last contact (n,) [s]
+    g: np.ndarray  # the CUSUM (n,)
+    clear: np.ndarray  # the clearing CUSUM of detected vehicles (n,)
+    acc: np.ndarray  # normalised residuals summed since g left 0 (n, 3)
+    acc_abs: np.ndarray  # their magnitudes summed (n, 3)
+    acc_raw: np.ndarray  # raw residuals summed since g left 0 (n, 3)
+    acc_obs: np.ndarray  # observed travel since g left 0 (n,) [m]
+    acc_pred: np.ndarray  # predicted travel since g left 0 (n,) [m]
+    acc_t: np.ndarray  # time since g left 0 (n,) [s]
+    acc_rot: np.ndarray  # observed rotation since g left 0 (n,) [rad]
+    acc_rot0: np.ndarray  # that of the first window (n,) [rad]
+    acc_n: np.ndarray  # windows summed since g left 0 (n,)
+    detected: np.ndarray  # latched (n,) bool
+    isolating: np.ndarray  # until when the kind is still read (n,) [s]
+    kinds: list  # the kind of each latched detection (n,)
+    history: object = None  # the last SHAPE_HISTORY s of (t, seen xy, fresh)
+
+
+def _start(ctx: DetectorContext) -> DetectorState:
+    n = len(ctx.pos)
+    z = np.zeros(n)
+    return DetectorState(
+        pose=ctx.seen.copy(),
+        start=ctx.seen.copy(),
+        vel=np.array(ctx.vel, dtype=float),
+        rate=z.copy(),
+        age=np.zeros(n, dtype=int),
+        pending=np.zeros(n, dtype=bool),
+        travel=z.copy(),
+        gate=np.zeros(n, dtype=int),
+        last_contact=np.full(n, -np.inf),
+        g=z.copy(),
+        clear=z.copy(),
+        acc=np.zeros((n, 3)),
+        acc_abs=np.zeros((n, 3)),
+        acc_raw=np.zeros((n, 3)),
+        acc_obs=z.copy(),
+        acc_pred=z.copy(),
+        acc_t=z.copy(),
+        acc_rot=z.copy(),
+        acc_rot0=z.copy(),
+        acc_n=np.zeros(n, dtype=int),
+        detected=np.zeros(n, dtype=bool),
+        isolating=np.full(n, -np.inf),
+        kinds=[""] * n,
+    )
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _advance_model(st: DetectorState, ctx: DetectorContext) -> None:
+    """One control period of the motor model (see the module docstring)."""
+    h, s = ctx.dt, max(1, int(ctx.substeps))
+    dts = h / s
+    v1, v2 = ctx.commands[:, 0], ctx.commands[:, 1]
+    heading = st.pose[:, 2] + 0.5 * v2 * h
+    target = np.column_stack((v1 * np.cos(heading), v1 * np.sin(heading)))
+    lin = ctx.motor_accel * dts  # inf: reached within one substep
+    ang = ctx.turn_accel * dts
+    start = st.pose[:, :2].copy()
+    for _ in range(s):
+        st.pose[:, :2] += st.vel * dts
+        st.pose[:, 2] += st.rate * dts
+        dv = target - st.vel
+        norm = np.hypot(dv[:, 0], dv[:, 1])
+        scale = np.where(norm > lin, lin / np.maximum(norm, 1e-300), 1.0)
+        st.vel = st.vel + dv * scale[:, None]
+        st.rate = st.rate + np.clip(v2 - st.rate, -ang, ang)
+    st.travel += np.hypot(*(st.pose[:, :2] - start).T)
+
+
+def _accumulate(st: DetectorState, i: int, k: int, sums: tuple) -> None:
+    """Add window ``k`` (of the due rows) to vehicle ``i``'s sums for isolation."""
+    z, raw, observed, travel, seconds, rotation = sums
+    st.acc[i] += z[k]
+    st.acc_abs[i] += np.abs(z[k])
+    st.acc_raw[i] += raw[k]
+    st.acc_obs[i] += observed[k]
+    st.acc_pred[i] += travel[k]
+    st.acc_t[i] += seconds[k]
+    if st.acc_n[i] == 0:
+        st.acc_rot0[i] = rotation[k]
+    st.acc_rot[i] += rotation[k]
+    st.acc_n[i] += 1
+
+
+def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]:
+    """How well a crash and a braked stop explain a track (least squares).
+
+    Parameters
+    ----------
+    t : ndarray (m,) [s]
+        Times of the observed positions.
+    s : ndarray (m,) [m]
+        The positions along the direction of travel.
+    brake : float [m/s^2]
+        The drive's braking limit (finite).
+
+    Returns
+    -------
+    crash, stop : float [m^2]
+        The least sum of squared residuals of the two models, each fitted over a
+        grid of onsets ``tau`` (the sample times) and speeds ``v``, with a free
+        offset: a crash moves at ``v`` until ``tau`` and is at rest after it; a stop
+        moves at ``v`` until ``tau`` and then brakes at ``brake`` to rest (reached at
+        ``tau + v / brake``, after ``v^2 / (2 brake)``).
+
+    >>> t = np.arange(0.0, 1.0, 0.01)
+    >>> crash, stop = stop_fits(t, np.minimum(t, 0.5), 5.0)
+    >>> bool(crash < stop)
+    True
+    """
+    t = np.asarray(t, dtype=float) - t[0]
+    s = np.asarray(s, dtype=float)
+    lag = min(10, len(t) - 1)
+    speed = np.abs(s[lag:] - s[:-lag]) / np.maximum(t[lag:] - t[:-lag], 1e-9)
+    v = np.linspace(0.0, 1.5 * float(speed.max()), 61)[:, None, None]
+    tau = t[None, :, None]
+    tt = t[None, None, :]
+    run = np.minimum(tt, tau)
+    crash = v * run
+    braking = np.clip(tt - tau, 0.0, v / brake)
+    stop = v * (run + braking) - 0.5 * brake * braking**2
+
+    def ssr(model: np.ndarray) -> float:
+        r = s - model
+        r = r - r.mean(axis=-1, keepdims=True)
+        return float((r * r).sum(axis=-1).min())
+
+    return ssr(crash), ssr(stop)
+
+
+def _recent_speed(st: DetectorState, i: int) -> float | None:
+    """Vehicle ``i``'s speed over the last :data:`RECENT_SPEED_WINDOW` s [m/s].
+
+    The slope of a straight line fitted to its fresh broadcast positions; None with
+    fewer than 5 of them.
+    """
+    if st.history is None or not st.history:
+        return None
+    now = st.history[-1][0]
+    rows = [
+        (t, xy[i])
+        for t, xy, fresh in st.history
+        if fresh[i] and t >= now - RECENT_SPEED_WINDOW - 1e-9
+    ]
+    if len(rows) < 5:
+        return None
+    t = np.array([r[0] for r in rows])
+    xy = np.array([r[1] for r in rows])
+    t = t - t.mean()
+    slope = (t[:, None] * (xy - xy.mean(axis=0))).sum(axis=0) / (t * t).sum()
+    return float(np.hypot(*slope))
+
+
+def _stopped_by_impact(st: DetectorState, i: int, brake: float) -> bool:
+    """Whether vehicle ``i``'s observed track fits a crash better than a stop.
+
+    Without a finite braking limit the two move alike: no.
+    """
+    if not np.isfinite(brake) or st.history is None:
+        return False
+    rows = [(t, xy[i]) for t, xy, fresh in st.history if fresh[i]]
+    if len(rows) < 10:
+        return False
+    t = np.array([r[0] for r in rows])
+    xy = np.array([r[1] for r in rows])
+    chord = xy[-5:].mean(axis=0) - xy[:5].mean(axis=0)
+    norm = float(np.hypot(*chord))
+    if norm < 1e-9:
+        return False
+    crash, stop = stop_fits(t, (xy - xy[0]) @ (chord / norm), brake)
+    return crash < stop
+
+
+def _isolate(st: DetectorState, i: int, t: float, ctx: DetectorContext) -> str:
+    """The kind of the alarm of vehicle ``i`` from its accumulated residuals."""
+    # Which component dominates: summed magnitudes (a spinning vehicle's heading
+    # residual changes sign as its controller turns against it); the sign of the
+    # along-track sum says deficit or excess.
+    za, zc, zh = st.acc_abs[i]
+    duration = max(st.acc_t[i], ctx.dt)
+    windows = max(1.0, st.acc_t[i] / max(ctx.params["window"], ctx.dt))
+    brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
+    brake = float(brakes[i])
+    # Slow: the speed observed lately (a line fitted to the last RECENT_SPEED_WINDOW s
+    # of broadcast positions) is below half the model's, the commanded one: a
+    # stopped or spinning vehicle once its drive has braked (an integral over the
+    # sums would count the travel before the onset, and the braking, as moving).
+    recent = _recent_speed(st, i)
+    commanded = float(np.hypot(*st.vel[i]))
+    if recent is None:  # too few observations: the sums since g left 0
+        slow = st.acc_obs[i] < max(STILL_SPEED * duration, 0.5 * st.acc_pred[i])
+    else:
+        slow = recent < max(STILL_SPEED, 0.5 * commanded)
+    # Whether the observed heading turns, beyond 4 standard deviations of the sum of
+    # the windows' noisy heading differences: after the first window once there are
+    # more (the first one holds the turn the vehicle made before the fault).
+    sh = np.sqrt(2.0 * ctx.heading_noise**2 + ctx.params["heading_floor"] ** 2)
+    late = int(st.acc_n[i]) - 1
+    rot = st.acc_rot[i] - st.acc_rot0[i] if late > 0 else st.acc_rot[i]
+    turned = abs(rot) > 4.0 * sh * np.sqrt(max(late, 1))
+    if slow and turned:
+        return "spin"
+    if slow and st.acc[i, 0] < 0 and (za >= zc or zh >= zc):
+        # At rest without turning: the commanded turn did not happen either.
+        if t - st.last_contact[i] <= CRASH_CONTACT_WINDOW:
+            return "crash"
+        # Stopped harder than the drive can brake: an impact.
+        return "crash" if _stopped_by_impact(st, i, brake) else "stop"
+    if zh >= max(za, zc):
+        # Moving: the speed is off the commands too (beyond 2 sigma) when uncontrolled.
+        speed_off = abs(st.acc[i, 0]) > 2.0 * np.sqrt(windows)
+        return "uncontrolled" if speed_off else "stuck_steering"
+    return "uncontrolled"
+
+
+@register_detector("oracle")
+def oracle(ctx: DetectorContext) -> np.ndarray:
+    """The truth, known at once (v0.1's behaviour)."""
+    return ctx.failing.copy()
+
+
+@register_detector("residual", params=RESIDUAL_PARAMS)
+def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
+    """Residuals of the observed motion against the commands, and a CUSUM."""
+    st: DetectorState | None = ctx.memory.get("state")
+    if st is None or ctx.commands is None:
+        # The first poses (or, with a delay, the first copies held): start from them.
+        st = ctx.memory["state"] = _start(ctx)
+        return st.detected.copy(), list(st.kinds)
+    p = ctx.params
+    if st.history is None:
+        from collections import deque
+
+        st.history = deque(maxlen=int(round(SHAPE_HISTORY / ctx.dt)) + 1)
+    st.history.append((ctx.t, ctx.seen[:, :2].copy(), ctx.fresh.copy()))
+    mu, lam = float(p["shift"]), float(p["lambda"])
+    window = max(1, int(round(p["window"] / ctx.dt)))
+    sp = np.sqrt(2.0 * ctx.position_noise**2 + p["noise_floor"] ** 2)
+    sh = np.sqrt(2.0 * ctx.heading_noise**2 + p["heading_floor"] ** 2)
+    _advance_model(st, ctx)
+    st.age += 1
+    # Windows start from a new observation (never the last one's end), so that no two
+    # windows share a pose's noise: independent windows.
+    restart = st.pending & ctx.fresh
+    if np.any(restart):
+        st.pose[restart] = ctx.seen[restart]
+        st.start[restart] = ctx.seen[restart]
+        st.age[restart] = 0
+        st.travel[restart] = 0.0
+        st.pending &= ~restart
+    contact = ctx.in_contact
+    st.last_contact = np.where(contact, ctx.t, st.last_contact)
+    # A window touching a contact, or the window after it, is skipped.
+    st.gate = np.where(contact, 2 * window, np.maximum(st.gate - 1, 0))
+    due = (st.age >= window) & ctx.fresh & ~st.pending
+    if not np.any(due):
+        return st.detected.copy(), list(st.kinds)
+    rows = np.flatnonzero(due)
+    seen = ctx.seen[rows]
+    pred = st.pose[rows]
+    d = seen[:, :2] - pred[:, :2]
+    c, s = np.cos(pred[:, 2]), np.sin(pred[:, 2])
+    raw = np.column_stack(
+        (
+            c * d[:, 0] + s * d[:, 1],
+            -s * d[:, 0] + c * d[:, 1],
+            _wrap(seen[:, 2] - pred[:, 2]),
+        )
+    )
+    travel = st.travel[rows]
+    sc = np.sqrt(sp * sp + (travel * ctx.heading_noise) ** 2)
+    z = raw / np.column_stack((np.full(len(rows), sp), sc, np.full(len(rows), sh)))
+    gated = st.gate[rows] > 0
+    inc = np.where(gated, 0.0, llr(np.hypot.reduce(z, axis=1), mu))
+    trace = ctx.memory.get("trace")
+    if trace is not None:  # (t, vehicle, l) of every window used, for studies
+        used = ~gated
+        trace.extend(
+            (ctx.t, int(i), float(x))
+            for i, x in zip(rows[used], inc[used], strict=True)
+        )
+    observed = np.hypot(*(seen[:, :2] - st.start[rows, :2]).T)
+    rotation = _wrap(seen[:, 2] - st.start[rows, 2])
+    seconds = st.age[rows] * ctx.dt
+    window_sums = (z, raw, observed, travel, seconds, rotation)
+    for k, i in enumerate(rows):
+        if gated[k]:
+            continue
+        if st.detected[i]:
+            if ctx.t <= st.isolating[i] + 1e-9:  # the kind from more residuals
+                _accumulate(st, i, k, window_sums)
+                # The kind from all residuals so far: a vehicle still braking (a
+                # stop or a spin) or a runaway whose speed is near the commanded one
+                # is plain only once its drive has reached its faulty command.
+                st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+            st.clear[i] = max(0.0, st.clear[i] - inc[k])
+            if st.clear[i] >= lam:
+                st.detected[i] = False
+                st.kinds[i] = ""
+                st.clear[i] = 0.0
+            continue
+        if st.g[i] <= 0.0:
+            st.acc[i] = 0.0
+            st.acc_abs[i] = 0.0
+            st.acc_raw[i] = 0.0
+            st.acc_obs[i] = st.acc_pred[i] = st.acc_t[i] = st.acc_rot[i] = 0.0
+            st.acc_n[i] = 0
+        st.g[i] = max(0.0, st.g[i] + inc[k])
+        if st.g[i] > 0.0:
+            _accumulate(st, i, k, window_sums)
+        if st.g[i] >= lam:
+            st.detected[i] = True
+            st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+            # Read on at least until a failed drive could have braked to rest from
+            # the commanded speed, and one window more.
+            brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
+            braking = float(np.hypot(*st.vel[i])) / float(brakes[i])
+            st.isolating[i] = ctx.t + max(
+                float(p["isolation"]), braking + window * ctx.dt
+            )
+            st.g[i] = 0.0
+            st.clear[i] = 0.0
+    st.pending[rows] = True  # the next window starts at the next observation
+    return st.detected.copy(), list(st.kinds)
+
+
+class Detection:
+    """The loop's detector: builds its context each period and keeps the events.
+
+    Made by :meth:`make` (None for the oracle, which the loop applies itself, so that
+    the default is today's behaviour to the bit). :meth:`update` is called from
+    ``Simulation._plan`` at every ``t_k`` and returns what the platoon believes has
+    failed; :attr:`events` lists the detections, as ``{"vehicle", "t", "kind",
+    "cleared"}`` (``cleared``: the time the detection was withdrawn, or None).
+    """
+
+    def __init__(self, scenario, names: list[str]) -> None:
+        from collections import deque
+
+        from sandbox.plugins.registration import get
+
+        spec = scenario.detection
+        self.method = spec.method
+        self.func = get("detector", spec.method).obj
+        self.params = dict(spec.params)
+        self.memory: dict = {}
+        self.names = list(names)
+        n = len(names)
+        sensing = scenario.sensing
+        self.position_noise = float(sensing.position_noise)
+        self.heading_noise = float(sensing.heading_noise)
+        delay = int(round(sensing.delay / scenario.dt))
+        self.substeps = int(scenario.substeps)
+        accel = np.array(
+            [
+                np.inf if v.motor_accel is None else v.motor_accel
+                for v in scenario.vehicles
+            ]
+        )
+        radius = np.array([v.diameter / 2.0 for v in scenario.vehicles])
+        self.motor_accel = accel
+        # The hardest the drive brakes: its declared acceleration limit, within the
+        # motor's (a failure's speed moves by at most max_accel h per period).
+        declared = np.array(
+            [np.inf if v.max_accel is None else v.max_accel for v in scenario.vehicles]
+        )
+        self.brake_accel = np.minimum(accel, declared)
+        self.turn_accel = ANGULAR_MOTOR_FACTOR * accel / radius
+        #: The commands the controllers asked for in the last period (n, 2).
+        self.intended: np.ndarray | None = None
+        self._sent: deque[np.ndarray] = deque(maxlen=delay + 1)
+        self._known = np.zeros(n, dtype=bool)
+        self._open: dict[int, dict] = {}
+        self.events: list[dict] = []
+
+    @classmethod
+    def make(cls, scenario, names: list[str]) -> Detection | None:
+        """The detection of a scenario, or None for ``method: oracle``."""
+        if scenario.detection.method == "oracle":
+            return None
+        return cls(scenario, names)
+
+    def update(self, sim, t: float, failing: np.ndarray) -> np.ndarray:
+        """What the platoon believes has failed at ``t`` (n,) bool; records events."""
+        fleet = sim.fleet
+        if self.intended is not None:
+            self._sent.append(self.intended)
+            self.intended = None
+        full = len(self._sent) == self._sent.maxlen
+        if sim.seen is not None:
+            seen = sim.seen
+            fresh = getattr(sim.broadcast, "fresh", None)
+        else:
+            seen = np.column_stack((fleet.pos, fleet.theta))
+            fresh = None
+        n = fleet.n
+        contact = getattr(sim.world, "in_contact", None)
+        ctx = DetectorContext(
+            t=t,
+            dt=sim.h,
+            pos=fleet.pos,
+            theta=fleet.theta,
+            vel=fleet.vel,
+            seen=seen,
+            fresh=np.ones(n, dtype=bool) if fresh is None else fresh,
+            commands=self._sent[0] if full else None,
+            in_contact=np.zeros(n, dtype=bool) if contact is None else contact(),
+            failing=failing,
+            position_noise=self.position_noise,
+            heading_noise=self.heading_noise,
+            substeps=self.substeps,
+            motor_accel=self.motor_accel,
+            turn_accel=self.turn_accel,
+            params=self.params,
+            memory=self.memory,
+            brake_accel=self.brake_accel,
+        )
+        out = self.func(ctx)
+        kinds = None
+        if isinstance(out, tuple):
+            out, kinds = out
+        known = np.asarray(out, dtype=bool).copy()
+        for i in np.flatnonzero(known & ~self._known):
+            kind = kinds[i] if kinds is not None and kinds[i] else "unknown"
+            event = {"vehicle": self.names[i], "t": round(t, 9), "kind": kind}
+            event["cleared"] = None
+            self.events.append(event)
+            self._open[int(i)] = event
+        if kinds is not None:  # a kind still being read is updated in its event
+            for i, event in self._open.items():
+                if known[i] and kinds[i]:
+                    event["kind"] = kinds[i]
+        for i in np.flatnonzero(~known & self._known):
+            event = self._open.pop(int(i), None)
+            if event is not None:
+                event["cleared"] = round(t, 9)
+        self._known = known
+        return known
+
+    def summary(self) -> dict:
+        """What ``Run.info["detection"]`` keeps: the method, its values, the events."""
+        return {
+            "method": self.method,
+            "params": dict(self.params),
+            "events": [dict(e) for e in self.events],
+        }
+
+
+def detection_metrics(info: dict, failures: list[dict]) -> dict | None:
+    """The ``detection`` block of ``metrics.json``, or None under the oracle.
+
+    Parameters
+    ----------
+    info : dict
+        ``Run.info`` (its ``detection`` entry holds the method and the events).
+    failures : list of dict
+        ``Run.info["failures"]``: ``{vehicle, kind, at, until}`` of each failure.
+
+    Returns
+    -------
+    dict
+        ``method``; ``detections``: ``{vehicle, t, kind, cleared, false_alarm}`` in
+        the order they happened, ``false_alarm`` when the vehicle had no active
+        failure at ``t``; ``failures``: per failure ``{vehicle, kind, at, detected_at,
+        delay, detected_kind, kind_right}`` (the first detection on the vehicle
+        during the failure; null fields when it was never detected);
+        ``false_alarms``: how many detections were false alarms.
+    """
+    block = info.get("detection")
+    if not block:
+        return None
+    events = block.get("events", [])
+
+    def failing(vehicle: str, t: float) -> bool:
+        return any(
+            f["vehicle"] == vehicle
+            and f["at"] <= t + 1e-9
+            and (f["until"] is None or t + 1e-9 < f["until"])
+            for f in failures
+        )
+
+    detections = [
+        {**e, "false_alarm": not failing(e["vehicle"], e["t"])} for e in events
+    ]
+    per_failure = []
+    for f in failures:
+        end = np.inf if f["until"] is None else f["until"]
+        hit = next(
+            (
+                e
+                for e in events
+                if e["vehicle"] == f["vehicle"] and f["at"] - 1e-9 <= e["t"] < end
+            ),
+            None,
+        )
+        per_failure.append(
+            {
+                "vehicle": f["vehicle"],
+                "kind": f["kind"],
+                "at": f["at"],
+                "detected_at": None if hit is None else hit["t"],
+                "delay": None if hit is None else round(hit["t"] - f["at"], 9),
+                "detected_kind": None if hit is None else hit["kind"],
+                "kind_right": None if hit is None else hit["kind"] == f["kind"],
+            }
+        )
+    return {
+        "method": block.get("method"),
+        "detections": detections,
+        "failures": per_failure,
+        "false_alarms": sum(d["false_alarm"] for d in detections),
+    }

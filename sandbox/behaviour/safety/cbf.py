@@ -1,0 +1,568 @@
+"""A control-barrier-function safety filter on the commands (``safety: {filter: cbf}``).
+
+The unicycle ``x1' = v1 cos x3, x2' = v1 sin x3, x3' = v2`` (eq. (1) of the report) is
+filtered through its look-ahead point ``p = x + l (cos x3, sin x3)``, whose velocity is
+an invertible linear map of the inputs::
+
+    p' = w = R(x3) diag(1, l) (v1, v2),
+    v1 = cos x3 w1 + sin x3 w2,   v2 = (-sin x3 w1 + cos x3 w2) / l,
+
+so ``p`` is a single integrator and every barrier below is linear in ``w``.
+
+Barriers, with ``gamma`` [1/s] and ``margin`` [m]:
+
+- **between two filtered vehicles** ``h_ij = |p_i - p_j|^2 - D^2``, ``D = (d_i + d_j)
+  / 2 + 2 l + margin``; ``h_ij >= 0`` keeps the centres ``d + margin`` apart. The
+  condition ``2 (p_i - p_j) . (w_i - w_j) >= -gamma h_ij`` is split between the two:
+  each vehicle solves alone for its own ``w_i`` with half of the budget. With
+  ``neighbour_velocity: broadcast`` (the default) each takes half of the *change*
+  of the relative velocity from the velocities of the last period ``w^_i, w^_j``
+  (which both know: the commands applied, broadcast)::
+
+      2 (p_i - p_j) . w_i >= -gamma h_ij / 2 + (p_i - p_j) . (w^_i + w^_j);
+
+  the two conditions add up to the pair's exactly, and a platoon moving together at a
+  common velocity is not slowed. With ``zero`` each treats the other as standing
+  still: ``2 (p_i - p_j) . w_i >= -gamma h_ij / 2`` (the textbook split, which brakes
+  a moving platoon whose neighbours are nearer than the barrier allows at rest);
+- **toward a vehicle the platoon believes failed** (``Simulation.known_failed``) **or
+  one driven open loop** (``drive: commands``): full responsibility, against its
+  centre ``c_j`` and its measured velocity ``c_j'``: ``h = |p_i - c_j|^2 - D'^2``,
+  ``D' = (d_i + d_j) / 2 + l + margin``, ``2 (p_i - c_j) . (w_i - c_j') >= -gamma h``;
+- **toward a static obstacle** (circles, boxes, polygons, walls of
+  :class:`~sandbox.behaviour.recovery.ObstacleField`): full responsibility against the nearest
+  surface point, ``h = s(p) - (d_i / 2 + l + margin)`` with ``s`` the signed distance
+  of ``p`` to the surface and ``n`` its unit normal there: ``n . w >= -gamma h``.
+
+Input bounds are hard: ``|v1| <= v1_max`` (``0 <= v1`` with ``reverse: false``),
+``|v1 - v1(t_k-1)| <= max_accel h`` and ``|v2| <= v2_max``; where a vehicle has no
+``v2_max`` the sideways speed of its look-ahead point ``l |v2|`` is bounded by its
+``v1_max`` instead (an automatic ``range`` needs every ``v1_max``; the loader says so).
+Each vehicle then solves ``min |w - w_nom|^2`` over those half-planes
+(:mod:`sandbox.behaviour.safety.qp`, exact); when they have no common point the barrier
+conditions are relaxed by the least slack (counted in ``metrics.json`` as
+``safety.infeasible_steps``). ``projection: speed`` keeps the controller's ``v2`` and
+changes ``v1`` only.
+
+**The right-hand rule out of stalls** (``pass_right``, an angle [rad], default pi/2):
+the filter's own deadlock is a look-ahead point in the corner of two barriers whose
+nominal velocity points into the polar cone of that corner, so the nearest safe
+velocity is 0 (the exact ring swaps: every vehicle cornered by its two neighbours). A
+vehicle whose filtered speed keeps less than half of its nominal speed turns its
+nominal velocity to the right, by up to ``pass_right`` as the cut grows (a smoothstep
+from half to a tenth kept; in proportion to the nominal speed below 0.2 m/s, so a
+vehicle at its slot is never turned) and is filtered again toward that (the barriers
+and bounds unchanged, so is safety). The corner of two barriers with unit normals at
+``+-a`` from the way out admits exactly the velocities within ``90 deg - a`` of it, so
+a nominal pointing straight into the corner is freed only by a turn of more than
+``a``; a ring of ``N`` jammed at its centre has ``a = 90 deg - 180 deg / N``, so a
+right angle is the least turn that frees every ring. The same rule for every vehicle,
+deterministic, breaks a symmetric stall the same way for all, like the rule of the
+road (Grover et al.'s right-hand rotation of the nominal command at a CBF deadlock;
+Wang, Ames and Egerstedt's perturbation when the filtered velocity collapses).
+
+Only vehicles driven by the controller are filtered (not the open-loop ones, not those
+believed failed); the filter acts before the step API's command overrides and the
+failures (which replace the commands of the vehicles they hit).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sandbox.behaviour.safety.qp import TOLERANCE, solve
+from sandbox.geometry.neighbours import NeighbourList
+from sandbox.plugins.contexts import FilterContext
+from sandbox.plugins.registration import Param, register_filter
+
+#: The speed bound used where a vehicle has no ``v1_max`` [m/s] (the loop's bound of a
+#: diverged run).
+UNLIMITED_SPEED = 1e3
+#: Shortest distance treated as a direction [m].
+MIN_DIST = 1e-9
+#: The right-hand rule (``pass_right``): a vehicle is stalled when its filtered
+#: look-ahead speed keeps less than STALL_START of its nominal speed, fully at
+#: STALL_FULL [1]; the turn fades in proportion below a nominal speed STALL_SPEED
+#: [m/s]. MIN_SPEED [m/s] guards the division.
+STALL_START = 0.5
+STALL_FULL = 0.1
+STALL_SPEED = 0.2
+MIN_SPEED = 1e-9
+
+PARAMS = {
+    "gamma": Param(
+        "number",
+        2.0,
+        "1/s",
+        "Rate of the barrier condition h' >= -gamma h: near a barrier the gap may "
+        "close at about gamma times itself (a braking of about gamma v)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "margin": Param(
+        "length",
+        0.05,
+        "m",
+        "Clearance kept between the surfaces of two vehicles (and to obstacles) "
+        "beyond contact",
+        minimum=0.0,
+    ),
+    "look_ahead": Param(
+        "length",
+        0.1,
+        "m",
+        "Distance l of the filtered point ahead of the centre; D = d + 2 l + margin",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "projection": Param(
+        "choice",
+        "look_ahead",
+        doc="look_ahead: the nearest safe velocity of the look-ahead point (speed "
+        "and turn rate both change, a turn rate costing l^2 as much); speed: keep "
+        "the controller's turn rate, change only the speed",
+        choices=("look_ahead", "speed"),
+    ),
+    "neighbour_velocity": Param(
+        "choice",
+        "broadcast",
+        doc="What a vehicle assumes of a filtered neighbour: broadcast: it keeps "
+        "the velocity of the last period, and each takes half of the change; zero: "
+        "it stands still, and each takes half of the budget",
+        choices=("broadcast", "zero"),
+    ),
+    "reverse": Param(
+        "boolean", True, doc="Whether the filter may command a negative speed v1"
+    ),
+    "pass_right": Param(
+        "number",
+        1.5708,
+        "rad",
+        "The right-hand rule out of stalls: a vehicle whose nominal look-ahead "
+        "velocity the filter cuts to less than half turns that velocity to its right "
+        "by up to this angle, ramped with the cut, and is filtered again (default "
+        "pi/2 = 1.5708, the least turn that leaves every corner of two barriers; "
+        "0: off)",
+        minimum=0.0,
+        maximum=1.5708,
+    ),
+    "range": Param(
+        "length",
+        None,
+        "m",
+        "Neighbours and obstacles beyond this are not constrained (default: the "
+        "distance beyond which no barrier can bind at the vehicles' speed limits)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "max_constraints": Param(
+        "integer",
+        8,
+        doc="Most barrier conditions per vehicle and step (the most restrictive are "
+        "kept)",
+        minimum=1,
+        maximum=16,
+    ),
+}
+
+
+@dataclass
+class FilterStep:
+    """What the filter did at one step (kept in the filter's memory as ``last``).
+
+    Attributes
+    ----------
+    active : ndarray, shape (n,), bool
+        Vehicles whose commands it changed.
+    slack : ndarray, shape (n,) [m/s]
+        The least largest violation of a barrier condition (0: feasible).
+    rows : int
+        Barrier conditions that could bind (after pruning).
+    """
+
+    active: np.ndarray
+    slack: np.ndarray
+    rows: int
+
+
+def _per_vehicle(value: float | np.ndarray, n: int) -> np.ndarray:
+    return np.broadcast_to(np.asarray(value, dtype=float), (n,))
+
+
+def auto_range(
+    v1_max: np.ndarray,
+    v2_max: np.ndarray,
+    diameter: np.ndarray,
+    gamma: float,
+    margin: float,
+    look_ahead: float,
+) -> float:
+    """Distance [m] beyond which no barrier condition can bind.
+
+    Look-ahead points move at most ``s = sqrt(v1_max^2 + (l v2_max)^2)``, so a gap
+    closes at most at ``2 s``; the pair's condition ``2 r r' >= -gamma (r^2 - D^2)``
+    holds at any velocity for ``r >= 2 s / gamma + sqrt((2 s / gamma)^2 + D^2)``, and
+    each half then holds at the velocities of the last period. Plus ``l`` (the
+    conditions toward failed vehicles use their centres). Unlimited speeds give
+    ``inf``.
+
+    >>> round(auto_range(np.array([2.0]), np.array([4.0]), np.array([0.5]),
+    ...                  2.0, 0.05, 0.1), 3)
+    4.347
+    """
+    lateral = np.where(np.isfinite(v2_max), look_ahead * v2_max, v1_max)
+    s = float(np.max(np.hypot(v1_max, lateral)))
+    if not np.isfinite(s):
+        return np.inf
+    big_d = float(np.max(diameter)) + 2.0 * look_ahead + margin
+    q = 2.0 * s / gamma
+    return q + float(np.sqrt(q * q + big_d * big_d)) + look_ahead
+
+
+class CBFState:
+    """What the filter keeps between steps: parameters, limits, the neighbour index."""
+
+    def __init__(self, ctx: FilterContext) -> None:
+        p = ctx.params
+        n = len(ctx.pos)
+        self.gamma = float(p["gamma"])
+        self.margin = float(p["margin"])
+        self.look = float(p["look_ahead"])
+        self.speed_only = p["projection"] == "speed"
+        self.broadcast = p["neighbour_velocity"] == "broadcast"
+        self.reverse = bool(p["reverse"])
+        self.max_rows = int(p["max_constraints"])
+        # at most a right angle (1.5708 is pi / 2 as written)
+        self.pass_right = min(float(p.get("pass_right") or 0.0), np.pi / 2)
+        v1_max = _per_vehicle(ctx.v1_max, n)
+        v2_max = _per_vehicle(ctx.v2_max, n)
+        self.v1_max = np.where(np.isfinite(v1_max), v1_max, UNLIMITED_SPEED)
+        # The look-ahead point's sideways speed l v2 (v1_max where v2 is unlimited).
+        self.lateral = np.where(np.isfinite(v2_max), self.look * v2_max, self.v1_max)
+        self.accel = _per_vehicle(ctx.accel_max, n).copy()
+        radius = p.get("range")
+        if radius is None:
+            radius = auto_range(
+                v1_max, v2_max, ctx.diameter, self.gamma, self.margin, self.look
+            )
+        if not np.isfinite(radius):
+            radius = auto_range(
+                self.v1_max, v2_max, ctx.diameter, self.gamma, self.margin, self.look
+            )
+        self.range = float(radius)
+        self.neighbours = NeighbourList(self.range)
+
+
+def _box(
+    state: CBFState, ctx: FilterContext, z2_nom: np.ndarray, rows: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Bounds of ``z = (v1, l v2)``: ``lo1 <= z1 <= hi1``, ``lo2 <= z2 <= hi2``."""
+    v1_max, lateral = state.v1_max[rows], state.lateral[rows]
+    lo1 = -v1_max if state.reverse else np.zeros(len(rows))
+    hi1 = v1_max
+    if ctx.v1_prev is not None:
+        step = state.accel[rows] * ctx.dt
+        prev = ctx.v1_prev[rows]
+        lo1 = np.maximum(lo1, prev - step)
+        hi1 = np.minimum(hi1, prev + step)
+        lo1 = np.minimum(lo1, hi1)
+    if state.speed_only:
+        lo2 = hi2 = z2_nom[rows]
+    else:
+        lo2, hi2 = -lateral, lateral
+    return lo1, hi1, lo2, hi2
+
+
+def barrier_rows(
+    state: CBFState,
+    ctx: FilterContext,
+    filtered: np.ndarray,
+    reach: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every barrier condition of the step as a half-plane ``a . w <= b``.
+
+    Parameters
+    ----------
+    state : CBFState
+    ctx : FilterContext
+    filtered : ndarray, shape (n,), bool
+        Vehicles the filter drives (the others are only obstacles to them).
+    reach : ndarray, shape (n,) [m/s], optional
+        The largest change of each vehicle's look-ahead velocity from the last
+        period's within its bounds; conditions no such change can violate may be
+        left out (default: all are made).
+
+    Returns
+    -------
+    vehicle : ndarray, shape (r,) int
+        The vehicle each condition belongs to.
+    a : ndarray, shape (r, 2)
+        Unit normal in the look-ahead velocity ``w`` [1].
+    b : ndarray, shape (r,) [m/s]
+        Offset.
+    """
+    gamma, look, margin = state.gamma, state.look, state.margin
+    pos, theta, d = ctx.pos, ctx.theta, ctx.diameter
+    heading = np.stack((np.cos(theta), np.sin(theta)), -1)
+    p = pos + look * heading
+    if ctx.seen is None:
+        centre_seen, p_seen = pos, p
+    else:
+        centre_seen = ctx.seen[:, :2]
+        seen_heading = np.stack((np.cos(ctx.seen[:, 2]), np.sin(ctx.seen[:, 2])), -1)
+        p_seen = centre_seen + look * seen_heading
+    cooperative = filtered
+    if reach is None:
+        reach = np.full(len(pos), np.inf)
+    out_v, out_a, out_b = [], [], []
+
+    if ctx.v1_prev is not None:
+        w_hat = heading * ctx.v1_prev[:, None]
+        w_hat += look * ctx.v2_prev[:, None] * heading[:, ::-1] * [-1.0, 1.0]
+    else:
+        w_hat = None
+    i, j, rel = state.neighbours.near(p_seen)
+    if len(i) and ctx.seen is None:
+        # Without sensing both rows of a pair see the same geometry. A condition
+        # a . w <= b can bind only if b - a . w^ < |w - w^| for some w within the
+        # bounds (w^: the last period's velocity), so pairs of cooperating vehicles
+        # whose slack at w^ is at least both vehicles' largest change `reach` are
+        # dropped here, before their rows are made: exact, and cheap.
+        dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
+        big_d = 0.5 * (d[i] + d[j]) + 2.0 * look + margin
+        h = dist * dist - big_d * big_d
+        base = 0.25 * gamma * h / dist
+        if w_hat is None:
+            slack_i = slack_j = base
+        else:
+            wi, wj = np.take(w_hat, i, axis=0), np.take(w_hat, j, axis=0)
+            unit = rel / dist[:, None]
+            along_i = unit[:, 0] * wi[:, 0] + unit[:, 1] * wi[:, 1]
+            along_j = unit[:, 0] * wj[:, 0] + unit[:, 1] * wj[:, 1]
+            if state.broadcast:  # the same for both: a quarter budget less closing
+                slack_i = slack_j = base + 0.5 * (along_i - along_j)
+            else:
+                slack_i, slack_j = base + along_i, base - along_j
+        keep = (slack_i < reach[i]) | (slack_j < reach[j])
+        keep = np.flatnonzero(keep | ~(cooperative[i] & cooperative[j]))
+        i, j = i.take(keep), j.take(keep)
+    if len(i):
+        # Both directions of each pair: vehicle `me` toward `other`.
+        me = np.concatenate((i, j))
+        other = np.concatenate((j, i))
+        keep = np.flatnonzero(filtered[me])
+        me, other = me[keep], other[keep]
+        coop = cooperative[other]
+        target = np.where(coop[:, None], p_seen[other], centre_seen[other])
+        rel = p[me] - target
+        dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
+        big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
+        h = dist * dist - big_d * big_d
+        if w_hat is not None and state.broadcast:
+            shared = w_hat[me] + w_hat[other]
+            share = np.einsum("kd,kd->k", rel, shared)
+        else:
+            share = np.zeros(len(me))
+        moving = np.einsum("kd,kd->k", rel, ctx.vel[other])
+        # 2 rel . w >= rhs
+        rhs = np.where(coop, -0.5 * gamma * h + share, -gamma * h + 2.0 * moving)
+        out_v.append(me)
+        out_a.append(-rel / dist[:, None])
+        out_b.append(-rhs / (2.0 * dist))
+
+    field = ctx.obstacle_field
+    if field is not None and not field.empty:
+        rows, cols = state.neighbours.obstacle_pairs(p, field)
+        keep = np.flatnonzero(filtered[rows])
+        rows, cols = rows[keep], cols[keep]
+        if len(rows):
+            signed, point = field.pair_distance(p, rows, cols)
+            away = (p[rows] - point) * np.where(signed < 0, -1.0, 1.0)[:, None]
+            norm = np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)
+            away /= norm[:, None]
+            clearance = 0.5 * d[rows] + look + margin
+            out_v.append(rows)
+            out_a.append(-away)
+            out_b.append(gamma * (signed - clearance))
+    if not out_v:
+        empty = np.zeros(0, dtype=np.intp)
+        return empty, np.zeros((0, 2)), np.zeros(0)
+    return np.concatenate(out_v), np.concatenate(out_a), np.concatenate(out_b)
+
+
+def stall_turn(z0: np.ndarray, z: np.ndarray, angle: float) -> np.ndarray:
+    """The right-hand rule's turn [rad] of each nominal velocity, from the cut.
+
+    A vehicle is stalled by the filter when the filtered velocity of its look-ahead
+    point keeps less than :data:`STALL_START` of the nominal speed: the turn ramps
+    smoothly (a smoothstep) from 0 there to ``angle`` at :data:`STALL_FULL`, and in
+    proportion to the nominal speed below :data:`STALL_SPEED` (a vehicle at its slot,
+    whose nominal speed vanishes, is never turned).
+
+    Parameters
+    ----------
+    z0, z : ndarray, shape (k, 2) [m/s]
+        Nominal and filtered ``(v1, l v2)``.
+    angle : float [rad]
+        The largest turn (``pass_right``).
+
+    Returns
+    -------
+    ndarray, shape (k,) [rad]
+
+    >>> z0 = np.array([[1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.1, 0.0]])
+    >>> z = np.array([[0.6, 0.0], [0.3, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    >>> np.round(stall_turn(z0, z, np.pi / 2), 4).tolist()
+    [0.0, 0.7854, 1.5708, 0.7854]
+    """
+    nominal = np.hypot(z0[:, 0], z0[:, 1])
+    kept = np.hypot(z[:, 0], z[:, 1])
+    cut = 1.0 - kept / np.maximum(nominal, MIN_SPEED)
+    x = np.clip((cut - (1.0 - STALL_START)) / (STALL_START - STALL_FULL), 0.0, 1.0)
+    ramp = x * x * (3.0 - 2.0 * x)
+    return angle * ramp * np.minimum(nominal / STALL_SPEED, 1.0)
+
+
+def _pass_right(
+    state: CBFState,
+    z0: np.ndarray,
+    z: np.ndarray,
+    slack: np.ndarray,
+    mat: np.ndarray,
+    off: np.ndarray,
+    soft: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Filter again, toward the nominal velocities turned right where stalled.
+
+    The barriers and bounds are the same (``mat``, ``off``, ``soft``), so is safety;
+    only the point the nearest safe velocity is sought to moves.
+    """
+    turn = stall_turn(z0, z, state.pass_right)
+    rows = np.flatnonzero(turn > 0)
+    if len(rows) == 0:
+        return z, slack
+    c, s = np.cos(turn[rows]), np.sin(turn[rows])
+    zr = z0[rows]
+    # clockwise by the turn: (v1, l v2) rotated toward (0, -|z0|), the right
+    nominal = np.stack((c * zr[:, 0] + s * zr[:, 1], c * zr[:, 1] - s * zr[:, 0]), -1)
+    z, slack = z.copy(), slack.copy()
+    z[rows], slack[rows] = solve(nominal, mat[rows], off[rows], soft[rows])
+    return z, slack
+
+
+def filter_commands(
+    state: CBFState, ctx: FilterContext, prune: bool = True
+) -> tuple[np.ndarray, np.ndarray, FilterStep]:
+    """The filtered ``(v1, v2)`` of one step, and what the filter did.
+
+    Parameters
+    ----------
+    state : CBFState
+    ctx : FilterContext
+    prune : bool
+        Whether pairs that cannot bind are dropped before their conditions are made
+        (the result is the same; False is for checking that).
+
+    Returns
+    -------
+    v1 : ndarray, shape (n,) [m/s]
+    v2 : ndarray, shape (n,) [rad/s]
+    step : FilterStep
+    """
+    n, look = len(ctx.pos), state.look
+    filtered = np.ones(n, dtype=bool)
+    if ctx.known_failed is not None:
+        filtered &= ~ctx.known_failed
+    if ctx.commanded is not None:
+        filtered &= ~ctx.commanded
+    v1 = np.array(ctx.v1, dtype=float)
+    v2 = np.array(ctx.v2, dtype=float)
+    z0 = np.stack((v1, look * v2), -1)
+    slack = np.zeros(n)
+    active = np.zeros(n, dtype=bool)
+    who = np.flatnonzero(filtered)
+    if len(who) == 0:
+        return v1, v2, FilterStep(active, slack, 0)
+    lo1, hi1, lo2, hi2 = (np.zeros(n) for _ in range(4))
+    lo1[who], hi1[who], lo2[who], hi2[who] = _box(state, ctx, z0[:, 1], who)
+    if ctx.v1_prev is None:
+        z_hat = np.zeros((n, 2))
+    else:
+        z_hat = np.stack((ctx.v1_prev, look * ctx.v2_prev), -1)
+    reach = np.hypot(
+        np.maximum(np.abs(lo1 - z_hat[:, 0]), np.abs(hi1 - z_hat[:, 0])),
+        np.maximum(np.abs(lo2 - z_hat[:, 1]), np.abs(hi2 - z_hat[:, 1])),
+    )
+    reach = reach * (1.0 + 1e-9) + 1e-9 if prune else None
+    veh, a_w, b = barrier_rows(state, ctx, filtered, reach)
+    # In z = (v1, l v2): w = R(x3) z, so a . w = (R^T a) . z and |w - w0| = |z - z0|.
+    c, s = np.cos(ctx.theta[veh]), np.sin(ctx.theta[veh])
+    a = np.stack((c * a_w[:, 0] + s * a_w[:, 1], -s * a_w[:, 0] + c * a_w[:, 1]), -1)
+    # Conditions no input within the bounds can violate are dropped.
+    reach = np.maximum(a[:, 0] * lo1[veh], a[:, 0] * hi1[veh]) + np.maximum(
+        a[:, 1] * lo2[veh], a[:, 1] * hi2[veh]
+    )
+    keep = np.flatnonzero(reach > b - TOLERANCE)
+    veh, a, b = veh[keep], a[keep], b[keep]
+    # At most max_rows per vehicle, the most restrictive (smallest b) first.
+    order = np.lexsort((b, veh))
+    veh, a, b = veh[order], a[order], b[order]
+    counts = np.bincount(veh, minlength=n)
+    start = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    rank = np.arange(len(veh)) - start[veh]
+    keep = np.flatnonzero(rank < state.max_rows)
+    veh, a, b, rank = veh[keep], a[keep], b[keep], rank[keep]
+    counts = np.minimum(counts, state.max_rows)
+
+    z = z0.copy()
+    bare = who[counts[who] == 0]  # the bounds only: a clip
+    z[bare, 0] = np.clip(z0[bare, 0], lo1[bare], hi1[bare])
+    z[bare, 1] = np.clip(z0[bare, 1], lo2[bare], hi2[bare])
+    for m in np.unique(counts[who]):
+        if m == 0:
+            continue
+        group = who[counts[who] == m]
+        k = len(group)
+        slot = np.full(n, -1, dtype=np.intp)
+        slot[group] = np.arange(k)
+        mat = np.zeros((k, 4 + m, 2))
+        off = np.zeros((k, 4 + m))
+        mat[:, 0, 0], off[:, 0] = 1.0, hi1[group]
+        mat[:, 1, 0], off[:, 1] = -1.0, -lo1[group]
+        mat[:, 2, 1], off[:, 2] = 1.0, hi2[group]
+        mat[:, 3, 1], off[:, 3] = -1.0, -lo2[group]
+        mine = np.flatnonzero(slot[veh] >= 0)
+        mat[slot[veh[mine]], 4 + rank[mine]] = a[mine]
+        off[slot[veh[mine]], 4 + rank[mine]] = b[mine]
+        soft = np.zeros((k, 4 + m), dtype=bool)
+        soft[:, 4:] = True
+        zg, sg = solve(z0[group], mat, off, soft)
+        if state.pass_right > 0 and not state.speed_only:
+            zg, sg = _pass_right(state, z0[group], zg, sg, mat, off, soft)
+        z[group], slack[group] = zg, sg
+    changed = np.any(z != z0, axis=1)
+    rows = np.flatnonzero(changed)
+    v1[rows] = z[rows, 0]
+    if not state.speed_only:  # else v2 is the controller's, exactly
+        v2[rows] = z[rows, 1] / look
+    active[rows] = True
+    return v1, v2, FilterStep(active, slack, len(veh))
+
+
+@register_filter("cbf", params=PARAMS)
+def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
+    """Control-barrier-function filter through the look-ahead point (sandbox/safety)."""
+    state = ctx.memory.get("cbf")
+    if state is None:
+        state = ctx.memory["cbf"] = CBFState(ctx)
+    v1, v2, step = filter_commands(state, ctx)
+    ctx.memory["last"] = step
+    stats = ctx.stats
+    stats["active_steps"] = stats.get("active_steps", 0) + int(step.active.sum())
+    bad = step.slack > TOLERANCE
+    stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + int(bad.sum())
+    worst = float(step.slack.max()) if len(step.slack) else 0.0
+    stats["max_slack"] = max(stats.get("max_slack", 0.0), worst)
+    return v1, v2

@@ -1,0 +1,45 @@
+"""The divergence check of the simulation loop: a state that no physics can mean.
+
+A run whose state turns non-finite, or runs beyond :data:`DIVERGED_POSITION` or
+:data:`DIVERGED_SPEED`, ends with status ``diverged`` (see
+:meth:`sandbox.loop.simulation.Simulation._sense`); the batched runner of
+:mod:`sandbox.study.batch` applies the same check to each of its worlds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sandbox.loop.state import Fleet
+
+#: A state beyond these bounds is reported as ``diverged`` [m], [m/s].
+DIVERGED_POSITION = 1e6
+DIVERGED_SPEED = 1e3
+
+
+def diverged(fleet: Fleet) -> tuple[int, str] | None:
+    """First vehicle whose state is non-finite or beyond the bounds, with the reason."""
+    # Fast path, one reduction per array: clearly healthy (NaN fails every comparison).
+    vel, chi = fleet.vel, fleet.chi
+    speed2 = (0.999 * DIVERGED_SPEED) ** 2
+    if (
+        np.max(np.abs(fleet.pos)) <= DIVERGED_POSITION
+        and np.max(np.abs(fleet.theta)) < np.inf
+        and np.max(vel[:, 0] * vel[:, 0] + vel[:, 1] * vel[:, 1]) <= speed2
+        and np.max(chi[:, 0] * chi[:, 0] + chi[:, 1] * chi[:, 1]) <= speed2
+    ):
+        return None
+    finite = (
+        np.isfinite(fleet.pos).all(axis=1)
+        & np.isfinite(fleet.theta)
+        & np.isfinite(fleet.chi).all(axis=1)
+    )
+    if not finite.all():
+        return int(np.flatnonzero(~finite)[0]), "non-finite state"
+    far = np.abs(fleet.pos).max(axis=1) > DIVERGED_POSITION
+    fast = np.hypot(fleet.vel[:, 0], fleet.vel[:, 1]) > DIVERGED_SPEED
+    bad = far | fast | (np.hypot(fleet.chi[:, 0], fleet.chi[:, 1]) > DIVERGED_SPEED)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        return i, "position beyond 1e6 m" if far[i] else "speed beyond 1e3 m/s"
+    return None

@@ -1,0 +1,99 @@
+"""Fleet: the struct-of-arrays state of all vehicles.
+
+One array per quantity, indexed by vehicle; one numpy expression updates the whole
+fleet.
+No per-vehicle Python object is touched on the hot path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sandbox.model.flatness import Gains
+from sandbox.scenario import Scenario
+
+
+@dataclass
+class Fleet:
+    """State and parameters of ``n`` vehicles.
+
+    Attributes
+    ----------
+    pos : ndarray, shape (n, 2) [m]
+        Positions (x1, x2), read back from the physics every control step.
+    theta : ndarray, shape (n,) [rad]
+        Headings x3 (unwrapped).
+    vel : ndarray, shape (n, 2) [m/s]
+        Measured velocities.
+    chi : ndarray, shape (n, 2) [m/s]
+        Extension states of eqs. (4)/(6).
+    v1, v2 : ndarray, shape (n,) [m/s], [rad/s]
+        Commands applied during the current control period.
+    mode : ndarray, shape (n,), int8
+        ``run.MODE_*`` codes.
+    failed : ndarray, shape (n,), bool
+    offset : ndarray, shape (n, 2) [m]
+        Offsets (delta1, delta2) of each vehicle's slot.
+    diameter, v1_max, v2_max, accel_max : ndarray, shape (n,)
+        ``inf`` where a limit is not set.
+    gains : Gains
+        With arrays of shape (n,).
+    commanded : ndarray, shape (n,), bool
+        Vehicles driven open-loop by a command schedule.
+    """
+
+    pos: np.ndarray
+    theta: np.ndarray
+    vel: np.ndarray
+    chi: np.ndarray
+    v1: np.ndarray
+    v2: np.ndarray
+    mode: np.ndarray
+    failed: np.ndarray
+    offset: np.ndarray
+    diameter: np.ndarray
+    v1_max: np.ndarray
+    v2_max: np.ndarray
+    accel_max: np.ndarray
+    gains: Gains
+    commanded: np.ndarray
+
+    @property
+    def n(self) -> int:
+        """Number of vehicles."""
+        return len(self.theta)
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario) -> Fleet:
+        """Initial fleet: vehicles at rest at their scenario poses (chi = 0)."""
+        vs = scenario.vehicles
+        n = len(vs)
+
+        def limit(values: list[float | None]) -> np.ndarray:
+            return np.array([np.inf if v is None else v for v in values], dtype=float)
+
+        gains = Gains(
+            **{
+                k: np.array([getattr(v.gains, k) for v in vs], dtype=float)
+                for k in ("k1", "k2", "k3", "k4", "kp")
+            }
+        )
+        return cls(
+            pos=np.array([v.pose[:2] for v in vs], dtype=float).reshape(n, 2),
+            theta=np.array([v.pose[2] for v in vs], dtype=float),
+            vel=np.zeros((n, 2)),
+            chi=np.zeros((n, 2)),
+            v1=np.zeros(n),
+            v2=np.zeros(n),
+            mode=np.zeros(n, dtype=np.int8),
+            failed=np.zeros(n, dtype=bool),
+            offset=np.array([v.offset for v in vs], dtype=float).reshape(n, 2),
+            diameter=np.array([v.diameter for v in vs], dtype=float),
+            v1_max=limit([v.v1_max for v in vs]),
+            v2_max=limit([v.v2_max for v in vs]),
+            accel_max=limit([v.max_accel for v in vs]),
+            gains=gains,
+            commanded=np.array([v.drive.type == "commands" for v in vs], dtype=bool),
+        )

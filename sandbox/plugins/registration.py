@@ -1,0 +1,675 @@
+"""Registration: :class:`Param`, the kinds of plug-in, the decorators and the tables.
+
+The lowest layer of the package beside :mod:`sandbox.errors`: it imports nothing that
+registers into it. The built-in plug-ins are imported by name, once, the first time a
+table is read (:data:`sandbox.plugins.builtin.BUILTIN_MODULES`); the public face of
+this module is :mod:`sandbox.plugins`.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sandbox.errors import PluginError
+from sandbox.plugins.builtin import BUILTIN_MODULES
+from sandbox.plugins.contexts import (
+    DetectorContext,
+    FailureContext,
+    FilterContext,
+    LawContext,
+    ObstacleContext,
+    ReferenceContext,
+    StrategyContext,
+)
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "KINDS",
+    "REQUIRED",
+    "DetectorContext",
+    "FailureContext",
+    "FilterContext",
+    "LawContext",
+    "ObstacleContext",
+    "Param",
+    "Plugin",
+    "PluginError",
+    "ReferenceContext",
+    "StrategyContext",
+    "get",
+    "make_law",
+    "names",
+    "register_detector",
+    "register_failure",
+    "register_filter",
+    "register_law",
+    "register_obstacle",
+    "register_reference",
+    "register_strategy",
+    "registry",
+]
+
+#: A parameter without a default: the key must be given.
+REQUIRED: Any = type("Required", (), {"__repr__": lambda self: "REQUIRED"})()
+#: Where a law lays out a generated platoon's offsets (``register_law(frame=...)``).
+LAW_FRAMES = ("leader", "world", "reference", "leader_reference")
+#: Entry-point group of installed plug-in packages.
+ENTRY_POINT_GROUP = "sandbox.plugins"
+#: Parameter types a declaration may name.
+PARAM_TYPES = (
+    "number",
+    "length",
+    "integer",
+    "boolean",
+    "string",
+    "name",
+    "choice",
+    "point",
+    "points",
+)
+#: Further types the scenario layer uses for its own sections (read by its code).
+SECTION_TYPES = ("text", "custom")
+
+
+# ----------------------------------------------------------------------- parameters
+@dataclass(frozen=True)
+class Param:
+    """One YAML key of a plug-in or of a section of the scenario format.
+
+    Parameters
+    ----------
+    type : str
+        One of :data:`PARAM_TYPES`: ``number``, ``length`` (metres or ``"3d"``),
+        ``integer``, ``boolean``, ``string``, ``name`` (one plain line, usable in
+        file names), ``choice`` (one of ``choices``), ``point`` (two lengths [m]),
+        ``points`` (a list of at least ``min_items`` points).
+    default : optional
+        The value used when the key is left out; :data:`REQUIRED` (the default) makes
+        the key required; ``None`` makes it optional without a value. A length's
+        default may be written ``"3d"`` (a multiple of the vehicle diameter).
+    unit : str
+        Unit of the value (``"m"``, ``"s"``, ``"rad/s"``, ...), empty for none.
+    doc : str
+        One line: what the key means.
+    minimum, maximum : float, optional
+        Bounds (inclusive unless ``exclusive``).
+    exclusive : bool
+        Whether ``minimum`` itself is excluded (``> minimum``).
+    choices : tuple of str
+        The allowed values of a ``choice``.
+    min_items : int
+        Fewest points of a ``points`` value.
+    schema : dict, optional
+        The JSON Schema fragment of a ``custom`` key (a section of the format).
+    """
+
+    type: str = "number"
+    default: Any = REQUIRED
+    unit: str = ""
+    doc: str = ""
+    minimum: float | None = None
+    maximum: float | None = None
+    exclusive: bool = False
+    choices: tuple[str, ...] = ()
+    min_items: int = 2
+    schema: dict[str, Any] | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.type not in PARAM_TYPES + SECTION_TYPES:
+            raise ValueError(
+                f"parameter type {self.type!r} is not one of: {', '.join(PARAM_TYPES)}"
+            )
+        if self.type == "choice" and not self.choices:
+            raise ValueError("a choice parameter needs its choices")
+
+    @property
+    def required(self) -> bool:
+        """Whether the key must be given."""
+        return self.default is REQUIRED
+
+    def bounds_text(self) -> str:
+        """The bounds in words, e.g. ``> 0`` or ``from 1 to 10000`` (empty if none)."""
+        lo, hi = self.minimum, self.maximum
+        if lo is not None and hi is not None:
+            return f"from {lo:g} to {hi:g}"
+        if lo is not None:
+            return f"{'>' if self.exclusive else '>='} {lo:g}"
+        if hi is not None:
+            return f"<= {hi:g}"
+        return ""
+
+
+def declare(params: Mapping[str, Any] | None) -> dict[str, Param]:
+    """Turn a ``params=`` argument into :class:`Param` declarations, in order.
+
+    A value that is a :class:`Param` is used as is; any other value is a default and
+    its type gives the parameter's: a float (or None) a ``number``, an int an
+    ``integer``, a bool a ``boolean``, a str a ``string``, two numbers a ``point``.
+
+    >>> declare({"gain": 1.0, "count": 3})["count"].type
+    'integer'
+    """
+    out: dict[str, Param] = {}
+    for name, value in (params or {}).items():
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ValueError(f"parameter name {name!r} is not an identifier")
+        if isinstance(value, Param):
+            out[name] = value
+        elif isinstance(value, bool):
+            out[name] = Param("boolean", value)
+        elif isinstance(value, int):
+            out[name] = Param("integer", value)
+        elif value is None or isinstance(value, float):
+            out[name] = Param("number", value)
+        elif isinstance(value, str):
+            out[name] = Param("string", value)
+        elif isinstance(value, list | tuple) and len(value) == 2:
+            out[name] = Param("point", tuple(float(v) for v in value), unit="m")
+        else:
+            raise ValueError(
+                f"parameter {name!r}: cannot tell the type of the default {value!r} "
+                "(give a Param(...))"
+            )
+    return out
+
+
+# ------------------------------------------------------------------------ the kinds
+@dataclass(frozen=True)
+class Kind:
+    """A kind of plug-in: where a scenario selects it and how.
+
+    Attributes
+    ----------
+    name : str
+        ``law``, ``strategy``, ...
+    section : str
+        The YAML section that selects it (empty: none yet).
+    selector : str
+        The key of that section holding the plug-in's name.
+    title : str
+        What one is called in messages (``recovery strategy``).
+    lenient : bool
+        Whether the section accepts, and ignores, keys declared by another plug-in of
+        the kind (so that switching e.g. the strategy with ``--set`` keeps a file
+        valid); otherwise such a key is an error naming the plug-ins it applies to.
+    context : str
+        One line on what the plug-in receives and returns.
+    """
+
+    name: str
+    section: str
+    selector: str
+    title: str
+    lenient: bool
+    context: str
+
+
+KINDS: dict[str, Kind] = {
+    k.name: k
+    for k in (
+        Kind(
+            "law",
+            "formation",
+            "law",
+            "formation law",
+            False,
+            "a FormationLaw subclass, or f(ctx: LawContext) -> (slot, v_ref, a_ref)",
+        ),
+        Kind(
+            "strategy",
+            "recovery",
+            "strategy",
+            "recovery strategy",
+            True,
+            "f(ctx: StrategyContext) -> (shift (n, 2) [m], active (n,) bool)",
+        ),
+        Kind(
+            "failure",
+            "failures",
+            "kind",
+            "failure kind",
+            True,
+            "f(ctx: FailureContext) -> (v1 [m/s], v2 [rad/s]) of the failed vehicle",
+        ),
+        Kind(
+            "reference",
+            "reference",
+            "type",
+            "reference type",
+            False,
+            "a class built with the params, with evaluate(t) -> (p, dp, ddp), or "
+            "f(ctx: ReferenceContext) -> (p, dp, ddp)",
+        ),
+        Kind(
+            "obstacle",
+            "obstacles",
+            "type",
+            "obstacle type",
+            False,
+            "f(ctx: ObstacleContext) -> ObstacleSpec (a circle, box, polygon or wall)",
+        ),
+        Kind(
+            "filter",
+            "safety",
+            "filter",
+            "safety filter",
+            True,
+            "f(ctx: FilterContext) -> (v1 (n,) [m/s], v2 (n,) [rad/s])",
+        ),
+        Kind(
+            "detector",
+            "detection",
+            "method",
+            "failure detector",
+            True,
+            "f(ctx: DetectorContext) -> suspected (n,) bool, or (suspected, kinds)",
+        ),
+    )
+}
+
+
+@dataclass(frozen=True)
+class Plugin:
+    """One registered name.
+
+    Attributes
+    ----------
+    kind, name : str
+    obj : object
+        The registered function or class.
+    params : dict of str to Param
+        Its YAML parameters.
+    doc : str
+        The first line of its docstring.
+    origin : str
+        Where it comes from: ``built-in (module)``, a file path, a module name or an
+        entry point.
+    options : dict
+        Kind-specific flags (a law's ``needs_leader``, a failure's ``immovable``, ...).
+    check : callable, optional
+        ``check(values, section) -> [(key, what, got, expected), ...]``: checks across
+        the plug-in's values (which it may complete, e.g. a default that depends on
+        another key); ``section`` is the whole YAML section, read.
+    """
+
+    kind: str
+    name: str
+    obj: Any
+    params: dict[str, Param]
+    doc: str
+    origin: str
+    options: dict[str, Any] = field(default_factory=dict)
+    check: Callable[[dict[str, Any], dict[str, Any]], list[tuple]] | None = None
+
+
+_REGISTRY: dict[str, dict[str, Plugin]] = {kind: {} for kind in KINDS}
+#: Plug-in sources already imported (resolved path or module name -> module).
+_LOADED: dict[str, Any] = {}
+#: Whether the entry points were imported (once per process).
+_ENTRY_POINTS_LOADED: list[bool] = []
+#: Whether the built-in plug-ins were imported (once per process).
+_BUILTINS_LOADED: list[bool] = []
+#: Where plug-ins registered now come from (set while a plug-in module is imported).
+_ORIGIN: list[str] = []
+
+
+def _ensure_builtins() -> None:
+    """Import the modules that register the built-in plug-ins, once.
+
+    They are named in :data:`sandbox.plugins.builtin.BUILTIN_MODULES`, imported by
+    name: this module imports nothing that registers into it.
+    """
+    if _BUILTINS_LOADED:
+        return
+    _BUILTINS_LOADED.append(True)
+    for module in BUILTIN_MODULES:
+        importlib.import_module(module)
+
+
+def registry(kind: str) -> dict[str, Plugin]:
+    """The registered plug-ins of a kind, name to :class:`Plugin`, in order."""
+    if kind not in KINDS:
+        raise KeyError(f"no plug-in kind {kind!r}; kinds: {', '.join(KINDS)}")
+    _ensure_builtins()
+    return _REGISTRY[kind]
+
+
+def names(kind: str) -> tuple[str, ...]:
+    """The registered names of a kind, in registration order (built-ins first)."""
+    return tuple(registry(kind))
+
+
+def get(kind: str, name: str) -> Plugin:
+    """The plug-in registered under ``name`` (``KeyError`` if none)."""
+    return registry(kind)[name]
+
+
+def all_params(kind: str) -> dict[str, list[str]]:
+    """Every parameter name of a kind, with the plug-ins that declare it."""
+    out: dict[str, list[str]] = {}
+    for plugin in registry(kind).values():
+        for key in plugin.params:
+            out.setdefault(key, []).append(plugin.name)
+    return out
+
+
+class RegistryView(Mapping):
+    """A read-only, live mapping name -> registered object of one kind.
+
+    ``sandbox.model.laws.LAWS`` is ``RegistryView("law")``: code that looked
+    laws up by name keeps working, and sees plug-ins registered later.
+    """
+
+    def __init__(self, kind: str) -> None:
+        self.kind = kind
+
+    def __getitem__(self, name: str) -> Any:
+        return registry(self.kind)[name].obj
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(registry(self.kind))
+
+    def __len__(self) -> int:
+        return len(registry(self.kind))
+
+
+def _first_line(obj: Any) -> str:
+    text = inspect.getdoc(obj) or ""
+    return text.strip().splitlines()[0] if text.strip() else ""
+
+
+def register(
+    kind: str,
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+    **options: Any,
+) -> Callable[[Any], Any]:
+    """Decorator registering ``obj`` as the plug-in ``name`` of ``kind``.
+
+    The ``register_*`` functions are this with their kind filled in.
+
+    Raises
+    ------
+    ValueError
+        The name is already registered for this kind, is not a plain name, or a
+        parameter declaration is invalid, or clashes with a key of the section.
+    """
+    if kind not in KINDS:
+        raise ValueError(f"no plug-in kind {kind!r}; kinds: {', '.join(KINDS)}")
+    if not isinstance(name, str) or not name or not name.replace("_", "a").isalnum():
+        raise ValueError(f"{kind} name {name!r}: use letters, digits and _ only")
+    declared = declare(params)
+    reserved = _SECTION_KEYS.get(kind, ())
+    clash = [k for k in declared if k in reserved]
+    if clash:
+        raise ValueError(
+            f"{kind} {name!r}: parameter {clash[0]!r} is a key of the "
+            f"{KINDS[kind].section} section itself; choose another name"
+        )
+
+    def add(obj: Any) -> Any:
+        table = _REGISTRY[kind]
+        if name in table:
+            raise ValueError(
+                f"{KINDS[kind].title} {name!r} is already registered "
+                f"(by {table[name].origin})"
+            )
+        module = getattr(obj, "__module__", "") or ""
+        origin = _ORIGIN[-1] if _ORIGIN else ""
+        if not origin:
+            origin = f"built-in ({module})" if module.startswith("sandbox.") else module
+        table[name] = Plugin(
+            kind,
+            name,
+            obj,
+            declared,
+            doc if doc is not None else _first_line(obj),
+            origin,
+            dict(options),
+            check,
+        )
+        return obj
+
+    return add
+
+
+#: Keys of each kind's YAML section that are not plug-in parameters (set by the
+#: scenario layer, which declares those sections).
+_SECTION_KEYS: dict[str, tuple[str, ...]] = {}
+
+
+def reserve_section_keys(kind: str, keys: tuple[str, ...]) -> None:
+    """Record the section's own keys of a kind (a plug-in may not declare them)."""
+    _SECTION_KEYS[kind] = tuple(keys)
+
+
+def unregister(kind: str, name: str) -> None:
+    """Remove a registration (for tests and interactive sessions)."""
+    _REGISTRY[kind].pop(name, None)
+
+
+def register_law(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    needs_leader: bool | None = None,
+    needs_reference: bool | None = None,
+    frame: str = "leader",
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a formation law (``formation: {law: NAME, ...}``).
+
+    The law is a :class:`~sandbox.model.laws.FormationLaw` subclass, built as
+    ``cls(delta, h, **params)``, or a function ``f(ctx: LawContext) -> (slot, v_ref,
+    a_ref)``, each of shape (n, 2) [m], [m/s], [m/s^2].
+
+    Parameters
+    ----------
+    needs_leader, needs_reference : bool, optional
+        Whether the law needs a vehicle with ``leader: true`` / a ``reference``
+        (default: the class's attributes; for a function, a leader and no reference).
+        A law without a leader has every vehicle follow its slot; with one, the
+        leader tracks the reference itself.
+    frame : str
+        Where the offsets of a generated ``platoon`` are laid out at t = 0:
+        ``leader`` (around the leader, in its frame), ``world`` (around the leader,
+        in the world frame), ``reference`` (around the reference's start, turned by
+        its tangent with ``rotate``) or ``leader_reference`` (around the leader,
+        turned by the reference's tangent with ``rotate``).
+    """
+    if frame not in LAW_FRAMES:
+        raise ValueError(f"law {name!r}: frame {frame!r} is not one of {LAW_FRAMES}")
+
+    def add(obj: Any) -> Any:
+        lead = needs_leader
+        ref = needs_reference
+        if lead is None:
+            lead = bool(getattr(obj, "needs_leader", True))
+        if ref is None:
+            ref = bool(getattr(obj, "needs_reference", False))
+        if inspect.isclass(obj):
+            obj.name = name
+            obj.needs_leader, obj.needs_reference = lead, ref
+        return register(
+            "law",
+            name,
+            params,
+            doc=doc,
+            check=check,
+            needs_leader=lead,
+            needs_reference=ref,
+            frame=frame,
+        )(obj)
+
+    return add
+
+
+def register_strategy(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a recovery strategy (``recovery: {strategy: NAME, ...}``).
+
+    The strategy is ``f(ctx: StrategyContext) -> (shift, active)``: the shift of each
+    vehicle's target, shape (n, 2) [m], and whether each vehicle is avoiding (mode
+    ``avoid``), shape (n,) bool. Vehicles that may not avoid (``ctx.may_avoid``
+    false) keep a zero shift whatever it returns.
+    """
+    return register("strategy", name, params, doc=doc, check=check)
+
+
+def register_failure(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    controlled_speed: bool = False,
+    immovable: bool = False,
+    permanent: bool = False,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a failure kind (``failures: [{kind: NAME, vehicle: ..., at: ...}]``).
+
+    The kind is ``f(ctx: FailureContext) -> (v1, v2)``: the commands the failed
+    vehicle really applies [m/s], [rad/s], called once per control period while the
+    failure is active.
+
+    Parameters
+    ----------
+    controlled_speed : bool
+        Whether the controller still drives v1 (its states keep integrating).
+    immovable : bool
+        Whether the vehicle becomes a fixed obstacle at onset.
+    permanent : bool
+        Whether the failure cannot end (``until`` is refused).
+    """
+    return register(
+        "failure",
+        name,
+        params,
+        doc=doc,
+        check=check,
+        controlled_speed=controlled_speed,
+        immovable=immovable,
+        permanent=permanent,
+    )
+
+
+def register_reference(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a reference type (``reference: {type: NAME, ...}``).
+
+    Either a class built once as ``cls(**params)`` with ``evaluate(t) -> (p, dp,
+    ddp)``, or a function ``f(ctx: ReferenceContext) -> (p, dp, ddp)``; ``t`` is a
+    float or an array of times [s], and each result has shape ``t.shape + (2,)``
+    [m], [m/s], [m/s^2].
+    """
+    return register("reference", name, params, doc=doc, check=check)
+
+
+def register_obstacle(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register an obstacle type (``obstacles: [{type: NAME, ...}]``).
+
+    The type is ``f(ctx: ObstacleContext) -> ObstacleSpec``: the shape it occupies,
+    as a circle, box, polygon or wall (:class:`~sandbox.scenario.ObstacleSpec`),
+    built once at load time.
+    """
+    return register("obstacle", name, params, doc=doc, check=check)
+
+
+def register_filter(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a safety filter (``safety: {filter: NAME, ...}``).
+
+    The filter is ``f(ctx: FilterContext) -> (v1, v2)``, each of shape (n,) [m/s],
+    [rad/s]: it sees the commands about to be applied and returns the ones to apply,
+    once per control period, after the controller and before the failures. Built in:
+    ``none`` (never called) and ``cbf`` (:mod:`sandbox.behaviour.safety.cbf`).
+    """
+    return register("filter", name, params, doc=doc, check=check)
+
+
+def register_detector(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    *,
+    doc: str | None = None,
+    check: Callable | None = None,
+) -> Callable[[Any], Any]:
+    """Register a failure detector (``detection: {method: NAME, ...}``).
+
+    The detector is ``f(ctx: DetectorContext) -> suspected``, shape (n,) bool: the
+    vehicles the platoon believes failed now (it keeps its state in ``ctx.memory``),
+    or ``(suspected, kinds)`` with ``kinds`` a list of n strings naming the kind of
+    each suspicion. Built in: ``oracle`` (the truth, at once), ``residual``
+    (:mod:`sandbox.behaviour.detection`) and ``none`` (nothing is ever detected).
+    """
+    return register("detector", name, params, doc=doc, check=check)
+
+
+@register_filter("none")
+def no_filter(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
+    """No safety filter: the commands pass unchanged."""
+    return ctx.v1, ctx.v2
+
+
+@register_detector("none")
+def no_detector(ctx: DetectorContext) -> np.ndarray:
+    """No failure detection: no vehicle is ever believed failed."""
+    return np.zeros(len(ctx.pos), dtype=bool)
+
+
+# ------------------------------------------------------------------ building plug-ins
+class FunctionLaw:
+    """A formation law registered as a function ``f(ctx) -> (slot, v_ref, a_ref)``."""
+
+    def __init__(self, func: Callable[[LawContext], Any]) -> None:
+        self.func = func
+
+    def targets(self, ctx: LawContext) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Call the law; each result is broadcast to the fleet's shape (n, 2)."""
+        shape = np.shape(ctx.offset)
+        return tuple(
+            np.broadcast_to(np.asarray(a, dtype=float), shape) for a in self.func(ctx)
+        )
+
+
+def make_law(name: str, params: Mapping[str, Any], delta: np.ndarray, h: float) -> Any:
+    """Build the registered law ``name`` for offsets ``delta`` (n, 2) and period h.
+
+    A class is built as ``cls(delta, h, **params)``; a function is wrapped in a
+    :class:`FunctionLaw`. Either has ``targets(ctx: LawContext)``.
+    """
+    obj = get("law", name).obj
+    if inspect.isclass(obj):
+        return obj(delta, h, **dict(params))
+    return FunctionLaw(obj)

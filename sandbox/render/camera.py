@@ -1,0 +1,336 @@
+"""What a frame of :mod:`sandbox.render.animation` shows of the world: camera and framing.
+
+:class:`Camera` maps world coordinates to pixels. :meth:`Camera.for_run` frames a whole
+run (every pose, the reference path and the obstacles) or follows a vehicle;
+:func:`auto_follow` is the automatic choice between the two that ``sandbox run --gif``,
+``sandbox render`` and ``sandbox gallery`` use. The viewport leaves room for the text
+bands of :mod:`sandbox.render.overlay` (the heads-up line, the scale bar and the
+legend), whose layout depends on the run (its vehicles' names and the marks it shows).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from sandbox.render.overlay import LEGEND_NAMES_MAX, Bands, LegendItem, frame_bands
+from sandbox.render.palette import _build_palette
+from sandbox.run.record import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, Run
+
+__all__ = ["AUTO_FOLLOW_ASPECT", "Camera", "auto_follow", "resolve_follow"]
+
+#: Fleets larger than this are drawn without trails, slot marks and zones.
+LARGE_FLEET = 100
+_MARGIN = 0.04  # fraction of the image size kept free around the content
+
+
+def _reference_path(run: Run) -> np.ndarray | None:
+    """Return the reference path (m, 2) [m]: ``info["reference_path"]`` or samples."""
+    raw = run.info.get("reference_path") if isinstance(run.info, dict) else None
+    pts = None
+    if raw is not None:
+        arr = np.asarray(raw, dtype=float)
+        if arr.ndim == 2 and arr.shape[1] == 2:
+            pts = arr
+    if pts is None:
+        pts = np.asarray(run.reference, dtype=float).reshape(-1, 2)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    return pts if len(pts) >= 2 else None
+
+
+def _obstacles(run: Run) -> list[tuple[str, Any]]:
+    """List obstacles as ``("circle", ((x, y), r))`` or ``("polygon", (m, 2))`` [m]."""
+    out: list[tuple[str, Any]] = []
+    raw = run.info.get("obstacles", []) if isinstance(run.info, dict) else []
+    for ob in raw or []:
+        kind = ob.get("type")
+        if kind == "circle":
+            c = np.asarray(ob["center"], dtype=float)
+            out.append(("circle", ((float(c[0]), float(c[1])), float(ob["radius"]))))
+        elif kind == "polygon":
+            pts = np.asarray(ob["points"], dtype=float).reshape(-1, 2)
+            if len(pts) >= 2:
+                out.append(("polygon", pts))
+    return out
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Map from world coordinates [m] (y up) to pixel coordinates (y down).
+
+    Pixel coordinates are continuous: pixel ``(col, row)`` covers ``[col, col + 1) x
+    [row, row + 1)``, so the pixel containing a world point is ``floor`` of its pixel
+    coordinates. One metre is ``scale`` pixels along both axes (1:1 aspect).
+
+    Attributes
+    ----------
+    center : tuple of float [m]
+        World point drawn at ``anchor``.
+    scale : float [px/m]
+    size : int [px]
+        Width and height of the (square) image.
+    anchor : tuple of float [px]
+        Pixel coordinates of ``center``.
+
+    Examples
+    --------
+    >>> cam = Camera(center=(0.0, 0.0), scale=10.0, size=100, anchor=(50.0, 50.0))
+    >>> cam.world_to_pixel([1.0, 2.0]).tolist()
+    [60.0, 30.0]
+    >>> cam.pixel_to_world([60.0, 30.0]).tolist()
+    [1.0, 2.0]
+    """
+
+    center: tuple[float, float]
+    scale: float
+    size: int
+    anchor: tuple[float, float]
+
+    def world_to_pixel(self, xy: ArrayLike) -> np.ndarray:
+        """Pixel coordinates of world points.
+
+        Parameters
+        ----------
+        xy : array_like, shape (..., 2) [m]
+
+        Returns
+        -------
+        ndarray, shape (..., 2) [px]
+            Column then row, as floats.
+        """
+        xy = np.asarray(xy, dtype=float)
+        col = self.anchor[0] + (xy[..., 0] - self.center[0]) * self.scale
+        row = self.anchor[1] - (xy[..., 1] - self.center[1]) * self.scale
+        return np.stack((col, row), axis=-1)
+
+    def pixel_to_world(self, px: ArrayLike) -> np.ndarray:
+        """World coordinates of pixel points, the inverse of :meth:`world_to_pixel`.
+
+        Parameters
+        ----------
+        px : array_like, shape (..., 2) [px]
+
+        Returns
+        -------
+        ndarray, shape (..., 2) [m]
+        """
+        px = np.asarray(px, dtype=float)
+        x = self.center[0] + (px[..., 0] - self.anchor[0]) / self.scale
+        y = self.center[1] - (px[..., 1] - self.anchor[1]) / self.scale
+        return np.stack((x, y), axis=-1)
+
+    def centered_on(self, center: ArrayLike) -> Camera:
+        """Return this camera moved so that ``center`` [m] is drawn at the anchor."""
+        c = np.asarray(center, dtype=float)
+        return Camera((float(c[0]), float(c[1])), self.scale, self.size, self.anchor)
+
+    @classmethod
+    def fit(
+        cls,
+        lo: ArrayLike,
+        hi: ArrayLike,
+        size: int,
+        bands: tuple[int, int] = (16, 18),
+    ) -> Camera:
+        """Camera showing the world box ``[lo, hi]`` [m] whole, with a margin.
+
+        The box is centred in the viewport, the part of the image below the heads-up
+        band and above the bottom band (scale bar and legend), ``bands = (top,
+        bottom)`` [px] high.
+        """
+        lo = np.asarray(lo, dtype=float)
+        hi = np.asarray(hi, dtype=float)
+        x0, y0, x1, y1 = _viewport(size, bands)
+        y1 = max(y1, y0 + 1.0)  # [px] bands taller than the frame: a one-pixel view
+        extent = np.maximum(hi - lo, 1e-9)
+        scale = float(min((x1 - x0) / extent[0], (y1 - y0) / extent[1]))
+        mid = (lo + hi) / 2.0
+        return cls(
+            (float(mid[0]), float(mid[1])), scale, size, ((x0 + x1) / 2, (y0 + y1) / 2)
+        )
+
+    @classmethod
+    def for_run(
+        cls,
+        run: Run,
+        size: int = 640,
+        follow: str | None = None,
+        legend: bool = True,
+    ) -> Camera:
+        """Build the camera of the first frame of ``run``.
+
+        Parameters
+        ----------
+        run : Run
+        size : int [px]
+        follow : {None, "auto", "leader"} or str
+            ``None``: the whole run is framed (every pose, the reference path and the
+            obstacles) and the camera never moves. ``"leader"`` or a vehicle name: a
+            window centred on that vehicle (the fleet centroid when ``"leader"`` is
+            asked of a run without leader), 1.3 times as wide as the initial formation;
+            :func:`render_frames` recentres it on every frame. ``"auto"``: the choice
+            of :func:`auto_follow` (``"leader"`` for a run spread along a line).
+        legend : bool
+            Whether the frame has a legend strip (the viewport leaves room for it).
+
+        Returns
+        -------
+        Camera
+        """
+        follow = resolve_follow(run, follow)
+        pos = run.pose[:, :, :2]
+        reach = float(np.max(run.diameter, initial=0.0)) / 2.0
+        bands = _run_bands(run, size, legend)
+        edges = (bands.top, bands.bottom)
+        if follow is None:
+            lo, hi = _content_bounds(run, reach)
+            return cls.fit(lo, hi, size, edges)
+        track = _follow_track(run, follow)
+        first = pos[0][np.isfinite(pos[0]).all(axis=1)]
+        spread = float(np.max(np.linalg.norm(first - track[0], axis=1), initial=0.0))
+        width = max(1.3 * 2.0 * (spread + reach), 10.0 * reach, 1e-3)  # [m]
+        c = track[0]
+        return cls.fit(c - width / 2, c + width / 2, size, edges)
+
+
+#: Above this ratio of the sides of the area a run covers, ``follow="auto"`` follows
+#: the leader.
+AUTO_FOLLOW_ASPECT = 2.5
+
+
+def auto_follow(run: Run) -> str | None:
+    """The automatic camera: ``"leader"`` for a run spread along a line, else None.
+
+    A run whose covered area (every pose, plus a vehicle diameter) is more than
+    :data:`AUTO_FOLLOW_ASPECT` times longer than wide, and that has a leader, would be
+    drawn tiny in a square frame holding all of it (a platoon on a straight
+    reference): the camera follows the leader instead. Otherwise the whole run is
+    framed.
+    """
+    if run.leader < 0:
+        return None
+    box = _finite_box(run.pose[:, :, :2])
+    if box is None:
+        return None
+    extent = box[1] - box[0] + float(np.max(run.diameter, initial=0.0))
+    return "leader" if extent.max() > AUTO_FOLLOW_ASPECT * extent.min() else None
+
+
+def resolve_follow(run: Run, follow: str | None) -> str | None:
+    """``follow`` with ``"auto"`` replaced by the choice of :func:`auto_follow`."""
+    return auto_follow(run) if follow == "auto" else follow
+
+
+def _viewport(
+    size: int, bands: tuple[int, int] = (16, 18)
+) -> tuple[float, float, float, float]:
+    """Pixel box ``(x0, y0, x1, y1)`` the world content is fitted into."""
+    pad = _MARGIN * size
+    return pad, bands[0] + pad, size - pad, size - bands[1] - pad
+
+
+def _legend_items(run: Run, body: np.ndarray, large: bool) -> list[LegendItem]:
+    """The legend strip of ``run``: its vehicles, then the marks its frames show."""
+    if run.n_vehicles <= LEGEND_NAMES_MAX:
+        items = [
+            LegendItem("vehicle", name, int(body[i]))
+            for i, name in enumerate(run.names)
+        ]
+    else:
+        items = [LegendItem("vehicle", f"{run.n_vehicles} vehicles", int(body[0]))]
+    mode = np.asarray(run.mode)
+    if _reference_path(run) is not None:
+        items.append(LegendItem("reference", "reference"))
+    if not large:
+        items.append(LegendItem("slot", "slot"))
+    if (mode == MODE_AVOID).any():
+        items.append(LegendItem("avoid", "avoiding"))
+    if (mode == MODE_EXTERNAL).any():
+        items.append(LegendItem("external", "external command"))
+    if np.asarray(run.failed, dtype=bool).any() or (mode == MODE_FAILED).any():
+        items.append(LegendItem("failed", "failed"))
+    if len(run.events):
+        items.append(LegendItem("collision", "collision"))
+    return items
+
+
+def _run_bands(run: Run, size: int, legend: bool) -> Bands:
+    """Layout of the text bands of ``run``'s frames (no legend rows without legend)."""
+    if not legend:
+        return frame_bands(int(size), [])
+    _, body, _ = _build_palette(run.colors)
+    return frame_bands(
+        int(size), _legend_items(run, body, run.n_vehicles > LARGE_FLEET)
+    )
+
+
+def _content_bounds(run: Run, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """World bounding box [m] of poses, reference path and obstacles."""
+    boxes = [_finite_box(run.pose[:, :, :2]), _finite_box(run.reference)]
+    path = _reference_path(run)
+    if path is not None:
+        boxes.append(_finite_box(path))
+    for kind, geom in _obstacles(run):
+        if kind == "circle":
+            (cx, cy), r = geom
+            boxes.append((np.array([cx - r, cy - r]), np.array([cx + r, cy + r])))
+        else:
+            boxes.append(_finite_box(geom))
+    found = [b for b in boxes if b is not None]
+    if found:
+        lo = np.min([b[0] for b in found], axis=0) - reach
+        hi = np.max([b[1] for b in found], axis=0) + reach
+    else:
+        lo, hi = np.full(2, -reach), np.full(2, reach)
+    side = max(float(np.max(hi - lo)), 8.0 * reach, 0.5)  # [m] never a degenerate box
+    half = np.maximum((hi - lo) / 2.0, side / 2.0)
+    mid = (lo + hi) / 2.0
+    return mid - half, mid + half
+
+
+def _finite_box(points: ArrayLike) -> tuple[np.ndarray, np.ndarray] | None:
+    """Bounding box ``(lo, hi)`` of the finite points of an array (..., 2), or None.
+
+    Reads a large (possibly memory-mapped) array a block of samples at a time.
+    """
+    arr = np.asarray(points, dtype=float)
+    arr = arr.reshape(len(arr), -1, 2) if arr.ndim >= 2 else arr.reshape(1, -1, 2)
+    step = max(1, 1_000_000 // max(arr.shape[1], 1))
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    for start in range(0, len(arr), step):
+        block = arr[start : start + step].reshape(-1, 2)
+        block = block[np.isfinite(block).all(axis=1)]
+        if len(block):
+            lo = np.minimum(lo, block.min(axis=0))
+            hi = np.maximum(hi, block.max(axis=0))
+    return (lo, hi) if np.isfinite(lo).all() else None
+
+
+def _follow_track(run: Run, follow: str) -> np.ndarray:
+    """Point the camera follows at each sample, shape (T, 2) [m]."""
+    pos = run.pose[:, :, :2]
+    if follow == "leader" and run.leader >= 0:
+        track = pos[:, run.leader].copy()
+    elif follow == "leader":
+        alive = np.isfinite(pos).all(axis=2) & ~np.asarray(run.failed, dtype=bool)
+        count = alive.sum(axis=1)
+        total = np.where(alive[..., None], pos, 0.0).sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            track = total / count[:, None]
+    elif follow in run.names:
+        track = pos[:, run.names.index(follow)].copy()
+    else:
+        raise ValueError(
+            f"follow: expected None, 'auto', 'leader' or a vehicle name in "
+            f"{run.names}, got {follow!r}"
+        )
+    # Hold the last finite point where the followed point is undefined.
+    good = np.isfinite(track).all(axis=1)
+    if not good.any():
+        return np.zeros_like(track)
+    last = np.maximum.accumulate(np.where(good, np.arange(len(track)), -1))
+    last[last < 0] = int(np.argmax(good))
+    return track[last]

@@ -1,0 +1,29 @@
+"""A recorded run and what is computed from it: the record, metrics, expectations, files.
+
+- :mod:`~sandbox.run.record`: :class:`~sandbox.run.record.Run` (the arrays a simulation
+  produced), the collision events, modes and statuses, and the recorder the loop fills;
+- :mod:`~sandbox.run.metrics`: the loop metrics and ``metrics.json``;
+- :mod:`~sandbox.run.deadlock`: vehicles trapped short of their slots;
+- :mod:`~sandbox.run.expectations`: a scenario's ``expect:`` evaluated on a run;
+- :mod:`~sandbox.run.output`: run directories, written atomically and read back;
+- :mod:`~sandbox.run.analysis`: one vehicle's arrays, long tables, Parquet.
+
+``from sandbox.run import Run`` (the v0.2 module) still works for one release, with a
+:class:`DeprecationWarning`: the public names are ``sandbox.Run`` and
+``sandbox.load_run``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def __getattr__(name: str) -> Any:
+    """The names of the v0.2 module ``sandbox.run``, with a deprecation warning."""
+    import sandbox.run.record as record
+    from sandbox._moved import warn_moved
+
+    if name.startswith("__") or not hasattr(record, name):
+        raise AttributeError(f"module 'sandbox.run' has no attribute {name!r}")
+    warn_moved(f"sandbox.run.{name}", f"sandbox.run.record.{name}")
+    return getattr(record, name)

@@ -1,0 +1,491 @@
+"""Metrics of a run: what the loop accumulates, and functions of the recorded run.
+
+Definitions (the keys of ``metrics.json``):
+
+- ``collisions``: contact episodes counted from the physics (see
+  :class:`~sandbox.run.record.CollisionEvent`): an episode of a pair starts at its first
+  contact and ends once the gap between the surfaces has exceeded
+  ``metrics.contact_release``; ``vehicle_vehicle`` and ``vehicle_obstacle`` apart;
+  ``healthy``: the episodes in which no vehicle involved had an active failure at the
+  first contact (two healthy vehicles, or a healthy vehicle and a static obstacle): what
+  recovery is meant to prevent; ``events`` lists ``{t, end, a, b, kind, healthy,
+  penetration}``.
+- ``min_distance``: smallest centre-to-centre distance between two vehicles [m], checked
+  every control period by :class:`LoopMetrics` (null with a single vehicle).
+- ``motor``: the check that eq. (1) holds while a vehicle is free of contact
+  (:class:`LoopMetrics`): largest velocity and speed errors [m/s], the vehicle-periods
+  checked, and the fraction of them in which the motor could not follow.
+- per vehicle, ``formation_error``: distance from the vehicle to its slot as its law
+  defines it (the leader's slot is the reference point) [m]: ``final`` (last sample),
+  ``max``, and ``rms_last_quarter`` (RMS over the last quarter of the run);
+  ``settling_time``: first time after which the error stays below ``settle_tol`` until
+  the end [s], null if it never does, if the run does not last ``settle_dwell`` after
+  it, or if the vehicle has no slot; ``effort_v1`` [m/s] and ``effort_v2`` [rad/s]: the
+  total variation of each command over every control period, and ``control_effort =
+  effort_v1 + (d/2) effort_v2`` [m/s]: they grow with aggressive and chattering inputs,
+  not with steady driving; ``mode_switches``: number of changes between ``formation``
+  and ``avoid`` mode; ``failed_at``: time of the first failure of the vehicle, or null.
+- ``deadlocks``: ``{vehicles, t, duration}`` for each time healthy vehicles stayed
+  below ``metrics.deadlock_speed`` for ``metrics.deadlock_time`` while farther than
+  ``metrics.deadlock_distance`` from their slots (:mod:`sandbox.run.deadlock`).
+- ``converged``: every healthy vehicle (no failure active at the end of the run, with a
+  slot) has a settling time.
+- ``detections`` and ``detection`` (with ``detection: {method: residual}`` only, see
+  :func:`sandbox.behaviour.detection.detection_metrics`): every detection ``{vehicle, t, kind,
+  cleared, false_alarm}``, and per failure the detection delay [s] and whether the
+  kind was right; ``false_alarms`` counts detections on a vehicle without an active
+  failure.
+- ``warnings``: what a user should know about the numbers (a saturated motor).
+- ``reassignments`` and ``leader_changes`` (only with ``reconfigure`` or
+  ``on_leader_failure``, see :mod:`sandbox.behaviour.reconfigure`): ``{t, assignment}``, the
+  formation slot each vehicle tracks from then on (null: none), and ``{t, from, to,
+  mode}`` (``to`` null: the virtual leader); ``slots``, each vehicle's slots over
+  time (``{vehicle: [[t, slot], ...]}``, held from ``t``; see
+  :attr:`sandbox.run.record.Run.slot_index`).
+
+Formation errors, settling and mode switches read the recorded samples (at the
+resolution of ``record_every``); the rest comes from the loop (``Run.info
+["loop_metrics"]``) and the physics. A run without loop metrics (built by hand) falls
+back to the recorded samples.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from sandbox.run.deadlock import find_deadlocks
+from sandbox.run.record import MODE_AVOID, MODE_FORMATION, Run
+
+#: Above this many vehicles the minimum distance uses a KD-tree per sample.
+BRUTE_FORCE_MAX = 200
+#: A free body follows its command when the velocity error is within this fraction of
+#: the commanded speed, or within :data:`MOTOR_ABS_TOL` [m/s], whichever is larger.
+MOTOR_REL_TOL = 0.01
+MOTOR_ABS_TOL = 0.01
+#: Up to this many vehicles the in-loop closest approach checks every pair.
+ALL_PAIRS_MAX = 64
+
+
+class ClosestApproach:
+    """Smallest centre distance between two vehicles, updated every control period.
+
+    Up to :data:`ALL_PAIRS_MAX` vehicles every pair is checked. Beyond, a Verlet list:
+    the pairs closer than ``best + skin`` (KD-tree) are the candidates until some
+    vehicle has moved more than ``skin / 2``; a pair closer than the smallest distance
+    so far (which only decreases) is then always a candidate, so the result is exact.
+
+    >>> ca = ClosestApproach()
+    >>> ca.update(np.array([[0.0, 0.0], [3.0, 0.0], [0.0, 1.0]]))
+    >>> ca.best
+    1.0
+    """
+
+    def __init__(self) -> None:
+        self.best = np.inf
+        self._anchor: np.ndarray | None = None
+        self._skin = 0.0
+        self._i = self._j = np.zeros(0, dtype=np.intp)
+
+    def update(self, pos: np.ndarray) -> None:
+        """Take the positions (n, 2) [m] of one period into account."""
+        n = len(pos)
+        if n < 2 or not np.all(np.isfinite(pos)):
+            return
+        if n <= ALL_PAIRS_MAX:
+            if len(self._i) == 0:
+                self._i, self._j = np.triu_indices(n, 1)
+        else:
+            anchor = self._anchor
+            if anchor is None:
+                self._rebuild(pos)
+            else:
+                moved = pos - anchor
+                worst = np.max(moved[:, 0] * moved[:, 0] + moved[:, 1] * moved[:, 1])
+                if worst > 0.25 * self._skin * self._skin:
+                    self._rebuild(pos)
+        if len(self._i):
+            d = pos[self._i] - pos[self._j]
+            best = float(np.sqrt(np.min(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])))
+            self.best = min(self.best, best)
+
+    def _rebuild(self, pos: np.ndarray) -> None:
+        from scipy.spatial import cKDTree
+
+        tree = cKDTree(pos)
+        if not np.isfinite(self.best):
+            d, _ = tree.query(pos, k=2)
+            self.best = float(d[:, 1].min())
+        self._skin = max(0.5 * self.best, 0.05)
+        pairs = tree.query_pairs(self.best + self._skin, output_type="ndarray")
+        self._i, self._j = pairs[:, 0], pairs[:, 1]
+        self._anchor = pos.copy()
+
+
+class LoopMetrics:
+    """Metrics accumulated inside the simulation loop, once per control period.
+
+    They do not depend on ``record_every``: control effort (the total variation of
+    each vehicle's commands, ``effort_v1 = sum |v1(k) - v1(k-1)|`` [m/s] and
+    ``effort_v2 = sum |v2(k) - v2(k-1)|`` [rad/s], i.e. the integrals of ``|v1'|`` and
+    ``|v2'|``), the closest approach of two vehicles (:class:`ClosestApproach`), and
+    the motor check: for every vehicle free of contact at both ends of a period, the
+    body's velocity read at the end against the velocity commanded for the period
+    (the unicycle of eq. (1)); a period whose error exceeds ``MOTOR_REL_TOL`` of the
+    commanded speed and ``MOTOR_ABS_TOL`` counts as saturated.
+
+    Parameters
+    ----------
+    n : int
+        Number of vehicles.
+    h : float [s]
+        Control period.
+    """
+
+    def __init__(self, n: int, h: float) -> None:
+        self.h = h
+        self.effort_v1 = np.zeros(n)
+        self.effort_v2 = np.zeros(n)
+        self.closest = ClosestApproach()
+        self.max_speed_error = 0.0
+        self.max_velocity_error = 0.0
+        self.free_periods = 0
+        self.saturated_periods = 0
+        self._prev: tuple[np.ndarray, np.ndarray] | None = None
+        self._commanded: np.ndarray | None = None
+        self._was_free: np.ndarray | None = None
+
+    def update(
+        self,
+        pos: np.ndarray,
+        theta: np.ndarray,
+        vel: np.ndarray,
+        v1: np.ndarray,
+        v2: np.ndarray,
+        in_contact: np.ndarray | None,
+    ) -> None:
+        """Account for period ``k``: state at ``t_k`` and the commands from it.
+
+        Parameters
+        ----------
+        pos : ndarray (n, 2) [m]
+        theta : ndarray (n,) [rad]
+        vel : ndarray (n, 2) [m/s]
+            Body velocities read at ``t_k``.
+        v1, v2 : ndarray (n,) [m/s], [rad/s]
+            Commands for the period from ``t_k``.
+        in_contact : ndarray (n,) bool or None
+            Vehicles in an open contact episode at ``t_k`` (None: unknown, no motor
+            check).
+        """
+        self.closest.update(pos)
+        if self._prev is not None:
+            self.effort_v1 += np.abs(v1 - self._prev[0])
+            self.effort_v2 += np.abs(v2 - self._prev[1])
+        self._prev = (np.array(v1, dtype=float), np.array(v2, dtype=float))
+        free = None if in_contact is None else ~in_contact
+        if self._commanded is not None and free is not None:
+            check = free & self._was_free & np.all(np.isfinite(vel), axis=1)
+            if check.any():
+                cmd, got = self._commanded[check], vel[check]
+                want = np.hypot(cmd[:, 0], cmd[:, 1])
+                err = np.hypot(got[:, 0] - cmd[:, 0], got[:, 1] - cmd[:, 1])
+                speed_err = np.abs(np.hypot(got[:, 0], got[:, 1]) - want)
+                self.max_velocity_error = max(self.max_velocity_error, float(err.max()))
+                self.max_speed_error = max(self.max_speed_error, float(speed_err.max()))
+                tol = np.maximum(MOTOR_REL_TOL * want, MOTOR_ABS_TOL)
+                self.free_periods += int(check.sum())
+                self.saturated_periods += int(np.count_nonzero(err > tol))
+        heading = theta + 0.5 * v2 * self.h
+        self._commanded = np.stack((v1 * np.cos(heading), v1 * np.sin(heading)), -1)
+        self._was_free = free
+
+    def result(self) -> dict[str, Any]:
+        """The accumulated values, JSON-ready (kept in ``Run.info["loop_metrics"]``)."""
+        best = self.closest.best
+        return {
+            "effort_v1": [float(x) for x in self.effort_v1],
+            "effort_v2": [float(x) for x in self.effort_v2],
+            "min_distance": float(best) if np.isfinite(best) else None,
+            "motor": {
+                "max_speed_error_free": self.max_speed_error,
+                "max_velocity_error_free": self.max_velocity_error,
+                "free_periods": self.free_periods,
+                "saturated_fraction": self.saturated_periods / self.free_periods
+                if self.free_periods
+                else 0.0,
+            },
+        }
+
+
+def min_distance(pose: np.ndarray) -> float | None:
+    """Smallest centre distance between two vehicles over all samples [m].
+
+    Parameters
+    ----------
+    pose : ndarray, shape (T, n, >=2)
+    """
+    T, n = pose.shape[:2]
+    if n < 2 or T == 0:
+        return None
+    pos = pose[..., :2]
+    if n <= BRUTE_FORCE_MAX:
+        i, j = np.triu_indices(n, 1)
+        best = np.inf
+        for chunk in np.array_split(np.arange(T), max(1, T * len(i) // 2_000_000)):
+            d = np.linalg.norm(pos[chunk][:, i] - pos[chunk][:, j], axis=-1)
+            best = min(best, float(d.min()))
+        return best
+    from scipy.spatial import cKDTree
+
+    best = np.inf
+    for k in range(T):
+        d, _ = cKDTree(pos[k]).query(pos[k], k=2)
+        best = min(best, float(d[:, 1].min()))
+    return best
+
+
+def settling_time(
+    t: np.ndarray, error: np.ndarray, tol: float, dwell: float = 0.0
+) -> float | None:
+    """First time after which ``error`` stays below ``tol`` until the end, or None.
+
+    The run must also go on for at least ``dwell`` [s] after that time (a last sample
+    that happens to fall in band is not settling): otherwise None.
+
+    >>> settling_time(np.arange(5.0), np.array([1.0, 0.5, 0.01, 0.2, 0.01]), 0.05)
+    4.0
+    >>> settling_time(np.arange(5.0), np.array([1.0, 0.5, 0.01, 0.2, 0.01]), 0.05, 1.0)
+    >>> settling_time(np.arange(5.0), np.array([1.0, 0.01, 0.01, 0.01, 0.0]), 0.05, 1.0)
+    1.0
+    >>> settling_time(np.arange(3.0), np.array([1.0, 0.5, 0.2]), 0.05) is None
+    True
+    """
+    if len(t) == 0 or not np.isfinite(error[-1]) or error[-1] >= tol:
+        return None
+    above = np.flatnonzero(~(error < tol))
+    settled = float(t[0] if len(above) == 0 else t[above[-1] + 1])
+    return settled if t[-1] - settled >= dwell - 1e-9 else None
+
+
+def control_effort(cmd: np.ndarray, diameter: float) -> float:
+    """Total variation of recorded commands: ``sum |dv1| + (d/2) sum |dv2|`` [m/s].
+
+    The per-period value of a simulated run comes from :class:`LoopMetrics`; this
+    reads samples (every ``record_every`` periods only).
+
+    Parameters
+    ----------
+    cmd : ndarray, shape (T, 2)
+        ``(v1, v2)`` samples of one vehicle.
+    diameter : float [m]
+    """
+    if len(cmd) < 2:
+        return 0.0
+    d = np.abs(np.diff(cmd, axis=0))
+    return float(d[:, 0].sum() + 0.5 * diameter * d[:, 1].sum())
+
+
+def mode_switches(mode: np.ndarray) -> int:
+    """Number of changes between ``formation`` and ``avoid`` in a mode sequence."""
+    m = mode[(mode == MODE_FORMATION) | (mode == MODE_AVOID)]
+    return int(np.count_nonzero(np.diff(m) != 0))
+
+
+def healthy_events(run: Run) -> list[bool]:
+    """Whether each collision event involved only vehicles without an active failure.
+
+    A vehicle's failure state at an event is the one recorded for the control period the
+    event falls in (exact with ``record_every = 1``). Obstacle names are not vehicles.
+    """
+    index = {name: i for i, name in enumerate(run.names)}
+    out = []
+    for e in run.events:
+        if e.healthy is not None:  # stamped by the physics at the first contact
+            out.append(bool(e.healthy))
+            continue
+        k = max(int(np.searchsorted(run.t, e.t + 1e-9, side="right")) - 1, 0)
+        ids = [index[x] for x in (e.a, e.b) if x in index]
+        out.append(len(run.t) == 0 or not any(bool(run.failed[k, i]) for i in ids))
+    return out
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]:
+    """All metrics of a run, as written to ``metrics.json``.
+
+    Parameters
+    ----------
+    run : Run
+    settle_tol : float, optional
+        Tolerance of the settling time [m]; default: the scenario's
+        ``metrics.settle_tol``
+        (0.05 m).
+    """
+    spec = run.scenario.metrics if run.scenario is not None else None
+    if settle_tol is None:
+        settle_tol = spec.settle_tol if spec is not None else 0.05
+    dwell = spec.settle_dwell if spec is not None else 1.0
+    loop = run.info.get("loop_metrics")
+    t = np.asarray(run.t)
+    T = len(t)
+    last_quarter = t >= t[-1] - 0.25 * (t[-1] - t[0]) if T else np.zeros(0, dtype=bool)
+    failed_at = run.info.get("failed_at", {})
+    vehicles: dict[str, Any] = {}
+    healthy_settled = []
+    # Vehicles in blocks of about a million samples: bounded temporaries whatever the
+    # length of the run (the record may be memory-mapped from disk).
+    block = max(1, 1_000_000 // max(T, 1))
+    for i, name in enumerate(run.names):
+        if i % block == 0:
+            cols = slice(i, i + block)
+            pose = np.asarray(run.pose[:, cols, :2])
+            error = np.linalg.norm(pose - np.asarray(run.slot[:, cols]), axis=-1)
+            cmd = np.asarray(run.cmd[:, cols])
+            mode = np.asarray(run.mode[:, cols])
+        e = error[:, i % block]
+        has_slot = T > 0 and bool(np.all(np.isfinite(e)))
+        settle = settling_time(t, e, settle_tol, dwell) if has_slot else None
+        failed_end = bool(run.failed[-1, i]) if T else False
+        vehicles[name] = {
+            "formation_error": {
+                "final": _finite(e[-1]) if has_slot else None,
+                "rms_last_quarter": _finite(np.sqrt(np.mean(e[last_quarter] ** 2)))
+                if has_slot
+                else None,
+                "max": _finite(np.max(e)) if has_slot else None,
+            },
+            "settling_time": settle,
+            **_effort(loop, i, cmd[:, i % block], float(run.diameter[i])),
+            "mode_switches": mode_switches(mode[:, i % block]),
+            "failed_at": failed_at.get(name),
+        }
+        if has_slot and not failed_end:
+            healthy_settled.append(settle is not None)
+    vv = [e for e in run.events if e.kind == "vehicle_vehicle"]
+    vo = [e for e in run.events if e.kind == "vehicle_obstacle"]
+    healthy = healthy_events(run)
+    out: dict[str, Any] = {
+        "status": run.status,
+        "collisions": {
+            "total": len(run.events),
+            "vehicle_vehicle": len(vv),
+            "vehicle_obstacle": len(vo),
+            "healthy": int(sum(healthy)),
+            "events": [
+                {
+                    "t": round(e.t, 6),
+                    "end": None if e.end is None else round(e.end, 6),
+                    "a": e.a,
+                    "b": e.b,
+                    "kind": e.kind,
+                    "healthy": h,
+                    "penetration": round(e.penetration, 6),
+                }
+                for e, h in zip(run.events, healthy, strict=True)
+            ],
+        },
+        "min_distance": loop["min_distance"] if loop else min_distance(run.pose),
+        "deadlocks": _deadlocks(run, spec),
+        "converged": bool(healthy_settled) and all(healthy_settled),
+        "settle_tol": settle_tol,
+        "settle_dwell": dwell,
+        "duration": float(t[-1]) if T else 0.0,
+        "vehicles": vehicles,
+    }
+    if loop:
+        out["motor"] = loop["motor"]
+    keys = ("safety", "diverged", "interrupted", "reassignments", "leader_changes")
+    for key in (*keys, "slots"):
+        if key in run.info:
+            out[key] = run.info[key]
+    from sandbox.behaviour.detection import detection_metrics
+
+    detection = detection_metrics(run.info, run.info.get("failures", []))
+    if detection is not None:
+        out["detections"] = detection.pop("detections")
+        out["detection"] = detection
+    out["warnings"] = run_warnings(out)
+    return out
+
+
+def _deadlocks(run: Run, spec: Any) -> list[dict[str, Any]]:
+    """``deadlocks`` of ``metrics.json`` (:func:`sandbox.run.deadlock.find_deadlocks`)."""
+    keys = {}
+    if spec is not None:
+        keys = {
+            "speed": spec.deadlock_speed,
+            "duration": spec.deadlock_time,
+            "distance": spec.deadlock_distance,
+        }
+    return find_deadlocks(
+        np.asarray(run.t),
+        np.asarray(run.pose[:, :, :2]),
+        np.asarray(run.slot),
+        np.asarray(run.failed, dtype=bool),
+        list(run.names),
+        **keys,
+    )
+
+
+def _effort(
+    loop: dict[str, Any] | None, i: int, cmd: np.ndarray, diameter: float
+) -> dict[str, float]:
+    """``control_effort``, ``effort_v1``, ``effort_v2`` of vehicle ``i``.
+
+    From the loop's per-period totals when the run has them, else from the recorded
+    commands (a run built by hand, or saved by an earlier version).
+    """
+    if loop:
+        e1, e2 = loop["effort_v1"][i], loop["effort_v2"][i]
+    elif len(cmd) >= 2:
+        d = np.abs(np.diff(cmd, axis=0))
+        e1, e2 = float(d[:, 0].sum()), float(d[:, 1].sum())
+    else:
+        e1 = e2 = 0.0
+    return {
+        "control_effort": e1 + 0.5 * diameter * e2,
+        "effort_v1": e1,
+        "effort_v2": e2,
+    }
+
+
+def run_warnings(metrics: dict[str, Any]) -> list[str]:
+    """What a user should know about a run's numbers (printed by ``sandbox run``)."""
+    out = []
+    motor = metrics.get("motor")
+    if motor and motor["saturated_fraction"] > 0:
+        out.append(
+            f"the motor could not follow the commands in "
+            f"{100 * motor['saturated_fraction']:.2g} % of the free vehicle-periods "
+            f"(velocity error up to {motor['max_velocity_error_free']:.3g} m/s): the "
+            "vehicles did not move as eq. (1) says; leave vehicle.motor_accel out "
+            "for a motor that follows every command"
+        )
+    return out
+
+
+def summary_rows(metrics: dict[str, Any]) -> list[tuple[str, str, str, str, str, str]]:
+    """Rows ``(vehicle, final error, rms last quarter, settling, effort, switches)``."""
+
+    def fmt(x: float | None, spec: str = ".4f") -> str:
+        return "-" if x is None else format(x, spec)
+
+    rows = []
+    for name, m in metrics["vehicles"].items():
+        fe = m["formation_error"]
+        rows.append(
+            (
+                name,
+                fmt(fe["final"]),
+                fmt(fe["rms_last_quarter"]),
+                fmt(m["settling_time"], ".2f"),
+                fmt(m["control_effort"], ".2f"),
+                str(m["mode_switches"]),
+            )
+        )
+    return rows
