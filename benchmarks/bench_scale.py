@@ -4,12 +4,12 @@ Run ``python benchmarks/bench_scale.py`` (about 1.5 minutes on a 2-core machine;
 ``--quick`` skips N = 10,000 and repeats less, about 40 s). For N = 10, 100, 1,000 and
 10,000 vehicles it prints, each row measured in a fresh subprocess:
 
-- ``sim``: control steps per second of :class:`sandbox.loop.simulation.Simulation` on the
-  workload below (controller, formation law, ``continuous`` recovery with its neighbour
-  search, recording every 10 steps), timed over the simulation loop only (the
+- ``sim``: control steps per second of :class:`sandbox.loop.simulation.Simulation` on
+  the workload below (controller, formation law, ``continuous`` recovery with its
+  neighbour search, recording every 10 steps), timed over the simulation loop only (the
   ``wall_time`` the run reports; building the scenario and the world is not timed);
-- ``physics``: control steps per second of the same :class:`sandbox.physics.world.World` (the
-  same bodies, shapes and joints) stepped with fixed commands and nothing else: the
+- ``physics``: control steps per second of the same :class:`sandbox.physics.world.World`
+  (the same bodies, shapes and joints) stepped with fixed commands and nothing else: the
   physics engine's own speed, the limit of the simulation;
 - ``ratio``: sim / physics (target: at least 0.5);
 - ``veh-steps/s``: vehicle-steps per second of the simulation (N x steps/s);

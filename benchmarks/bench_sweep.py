@@ -4,9 +4,10 @@ The workload of a study: the Fig. 15 scenario (three vehicles, 12 s, 1,200 contr
 steps of 4 substeps), ``--runs`` times (default 256).
 
 - ``bare pymunk``: for each run, the scenario's pymunk world (the same bodies, motor
-  joints and obstacles, built by :class:`sandbox.physics.world.World`) stepped 1,200 control
-  periods of ``substeps`` calls of ``Space.step`` with fixed commands: no controller,
-  no law, no recovery, no recording, no metrics. The floor a sweep could reach.
+  joints and obstacles, built by :class:`sandbox.physics.world.World`) stepped 1,200
+  control periods of ``substeps`` calls of ``Space.step`` with fixed commands: no
+  controller, no law, no recovery, no recording, no metrics: the floor a sweep
+  could reach.
 - ``single runs``: ``Simulation(scenario).run()`` and ``compute_metrics``, one run
   after the other (``--single`` runs of them, default 16: they are slow).
 - ``batch of K``: the runs as batches of K worlds (:class:`sandbox.study.batch.Batch`;

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 from helpers import SCENARIOS
 
-from sandbox.scenario import bundled
 from sandbox.cli import main
+from sandbox.scenario import bundled
 
 
 @pytest.fixture()

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sandbox.run import output
 from sandbox.cli import main
 from sandbox.errors import OutputError
 from sandbox.loop.simulation import Simulation
+from sandbox.run import output
 from sandbox.run.metrics import compute_metrics
 from sandbox.run.output import load_run_dir, write_json, write_run_dir
 from sandbox.run.record import Run

@@ -2,10 +2,10 @@
 
 Every figure's variants share one set of initial conditions (see the files' headers),
 chosen so that the report's ideal kinematics (eq. (1) exactly, no limits, no contacts:
-:func:`sandbox.study.ideal.ideal_encounters`) and this product agree that forming without
-recovery collides: one encounter (red cuts through the leader) in the ideal model, on
-the limited robot and on the unlimited one. Each test states the report's claim and
-asserts what is measured; counts are contact episodes (encounters).
+:func:`sandbox.study.ideal.ideal_encounters`) and this product agree that forming
+without recovery collides: one encounter (red cuts through the leader) in the ideal
+model, on the limited robot and on the unlimited one. Each test states the report's
+claim and asserts what is measured; counts are contact episodes (encounters).
 
 - Limited robot (the files: v1 <= 2 m/s, |chi'| <= 5 m/s^2, v2 <= 8 rad/s): beta = 1
   avoids the encounter with the discontinuous approach but not with the continuous one;

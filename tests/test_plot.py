@@ -14,8 +14,8 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from PIL import Image
 
-from sandbox.render import figures as plot
 from sandbox.render import figure_parts as plot_parts
+from sandbox.render import figures as plot
 from sandbox.run.record import CollisionEvent, Run
 
 DPI = 40  # small figures keep the tests fast

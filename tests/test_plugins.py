@@ -17,9 +17,9 @@ import pytest
 import yaml
 
 from sandbox import plugins
-from sandbox.plugins import registration
 from sandbox.cli import main
 from sandbox.errors import ScenarioError
+from sandbox.plugins import registration
 from sandbox.scenario import load_scenario
 
 #: A strategy pushing each avoiding vehicle straight away from its neighbours, a law

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from PIL import Image, ImageColor
 
-from sandbox.render import gif_stream
 from sandbox.render import animation as render
 from sandbox.render import camera as render_camera
+from sandbox.render import gif_stream
 from sandbox.render import overlay as render_overlay
 from sandbox.render import palette as render_palette
 from sandbox.run.record import MODE_AVOID, CollisionEvent, Run

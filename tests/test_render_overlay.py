@@ -12,12 +12,12 @@ from helpers import write_yaml
 from PIL import ImageColor
 from test_render import make_run
 
+from sandbox.cli import main
 from sandbox.render import animation as render
 from sandbox.render import camera as render_camera
 from sandbox.render import overlay as render_overlay
 from sandbox.render import palette as render_palette
 from sandbox.render import video
-from sandbox.cli import main
 from sandbox.run.output import load_run_dir
 from sandbox.run.record import MODE_AVOID, CollisionEvent
 

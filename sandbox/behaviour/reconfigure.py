@@ -3,9 +3,9 @@
 The formation's *slots* are the vehicles' offsets in the order the scenario lists the
 vehicles (slot ``k`` is ``vehicles[k].offset``: the formation order). In v0.1 vehicle
 ``k`` tracks slot ``k`` for ever, failed or not. This module changes that, on events
-only: whenever :attr:`~sandbox.loop.simulation.Simulation.known_failed` (what the platoon
-*believes* has failed, the oracle or a detector) changes, a vehicle newly believed
-failed or a fault cleared, it
+only: whenever :attr:`~sandbox.loop.simulation.Simulation.known_failed` (what the
+platoon *believes* has failed, the oracle or a detector) changes, a vehicle newly
+believed failed or a fault cleared, it
 
 1. hands the lead over if the leader is believed failed (``on_leader_failure``):
 

@@ -71,8 +71,8 @@ class Progress:
                 bar.advance()          # one more done
                 bar.write(f"{f}: ok")  # a line printed above the bar
 
-    ``bar(done, total)`` sets the position instead, so a ``Progress`` can be passed
-    as the ``progress`` callback of :meth:`sandbox.loop.simulation.Simulation.run`. The bar
+    ``bar(done, total)`` sets the position instead, so a ``Progress`` can be passed as
+    the ``progress`` callback of :meth:`sandbox.loop.simulation.Simulation.run`. The bar
     is drawn by tqdm while :func:`progress_enabled` holds; otherwise every call does
     nothing (and tqdm is not even imported). Leaving the ``with`` block erases the bar
     line, so what the command prints next starts on a clean line.

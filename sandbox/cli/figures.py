@@ -83,8 +83,8 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-#: Resolutions ``--dpi`` accepts, as :data:`sandbox.render.figures.DPI_RANGE` (a test checks
-#: they agree; not imported from there, since matplotlib is slow to import).
+#: Resolutions ``--dpi`` accepts, as :data:`sandbox.render.figures.DPI_RANGE` (a test
+#: checks they agree; not imported from there, since matplotlib is slow to import).
 DPI_RANGE = (10, 1200)
 
 

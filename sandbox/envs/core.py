@@ -369,7 +369,7 @@ class Task:
         return render_frame(run, size=self.render_size, follow=follow)
 
     def episode_run(self) -> Run:
-        """The episode so far as a :class:`~sandbox.run.record.Run` of its observations."""
+        """The episode so far as a :class:`~sandbox.Run` of its observations."""
         sim = self.sim
         obs = [o for o, _ in self.history]
         n = len(self.names)

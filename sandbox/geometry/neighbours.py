@@ -1,4 +1,4 @@
-"""Neighbour search in the plane: pairs of points closer than a radius, kept between steps.
+"""Neighbour search in the plane: the pairs of points closer than a radius.
 
 :func:`neighbour_pairs` finds the pairs directly (all pairs up to
 :data:`BRUTE_FORCE_MAX` points, a KD-tree of scipy above); :class:`NeighbourList` keeps

@@ -1,10 +1,11 @@
 """What the step-wise API shows and accepts: observations and per-step overrides.
 
-:meth:`sandbox.loop.simulation.Simulation.observe` returns an :class:`Observation` (copies of
-the fleet arrays at the current time); :meth:`~sandbox.loop.simulation.Simulation.step`
-accepts ``commands`` and ``targets`` overrides, either as a mapping from vehicle name to
-a pair or as an ``(n, 2)`` array with NaN rows for "no override", which
-:func:`override_rows` turns into one array and one mask.
+:meth:`sandbox.loop.simulation.Simulation.observe` returns an :class:`Observation`
+(copies of the fleet arrays at the current time);
+:meth:`~sandbox.loop.simulation.Simulation.step` accepts ``commands`` and ``targets``
+overrides, either as a mapping from vehicle name to a pair or as an ``(n, 2)`` array
+with NaN rows for "no override", which :func:`override_rows` turns into one array and
+one mask.
 """
 
 from __future__ import annotations

@@ -14,10 +14,10 @@ Every control period ``h = dt`` runs these stages over whole-fleet arrays:
 5. **advance**: write the commands to the physics and step it ``substeps`` times.
 
 :meth:`Simulation.step` runs one period with optional overrides and returns an
-:class:`~sandbox.loop.observation.Observation`; :meth:`Simulation.run` is the loop of steps
-without overrides, and :meth:`Simulation.result` the recorded
-:class:`~sandbox.run.record.Run`. The physics is reached only through the
-:class:`~sandbox.physics.interface.Physics` interface. Nothing here draws or computes metrics.
+:class:`~sandbox.loop.observation.Observation`; :meth:`Simulation.run` is the loop of
+steps without overrides, and :meth:`Simulation.result` the recorded
+:class:`~sandbox.Run`. The physics is reached only through the
+:class:`~sandbox.physics.Physics` interface. Nothing here draws or computes metrics.
 """
 
 from __future__ import annotations
@@ -77,8 +77,8 @@ class Simulation:
     scenario : Scenario
         A validated scenario (see :func:`sandbox.load_scenario`).
     world : Physics, optional
-        The physics back-end; default a pymunk :class:`~sandbox.physics.world.World` of the
-        scenario's vehicles and obstacles.
+        The physics back-end; default a pymunk :class:`~sandbox.physics.world.World` of
+        the scenario's vehicles and obstacles.
 
     Examples
     --------
@@ -138,7 +138,7 @@ class Simulation:
         self._filter_memory: dict = {}
         self._filter_stats: dict = {}
         self._filter_started = False
-        # What the vehicles see of each other (None: the truth, see sandbox.behaviour.sensing).
+        # What the vehicles see of each other (None: the truth; behaviour.sensing).
         self.broadcast = make_broadcast(scenario.sensing, self.h, scenario.seed)
         #: The broadcast poses received at t_k, shape (n, 3), or None without sensing.
         self.seen: np.ndarray | None = None
@@ -761,5 +761,5 @@ def _uniform(values: np.ndarray) -> float | np.ndarray:
 
 
 def simulate(scenario: Scenario, **kwargs) -> Run:
-    """Run a scenario; return its :class:`~sandbox.run.record.Run` (:meth:`Simulation.run`)."""
+    """Run a scenario; return its :class:`~sandbox.Run` (:meth:`Simulation.run`)."""
     return Simulation(scenario).run(**kwargs)

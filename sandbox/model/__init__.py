@@ -1,4 +1,4 @@
-"""The model of the report: pure functions and records of arrays, no physics, no drawing.
+"""The model of the report: pure functions of arrays, no physics, no drawing.
 
 - :mod:`~sandbox.model.dynamics`: the unicycle, eq. (1), and the angle helper;
 - :mod:`~sandbox.model.flatness`: the flatness-based controller, eqs. (4)-(6);

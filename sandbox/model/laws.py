@@ -137,9 +137,9 @@ class FormationLaw:
         """Forget every estimate: each :class:`BackwardDifference` starts afresh.
 
         Called when another vehicle leads or the offsets change
-        (:mod:`sandbox.behaviour.reconfigure`), whose jump eqs. (8)-(9) and (18)-(19) would
-        otherwise read as a velocity and an acceleration (1 m in h = 0.01 s: 100 m/s
-        and 1e4 m/s^2).
+        (:mod:`sandbox.behaviour.reconfigure`), whose jump eqs. (8)-(9) and (18)-(19)
+        would otherwise read as a velocity and an acceleration (1 m in h = 0.01 s: 100
+        m/s and 1e4 m/s^2).
         """
         for value in vars(self).values():
             if isinstance(value, BackwardDifference):

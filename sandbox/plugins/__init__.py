@@ -99,5 +99,6 @@ __all__ = [
     "register_reference",
     "register_strategy",
     "registry",
+    "resolve_file",
     "unregister",
 ]

@@ -32,7 +32,19 @@ _EXPORTS = {
     "plot_run": "sandbox.render.figures",
 }
 
-__all__ = sorted(_EXPORTS)
+__all__ = [
+    "FIGURES",
+    "FramePlan",
+    "VideoError",
+    "VideoUnavailable",
+    "frame_plan",
+    "plot_run",
+    "render_frame",
+    "render_frames",
+    "video_available",
+    "write_gif",
+    "write_mp4",
+]
 
 if TYPE_CHECKING:
     from sandbox.render.animation import (

@@ -4,14 +4,14 @@ This module and its helpers are the only ones that draw frames: the camera and f
 (:mod:`sandbox.render.camera`), the palette and drawing primitives
 (:mod:`sandbox.render.palette`), the text bands (:mod:`sandbox.render.overlay`: the
 heads-up line, the scale bar and the legend strip) and the GIF encoder
-(:mod:`sandbox.render.gif_stream`); :mod:`sandbox.render.video` writes the same frames as MP4. They
-read a :class:`sandbox.run.record.Run` and never touch the simulation. Frames are drawn with
-Pillow's ``ImageDraw`` (and, for large fleets, vectorized numpy stamps of the bodies) on
-a canvas of palette indices: every colour a frame can contain is known before drawing
-starts (white, black, greys, orange, red, blue, each vehicle's colour and a few paler
-shades of it for trails), so no per-frame quantization is needed and the GIF palette is
-exact. Drawing is not antialiased (that would need blended colours outside the
-palette).
+(:mod:`sandbox.render.gif_stream`); :mod:`sandbox.render.video` writes the same frames
+as MP4. They read a :class:`sandbox.run.record.Run` and never touch the simulation.
+Frames are drawn with Pillow's ``ImageDraw`` (and, for large fleets, vectorized numpy
+stamps of the bodies) on a canvas of palette indices: every colour a frame can contain
+is known before drawing starts (white, black, greys, orange, red, blue, each vehicle's
+colour and a few paler shades of it for trails), so no per-frame quantization is needed
+and the GIF palette is exact. Drawing is not antialiased (that would need blended
+colours outside the palette).
 
 Timing
 ------

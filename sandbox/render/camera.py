@@ -1,4 +1,4 @@
-"""What a frame of :mod:`sandbox.render.animation` shows of the world: camera and framing.
+"""What an animation frame shows of the world: the camera and its framing.
 
 :class:`Camera` maps world coordinates to pixels. :meth:`Camera.for_run` frames a whole
 run (every pose, the reference path and the obstacles) or follows a vehicle;

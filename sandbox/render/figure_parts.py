@@ -2,8 +2,8 @@
 
 Atomic, deterministic saving as PNG, PDF or SVG; the median and percentile bands that
 stand for a large fleet's time series; the size of an equal-aspect axes box that fits
-its content; and time labels placed so that no two overlap. Like :mod:`sandbox.render.figures`,
-this module never imports ``pyplot``.
+its content; and time labels placed so that no two overlap. Like
+:mod:`sandbox.render.figures`, this module never imports ``pyplot``.
 """
 
 from __future__ import annotations

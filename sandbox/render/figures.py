@@ -18,14 +18,13 @@ deterministic). It reads a :class:`sandbox.run.record.Run` only.
   leader's frame over time (report Figs. 5 and 8). A run without a leader is drawn
   relative to the centroid of the fleet, with world-aligned axes, and says so in its
   title;
-- ``formation_error`` (:func:`formation_error_figure`): distance of each vehicle to
-  its slot against time, failures as vertical dashed lines (dotted where they end),
-  collisions as red stars, detections (``detection: residual``) as triangles on the
-  time axis, reassignments and leader changes (``reconfigure``,
-  ``on_leader_failure``) as marks on its top edge (:mod:`sandbox.render.figure_marks`). A
-  failed vehicle's error while it is failed (it grows without bound for a stopped
-  vehicle) is drawn apart, on a lower panel with its own scale, so that it does not
-  flatten the healthy curves;
+- ``formation_error`` (:func:`formation_error_figure`): distance of each vehicle to its
+  slot against time, failures as vertical dashed lines (dotted where they end),
+  collisions as red stars, detections (``detection: residual``) as triangles on the time
+  axis, reassignments and leader changes (``reconfigure``, ``on_leader_failure``) as
+  marks on its top edge (:mod:`sandbox.render.figure_marks`). A failed vehicle's error
+  while it is failed (it grows without bound for a stopped vehicle) is drawn apart, on a
+  lower panel with its own scale, so that it does not flatten the healthy curves;
 - ``commands`` (:func:`commands_figure`): ``v1`` and ``v2`` against time.
 
 Fleets of more than :data:`LEGEND_MAX` vehicles have no per-vehicle legend; their time
@@ -301,8 +300,8 @@ def trajectories_figure(run: Run) -> Figure:
     """Draw the paths and snapshots of every vehicle in the world frame.
 
     The axes box takes the aspect ratio of the content (within the bounds of
-    :data:`~sandbox.render.figure_parts.TRAJECTORY_HEIGHT`), so the content fills it; the legend
-    stands outside the axes, below a wide figure and to the right of a tall one.
+    :data:`~sandbox.render.figure_parts.TRAJECTORY_HEIGHT`), so the content fills it;
+    the legend stands outside the axes, below a wide figure and right of a tall one.
 
     Parameters
     ----------

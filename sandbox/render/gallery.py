@@ -1,12 +1,12 @@
 """The gallery: every bundled scenario of given folders run and rendered to a GIF.
 
 ``sandbox gallery`` (default folders ``scenarios/paper`` and ``scenarios/failures``,
-output ``renders/``) makes the GIFs committed in ``renders/`` and shown in the README.
-A GIF over the size budget is rendered again smaller (fewer pixels, then fewer frames
-per second) until it fits. A run that spreads along a line (a platoon on a straight
+output ``renders/``) makes the GIFs committed in ``renders/`` and shown in the README. A
+GIF over the size budget is rendered again smaller (fewer pixels, then fewer frames per
+second) until it fits. A run that spreads along a line (a platoon on a straight
 reference) would be drawn tiny in a square frame that holds all of it: its camera
-follows the leader instead (:func:`sandbox.render.animation.auto_follow`, the camera of ``sandbox
-run --gif`` too).
+follows the leader instead (:func:`sandbox.render.animation.auto_follow`, the camera of
+``sandbox run --gif`` too).
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ def scenario_files(folders: list[Path]) -> list[Path]:
 def camera_follow(run: Run) -> str | None:
     """``"leader"`` for a run spread along a line, else None (frame it whole).
 
-    The automatic camera of :func:`sandbox.render.animation.auto_follow`, which ``sandbox run
-    --gif`` and ``sandbox render`` use too.
+    The automatic camera of :func:`sandbox.render.animation.auto_follow`, which
+    ``sandbox run --gif`` and ``sandbox render`` use too.
     """
     return auto_follow(run)
 

@@ -1,9 +1,9 @@
 """An animated GIF written a chunk of frames at a time, with one global palette.
 
-:mod:`sandbox.render.animation` draws frames as palette indices; :class:`GifStream` encodes them
-with imageio (its Pillow plugin), a chunk at a time so that memory stays bounded on long
-runs, and joins the chunks into one GIF89a stream whose global colour table is the
-run's palette (index 0, white, is the background).
+:mod:`sandbox.render.animation` draws frames as palette indices; :class:`GifStream`
+encodes them with imageio (its Pillow plugin), a chunk at a time so that memory stays
+bounded on long runs, and joins the chunks into one GIF89a stream whose global colour
+table is the run's palette (index 0, white, is the background).
 """
 
 from __future__ import annotations

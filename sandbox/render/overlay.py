@@ -1,10 +1,10 @@
 """Text bands of the animation frames: the heads-up line, the scale bar and the legend.
 
-A frame of :mod:`sandbox.render.animation` has a band at the top (the heads-up line: scenario,
-time, collisions so far, recovery strategy) and a band at the bottom (a scale bar and a
-legend strip naming each vehicle by its colour and saying what the marks mean: slots,
-orange and blue rings, black crosses, red flashes). Text is drawn with Pillow's bundled
-FreeType font (no font files needed) at a size that grows with the frame,
+A frame of :mod:`sandbox.render.animation` has a band at the top (the heads-up line:
+scenario, time, collisions so far, recovery strategy) and a band at the bottom (a scale
+bar and a legend strip naming each vehicle by its colour and saying what the marks mean:
+slots, orange and blue rings, black crosses, red flashes). Text is drawn with Pillow's
+bundled FreeType font (no font files needed) at a size that grows with the frame,
 :func:`font_px`, without antialiasing so that frames keep to the run's palette.
 
 Drawing text with FreeType costs about 1.5 ms per line, so nothing here draws text per

@@ -1,8 +1,8 @@
 """The palette of an animation and the drawing primitives that use it.
 
-Frames of :mod:`sandbox.render.animation` are canvases of palette indices: the fixed entries
-below (white, black, greys, orange, red, blue), then each vehicle's colour and a few
-paler shades of it for its trail. This module builds that palette, and holds the
+Frames of :mod:`sandbox.render.animation` are canvases of palette indices: the fixed
+entries below (white, black, greys, orange, red, blue), then each vehicle's colour and a
+few paler shades of it for its trail. This module builds that palette, and holds the
 drawing helpers that need nothing else: dashes along a path, vectorized disc stamps for
 large fleets, the scale bar's round lengths.
 """

@@ -1,12 +1,13 @@
-"""MP4 video of a recorded run: the frames of :mod:`sandbox.render.animation`, encoded as H.264.
+"""MP4 video of a recorded run: the frames of the animation, encoded as H.264.
 
-A GIF of a long run is large (256 colours, little compression between frames); an MP4
-of the same frames is a fraction of its size and plays in every presentation program.
-:func:`write_mp4` draws exactly the frames :func:`sandbox.render.animation.render_frames` yields
-(same camera, legend, timing: frame ``k`` shows simulated time ``t0 + k * speed /
-fps``) and pipes them to the ffmpeg executable that the optional ``imageio-ffmpeg``
-package ships (``pip install 'sandbox[video]'``). The video has a constant frame rate
-``fps``; it lasts ``frames / fps`` seconds.
+A GIF of a long run is large (256 colours, little compression between frames); an MP4 of
+the same frames is a fraction of its size and plays in every presentation program.
+:func:`write_mp4` draws exactly the frames
+:func:`sandbox.render.animation.render_frames` yields (same camera, legend, timing:
+frame ``k`` shows simulated time ``t0 + k * speed / fps``) and pipes them to the ffmpeg
+executable that the optional ``imageio-ffmpeg`` package ships (``pip install
+'sandbox[video]'``). The video has a constant frame rate ``fps``; it lasts ``frames /
+fps`` seconds.
 
 Encoding: H.264 (libx264) in yuv420p, constant quality (CRF 18, visually lossless for
 these flat-colour frames), one encoder thread and ffmpeg's bit-exact flags, so the same

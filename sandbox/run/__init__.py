@@ -1,4 +1,4 @@
-"""A recorded run and what is computed from it: the record, metrics, expectations, files.
+"""A recorded run and what is read from it: metrics, expectations, files, tables.
 
 - :mod:`~sandbox.run.record`: :class:`~sandbox.run.record.Run` (the arrays a simulation
   produced), the collision events, modes and statuses, and the recorder the loop fills;

@@ -1,9 +1,9 @@
 """Views of a recorded run for analysis: one vehicle's arrays, a long table, Parquet.
 
-- :meth:`sandbox.run.record.Run.vehicle` (:func:`vehicle_track`): one vehicle's arrays by
-  name, ``run.vehicle("red").x1``;
-- :meth:`sandbox.run.record.Run.to_dataframe` (:func:`to_dataframe`): a pandas DataFrame in
-  long format, one row per vehicle per recorded sample, with the columns of
+- :meth:`sandbox.run.record.Run.vehicle` (:func:`vehicle_track`): one vehicle's arrays
+  by name, ``run.vehicle("red").x1``;
+- :meth:`sandbox.run.record.Run.to_dataframe` (:func:`to_dataframe`): a pandas DataFrame
+  in long format, one row per vehicle per recorded sample, with the columns of
   ``trajectory.csv`` (:data:`COLUMNS`);
 - :func:`write_parquet`: ``trajectory.parquet``, the same table as ``trajectory.csv``
   in a compressed columnar file (``sandbox run --format parquet``).
@@ -71,7 +71,7 @@ def require(module: str, feature: str) -> ModuleType:
 
 @dataclass(frozen=True)
 class VehicleTrack:
-    """The recorded arrays of one vehicle (a slice of a :class:`~sandbox.run.record.Run`).
+    """The recorded arrays of one vehicle (a slice of a :class:`~sandbox.Run`).
 
     Attributes
     ----------

@@ -1,8 +1,8 @@
 """Expectations of a scenario (its ``expect:`` section) and their evaluation on a run.
 
 A scenario may state what its run must show; ``sandbox check``, the pytest plugin and
-:func:`sandbox.testing.assertions.check_scenario` run it and compare. The grammar (documented key
-by key in ``scenarios/reference.yaml``)::
+:func:`sandbox.testing.assertions.check_scenario` run it and compare. The grammar
+(documented key by key in ``scenarios/reference.yaml``)::
 
     expect:
       status: ok                  # ok | diverged; default ok (checked even if left out)
@@ -21,11 +21,11 @@ by key in ``scenarios/reference.yaml``)::
         red: {rms_last_quarter: {at_most: 0.06}, final: {at_most: 0.001}}  # final, max
 
 Bounds are inclusive. Every quantity is the one of ``metrics.json``
-(:func:`sandbox.run.metrics.compute_metrics`), so a check reads exactly what ``sandbox run``
-reports. Reading the section is the loader's business (:func:`read_expectations`, called
-by :func:`sandbox.scenario.parse_scenario` with its field reader, so problems come with
-line numbers and did-you-mean hints like those of every other section); evaluating it
-is :func:`evaluate`'s, which returns one :class:`Outcome` per expectation.
+(:func:`sandbox.run.metrics.compute_metrics`), so a check reads exactly what ``sandbox
+run`` reports. Reading the section is the loader's business (:func:`read_expectations`,
+called by :func:`sandbox.scenario.parse_scenario` with its field reader, so problems
+come with line numbers and did-you-mean hints like those of every other section);
+evaluating it is :func:`evaluate`'s, which returns one :class:`Outcome` per expectation.
 """
 
 from __future__ import annotations
@@ -548,8 +548,8 @@ def events_text(events: Sequence[dict[str, Any]], shown: int = SHOWN_EVENTS) -> 
 def closest_approach(run: Run) -> tuple[float, float, str, str] | None:
     """The closest two vehicles came: ``(distance [m], t [s], a, b)``, or None.
 
-    The same minimum as :func:`sandbox.run.metrics.min_distance` over the recorded samples,
-    with where and when it happened (pairs in scenario order).
+    The same minimum as :func:`sandbox.run.metrics.min_distance` over the recorded
+    samples, with where and when it happened (pairs in scenario order).
     """
     pos = np.asarray(run.pose[..., :2])
     T, n = pos.shape[:2]

@@ -31,16 +31,16 @@ Definitions (the keys of ``metrics.json``):
 - ``converged``: every healthy vehicle (no failure active at the end of the run, with a
   slot) has a settling time.
 - ``detections`` and ``detection`` (with ``detection: {method: residual}`` only, see
-  :func:`sandbox.behaviour.detection.detection_metrics`): every detection ``{vehicle, t, kind,
-  cleared, false_alarm}``, and per failure the detection delay [s] and whether the
+  :func:`sandbox.behaviour.detection.detection_metrics`): every detection ``{vehicle, t,
+  kind, cleared, false_alarm}``, and per failure the detection delay [s] and whether the
   kind was right; ``false_alarms`` counts detections on a vehicle without an active
   failure.
 - ``warnings``: what a user should know about the numbers (a saturated motor).
 - ``reassignments`` and ``leader_changes`` (only with ``reconfigure`` or
-  ``on_leader_failure``, see :mod:`sandbox.behaviour.reconfigure`): ``{t, assignment}``, the
-  formation slot each vehicle tracks from then on (null: none), and ``{t, from, to,
-  mode}`` (``to`` null: the virtual leader); ``slots``, each vehicle's slots over
-  time (``{vehicle: [[t, slot], ...]}``, held from ``t``; see
+  ``on_leader_failure``, see :mod:`sandbox.behaviour.reconfigure`): ``{t, assignment}``,
+  the formation slot each vehicle tracks from then on (null: none), and ``{t, from, to,
+  mode}`` (``to`` null: the virtual leader); ``slots``, each vehicle's slots over time
+  (``{vehicle: [[t, slot], ...]}``, held from ``t``; see
   :attr:`sandbox.run.record.Run.slot_index`).
 
 Formation errors, settling and mode switches read the recorded samples (at the
@@ -414,7 +414,7 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
 
 
 def _deadlocks(run: Run, spec: Any) -> list[dict[str, Any]]:
-    """``deadlocks`` of ``metrics.json`` (:func:`sandbox.run.deadlock.find_deadlocks`)."""
+    """The ``deadlocks`` of ``metrics.json``: :func:`find_deadlocks` of the run."""
     keys = {}
     if spec is not None:
         keys = {

@@ -2,10 +2,11 @@
 
 Each key is a :class:`~sandbox.plugins.Param` in one table (``TOP``, ``METRICS``, the
 own keys of the sections that select a plug-in, and, in :mod:`.vehicles`, those of the
-vehicles); a plug-in's keys are declared by its registration. :func:`read_param` reads
-a key from its declaration, :func:`read_plugin_section` a section that selects a
-plug-in by name (reference, formation, recovery, failures, obstacles). The JSON Schema
-(:mod:`sandbox.scenario.schema`) and the documentation checks derive from the same tables.
+vehicles); a plug-in's keys are declared by its registration. :func:`read_param` reads a
+key from its declaration, :func:`read_plugin_section` a section that selects a plug-in
+by name (reference, formation, recovery, failures, obstacles). The JSON
+Schema (:mod:`sandbox.scenario.schema`) and the documentation checks derive from
+these tables.
 """
 
 from __future__ import annotations
@@ -47,8 +48,8 @@ from sandbox.scenario.specs import (
 
 
 # Every key of the format is declared once, here or in the plug-in that uses it: the
-# reader below, the JSON Schema (sandbox.scenario.schema) and the documentation checks of
-# scenarios/reference.yaml (tests/test_reference_doc.py) are derived from these tables.
+# reader below, the JSON Schema (scenario/schema.py) and the documentation checks of
+# scenarios/reference.yaml (tests/test_reference_doc.py) derive from these tables.
 def _section(name: str) -> dict[str, Any]:
     return {"type": "custom", "default": None, "schema": {"$ref": f"#/$defs/{name}"}}
 

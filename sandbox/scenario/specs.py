@@ -217,7 +217,7 @@ class MetricsSpec:
 
 @dataclass(frozen=True)
 class DetectionSpec:
-    """How the platoon learns of failures (``detection:``, :mod:`sandbox.behaviour.detection`).
+    """How the platoon learns of failures (``detection:``).
 
     ``method``: the registered detector (``oracle``: the truth at once, the default;
     ``residual``: a CUSUM on the residual of the observed motion against the
@@ -230,7 +230,7 @@ class DetectionSpec:
 
 @dataclass(frozen=True)
 class SensingSpec:
-    """What the vehicles see of each other (``sensing:``, see :mod:`sandbox.behaviour.sensing`).
+    """What the vehicles see of each other (``sensing:``).
 
     ``position_noise`` [m] and ``heading_noise`` [rad]: standard deviations of the
     broadcast noise; ``delay`` [s]: the latency, a whole number of control periods;
@@ -245,7 +245,7 @@ class SensingSpec:
 
 @dataclass(frozen=True)
 class SafetySpec:
-    """The safety filter on the commands (``safety:``, see :mod:`sandbox.behaviour.safety`).
+    """The safety filter on the commands (``safety:``).
 
     ``filter``: the registered name (``none``: no filter, the default); ``params``:
     its YAML values (lengths in metres, defaults filled in).
@@ -257,7 +257,7 @@ class SafetySpec:
 
 @dataclass(frozen=True)
 class ReconfigureSpec:
-    """Slot reassignment after failures (``reconfigure:``, :mod:`sandbox.behaviour.reconfigure`).
+    """Slot reassignment after failures (``reconfigure:``).
 
     ``assign``: ``none`` (every vehicle keeps its slot) or ``hungarian``;
     ``close_gap``: whether the slots are the formation's first ones (one per healthy

@@ -1,15 +1,16 @@
 """Many small runs at once: a batch of independent worlds stepped together.
 
 A sweep's runs usually differ only in values (starts, offsets, ``beta``, failure times,
-seeds), not in structure (vehicle count, law, strategy, reference, obstacles). For
-such runs the fixed cost of a control step (about 200 numpy calls, 0.19 ms for three
+seeds), not in structure (vehicle count, law, strategy, reference, obstacles). For such
+runs the fixed cost of a control step (about 200 numpy calls, 0.19 ms for three
 vehicles, against 0.01 ms of physics) is paid once per step for the whole batch:
-:class:`Batch` keeps K worlds, each its own pymunk :class:`~sandbox.physics.world.World`, and
-evaluates the loop of :class:`~sandbox.loop.simulation.Simulation` (reference, formation
-law, failures, recovery, the flatness controller of eqs. (5)-(6), limits, the motor
-sizing, the loop metrics, the record) on stacked arrays of all ``K * n`` vehicles in
-one pass per step. Only the physics itself (bulk read, bulk write, ``Space.step``) is
-called world by world.
+:class:`Batch` keeps K worlds, each its own pymunk
+:class:`~sandbox.physics.world.World`, and evaluates the loop of
+:class:`~sandbox.loop.simulation.Simulation` (reference, formation law, failures,
+recovery, the flatness controller of eqs. (5)-(6), limits, the motor sizing, the loop
+metrics, the record) on stacked arrays of all ``K * n`` vehicles in one pass per step.
+Only the physics itself (bulk read, bulk write, ``Space.step``) is called world
+by world.
 
 Results are bit-identical to single runs (``Simulation(scenario).run()``): the same
 functions are called on the stacked arrays (elementwise, so each vehicle's numbers are
@@ -69,11 +70,11 @@ from sandbox.study.batchable import (
 class _Pairs:
     """Neighbour pairs of K worlds of ``n`` vehicles: never across worlds.
 
-    Every pair of a world is a candidate (as alone, up to :data:`MAX_VEHICLES`), in
-    the single run's ``(i, j)`` order, world after world; so the sums over pairs add
-    each vehicle's terms in the order it adds them alone. Obstacle candidates come from
-    a :class:`~sandbox.behaviour.recovery.NeighbourList` over all vehicles (a superset of the
-    pairs in range; the others weigh exactly 0).
+    Every pair of a world is a candidate (as alone, up to :data:`MAX_VEHICLES`), in the
+    single run's ``(i, j)`` order, world after world; so the sums over pairs add each
+    vehicle's terms in the order it adds them alone. Obstacle candidates come from a
+    :class:`~sandbox.behaviour.recovery.NeighbourList` over all vehicles (a superset of
+    the pairs in range; the others weigh exactly 0).
     """
 
     def __init__(self, worlds: int, n: int, radius: float) -> None:

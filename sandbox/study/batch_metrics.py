@@ -1,4 +1,4 @@
-"""The loop metrics of a batch of worlds: :class:`~sandbox.run.metrics.LoopMetrics` stacked.
+"""The loop metrics of a batch of worlds: the loop metrics of each, stacked.
 
 :class:`BatchTally` accumulates, for K worlds of ``n`` vehicles each stepped together by
 :class:`~sandbox.study.batch.Batch`, exactly the numbers ``LoopMetrics`` accumulates
@@ -25,7 +25,7 @@ CHUNK = 64
 
 
 class BatchTally:
-    """:class:`~sandbox.run.metrics.LoopMetrics` of K worlds, stacked (the same numbers)."""
+    """The :class:`~sandbox.run.metrics.LoopMetrics` of K worlds, stacked."""
 
     def __init__(self, K: int, n: int, h: float) -> None:
         self.K, self.n, self.h = K, n, h

@@ -68,8 +68,8 @@ KNOWN_FIELDS = frozenset(
 def batch_reason(sim: Simulation) -> str | None:
     """Why ``sim`` cannot run in a batch, or None when it can.
 
-    ``sim`` is a freshly built :class:`~sandbox.loop.simulation.Simulation` (step 0 sensed
-    and planned, nothing stepped).
+    ``sim`` is a freshly built :class:`~sandbox.loop.simulation.Simulation` (step 0
+    sensed and planned, nothing stepped).
     """
     sc = sim.scenario
     if type(sim) is not Simulation or type(sim.world) is not World:

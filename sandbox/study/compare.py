@@ -20,11 +20,10 @@ apply to every run), and prints one row per run:
 ``recovery.*`` paths take their first value only). ``--columns safety`` prints the
 safety benchmark's columns instead: ``success`` (converged and no contact episode at
 all), ``collisions`` (every episode), ``min separation - d`` [m], ``deadlocks``
-(:mod:`sandbox.run.deadlock`), ``extra settle`` (the settling time minus that of the same
-scenario without recovery on the ideal kinematics, where vehicles pass through each
-other and the obstacles) [s], and the wall time of planning and acting per control
-step [ms], a measurement that varies from run to run (the other columns are
-deterministic).
+(:mod:`sandbox.run.deadlock`), ``extra settle`` (the settling time minus that of the
+same scenario without recovery on the ideal kinematics, where vehicles pass through each
+other and the obstacles) [s], and the wall time of planning and acting per control step
+[ms], a measurement that varies from run to run (the other columns are deterministic).
 
 The strategy name ``file`` keeps each file's own recovery section (``sandbox compare
 scenarios/paper/fig1*.yaml --strategies file`` tabulates the section-4 figures as

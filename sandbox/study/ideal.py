@@ -1,13 +1,13 @@
 """The report's ideal kinematics: eq. (1) integrated exactly, without contacts.
 
-:class:`IdealKinematics` implements the :class:`~sandbox.physics.interface.Physics` interface
-with :func:`~sandbox.model.dynamics.unicycle_step` instead of pymunk: every vehicle moves
-exactly as its commands say and vehicles pass through each other. Run under the same
-:class:`~sandbox.loop.simulation.Simulation` (same controller, laws, recovery), it answers
-"would the report's model collide here?": :func:`ideal_encounters` counts the encounters
-(a pair closer than the sum of the radii, until the gap exceeds the contact release
-distance, as contact episodes are counted) and the closest approach. A check tool, not
-a scenario mode.
+:class:`IdealKinematics` implements the :class:`~sandbox.physics.interface.Physics`
+interface with :func:`~sandbox.model.dynamics.unicycle_step` instead of pymunk: every
+vehicle moves exactly as its commands say and vehicles pass through each other. Run
+under the same :class:`~sandbox.loop.simulation.Simulation` (same controller, laws,
+recovery), it answers "would the report's model collide here?": :func:`ideal_encounters`
+counts the encounters (a pair closer than the sum of the radii, until the gap exceeds
+the contact release distance, as contact episodes are counted) and the closest approach.
+A check tool, not a scenario mode.
 """
 
 from __future__ import annotations

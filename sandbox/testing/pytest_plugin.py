@@ -1,9 +1,9 @@
 """The pytest plugin of sandbox, active wherever sandbox is installed (``pytest11``).
 
 - Fixture ``sandbox_run``: a factory; ``sandbox_run("path.yaml", set=[...])`` returns
-  the :class:`~sandbox.run.record.Run` of that scenario. Runs are cached for the whole session:
-  identical arguments simulate once (the cached arrays are read-only). A relative path
-  is looked up next to the test file first, then in the working directory.
+  the :class:`~sandbox.run.record.Run` of that scenario. Runs are cached for the whole
+  session: identical arguments simulate once (the cached arrays are read-only). A
+  relative path is looked up next to the test file first, then in the working directory.
 - Files named ``test_*.yaml`` (or ``.yml``) with an ``expect:`` section, under the paths
   pytest collects, are test items, one per file (``test_x.yaml::expect``): the item
   runs the scenario and fails with one ``sandbox check`` line per failed expectation.

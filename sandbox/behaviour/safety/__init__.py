@@ -6,9 +6,9 @@ it after the flatness controller and before the open-loop schedules, the step AP
 command overrides and the failures. ``none`` (the default) is not called at all: runs
 without a filter are the same bytes as before the section existed.
 
-Built in: ``cbf`` (:mod:`sandbox.behaviour.safety.cbf`), a control-barrier-function filter
-through the look-ahead point of each unicycle, solved per vehicle by the exact planar
-quadratic program of :mod:`sandbox.behaviour.safety.qp`.
+Built in: ``cbf`` (:mod:`sandbox.behaviour.safety.cbf`), a control-barrier-function
+filter through the look-ahead point of each unicycle, solved per vehicle by the exact
+planar quadratic program of :mod:`sandbox.behaviour.safety.qp`.
 """
 
 from sandbox.behaviour.safety import cbf  # noqa: F401  (registers the filter)

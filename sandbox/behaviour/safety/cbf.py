@@ -30,9 +30,10 @@ Barriers, with ``gamma`` [1/s] and ``margin`` [m]:
   centre ``c_j`` and its measured velocity ``c_j'``: ``h = |p_i - c_j|^2 - D'^2``,
   ``D' = (d_i + d_j) / 2 + l + margin``, ``2 (p_i - c_j) . (w_i - c_j') >= -gamma h``;
 - **toward a static obstacle** (circles, boxes, polygons, walls of
-  :class:`~sandbox.behaviour.recovery.ObstacleField`): full responsibility against the nearest
-  surface point, ``h = s(p) - (d_i / 2 + l + margin)`` with ``s`` the signed distance
-  of ``p`` to the surface and ``n`` its unit normal there: ``n . w >= -gamma h``.
+  :class:`~sandbox.behaviour.recovery.ObstacleField`): full responsibility against the
+  nearest surface point, ``h = s(p) - (d_i / 2 + l + margin)`` with ``s`` the signed
+  distance of ``p`` to the surface and ``n`` its unit normal there:
+  ``n . w >= -gamma h``.
 
 Input bounds are hard: ``|v1| <= v1_max`` (``0 <= v1`` with ``reverse: false``),
 ``|v1 - v1(t_k-1)| <= max_accel h`` and ``|v2| <= v2_max``; where a vehicle has no
