@@ -190,7 +190,7 @@ def profile_phases(
     from sandbox.model.failures import FailureSchedule
     from sandbox.run.metrics import compute_metrics
     from sandbox.run.output import write_csv
-    from sandbox.run.record import Recorder
+    from sandbox.run.recorder import Recorder
 
     if path is None:
         scenario = load_scenario(scenario_doc(n, steps))

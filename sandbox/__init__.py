@@ -19,8 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import sandbox._startup  # noqa: F401  (first: quiet Ctrl-C while the command starts)
 from sandbox._moved import install as _install_moved_paths
-
-__version__ = "0.1.0"
+from sandbox._version import __version__ as __version__
 
 _install_moved_paths()  # the v0.2 module paths, for one release (sandbox._moved)
 

@@ -23,7 +23,7 @@ import sandbox.loop.simulation as simulation_module
 import sandbox.render.animation as render
 import sandbox.run.output as output_module
 from sandbox.cli import main
-from sandbox.run.record import Recorder, remove_dead_records
+from sandbox.run.recorder import Recorder, remove_dead_records
 
 TINY = {
     "name": "tiny",

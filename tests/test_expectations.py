@@ -13,12 +13,8 @@ from helpers import HEADON, PAPER
 
 from sandbox import compute_metrics, load_scenario, simulate
 from sandbox.errors import ScenarioError
-from sandbox.run.expectations import (
-    Bound,
-    Expectations,
-    closest_approach,
-    evaluate,
-)
+from sandbox.run.expectations import closest_approach, evaluate
+from sandbox.scenario.expectations import Bound, Expectations
 from sandbox.scenario.schema import build_schema
 
 FULL = {

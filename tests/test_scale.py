@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from helpers import SCENARIOS
 
-import sandbox.run.record as run_module
+import sandbox.run.recorder as run_module
 from sandbox import load_scenario
 from sandbox.behaviour.recovery import avoidance_shift
 from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList, neighbour_pairs
@@ -25,7 +25,8 @@ from sandbox.loop.simulation import Simulation
 from sandbox.model.obstacle_field import ObstacleField
 from sandbox.run.metrics import compute_metrics
 from sandbox.run.output import load_run_dir, write_run_dir
-from sandbox.run.record import MODE_AVOID, MODE_FORMATION, Recorder
+from sandbox.run.record import MODE_AVOID, MODE_FORMATION
+from sandbox.run.recorder import Recorder
 
 RECORDED = ("t", "pose", "cmd", "chi", "slot", "target", "mode", "failed", "reference")
 

@@ -80,10 +80,16 @@ Latching
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from sandbox.plugins.registration import DetectorContext, Param, register_detector
+from sandbox.plugins.registration import (
+    DetectorContext,
+    Param,
+    register_detector,
+    register_metrics,
+)
 
 #: The kinds a detection names (failure kinds of :mod:`sandbox.model.failures`).
 KINDS = ("stop", "spin", "stuck_steering", "uncontrolled", "crash")
@@ -697,3 +703,12 @@ def detection_metrics(info: dict, failures: list[dict]) -> dict | None:
         "failures": per_failure,
         "false_alarms": sum(d["false_alarm"] for d in detections),
     }
+
+
+@register_metrics("detection")
+def detection_blocks(run: Any) -> dict[str, Any]:
+    """``detections`` and ``detection`` of ``metrics.json`` (none under the oracle)."""
+    detection = detection_metrics(run.info, run.info.get("failures", []))
+    if detection is None:
+        return {}
+    return {"detections": detection.pop("detections"), "detection": detection}

@@ -6,16 +6,14 @@ safe zone, eqs. (22)/(26):
     x_ref = slot + beta * sum_i alpha_i * vect_avoid_i,   vect_avoid_i = u_i / dist_i
 
 with ``u_i`` the unit vector from obstacle i to the vehicle (eq. (24)) and ``dist_i``
-the
-distance (eq. (25)). Strategies differ only in the weight ``alpha(dist)``:
+the distance (eq. (25)). Strategies differ only in the weight ``alpha(dist)``:
 
 - ``none``: 0;
 - ``discontinuous`` (4.1): 1 inside R, 0 outside (a switch);
 - ``continuous`` (4.2, eq. (27)): 1 inside r, a linear ramp from 1 to 0 between r and R;
 - ``smooth`` (the conclusion's proposal): a hyperbolic-tangent transition between r and
-R,
-  scaled to equal exactly 1 at r and 0 at R. It is continuous, not differentiable, at r
-  and R: its slope there is ``s (1 - tanh(s)^2) / tanh(s)`` times the ramp's (0.15 for
+  R, scaled to equal exactly 1 at r and 0 at R. It is continuous, not differentiable, at
+  r and R: its slope there is ``s (1 - tanh(s)^2) / tanh(s)`` times the ramp's (0.15 for
   the default steepness s = 2), so the mode changes more gently than with the ramp.
 
 Beyond the report, the weighted strategies take a tangential term (``recovery.

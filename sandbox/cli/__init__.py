@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sandbox import __version__
+from sandbox._version import __version__
 from sandbox.cli import (
     check,
     compare,

@@ -63,9 +63,9 @@ from sandbox.run.record import (
     STATUS_DIVERGED,
     STATUS_INTERRUPTED,
     STATUS_OK,
-    Recorder,
     Run,
 )
+from sandbox.run.recorder import Recorder
 from sandbox.scenario import Scenario
 
 

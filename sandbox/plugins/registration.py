@@ -27,6 +27,7 @@ from sandbox.plugins.contexts import (
     ReferenceContext,
     StrategyContext,
 )
+from sandbox.plugins.params import REQUIRED, Param, declare
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -48,135 +49,19 @@ __all__ = [
     "register_detector",
     "register_failure",
     "register_filter",
+    "metric_contributions",
     "register_law",
+    "register_metrics",
     "register_obstacle",
     "register_reference",
     "register_strategy",
     "registry",
 ]
 
-#: A parameter without a default: the key must be given.
-REQUIRED: Any = type("Required", (), {"__repr__": lambda self: "REQUIRED"})()
 #: Where a law lays out a generated platoon's offsets (``register_law(frame=...)``).
 LAW_FRAMES = ("leader", "world", "reference", "leader_reference")
 #: Entry-point group of installed plug-in packages.
 ENTRY_POINT_GROUP = "sandbox.plugins"
-#: Parameter types a declaration may name.
-PARAM_TYPES = (
-    "number",
-    "length",
-    "integer",
-    "boolean",
-    "string",
-    "name",
-    "choice",
-    "point",
-    "points",
-)
-#: Further types the scenario layer uses for its own sections (read by its code).
-SECTION_TYPES = ("text", "custom")
-
-
-# ----------------------------------------------------------------------- parameters
-@dataclass(frozen=True)
-class Param:
-    """One YAML key of a plug-in or of a section of the scenario format.
-
-    Parameters
-    ----------
-    type : str
-        One of :data:`PARAM_TYPES`: ``number``, ``length`` (metres or ``"3d"``),
-        ``integer``, ``boolean``, ``string``, ``name`` (one plain line, usable in
-        file names), ``choice`` (one of ``choices``), ``point`` (two lengths [m]),
-        ``points`` (a list of at least ``min_items`` points).
-    default : optional
-        The value used when the key is left out; :data:`REQUIRED` (the default) makes
-        the key required; ``None`` makes it optional without a value. A length's
-        default may be written ``"3d"`` (a multiple of the vehicle diameter).
-    unit : str
-        Unit of the value (``"m"``, ``"s"``, ``"rad/s"``, ...), empty for none.
-    doc : str
-        One line: what the key means.
-    minimum, maximum : float, optional
-        Bounds (inclusive unless ``exclusive``).
-    exclusive : bool
-        Whether ``minimum`` itself is excluded (``> minimum``).
-    choices : tuple of str
-        The allowed values of a ``choice``.
-    min_items : int
-        Fewest points of a ``points`` value.
-    schema : dict, optional
-        The JSON Schema fragment of a ``custom`` key (a section of the format).
-    """
-
-    type: str = "number"
-    default: Any = REQUIRED
-    unit: str = ""
-    doc: str = ""
-    minimum: float | None = None
-    maximum: float | None = None
-    exclusive: bool = False
-    choices: tuple[str, ...] = ()
-    min_items: int = 2
-    schema: dict[str, Any] | None = field(default=None, compare=False)
-
-    def __post_init__(self) -> None:
-        if self.type not in PARAM_TYPES + SECTION_TYPES:
-            raise ValueError(
-                f"parameter type {self.type!r} is not one of: {', '.join(PARAM_TYPES)}"
-            )
-        if self.type == "choice" and not self.choices:
-            raise ValueError("a choice parameter needs its choices")
-
-    @property
-    def required(self) -> bool:
-        """Whether the key must be given."""
-        return self.default is REQUIRED
-
-    def bounds_text(self) -> str:
-        """The bounds in words, e.g. ``> 0`` or ``from 1 to 10000`` (empty if none)."""
-        lo, hi = self.minimum, self.maximum
-        if lo is not None and hi is not None:
-            return f"from {lo:g} to {hi:g}"
-        if lo is not None:
-            return f"{'>' if self.exclusive else '>='} {lo:g}"
-        if hi is not None:
-            return f"<= {hi:g}"
-        return ""
-
-
-def declare(params: Mapping[str, Any] | None) -> dict[str, Param]:
-    """Turn a ``params=`` argument into :class:`Param` declarations, in order.
-
-    A value that is a :class:`Param` is used as is; any other value is a default and
-    its type gives the parameter's: a float (or None) a ``number``, an int an
-    ``integer``, a bool a ``boolean``, a str a ``string``, two numbers a ``point``.
-
-    >>> declare({"gain": 1.0, "count": 3})["count"].type
-    'integer'
-    """
-    out: dict[str, Param] = {}
-    for name, value in (params or {}).items():
-        if not isinstance(name, str) or not name.isidentifier():
-            raise ValueError(f"parameter name {name!r} is not an identifier")
-        if isinstance(value, Param):
-            out[name] = value
-        elif isinstance(value, bool):
-            out[name] = Param("boolean", value)
-        elif isinstance(value, int):
-            out[name] = Param("integer", value)
-        elif value is None or isinstance(value, float):
-            out[name] = Param("number", value)
-        elif isinstance(value, str):
-            out[name] = Param("string", value)
-        elif isinstance(value, list | tuple) and len(value) == 2:
-            out[name] = Param("point", tuple(float(v) for v in value), unit="m")
-        else:
-            raise ValueError(
-                f"parameter {name!r}: cannot tell the type of the default {value!r} "
-                "(give a Param(...))"
-            )
-    return out
 
 
 # ------------------------------------------------------------------------ the kinds
@@ -455,6 +340,40 @@ def reserve_section_keys(kind: str, keys: tuple[str, ...]) -> None:
 def unregister(kind: str, name: str) -> None:
     """Remove a registration (for tests and interactive sessions)."""
     _REGISTRY[kind].pop(name, None)
+
+
+#: What a behaviour adds to ``metrics.json``: name -> ``f(run) -> dict`` of blocks.
+_METRICS: dict[str, Callable[[Any], dict[str, Any]]] = {}
+
+
+def register_metrics(name: str) -> Callable[[Any], Any]:
+    """Register what a behaviour adds to ``metrics.json``: ``f(run) -> dict``.
+
+    :func:`sandbox.compute_metrics` calls every registered function with the recorded
+    run and adds the blocks it returns (an empty dict adds nothing), after the
+    blocks of the run itself and before ``warnings``, in registration order. This is
+    how a stage above the metrics (the detector, for one) contributes to them without
+    the metrics importing it.
+
+    Raises
+    ------
+    ValueError
+        The name is already registered.
+    """
+
+    def add(func: Callable[[Any], dict[str, Any]]) -> Callable[[Any], dict[str, Any]]:
+        if name in _METRICS:
+            raise ValueError(f"metrics {name!r} are already registered")
+        _METRICS[name] = func
+        return func
+
+    return add
+
+
+def metric_contributions() -> dict[str, Callable[[Any], dict[str, Any]]]:
+    """The registered contributions to ``metrics.json``, in registration order."""
+    _ensure_builtins()
+    return dict(_METRICS)
 
 
 def register_law(

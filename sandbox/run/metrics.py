@@ -30,10 +30,11 @@ Definitions (the keys of ``metrics.json``):
   ``metrics.deadlock_distance`` from their slots (:mod:`sandbox.run.deadlock`).
 - ``converged``: every healthy vehicle (no failure active at the end of the run, with a
   slot) has a settling time.
-- ``detections`` and ``detection`` (with ``detection: {method: residual}`` only, see
-  :func:`sandbox.behaviour.detection.detection_metrics`): every detection ``{vehicle, t,
-  kind, cleared, false_alarm}``, and per failure the detection delay [s] and whether the
-  kind was right; ``false_alarms`` counts detections on a vehicle without an active
+- ``detections`` and ``detection`` (with ``detection: {method: residual}`` only, added
+  by the detector through :func:`sandbox.plugins.register_metrics`, see
+  :func:`sandbox.behaviour.detection.detection_metrics`): every detection ``{vehicle,
+  t, kind, cleared, false_alarm}``, and per failure the detection delay [s] and whether
+  the kind was right; ``false_alarms`` counts detections on a vehicle without an active
   failure.
 - ``warnings``: what a user should know about the numbers (a saturated motor).
 - ``reassignments`` and ``leader_changes`` (only with ``reconfigure`` or
@@ -55,6 +56,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.plugins.registration import metric_contributions
 from sandbox.run.deadlock import find_deadlocks
 from sandbox.run.record import MODE_AVOID, MODE_FORMATION, Run
 
@@ -403,12 +405,8 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     for key in (*keys, "slots"):
         if key in run.info:
             out[key] = run.info[key]
-    from sandbox.behaviour.detection import detection_metrics
-
-    detection = detection_metrics(run.info, run.info.get("failures", []))
-    if detection is not None:
-        out["detections"] = detection.pop("detections")
-        out["detection"] = detection
+    for contribute in metric_contributions().values():  # e.g. the detector's blocks
+        out.update(contribute(run))
     out["warnings"] = run_warnings(out)
     return out
 

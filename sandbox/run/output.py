@@ -27,7 +27,8 @@ import numpy as np
 import yaml
 
 from sandbox.errors import OutputError
-from sandbox.run.record import MODE_NAMES, Run, RunFileError, _alive
+from sandbox.run.record import MODE_NAMES, Run, RunFileError
+from sandbox.run.recorder import _alive
 from sandbox.scenario import load_scenario
 
 CSV_HEADER = "t,vehicle,x1,x2,x3,v1,v2,chi1,chi2,mode,failed"
@@ -178,12 +179,12 @@ def _write_manifest(run_dir: Path) -> None:
 
     It holds no time or host, so identical runs give identical manifests.
     """
-    import sandbox
+    from sandbox._version import __version__
 
     files = sorted(p.name for p in run_dir.iterdir() if p.name != MANIFEST)
     doc = {
         "product": "sandbox",
-        "version": getattr(sandbox, "__version__", "unknown"),
+        "version": __version__,
         "format": 1,
         "files": files,
     }

@@ -23,10 +23,10 @@ from sandbox.plugins.registration import (
     Param,
     PluginError,
 )
-from sandbox.run.expectations import allowed_keys as expect_keys
-from sandbox.run.expectations import read_expectations
 from sandbox.scenario import randomize
 from sandbox.scenario.checks import _check_consistency
+from sandbox.scenario.expectations import allowed_keys as expect_keys
+from sandbox.scenario.expectations import read_expectations
 from sandbox.scenario.reader import (
     _BAD_TEXT,
     MAX_VEHICLES,

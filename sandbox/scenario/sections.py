@@ -26,7 +26,7 @@ from sandbox.plugins.registration import (
     Param,
     reserve_section_keys,
 )
-from sandbox.run.expectations import EXPECT_SCHEMA
+from sandbox.scenario.expectations import EXPECT_SCHEMA
 from sandbox.scenario.reader import (
     _LENGTH,
     _REQUIRED,

@@ -28,7 +28,7 @@ from sandbox.plugins.registration import (
 )
 
 if TYPE_CHECKING:
-    from sandbox.run.expectations import Expectations
+    from sandbox.scenario.expectations import Expectations
 
 PLATOON_PATTERNS = ("grid", "line", "wedge", "ring")
 

@@ -666,7 +666,7 @@ class _WorldView:
 
 
 class _Record:
-    """A finished record (the ``arrays()`` of :class:`~sandbox.run.record.Recorder`)."""
+    """A finished record (what :meth:`Recorder.arrays` returns) of one world."""
 
     def __init__(self, arrays: dict[str, np.ndarray]) -> None:
         self._arrays = arrays
