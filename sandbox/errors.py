@@ -75,3 +75,24 @@ class PluginError(SandboxError):
 
     Also importable as ``sandbox.plugins.PluginError``.
     """
+
+
+class PluginRunError(SandboxError):
+    """A plug-in raised, or returned non-finite numbers, while a run was going on.
+
+    The loop ends the run with status ``error`` (its outputs are written, with the
+    plug-in and this message in ``metrics.json``'s ``error``).
+
+    Parameters
+    ----------
+    plugin : str
+        Which plug-in: its kind, name and origin (``recovery strategy repel
+        (my_plugins.py)``).
+    message : str
+        What went wrong, with the line of the plug-in where it happened.
+    """
+
+    def __init__(self, plugin: str, message: str) -> None:
+        self.plugin = plugin
+        self.message = message
+        super().__init__(f"{plugin}: {message}")

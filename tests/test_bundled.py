@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 from helpers import SCENARIOS
 
+from sandbox import load_scenario
 from sandbox.cli import main
 from sandbox.scenario import bundled
 
@@ -92,6 +93,23 @@ def test_copy_writes_an_identical_editable_file(elsewhere: Path, capsys) -> None
     assert (elsewhere / "into" / "rotating_circle.yaml").is_file()
     assert main(["copy", "reference", "ref.yaml"]) == 0
     assert main(["validate", "ref.yaml"]) == 0
+
+
+def test_a_copy_is_named_after_its_file(elsewhere: Path, capsys) -> None:
+    # v0.2 kept the bundled name: the copy's runs replaced runs/rotating_circle/
+    source = SCENARIOS / "paper" / "rotating_circle.yaml"
+    assert main(["copy", "paper/rotating_circle", "my_circle.yaml"]) == 0
+    copy = (elsewhere / "my_circle.yaml").read_text(encoding="utf-8")
+    assert load_scenario(elsewhere / "my_circle.yaml").name == "my_circle"
+    original = source.read_text(encoding="utf-8")
+    assert copy == original.replace("name: rotating_circle", "name: my_circle", 1)
+    assert main(["copy", "reference", "ref.yaml"]) == 0
+    line = next(
+        x
+        for x in (elsewhere / "ref.yaml").read_text().splitlines()
+        if x.startswith("name:")
+    )
+    assert line.startswith("name: ref ") and "# default" in line  # the comment stays
 
 
 def test_copy_never_replaces_a_file(elsewhere: Path, capsys) -> None:

@@ -92,7 +92,14 @@ def test_the_keep_right_plug_in_is_selected_from_yaml_and_avoids_the_collision(
     scenario = str(EXAMPLES / "keep_right.yaml")
     for label, extra in (("kr", []), ("none", ["--set", "recovery.strategy=none"])):
         done = sandbox_cli(
-            "run", scenario, "--duration", "8", "--out", str(tmp_path / label), *extra
+            "run",
+            scenario,
+            "--duration",
+            "8",
+            "--out",
+            str(tmp_path / label),
+            "--trust-plugins",
+            *extra,
         )
         assert done.returncode == 0, done.stderr
     kr = json.loads((tmp_path / "kr" / "metrics.json").read_text())

@@ -127,6 +127,9 @@ def test_the_schema_accepts_the_grammar_and_rejects_what_the_loader_rejects() ->
             "expect.formation_error.red.mean: unknown key",
         ),
         ({"formation_error": {"red": {"final": 0.1}}}, "red.final: not a bound"),
+        # v0.2 accepted it and `sandbox check` then crashed
+        ({"collisions": {"total": 10**400}}, "total: too large a count (got a number"),
+        ({"deadlocks": {"at_most": 10**10}}, "deadlocks.at_most: too large a count"),
     ],
 )
 def test_bad_expectations_are_reported(expect: object, message: str) -> None:
@@ -243,3 +246,21 @@ def test_null_means_not_given_for_the_loader_and_the_schema() -> None:
         collisions=(("healthy", Bound(0, 0)),),
         settling_times=(("green", Bound(None, 3.0)),),
     )
+
+
+@pytest.mark.parametrize(
+    "expect",
+    [
+        {"collisions": {"healthy": {"at_least": 0}}},
+        {"min_distance": {"at_least": 0}},
+        {"min_distance": {"at_most": 1e6}},
+        {"settling_time": {"red": {"at_least": 0, "at_most": 1e7}}},
+    ],
+)
+def test_an_expectation_that_cannot_fail_is_warned_of(expect: dict) -> None:
+    scenario = load_scenario(doc_with(expect))
+    assert any("cannot fail" in w for w in scenario.warnings), scenario.warnings
+
+
+def test_an_expectation_that_can_fail_is_not_warned_of() -> None:
+    assert not any("cannot fail" in w for w in load_scenario(doc_with(FULL)).warnings)

@@ -89,6 +89,12 @@ def post(ctx):
 '''
 
 
+@pytest.fixture(autouse=True)
+def trusted(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests run their own plug-ins (the trust model: test_plugin_trust.py)."""
+    monkeypatch.setenv("SANDBOX_TRUST_PLUGINS", "1")
+
+
 @pytest.fixture
 def registry_snapshot():
     """Restore the registry (and the loaded-file cache) after a test."""
@@ -134,7 +140,10 @@ def test_a_users_strategy_runs_validates_compares_and_is_in_the_schema(
 ) -> None:
     path = write(tmp_path, scenario_doc(gain=0.3, reach="2d"))
     monkeypatch.chdir(tmp_path / "..")  # the plug-in path is relative to the file
-    assert main(["validate", str(path)]) == 0
+    assert main(["validate", str(path)]) == 0  # never runs the file's plug-in code
+    assert "ok, not checked: recovery (strategy repel)" in capsys.readouterr().out
+    plugin = str(tmp_path / "my_plugins.py")
+    assert main(["validate", str(path), "--plugin", plugin]) == 0  # named: trusted
     assert "ok (3 vehicles" in capsys.readouterr().out
     sc = load_scenario(path)
     assert sc.recovery.strategy == "repel"

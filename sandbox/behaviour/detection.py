@@ -530,11 +530,11 @@ class Detection:
     def __init__(self, scenario, names: list[str]) -> None:
         from collections import deque
 
-        from sandbox.plugins.registration import get
+        from sandbox.plugins.registration import get, runnable
 
         spec = scenario.detection
         self.method = spec.method
-        self.func = get("detector", spec.method).obj
+        self.func = runnable(get("detector", spec.method))
         self.params = dict(spec.params)
         self.memory: dict = {}
         self.names = list(names)

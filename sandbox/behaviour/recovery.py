@@ -68,7 +68,13 @@ import numpy as np
 
 from sandbox.geometry.neighbours import NeighbourList, neighbour_pairs
 from sandbox.model.obstacle_field import MIN_DIST, ObstacleField
-from sandbox.plugins.registration import Param, StrategyContext, get, register_strategy
+from sandbox.plugins.registration import (
+    Param,
+    StrategyContext,
+    get,
+    register_strategy,
+    runnable,
+)
 
 __all__ = [
     "WEIGHTS",
@@ -274,7 +280,7 @@ def avoidance_shift(
         obstacle_field=obstacles,
         neighbours=neighbours,
     )
-    return get("strategy", strategy).obj(ctx)
+    return runnable(get("strategy", strategy))(ctx)
 
 
 def weighted_shift(

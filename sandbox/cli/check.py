@@ -105,5 +105,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also print every expectation that holds, with its measured value",
     )
-    add_plugin_option(p)
+    add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_check)

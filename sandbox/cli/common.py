@@ -265,11 +265,46 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
 
 
 def check_mp4(args: argparse.Namespace) -> None:
-    """Before a run: refuse ``--mp4`` when MP4 output cannot work here."""
+    """Before a run: refuse ``--mp4`` when MP4 output cannot work here.
+
+    Also refuses a ``--gif`` or ``--mp4`` target that exists and is not an earlier
+    output of the same kind (a GIF, an MP4 file), unless ``--force``: a typo such as
+    ``--gif mine.yaml`` never replaces what a user wrote.
+    """
+    for kind in ("gif", "mp4"):
+        check_target(getattr(args, kind, None), kind, getattr(args, "force", False))
     if getattr(args, "mp4", None):
         from sandbox.render.video import require_video
 
         require_video()
+
+
+#: How the first bytes of an earlier output of each kind begin.
+_MAGIC = {
+    "gif": lambda head: head[:6] in (b"GIF87a", b"GIF89a"),
+    "mp4": lambda head: head[4:8] == b"ftyp",
+}
+
+
+def check_target(target: str | None, kind: str, force: bool) -> None:
+    """Refuse to replace a file that is not an earlier ``kind`` output (``--force``)."""
+    if not target or force:
+        return
+    path = Path(target)
+    if path.is_dir():
+        raise GifOptionError(f"--{kind} {target}: a directory (expected a file path)")
+    if not path.exists():
+        return
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(12)
+    except OSError:
+        head = b""
+    if not path.is_file() or not _MAGIC[kind](head):
+        raise GifOptionError(
+            f"--{kind} {target}: exists and is not a {kind.upper()} file; not "
+            "replaced (give another path, or --force to replace it)"
+        )
 
 
 class GifOptionError(SandboxError):
@@ -397,6 +432,11 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
     p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace a --gif / --mp4 target even if it is not an earlier output",
+    )
+    p.add_argument(
         "--follow",
         choices=("auto", "leader", "whole"),
         default="auto",
@@ -411,15 +451,28 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def add_plugin_option(p: argparse.ArgumentParser) -> None:
-    """Add ``--plugin PATH_OR_MODULE`` (repeatable) to a command reading scenarios."""
+def add_plugin_option(p: argparse.ArgumentParser, trust: bool = False) -> None:
+    """Add ``--plugin PATH_OR_MODULE`` (repeatable) to a command reading scenarios.
+
+    With ``trust``, also ``--trust-plugins``: a command that runs scenarios may then
+    run the code of the plug-ins they list (``plugins:``); without the flag (or
+    ``SANDBOX_TRUST_PLUGINS=1``) such a scenario is refused with one line.
+    """
     p.add_argument(
         "--plugin",
         action="append",
         metavar="PATH_OR_MODULE",
-        help="import a plug-in file (.py) or module first (repeatable); scenarios "
-        "can also list theirs under plugins:",
+        help="import a plug-in file (.py) or module first (repeatable, trusted: you "
+        "named it); scenarios can also list theirs under plugins:",
     )
+    if trust:
+        p.add_argument(
+            "--trust-plugins",
+            action="store_true",
+            help="run the code of the plug-ins the scenarios list under plugins: "
+            "(a scenario is data: without this, or SANDBOX_TRUST_PLUGINS=1, one "
+            "that lists plug-in code is refused)",
+        )
 
 
 def load_cli_plugins(args: argparse.Namespace) -> None:
@@ -432,6 +485,8 @@ def load_cli_plugins(args: argparse.Namespace) -> None:
     """
     from sandbox.plugins import load_plugins
 
+    if getattr(args, "trust_plugins", False):  # this process and its workers
+        os.environ["SANDBOX_TRUST_PLUGINS"] = "1"
     load_plugins(tuple(getattr(args, "plugin", None) or ()))
 
 

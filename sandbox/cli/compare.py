@@ -116,5 +116,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="worker processes, >= 1, capped at the usable cores (default 1); the "
         "table is the same",
     )
-    add_plugin_option(p)
+    add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_compare)

@@ -119,7 +119,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("run_dir", help="a run directory written by sandbox run")
     p.add_argument("--gif", type=nonempty, help="output GIF file")
     add_gif_options(p)
-    add_plugin_option(p)
+    add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_render)
     p = add_command(
         sub,
@@ -167,5 +167,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"resolution of PNG figures, {DPI_RANGE[0]} to {DPI_RANGE[1]} dots per "
         "inch (default 120)",
     )
-    add_plugin_option(p)
+    add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_plot)

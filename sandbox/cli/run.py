@@ -30,7 +30,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from sandbox.loop.simulation import Simulation
     from sandbox.run.metrics import compute_metrics
     from sandbox.run.output import check_out_dir, write_run_dir
-    from sandbox.run.record import STATUS_DIVERGED, STATUS_INTERRUPTED
+    from sandbox.run.record import STATUS_DIVERGED, STATUS_ERROR, STATUS_INTERRUPTED
     from sandbox.scenario import load_scenario
 
     if args.format == "parquet":
@@ -84,6 +84,14 @@ def cmd_run(args: argparse.Namespace) -> int:
             f"error: the run diverged at t = {d.get('t', 0):.3f} s "
             f"(vehicle {d.get('vehicle')}: {d.get('reason')}); outputs up to then are "
             f"in {out_dir}",
+            file=sys.stderr,
+        )
+        return EXIT_FAILED
+    if run.status == STATUS_ERROR:
+        e = metrics.get("error", {})
+        print(
+            f"error: at t = {e.get('t', 0):.3f} s the {e.get('plugin')} failed: "
+            f"{e.get('message')}; outputs up to then are in {out_dir} (status 'error')",
             file=sys.stderr,
         )
         return EXIT_FAILED
@@ -195,5 +203,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--gif", type=nonempty, help="also render the run to this GIF file")
     add_gif_options(p)
-    add_plugin_option(p)
+    add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_run)

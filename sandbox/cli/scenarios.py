@@ -24,7 +24,7 @@ def cmd_list(args: argparse.Namespace) -> int:
         path = root / f"{name}.yaml"
         try:  # a sweep file (sandbox sweep) is described by its grid
             sweep = check_sweep_file(path)
-            sc = load_scenario(path) if sweep is None else None
+            sc = load_scenario(path, check_only=True) if sweep is None else None
             desc = (sc.description.splitlines() or [""])[0] if sc else sweep
         except ScenarioError as exc:
             desc = f"(invalid: {exc.lines[0]})"

@@ -239,5 +239,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="md",
         help="table: Markdown (default) or CSV",
     )
-    add_plugin_option(p)
+    add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_sweep)

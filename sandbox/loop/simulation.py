@@ -31,6 +31,7 @@ import numpy as np
 from sandbox.behaviour.detection import Detection
 from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.behaviour.sensing import make_broadcast
+from sandbox.errors import PluginRunError
 from sandbox.geometry.neighbours import NeighbourList
 from sandbox.loop.divergence import diverged
 from sandbox.loop.observation import Observation, Overrides, override_rows
@@ -53,6 +54,7 @@ from sandbox.plugins.registration import (
     StrategyContext,
     get,
     make_law,
+    runnable,
 )
 from sandbox.run.metrics import LoopMetrics
 from sandbox.run.record import (
@@ -61,6 +63,7 @@ from sandbox.run.record import (
     MODE_FAILED,
     MODE_FORMATION,
     STATUS_DIVERGED,
+    STATUS_ERROR,
     STATUS_INTERRUPTED,
     STATUS_OK,
     Run,
@@ -125,7 +128,7 @@ class Simulation:
         )
         self.law_params = dict(law_spec.params) if law_spec else {}
         self.law_memory: dict = {}
-        self.strategy = get("strategy", scenario.recovery.strategy).obj
+        self.strategy = runnable(get("strategy", scenario.recovery.strategy))
         self.strategy_params = dict(scenario.recovery.params)
         self.obstacles = ObstacleField(scenario.obstacles)
         self.failures = FailureSchedule(scenario.failures, self.names)
@@ -133,7 +136,7 @@ class Simulation:
         # The safety filter (safety:); None with filter none: not called at all.
         safety = scenario.safety
         self._filter = (
-            None if safety.filter == "none" else get("filter", safety.filter).obj
+            None if safety.filter == "none" else runnable(get("filter", safety.filter))
         )
         self._filter_memory: dict = {}
         self._filter_stats: dict = {}
@@ -202,7 +205,7 @@ class Simulation:
         # Slot reassignment and leader handover on events (None: keep every slot).
         self.reconfiguration = Reconfiguration.build(self)
         if self._sense():
-            self._plan()
+            self._guarded(self._plan)
 
     # ------------------------------------------------------------------ helpers
     def _scheduled_commands(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
@@ -544,7 +547,11 @@ class Simulation:
         """One control period: act, record, advance, sense and plan the next."""
         self._recorded_target = None
         start = time.perf_counter()
-        chi_next = self._act(commands, targets, shifts)
+        try:
+            chi_next = self._act(commands, targets, shifts)
+        except PluginRunError as exc:
+            self._plugin_failed(exc)
+            return
         self._control_time += time.perf_counter() - start
         self._record(self.plan, self.fleet.mode, self.fleet.failed)
         if should_stop is not None and should_stop():
@@ -555,8 +562,32 @@ class Simulation:
         self._advance(chi_next)
         if self._sense():
             start = time.perf_counter()
-            self._plan()
+            self._guarded(self._plan)
             self._control_time += time.perf_counter() - start
+
+    def _guarded(self, stage: Callable[[], None]) -> None:
+        """Run a stage that calls plug-ins; one that fails ends the run."""
+        try:
+            stage()
+        except PluginRunError as exc:
+            self._plugin_failed(exc)
+
+    def _plugin_failed(self, exc: PluginRunError) -> None:
+        """End the run with status ``error``: a plug-in raised or returned NaN.
+
+        The sample of the time it happened is recorded as a diverged state's is (the
+        plan undefined, the last commands), and ``info["error"]`` names the plug-in.
+        """
+        fleet = self.fleet
+        self.status = STATUS_ERROR
+        self.info["error"] = {
+            "t": self.k * self.h,
+            "plugin": exc.plugin,
+            "message": exc.message,
+        }
+        self.plan = Plan.undefined(fleet.n, failed=fleet.failed)
+        self._record(self.plan, fleet.mode, fleet.failed, always=True)
+        self._finish()
 
     def _finish(self) -> None:
         self._closed = True
@@ -647,9 +678,13 @@ class Simulation:
                 self.status = STATUS_INTERRUPTED
                 self.info["interrupted"] = {"t": self.k * self.h}
             self._recorded_target = None
-            self._act(None, None)
-            self._record(self.plan, self.fleet.mode, self.fleet.failed)
-            self._finish()
+            try:
+                self._act(None, None)
+            except PluginRunError as exc:
+                self._plugin_failed(exc)
+            else:
+                self._record(self.plan, self.fleet.mode, self.fleet.failed)
+                self._finish()
         sc, info = self.scenario, self.info
         info["failed_at"] = self.failed_at
         if self.detection is not None:

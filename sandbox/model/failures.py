@@ -32,7 +32,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sandbox.plugins.registration import FailureContext, Param, get, register_failure
+from sandbox.plugins.registration import (
+    FailureContext,
+    Param,
+    get,
+    register_failure,
+    runnable,
+)
 
 if TYPE_CHECKING:
     from sandbox.scenario import FailureSpec
@@ -108,6 +114,8 @@ class FailureSchedule:
             [s.until if s.until is not None else np.inf for s in specs], dtype=float
         )
         self.kinds = [get("failure", s.kind) for s in specs]
+        #: The failure functions as the loop calls them (a user's code guarded).
+        self.funcs = [runnable(kind) for kind in self.kinds]
         self.names = list(names)
         self.v2_onset = np.zeros(len(specs))
         self.started = np.zeros(len(specs), dtype=bool)
@@ -182,7 +190,7 @@ class FailureSchedule:
                 v2_onset=float(self.v2_onset[k]),
                 params=dict(spec.params),
             )
-            v1[i], v2[i] = kind.obj(ctx)
+            v1[i], v2[i] = self.funcs[k](ctx)
             if last_v1 is not None and not kind.options["immovable"]:
                 step = float(np.broadcast_to(accel_step, (self.n,))[i])
                 v1[i] = within_drive(float(v1[i]), float(last_v1[i]), step)

@@ -37,6 +37,7 @@ from sandbox.plugins.contexts import (
     StrategyContext,
 )
 from sandbox.plugins.loading import (
+    is_loaded,
     load_entry_points,
     load_plugin,
     load_plugins,
@@ -66,6 +67,7 @@ from sandbox.plugins.registration import (
     register_reference,
     register_strategy,
     registry,
+    runnable,
     unregister,
 )
 
@@ -86,6 +88,7 @@ __all__ = [
     "StrategyContext",
     "all_params",
     "get",
+    "is_loaded",
     "load_entry_points",
     "load_plugin",
     "load_plugins",
@@ -104,5 +107,6 @@ __all__ = [
     "register_strategy",
     "registry",
     "resolve_file",
+    "runnable",
     "unregister",
 ]

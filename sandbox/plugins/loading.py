@@ -1,7 +1,8 @@
 """Importing plug-ins: from files, modules and the ``sandbox.plugins`` entry points.
 
-A plug-in is imported once (by resolved path or module name); its decorators register
-its names, each with its origin (the file, the module, the entry point). Any error
+A plug-in is imported once (by resolved path or module name), with one line
+``loading plug-in code: PATH`` on stderr; its decorators register its names, each with
+its origin (the file, the module, the entry point). Any error
 while importing it becomes one :class:`~sandbox.plugins.PluginError` naming the
 plug-in, the error and the line of the plug-in where it happened: never a traceback.
 """
@@ -59,14 +60,24 @@ def load_plugin(spec: str, base: Path | None = None) -> Any:
             raise PluginError(f"plug-in {text}: not a Python file")
         module = importlib.util.module_from_spec(module_spec)
         sys.modules[name] = module
+        print(f"loading plug-in code: {path}", file=sys.stderr)
         _import(text, str(path), lambda: module_spec.loader.exec_module(module))
         _plugins._LOADED[key] = module
         return module
     if text in _plugins._LOADED:
         return _plugins._LOADED[text]
+    print(f"loading plug-in code: {text}", file=sys.stderr)
     module = _import(text, text, lambda: importlib.import_module(text))
     _plugins._LOADED[text] = module
     return module
+
+
+def is_loaded(spec: str, base: Path | None = None) -> bool:
+    """Whether the plug-in file or module ``spec`` was imported in this process."""
+    text = str(spec).strip()
+    if looks_like_file(text):
+        return str(resolve_file(text, base)) in _plugins._LOADED
+    return text in _plugins._LOADED
 
 
 def looks_like_file(spec: str) -> bool:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.errors import PluginError
+from sandbox.errors import PluginError, PluginRunError
 from sandbox.plugins.builtin import BUILTIN_MODULES
 from sandbox.plugins.contexts import (
     DetectorContext,
@@ -56,6 +56,7 @@ __all__ = [
     "register_reference",
     "register_strategy",
     "registry",
+    "runnable",
 ]
 
 #: Where a law lays out a generated platoon's offsets (``register_law(frame=...)``).
@@ -567,6 +568,85 @@ def no_detector(ctx: DetectorContext) -> np.ndarray:
     return np.zeros(len(ctx.pos), dtype=bool)
 
 
+# ------------------------------------------------------------- guarding plug-in code
+#: The kinds whose plug-ins run during a run (an obstacle type runs at load time).
+RUNTIME_KINDS = ("law", "strategy", "failure", "reference", "filter", "detector")
+#: The methods of a plug-in class that the loop calls.
+_METHODS = {"law": "targets", "reference": "evaluate"}
+
+
+def _non_finite(value: Any) -> bool:
+    """Whether a plug-in's result holds a NaN or an infinity (numbers only)."""
+    if isinstance(value, tuple | list):
+        return any(_non_finite(v) for v in value)
+    if isinstance(value, np.ndarray | float | int) and not isinstance(value, bool):
+        array = np.asarray(value)
+        return array.dtype.kind in "fc" and not bool(np.isfinite(array).all())
+    return False
+
+
+def _guard_call(func: Callable[..., Any], label: str) -> Callable[..., Any]:
+    def guarded(*args: Any, **kwargs: Any) -> Any:
+        try:
+            out = func(*args, **kwargs)
+        except (Exception, SystemExit) as exc:  # a user's code may raise anything
+            raise PluginRunError(label, _raised(exc)) from None
+        if _non_finite(out):
+            raise PluginRunError(label, "returned a NaN or an infinity")
+        return out
+
+    return guarded
+
+
+class _GuardedInstance:
+    """A plug-in class's instance whose method the loop calls, guarded."""
+
+    def __init__(self, inner: Any, method: str, label: str) -> None:
+        self._inner = inner
+        setattr(self, method, _guard_call(getattr(inner, method), label))
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._inner, name)
+
+
+def _raised(exc: BaseException) -> str:
+    """``Type: message (file, line N)`` of the innermost frame that raised."""
+    import traceback
+
+    frames = traceback.extract_tb(exc.__traceback__)
+    where = f" ({frames[-1].filename}, line {frames[-1].lineno})" if frames else ""
+    text = str(exc).splitlines()[0] if str(exc) else ""
+    return f"{type(exc).__name__}: {text}{where}"
+
+
+def _label(plugin: Plugin) -> str:
+    return f"{KINDS[plugin.kind].title} {plugin.name} ({plugin.origin})"
+
+
+def runnable(plugin: Plugin) -> Any:
+    """The plug-in's object as the loop calls it: a user's code guarded.
+
+    A built-in is returned as it is. A user's function (or, for a class, the
+    instance's ``targets`` / ``evaluate``) is wrapped so that an exception it raises,
+    ``SystemExit`` included, or a NaN or infinity among the numbers it returns becomes
+    a :class:`~sandbox.errors.PluginRunError` naming the plug-in: the run ends with
+    status ``error`` instead of a traceback (or a silent ``ok``).
+    """
+    obj = plugin.obj
+    if plugin.origin.startswith("built-in") or plugin.kind not in RUNTIME_KINDS:
+        return obj
+    label = _label(plugin)
+    if inspect.isclass(obj):
+        method = _METHODS.get(plugin.kind)
+
+        def build(*args: Any, **kwargs: Any) -> Any:
+            made = _guard_call(obj, label)(*args, **kwargs)
+            return made if method is None else _GuardedInstance(made, method, label)
+
+        return build
+    return _guard_call(obj, label)
+
+
 # ------------------------------------------------------------------ building plug-ins
 class FunctionLaw:
     """A formation law registered as a function ``f(ctx) -> (slot, v_ref, a_ref)``."""
@@ -588,7 +668,10 @@ def make_law(name: str, params: Mapping[str, Any], delta: np.ndarray, h: float) 
     A class is built as ``cls(delta, h, **params)``; a function is wrapped in a
     :class:`FunctionLaw`. Either has ``targets(ctx: LawContext)``.
     """
-    obj = get("law", name).obj
-    if inspect.isclass(obj):
-        return obj(delta, h, **dict(params))
-    return FunctionLaw(obj)
+    plugin = get("law", name)
+    if inspect.isclass(plugin.obj):
+        return runnable(plugin)(delta, h, **dict(params))
+    law = FunctionLaw(plugin.obj)
+    if plugin.origin.startswith("built-in"):
+        return law
+    return _GuardedInstance(law, "targets", _label(plugin))  # its broadcast too

@@ -401,7 +401,14 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     }
     if loop:
         out["motor"] = loop["motor"]
-    keys = ("safety", "diverged", "interrupted", "reassignments", "leader_changes")
+    keys = (
+        "safety",
+        "diverged",
+        "interrupted",
+        "error",
+        "reassignments",
+        "leader_changes",
+    )
     for key in (*keys, "slots"):
         if key in run.info:
             out[key] = run.info[key]

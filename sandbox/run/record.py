@@ -36,6 +36,8 @@ MODE_NAMES = ("formation", "avoid", "failed", "external")
 STATUS_OK = "ok"
 STATUS_DIVERGED = "diverged"
 STATUS_INTERRUPTED = "interrupted"
+#: A plug-in raised or returned non-finite numbers (``Run.info["error"]``).
+STATUS_ERROR = "error"
 
 
 @dataclass
@@ -401,7 +403,12 @@ def _check_meta(meta: Any, n: int) -> None:
     leader = meta.get("leader")
     if isinstance(leader, bool) or not isinstance(leader, int) or not -1 <= leader < n:
         raise RunFileError(f"meta: leader {leader!r} is not a vehicle index or -1")
-    if meta.get("status") not in (STATUS_OK, STATUS_DIVERGED, STATUS_INTERRUPTED):
+    if meta.get("status") not in (
+        STATUS_OK,
+        STATUS_DIVERGED,
+        STATUS_INTERRUPTED,
+        STATUS_ERROR,
+    ):
         raise RunFileError(f"meta: unknown status {meta.get('status')!r}")
     if not isinstance(meta.get("info"), dict):
         raise RunFileError("meta: info is not a mapping")

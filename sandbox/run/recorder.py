@@ -79,6 +79,13 @@ class Recorder:
         self.on_disk = T * sample_bytes > limit
         self._shapes = shapes
         self._dir: Path | None = None
+        where = (
+            Path(directory) if directory is not None else Path(tempfile.gettempdir())
+        )
+        # Every run (spilling or not) clears what killed runs left, once a process.
+        if where not in _CLEARED:
+            _CLEARED.add(where)
+            remove_dead_records(where)
         if not self.on_disk:
             self._chunk = T
             self._buffers = {
@@ -90,10 +97,6 @@ class Recorder:
             k: np.zeros((self._chunk, *shape), dtype)
             for k, (shape, dtype) in shapes.items()
         }
-        where = (
-            Path(directory) if directory is not None else Path(tempfile.gettempdir())
-        )
-        remove_dead_records(where)
         self._dir = Path(
             tempfile.mkdtemp(prefix=f"sandbox-record-{os.getpid()}-", dir=where)
         )
@@ -202,6 +205,10 @@ def _npy_header(dtype: np.dtype, shape: tuple[int, ...], length: int = 0) -> byt
 
 #: The files a disk-backed record holds.
 _RECORD_FILES = frozenset(f"{k}.npy" for k in _FIELDS)
+
+
+#: Directories whose dead records this process has removed already.
+_CLEARED: set[Path] = set()
 
 
 def remove_dead_records(directory: Path) -> None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import difflib
 import os
+import re
 from pathlib import Path, PurePosixPath
 
 from sandbox.errors import OutputError, Problem, ScenarioError
@@ -117,6 +118,9 @@ def copy(name: str, dest: str | os.PathLike[str] | None = None) -> Path:
         A file, or an existing directory to copy into; default: ``<stem>.yaml`` in the
         working directory.
 
+    The copy's top-level ``name:`` becomes the new file's stem (when that is a usable
+    run name), so its runs go to ``runs/<stem>/``, never over the bundled scenario's.
+
     Raises
     ------
     ScenarioError
@@ -128,7 +132,7 @@ def copy(name: str, dest: str | os.PathLike[str] | None = None) -> Path:
     target = Path(dest) if dest is not None else Path(source.name)
     if target.is_dir():
         target = target / source.name
-    data = source.read_bytes()
+    data = _renamed(source.read_bytes(), target.stem)
     try:
         # Mode "x" creates a new file and never opens an existing one; a write that
         # fails removes the new file, so no half-written copy is left.
@@ -166,3 +170,18 @@ def _unknown(name: str) -> str:
         "name; expected a readable YAML scenario file or a name that 'sandbox list' "
         f"prints{hint})"
     )
+
+
+def _renamed(data: bytes, stem: str) -> bytes:
+    """The file's text with its top-level ``name:`` line naming ``stem`` instead."""
+    from sandbox.scenario.reader import name_problem
+
+    if name_problem(stem, run=True):
+        return data  # the loader will name a usable run name for the user to choose
+    lines = data.decode("utf-8").splitlines(keepends=True)
+    for i, line in enumerate(lines):
+        match = re.match(r"(name:\s*)(\S+)(.*)", line, re.DOTALL)
+        if match:
+            lines[i] = f"{match.group(1)}{stem}{match.group(3)}"
+            break
+    return "".join(lines).encode("utf-8")

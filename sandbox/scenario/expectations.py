@@ -56,6 +56,11 @@ FORMATION_STATS = ("rms_last_quarter", "final", "max")
 BOUND_KEYS = ("at_least", "at_most")
 #: Run statuses that can be expected.
 STATUSES = ("ok", "diverged")
+#: Largest count an expectation may state (counts beyond it cannot be told apart).
+MAX_COUNT = 10**9
+#: Upper bounds that no run can exceed in practice, by kind: with no lower bound above
+#: 0, such an expectation cannot fail (10^6 m or s: far beyond any run's scale).
+NEVER_FAILS = {"count": MAX_COUNT, "length": 1e6, "time": 1e6}
 #: Collision events named in a message before "... and N more".
 SHOWN_EVENTS = 3
 #: Vehicle names listed in a message before "... (N vehicles)".
@@ -462,7 +467,21 @@ def _bound(rd: _Reader, value: Any, path: str, kind: str) -> Bound | None:
     if lo is not None and hi is not None and lo > hi:
         rd.fail(path, "empty range", f"at_least {lo:g} > at_most {hi:g}", expected)
         return None
+    if (lo is None or lo <= 0) and (hi is None or hi >= NEVER_FAILS[kind]):
+        rd.warn(
+            path,
+            f"this expectation cannot fail ({_bound_text(lo, hi)}): state a "
+            "bound a run could miss",
+        )
     return Bound(lo, hi)
+
+
+def _bound_text(lo: float | None, hi: float | None) -> str:
+    parts = [
+        f"at_least {lo:g}" if lo is not None else "",
+        f"at_most {hi:g}" if hi is not None else "",
+    ]
+    return ", ".join(p for p in parts if p)
 
 
 def _count(rd: _Reader, value: Any, path: str) -> int | None:
@@ -472,6 +491,14 @@ def _count(rd: _Reader, value: Any, path: str) -> int | None:
         value = int(value)
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
         rd.fail(path, "not a count", _describe(value), "a whole number >= 0")
+        return None
+    if value > MAX_COUNT:
+        shown = (
+            f"{value:.3g}"
+            if value < 10**300
+            else f"a number of {len(str(value))} digits"
+        )
+        rd.fail(path, "too large a count", shown, f"a whole number up to {MAX_COUNT:,}")
         return None
     return value
 

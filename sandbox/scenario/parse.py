@@ -1,13 +1,25 @@
 """Entry points: a scenario file or document to a validated :class:`Scenario`.
 
 :func:`load_scenario` reads a file (or takes a mapping) and :func:`parse_scenario`
-validates a document: ``--set`` overrides first, then the plug-ins the scenario lists,
-its ``randomize`` draws, every section, and the checks across sections.
+validates a document: the plug-ins the scenario lists (after the ``--set`` overrides
+of ``plugins`` itself), the other ``--set`` overrides, its ``randomize`` draws, every
+section, and the checks across sections.
+
+A scenario is data: the code of the plug-ins it lists (``plugins:``, files or modules)
+is run only on an explicit opt-in, ``trust_plugins=True`` (the command line's
+``--trust-plugins``, or ``SANDBOX_TRUST_PLUGINS=1`` in the environment); without it a
+scenario that lists a plug-in not yet loaded is refused with one line naming the
+entries. ``check_only=True`` (``sandbox validate``) never runs them: it checks the
+listed paths and names, and reports the sections that select a name such a plug-in
+may own as not checked (:class:`UncheckedScenario`). Plug-ins named on the command
+line (``--plugin``) and installed entry points are trusted: the user named or
+installed them.
 """
 
 from __future__ import annotations
 
 import copy
+import os
 import re
 from collections.abc import Mapping
 from pathlib import Path
@@ -88,6 +100,49 @@ from sandbox.scenario.yamlfile import (
     _YAMLLoader,
 )
 
+#: The environment variable that trusts the plug-in code scenarios list.
+TRUST_ENV = "SANDBOX_TRUST_PLUGINS"
+#: What the loader does with the plug-in code a scenario lists: run it, refuse the
+#: scenario, or leave it unrun and its sections unchecked.
+PLUGIN_CODE = ("load", "refuse", "skip")
+#: The sections a plug-in can own (their names select a registered plug-in).
+_PLUGIN_OWNED = tuple(kind.section for kind in KINDS.values())
+
+
+#: A dotted module name.
+_MODULE_NAME = r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*"
+
+
+def _under(path: str, section: str) -> bool:
+    """Whether a field path lies in a section (or is it)."""
+    return path == section or path.startswith((f"{section}.", f"{section}["))
+
+
+def trusted_by_environment() -> bool:
+    """Whether ``SANDBOX_TRUST_PLUGINS`` trusts the plug-ins scenarios list."""
+    return os.environ.get(TRUST_ENV, "").strip().lower() in ("1", "true", "yes")
+
+
+class UncheckedScenario(ScenarioError):
+    """A scenario valid as far as it was checked, with sections left unchecked.
+
+    Raised under ``check_only=True`` when a section selects a name that may belong to
+    a listed plug-in whose code was not run. ``unchecked`` holds ``(path, what)`` of
+    each such section; ``plugins`` the entries not loaded.
+    """
+
+    def __init__(
+        self, unchecked: list[tuple[str, str]], plugins: tuple[str, ...], source: str
+    ) -> None:
+        self.unchecked = list(unchecked)
+        self.plugins = tuple(plugins)
+        sections = ", ".join(f"{path} ({what})" for path, what in self.unchecked)
+        note = (
+            f"not checked: {sections}: they name plug-ins whose code is not run "
+            f"here ({', '.join(self.plugins)}); --trust-plugins loads them"
+        )
+        super().__init__([Problem("", note)], source)
+
 
 def parse_scenario(
     doc: Any,
@@ -96,6 +151,7 @@ def parse_scenario(
     lines: dict[str, int] | None = None,
     overrides: list[str] | None = None,
     problems: list[Problem] | None = None,
+    plugin_code: str | None = None,
 ) -> Scenario:
     """Validate a scenario document (as loaded from YAML); return a :class:`Scenario`.
 
@@ -112,12 +168,22 @@ def parse_scenario(
     problems : list of Problem, optional
         Problems already found in the file (e.g. duplicate keys), reported together with
         those of the document.
+    plugin_code : str, optional
+        One of :data:`PLUGIN_CODE`: ``load`` the listed plug-ins, ``refuse`` a scenario
+        that lists one not yet loaded, or ``skip`` them (``sandbox validate``); default
+        ``load`` if ``SANDBOX_TRUST_PLUGINS=1``, else ``refuse``.
 
     Raises
     ------
     ScenarioError
         With one :class:`~sandbox.errors.Problem` per problem found.
+    UncheckedScenario
+        Under ``skip``: sections select names of plug-ins that were not loaded.
     """
+    if plugin_code is None:
+        plugin_code = "load" if trusted_by_environment() else "refuse"
+    if plugin_code not in PLUGIN_CODE:
+        raise ValueError(f"plugin_code {plugin_code!r} is not one of {PLUGIN_CODE}")
     rd = _Reader(lines or {})
     rd.problems.extend(problems or [])
     first_line = (lines or {}).get("", 1) if lines is not None else None
@@ -168,12 +234,23 @@ def parse_scenario(
             source,
         ) from None
     overridden = []
-    for item in overrides or []:
+    # ``--set plugins=...`` first: the plug-ins' own keys exist once they are loaded.
+    first = [s for s in overrides or [] if s.strip().startswith("plugins")]
+    for item in first:
         where = _apply_override(rd, doc, item)
         if where is not None:
             overridden.append((where, item))
             rd.overridden.add(where)
-    loaded = _load_plugins(rd, doc.get("plugins"), source)
+    loaded = _load_plugins(rd, doc.get("plugins"), source, plugin_code)
+    for item in [s for s in overrides or [] if s not in first]:
+        before = len(rd.problems)
+        where = _apply_override(rd, doc, item)
+        if where is not None:
+            overridden.append((where, item))
+            rd.overridden.add(where)
+        elif rd.unloaded and item.strip().split(".")[0] in _PLUGIN_OWNED:
+            del rd.problems[before:]  # a key an unloaded plug-in may own
+            rd.unchecked.append((f"--set {item}", "a key of an unloaded plug-in"))
     if doc.get("randomize") is not None:  # draws into the document (randomize.py)
         doc, found = randomize.resolve(
             doc, skip=rd.overridden, line=rd.line, check=parse_scenario
@@ -267,6 +344,21 @@ def parse_scenario(
     names = [n for _, n, _ in rd.declared] + [v.name for _, v in generated]
     expect = read_expectations(rd, doc.get("expect"), "expect", names)
 
+    if rd.unchecked:  # sandbox validate of a scenario that needs its plug-ins
+        owned = tuple(path for path, _ in rd.unchecked)
+        rd.problems = [
+            p
+            for p in rd.problems
+            if not any(
+                p.path == o or p.path.startswith((f"{o}.", f"{o}[")) for o in owned
+            )
+        ]
+        if rd.problems:
+            found = _mark_overrides(rd.problems, overridden)
+            raise ScenarioError(
+                sorted(found, key=lambda p: (p.line is None, p.line or 0)), source
+            )
+        raise UncheckedScenario(rd.unchecked, rd.unloaded, source or "scenario")
     _check_consistency(
         rd,
         doc,
@@ -337,12 +429,17 @@ def parse_scenario(
     return scenario
 
 
-def _load_plugins(rd: _Reader, listed: Any, source: str | None) -> list[str]:
-    """Import the plug-ins a scenario lists; return them as they reload from anywhere.
+def _load_plugins(
+    rd: _Reader, listed: Any, source: str | None, plugin_code: str
+) -> list[str]:
+    """The plug-ins a scenario lists, as they reload from anywhere, loaded or not.
 
     Files are relative to the scenario's directory and returned as absolute paths;
-    module names are returned as they are. A plug-in that fails is a problem of its
-    ``plugins[i]`` entry.
+    module names are returned as they are. Under ``load`` each is imported (once per
+    process); under ``refuse`` a scenario listing one not yet loaded is refused with
+    one problem naming them and the opt-in; under ``skip`` none is imported: files
+    must exist, names must be module names, and the entries are kept in
+    ``rd.unloaded``. A plug-in that fails to load is a problem of its ``plugins[i]``.
     """
     if listed is None:
         return []
@@ -362,6 +459,7 @@ def _load_plugins(rd: _Reader, listed: Any, source: str | None) -> list[str]:
         plugins.load_entry_points()
     except PluginError as exc:
         rd.fail("plugins", str(exc), "a broken entry point", "plug-ins that import")
+    refused, unloaded = [], []
     for i, spec in enumerate(listed):
         where = f"plugins[{i}]"
         if not isinstance(spec, str) or not spec.strip():
@@ -369,17 +467,52 @@ def _load_plugins(rd: _Reader, listed: Any, source: str | None) -> list[str]:
                 where, "not a plug-in name", _describe(spec), "a .py file or a module"
             )
             continue
-        try:
-            plugins.load_plugin(spec, base)
-        except PluginError as exc:
-            rd.fail(
-                where, "plug-in cannot be loaded", str(exc), "a plug-in that imports"
-            )
-            continue
-        if plugins.looks_like_file(spec):
-            out.append(str(plugins.resolve_file(spec, base)))
+        is_file = plugins.looks_like_file(spec)
+        entry = str(plugins.resolve_file(spec, base)) if is_file else spec.strip()
+        if plugins.is_loaded(spec, base):
+            out.append(entry)
+        elif plugin_code == "refuse":
+            refused.append(spec.strip())
+        elif plugin_code == "skip":
+            if is_file and not Path(entry).is_file():
+                rd.fail(where, "no such plug-in file", entry, "a .py file that exists")
+                continue
+            if not is_file and not re.fullmatch(
+                r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*", entry
+            ):
+                rd.fail(where, "not a module name", repr(entry), "a dotted module name")
+                continue
+            unloaded.append(spec.strip())
+            out.append(entry)
         else:
-            out.append(spec.strip())
+            try:
+                plugins.load_plugin(spec, base)
+            except PluginError as exc:
+                rd.fail(
+                    where,
+                    "plug-in cannot be loaded",
+                    str(exc),
+                    "a plug-in that imports",
+                )
+                continue
+            out.append(entry)
+    if refused:
+        raise ScenarioError(
+            [
+                Problem(
+                    "plugins",
+                    _says(
+                        "plug-in code is not run without trust",
+                        ", ".join(refused),
+                        f"--trust-plugins, {TRUST_ENV}=1 or "
+                        "load_scenario(..., trust_plugins=True) to run it",
+                    ),
+                    rd.line("plugins"),
+                )
+            ],
+            source,
+        )
+    rd.unloaded = tuple(unloaded)
     return out
 
 
@@ -517,7 +650,11 @@ def _allowed_keys(parents: list[str], node: dict[Any, Any]) -> tuple[str, ...]:
 
 
 def load_scenario(
-    source: str | Path | Mapping[str, Any], overrides: list[str] | None = None
+    source: str | Path | Mapping[str, Any],
+    overrides: list[str] | None = None,
+    *,
+    trust_plugins: bool | None = None,
+    check_only: bool = False,
 ) -> Scenario:
     """Load and validate a scenario from a YAML file or a mapping.
 
@@ -527,6 +664,13 @@ def load_scenario(
         A ``.yaml`` file, or an already-loaded document (a dict).
     overrides : list of str, optional
         ``path=value`` assignments applied before validation.
+    trust_plugins : bool, optional
+        Whether to run the code of the plug-ins the scenario lists (``plugins:``);
+        default: whether ``SANDBOX_TRUST_PLUGINS=1``. Without trust, a scenario that
+        lists a plug-in not loaded yet is a :class:`ScenarioError` naming it.
+    check_only : bool
+        Never run listed plug-in code (``sandbox validate``): check the listed paths
+        and names, and raise :class:`UncheckedScenario` if a section needs them.
 
     Raises
     ------
@@ -534,8 +678,14 @@ def load_scenario(
         The file cannot be read or parsed, or the document is invalid. Never any other
         exception for any file content.
     """
+    if check_only:
+        code = "skip"
+    elif trust_plugins is None:
+        code = None
+    else:
+        code = "load" if trust_plugins else "refuse"
     if isinstance(source, Mapping):
-        return parse_scenario(source, overrides=overrides)
+        return parse_scenario(source, overrides=overrides, plugin_code=code)
     path = Path(source)
     name = str(source)
     expected = "a readable YAML scenario file"
@@ -619,7 +769,12 @@ def load_scenario(
             name,
         ) from None
     return parse_scenario(
-        doc, source=name, lines=lines, overrides=overrides, problems=duplicates
+        doc,
+        source=name,
+        lines=lines,
+        overrides=overrides,
+        problems=duplicates,
+        plugin_code=code,
     )
 
 

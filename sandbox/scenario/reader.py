@@ -132,6 +132,10 @@ class _Reader:
         self.timed: list[tuple[str, str | None, float | None]] = []
         #: Field paths set by ``--set`` overrides.
         self.overridden: set[str] = set()
+        #: The ``plugins:`` entries listed but not loaded (``sandbox validate``).
+        self.unloaded: tuple[str, ...] = ()
+        #: Sections left unchecked: they select a name an unloaded plug-in may own.
+        self.unchecked: list[tuple[str, str]] = []
 
     def line(self, path: str) -> int | None:
         if path.startswith("--set"):

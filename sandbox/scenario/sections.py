@@ -550,6 +550,10 @@ def read_plugin_section(
     own = PLUGIN_SECTIONS[kind]
     registered = plugins.names(kind)
     default = own[info.selector].default
+    selected = m.get(info.selector)
+    if rd.unloaded and isinstance(selected, str) and selected not in registered:
+        rd.unchecked.append((path, f"{info.selector} {selected}"))
+        return None, {}, {}, False
     name = rd.choice(m, info.selector, path, default, registered, info.title)
     own_values, ok = read_params(rd, m, path, own)
     everyone = plugins.all_params(kind)

@@ -101,8 +101,8 @@ class ReferenceSpec:
         """Return the reference object that evaluates ``(p, p', p'')``."""
         plugin = plugins.get("reference", self.type)
         if isinstance(plugin.obj, type):
-            return plugin.obj(**self.params)
-        return FunctionReference(plugin.obj, dict(self.params))
+            return plugins.runnable(plugin)(**self.params)
+        return FunctionReference(plugins.runnable(plugin), dict(self.params))
 
 
 @dataclass(frozen=True)

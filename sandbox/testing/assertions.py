@@ -267,11 +267,17 @@ class CheckResult:
         return [o.line(self.source) for o in self.failed]
 
 
-def load_checked(path: str | Path, overrides: Sequence[str] = ()) -> Any:
+def load_checked(
+    path: str | Path,
+    overrides: Sequence[str] = (),
+    trust_plugins: bool | None = None,
+) -> Any:
     """Load a scenario that must have expectations (a ``ScenarioError`` if not)."""
     from sandbox.scenario import load_scenario
 
-    scenario = load_scenario(path, overrides=list(overrides))
+    scenario = load_scenario(
+        path, overrides=list(overrides), trust_plugins=trust_plugins
+    )
     if scenario.expect is None:
         raise ScenarioError(
             [
@@ -287,7 +293,10 @@ def load_checked(path: str | Path, overrides: Sequence[str] = ()) -> Any:
 
 
 def check_scenario(
-    path: str | Path, overrides: Sequence[str] = (), keep_run: bool = True
+    path: str | Path,
+    overrides: Sequence[str] = (),
+    keep_run: bool = True,
+    trust_plugins: bool | None = None,
 ) -> CheckResult:
     """Run a scenario file and evaluate its ``expect:`` section.
 
@@ -299,6 +308,9 @@ def check_scenario(
         ``path=value`` assignments, as ``--set``.
     keep_run : bool
         Keep the run in the result (False saves memory and pickling).
+    trust_plugins : bool, optional
+        Run the code of the plug-ins the file lists (see
+        :func:`sandbox.load_scenario`); default ``SANDBOX_TRUST_PLUGINS``.
 
     Raises
     ------
@@ -307,7 +319,7 @@ def check_scenario(
     """
     from sandbox.loop.simulation import simulate
 
-    scenario = load_checked(path, overrides)
+    scenario = load_checked(path, overrides, trust_plugins)
     run = simulate(scenario)
     outcomes = evaluate(scenario.expect, run, compute_metrics(run))
     return CheckResult(str(path), outcomes, run if keep_run else None)

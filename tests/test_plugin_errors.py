@@ -1,0 +1,96 @@
+"""A plug-in that fails mid-run ends the run with status ``error``, written and named.
+
+v0.2 gave a traceback and no output directory for an exception, exit 0 and no message
+for ``SystemExit``, and accepted a NaN shift with status ``ok``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from sandbox import Simulation, load_run, load_scenario
+from sandbox.cli import main
+from sandbox.plugins import registration
+
+STRATEGY = """\
+import numpy as np
+
+from sandbox.plugins import register_strategy
+
+
+@register_strategy("{name}")
+def failing(ctx):
+    '''Fails at 0.3 s.'''
+    if ctx.t >= 0.3:
+        {action}
+    return np.zeros((ctx.n, 2)), np.zeros(ctx.n, dtype=bool)
+"""
+
+
+@pytest.fixture(autouse=True)
+def registry_snapshot(monkeypatch: pytest.MonkeyPatch):
+    monkeypatch.setenv("SANDBOX_TRUST_PLUGINS", "1")
+    registration._ensure_builtins()
+    saved = {k: dict(v) for k, v in registration._REGISTRY.items()}
+    loaded = dict(registration._LOADED)
+    yield
+    for k, v in saved.items():
+        registration._REGISTRY[k].clear()
+        registration._REGISTRY[k].update(v)
+    registration._LOADED.clear()
+    registration._LOADED.update(loaded)
+
+
+def scenario(tmp_path: Path, name: str, action: str) -> Path:
+    plugin = tmp_path / f"{name}.py"
+    plugin.write_text(STRATEGY.format(name=name, action=action), encoding="utf-8")
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(
+        f"name: {name}\nplugins: [{name}.py]\nduration: 1.0\n"
+        "reference: {type: line, speed: 0.5}\nformation: {law: rotating}\n"
+        f"recovery: {{strategy: {name}}}\n"
+        "vehicles:\n"
+        "  - {name: leader, pose: [0, 0, 0], leader: true}\n"
+        "  - {name: red, pose: [-1, 0.5, 0], offset: [-1, 0.5]}\n",
+        encoding="utf-8",
+    )
+    return path
+
+
+@pytest.mark.parametrize(
+    ("name", "action", "said"),
+    [
+        ("t_raises", "raise RuntimeError('no luck')", "RuntimeError: no luck"),
+        ("t_exits", "raise SystemExit(0)", "SystemExit"),
+        ("t_nan", "return np.full((ctx.n, 2), np.nan), np.ones(ctx.n, bool)", "NaN"),
+    ],
+)
+def test_the_run_ends_with_status_error_and_its_outputs(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    name: str,
+    action: str,
+    said: str,
+) -> None:
+    path = scenario(tmp_path, name, action)
+    out = tmp_path / "run"
+    assert main(["run", str(path), "--out", str(out)]) == 1
+    err = [x for x in capsys.readouterr().err.splitlines() if x.startswith("error")]
+    assert len(err) == 1 and f"recovery strategy {name}" in err[0] and said in err[0]
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["status"] == "error"
+    assert metrics["error"]["t"] == pytest.approx(0.3)
+    assert name in metrics["error"]["plugin"] and said in metrics["error"]["message"]
+    run = load_run(out)
+    assert run.status == "error" and run.t[-1] == pytest.approx(0.3)
+
+
+def test_the_message_gives_the_line_of_the_plugin(tmp_path: Path) -> None:
+    path = scenario(tmp_path, "t_line", "raise ValueError('bad')")
+    run = Simulation(load_scenario(path)).run()
+    assert run.status == "error"
+    # the raise is on line 10 of the plug-in file
+    assert f"{tmp_path / 't_line.py'}, line 10" in run.info["error"]["message"]
