@@ -115,6 +115,57 @@ class ScenarioSource:
         return load_scenario({**self.doc, "seed": int(seed)})
 
 
+def action_row(value: Any, who: str = "action") -> np.ndarray:
+    """An agent's action as 2 finite numbers, shape (2,); ``ValueError`` otherwise.
+
+    The environments clip actions to ``[-1, 1]``; anything that is not two finite
+    numbers (None, a scalar, a string, a NaN) is an error, as the step API gives.
+    """
+    expected = "2 finite numbers in [-1, 1]"
+    if value is None:
+        raise ValueError(f"{who}: expected {expected}, got None")
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{who}: expected {expected}, got {value!r:.60}") from None
+    if a.shape != (2,):
+        raise ValueError(f"{who}: expected {expected}, shape (2,), got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{who}: expected {expected}, got {a.tolist()}")
+    return a
+
+
+def _weights(weights: Any) -> Weights:
+    """Reward weights from a :class:`Weights` or a mapping, each finite and >= 0."""
+    if weights is None:
+        return Weights()
+    if isinstance(weights, Mapping):
+        unknown = set(weights) - {"error", "collision", "effort"}
+        if unknown:
+            raise ValueError(
+                f"weights: unknown keys {sorted(map(str, unknown))} "
+                "(expected error, collision, effort)"
+            )
+        weights = Weights(**weights)
+    if not isinstance(weights, Weights):
+        raise ValueError(
+            "weights: expected a sandbox.envs.Weights or a mapping of error, "
+            f"collision and effort, got {type(weights).__name__}"
+        )
+    for name in ("error", "collision", "effort"):
+        value = getattr(weights, name)
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not np.isfinite(value)
+            or value < 0
+        ):
+            raise ValueError(
+                f"weights.{name}: expected a finite number >= 0, got {value!r}"
+            )
+    return weights
+
+
 def default_agents(scenario: Scenario) -> list[str]:
     """Every vehicle that is neither the leader nor open-loop, in scenario order."""
     return [
@@ -189,6 +240,9 @@ class Task:
                 )
         if not agents:
             raise ValueError("agents: the scenario has no vehicle to drive")
+        twice = sorted({a for a in agents if list(agents).count(a) > 1})
+        if twice:
+            raise ValueError(f"agents: listed twice: {', '.join(twice)}")
         if action not in ACTIONS:
             raise ValueError(f"action: expected one of {ACTIONS}, got {action!r}")
         if int(neighbours) != neighbours or neighbours < 0:
@@ -202,7 +256,7 @@ class Task:
         self.action = action
         self.k = int(neighbours)
         self.repeat = int(repeat)
-        self.weights = weights if weights is not None else Weights()
+        self.weights = _weights(weights)
         self.max_distance = _positive(max_distance, "max_distance")
         v1_limits = [v.v1_max for v in sc.vehicles if v.v1_max is not None]
         self.max_speed = _positive(
@@ -256,6 +310,13 @@ class Task:
         Returns the agents' rewards, shape (m,).
         """
         sim, w = self.sim, self.weights
+        if sim is None:
+            raise RuntimeError("step() before reset(): call reset() first")
+        if sim.done:
+            raise RuntimeError(
+                f"the episode is over (status {sim.status!r} at t = {sim.t:g} s): "
+                "call reset() to start another"
+            )
         a = np.clip(
             np.asarray(actions, dtype=float).reshape(len(self.agents), 2), -1, 1
         )

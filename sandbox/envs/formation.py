@@ -17,7 +17,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from sandbox.envs.core import SEED_RANGE, Task, Weights
+from sandbox.envs.core import SEED_RANGE, Task, Weights, action_row
 from sandbox.scenario import Scenario
 
 
@@ -143,7 +143,7 @@ class FormationEnv(ParallelEnv):
         rows = np.full((len(self.possible_agents), 2), np.nan)
         for j, a in enumerate(self.possible_agents):
             if a in actions:
-                rows[j] = np.asarray(actions[a], dtype=float).reshape(2)
+                rows[j] = action_row(actions[a], f"actions[{a!r}]")
         reward = self.task.advance(rows)
         features = self.task.features()
         live = list(self.agents)

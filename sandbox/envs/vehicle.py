@@ -22,6 +22,7 @@ from sandbox.envs.core import (
     ScenarioSource,
     Task,
     Weights,
+    action_row,
     default_agents,
 )
 from sandbox.scenario import Scenario
@@ -125,7 +126,7 @@ class VehicleEnv(gym.Env):
         self, action: np.ndarray
     ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply ``action`` for ``repeat`` control periods."""
-        reward = self.task.advance(np.asarray(action, dtype=float)[None, :])
+        reward = self.task.advance(action_row(action)[None, :])
         terminated = self.task.diverged
         truncated = self.task.over and not terminated
         info = self.task.info(0)

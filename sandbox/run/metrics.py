@@ -19,12 +19,14 @@ Definitions (the keys of ``metrics.json``):
   defines it (the leader's slot is the reference point) [m]: ``final`` (last sample),
   ``max``, and ``rms_last_quarter`` (RMS over the last quarter of the run);
   ``settling_time``: first time after which the error stays below ``settle_tol`` until
-  the end [s], null if it never does, if the run does not last ``settle_dwell`` after
-  it, or if the vehicle has no slot; ``effort_v1`` [m/s] and ``effort_v2`` [rad/s]: the
-  total variation of each command over every control period, and ``control_effort =
-  effort_v1 + (d/2) effort_v2`` [m/s]: they grow with aggressive and chattering inputs,
-  not with steady driving; ``mode_switches``: number of changes between ``formation``
-  and ``avoid`` mode; ``failed_at``: time of the first failure of the vehicle, or null.
+  the end [s], null if it never does, if the vehicle drifts more than ``settle_speed``
+  relative to its slot over the run's last ``settle_dwell``, if the run does not last
+  ``settle_dwell`` after it, or if the vehicle has no slot; ``effort_v1`` [m/s] and
+  ``effort_v2`` [rad/s]: the total variation of each command over every control
+  period, and ``control_effort = effort_v1 + (d/2) effort_v2`` [m/s]: they grow with
+  aggressive and chattering inputs, not with steady driving; ``mode_switches``: number
+  of changes between ``formation`` and ``avoid`` mode; ``failed_at``: time of the
+  first failure of the vehicle, or null.
 - ``deadlocks``: ``{vehicles, t, duration}`` for each time healthy vehicles stayed
   below ``metrics.deadlock_speed`` for ``metrics.deadlock_time`` while farther than
   ``metrics.deadlock_distance`` from their slots (:mod:`sandbox.run.deadlock`).
@@ -56,6 +58,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.model.tunnelling import SUBSTEP_FRACTION
 from sandbox.plugins.registration import metric_contributions
 from sandbox.run.deadlock import find_deadlocks
 from sandbox.run.record import MODE_AVOID, MODE_FORMATION, Run
@@ -149,6 +152,8 @@ class LoopMetrics:
         self.h = h
         self.effort_v1 = np.zeros(n)
         self.effort_v2 = np.zeros(n)
+        #: Largest ``|v1|`` applied to each vehicle [m/s] (the tunnelling check).
+        self.peak_v1 = np.zeros(n)
         self.closest = ClosestApproach()
         self.max_speed_error = 0.0
         self.max_velocity_error = 0.0
@@ -186,6 +191,7 @@ class LoopMetrics:
             self.effort_v1 += np.abs(v1 - self._prev[0])
             self.effort_v2 += np.abs(v2 - self._prev[1])
         self._prev = (np.array(v1, dtype=float), np.array(v2, dtype=float))
+        np.fmax(self.peak_v1, np.abs(v1), out=self.peak_v1)
         free = None if in_contact is None else ~in_contact
         if self._commanded is not None and free is not None:
             check = free & self._was_free & np.all(np.isfinite(vel), axis=1)
@@ -209,6 +215,7 @@ class LoopMetrics:
         return {
             "effort_v1": [float(x) for x in self.effort_v1],
             "effort_v2": [float(x) for x in self.effort_v2],
+            "peak_v1": [float(x) for x in self.peak_v1],
             "min_distance": float(best) if np.isfinite(best) else None,
             "motor": {
                 "max_speed_error_free": self.max_speed_error,
@@ -325,16 +332,20 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     run : Run
     settle_tol : float, optional
         Tolerance of the settling time [m]; default: the scenario's
-        ``metrics.settle_tol``
-        (0.05 m).
+        ``metrics.settle_tol`` (0.05 m).
     """
     spec = run.scenario.metrics if run.scenario is not None else None
     if settle_tol is None:
         settle_tol = spec.settle_tol if spec is not None else 0.05
     dwell = spec.settle_dwell if spec is not None else 1.0
+    settle_speed = spec.settle_speed if spec is not None else 0.02
     loop = run.info.get("loop_metrics")
     t = np.asarray(run.t)
     T = len(t)
+    # The last settle_dwell of the run: a settled vehicle drifts less than
+    # settle_speed relative to its slot over it (first and last sample of the window).
+    window = int(np.searchsorted(t, t[-1] - dwell - 1e-9)) if T else 0
+    span = float(t[-1] - t[window]) if T else 0.0
     last_quarter = t >= t[-1] - 0.25 * (t[-1] - t[0]) if T else np.zeros(0, dtype=bool)
     failed_at = run.info.get("failed_at", {})
     vehicles: dict[str, Any] = {}
@@ -346,12 +357,17 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
         if i % block == 0:
             cols = slice(i, i + block)
             pose = np.asarray(run.pose[:, cols, :2])
-            error = np.linalg.norm(pose - np.asarray(run.slot[:, cols]), axis=-1)
+            offset = pose - np.asarray(run.slot[:, cols])
+            error = np.linalg.norm(offset, axis=-1)
             cmd = np.asarray(run.cmd[:, cols])
             mode = np.asarray(run.mode[:, cols])
         e = error[:, i % block]
         has_slot = T > 0 and bool(np.all(np.isfinite(e)))
         settle = settling_time(t, e, settle_tol, dwell) if has_slot else None
+        if settle is not None and span > 0:
+            moved = offset[-1, i % block] - offset[window, i % block]
+            if float(np.hypot(moved[0], moved[1])) > settle_speed * span:
+                settle = None  # in band, but still crossing its slot
         failed_end = bool(run.failed[-1, i]) if T else False
         vehicles[name] = {
             "formation_error": {
@@ -401,6 +417,9 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     }
     if loop:
         out["motor"] = loop["motor"]
+        fast = _tunnelling(run, loop.get("peak_v1"))
+        if fast is not None:
+            out["tunnelling"] = fast
     keys = (
         "safety",
         "diverged",
@@ -459,9 +478,46 @@ def _effort(
     }
 
 
+def _tunnelling(run: Run, peak_v1: list[float] | None) -> dict[str, Any] | None:
+    """The vehicle that moved farthest beyond the tunnelling bound in one substep.
+
+    From the commands applied during the run (``LoopMetrics.peak_v1``), not from the
+    loader's estimate: a vehicle moving more than :data:`SUBSTEP_FRACTION` of its
+    diameter in one physics substep can pass through a thin obstacle or another
+    vehicle with no contact. None when every vehicle stayed within the bound.
+    """
+    sc = run.scenario
+    if sc is None or not peak_v1:
+        return None
+    step = sc.dt / sc.substeps
+    per_substep = np.asarray(peak_v1, dtype=float) * step
+    bound = SUBSTEP_FRACTION * np.asarray(run.diameter, dtype=float)
+    over = per_substep - bound
+    worst = int(np.argmax(over))
+    if not over[worst] > 0:
+        return None
+    needed = int(np.ceil(peak_v1[worst] * sc.dt / bound[worst]))
+    return {
+        "vehicle": run.names[worst],
+        "peak_v1": float(peak_v1[worst]),
+        "per_substep": float(per_substep[worst]),
+        "bound": float(bound[worst]),
+        "substeps_needed": needed,
+    }
+
+
 def run_warnings(metrics: dict[str, Any]) -> list[str]:
     """What a user should know about a run's numbers (printed by ``sandbox run``)."""
     out = []
+    fast = metrics.get("tunnelling")
+    if fast:
+        out.append(
+            f"vehicle {fast['vehicle']} was driven at up to {fast['peak_v1']:.4g} m/s: "
+            f"{fast['per_substep']:.3g} m per physics substep, beyond the "
+            f"{fast['bound']:.3g} m (a quarter diameter) within which every contact is "
+            f"seen: contacts may have been missed; set vehicle.v1_max, or substeps "
+            f">= {fast['substeps_needed']}"
+        )
     motor = metrics.get("motor")
     if motor and motor["saturated_fraction"] > 0:
         out.append(

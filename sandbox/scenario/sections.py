@@ -260,6 +260,15 @@ METRICS: dict[str, Param] = {
         "time, else the settling time is null",
         minimum=0.0,
     ),
+    "settle_speed": Param(
+        "number",
+        0.02,
+        "m/s",
+        "Largest drift relative to the slot over the last settle_dwell of the run for "
+        "a settled vehicle (one crossing its slot slowly has not settled)",
+        minimum=0.0,
+        exclusive=True,
+    ),
     "contact_release": Param(
         "number",
         0.01,

@@ -200,7 +200,9 @@ class MetricsSpec:
     """Parameters of the metrics (``metrics.json``).
 
     ``settle_tol`` [m]: formation error of a settled vehicle; ``settle_dwell`` [s]: how
-    long the run must go on in band after the settling time; ``contact_release`` [m]:
+    long the run must go on in band after the settling time; ``settle_speed`` [m/s]:
+    largest drift relative to the slot over the run's last ``settle_dwell`` of a
+    settled vehicle; ``contact_release`` [m]:
     gap between two surfaces that ends a contact episode; ``deadlock_speed`` [m/s],
     ``deadlock_time`` [s], ``deadlock_distance`` [m]: a healthy vehicle slower than
     ``deadlock_speed`` for ``deadlock_time`` while farther than ``deadlock_distance``
@@ -209,6 +211,7 @@ class MetricsSpec:
 
     settle_tol: float = 0.05
     settle_dwell: float = 1.0
+    settle_speed: float = 0.02
     contact_release: float = 0.01
     deadlock_speed: float = 0.01
     deadlock_time: float = 2.0

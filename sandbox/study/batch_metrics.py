@@ -38,6 +38,7 @@ class BatchTally:
         self._buf_free = np.empty((CHUNK, N), dtype=bool)
         self.effort_v1 = np.zeros(K * n)
         self.effort_v2 = np.zeros(K * n)
+        self.peak_v1 = np.zeros(K * n)
         self.best = np.full(K, np.inf)
         self.max_speed_error = np.zeros(K)
         self.max_velocity_error = np.zeros(K)
@@ -110,6 +111,8 @@ class BatchTally:
             self.effort_v1 += step[r, 0]
             self.effort_v2 += step[r, 1]
         self._prev = (v[m - 1, 0].copy(), v[m - 1, 1].copy())
+        for r in range(m):
+            np.fmax(self.peak_v1, np.abs(v[r, 0]), out=self.peak_v1)
         free, vel, cmd_now = self._buf_free[:m], self._buf_vel[:m], self._buf_cmd[:m]
         if self._commanded is not None:
             cmd = np.concatenate((self._commanded[None], cmd_now[:-1]))
@@ -169,6 +172,7 @@ class BatchTally:
                     finite, np.minimum(self.best[ws], best), self.best[ws]
                 )
         v1, v2 = b.v1[vs], b.v2[vs]
+        self.peak_v1[vs] = np.fmax(self.peak_v1[vs], np.abs(v1))
         if self._prev is not None:
             self.effort_v1[vs] += np.abs(v1 - self._prev[0][vs])
             self.effort_v2[vs] += np.abs(v2 - self._prev[1][vs])
@@ -219,6 +223,7 @@ class BatchTally:
         return {
             "effort_v1": [float(x) for x in self.effort_v1[rows]],
             "effort_v2": [float(x) for x in self.effort_v2[rows]],
+            "peak_v1": [float(x) for x in self.peak_v1[rows]],
             "min_distance": float(best) if np.isfinite(best) else None,
             "motor": {
                 "max_speed_error_free": float(self.max_speed_error[w]),
