@@ -10,6 +10,7 @@ and line of each problem; this one is about surviving, and about what is accepte
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
@@ -142,6 +143,18 @@ CASES: dict[str, tuple[bytes | str, int, str]] = {
         "out of range",
     ),
     "run_too_long": (ONE + "duration: 1e9\ndt: 1e-3\n", 2, "control steps"),
+    # ---- plug-in code listed in a data file: validate never runs it
+    "plugin_not_python": (ONE + "plugins: [/etc/hostname]\n", 2, "not a .py file"),
+    "plugin_missing_file": (ONE + "plugins: [/nowhere/x.py]\n", 2, "no such plug-in"),
+    "plugin_module_not_imported": (ONE + "plugins: [antigravity]\n", 0, ""),
+    "plugin_bad_module_name": (ONE + "plugins: ['os; rm']\n", 2, "not a module name"),
+    "plugins_not_a_list": (ONE + "plugins: 5\n", 2, "not a list"),
+    "plugin_empty_name": (ONE + "plugins: ['']\n", 2, "not a plug-in name"),
+    "plugin_section_unchecked": (
+        ONE + "plugins: [antigravity]\nrecovery: {strategy: fly, height: 9}\n",
+        0,
+        "",
+    ),
 }
 
 
@@ -163,6 +176,7 @@ def test_validate_survives_the_hostile_file(
         assert line.startswith(f"{path}"), line
         assert len(line) < 2000, "a message must not echo a huge value"
     assert text in err
+    assert "antigravity" not in sys.modules  # a listed module is never imported
 
 
 # --------------------------------------------------------------------------- paths

@@ -474,8 +474,13 @@ def _load_plugins(
         elif plugin_code == "refuse":
             refused.append(spec.strip())
         elif plugin_code == "skip":
-            if is_file and not Path(entry).is_file():
-                rd.fail(where, "no such plug-in file", entry, "a .py file that exists")
+            if is_file and not (entry.endswith(".py") and Path(entry).is_file()):
+                what = (
+                    "no such plug-in file"
+                    if not Path(entry).exists()
+                    else "not a .py file"
+                )
+                rd.fail(where, what, entry, "a .py file that exists")
                 continue
             if not is_file and not re.fullmatch(
                 r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*", entry
