@@ -15,7 +15,7 @@ from sandbox import load_scenario
 from sandbox.cli import main
 from sandbox.errors import ScenarioError
 from sandbox.plugins import registration
-from sandbox.scenario.parse import UncheckedScenario
+from sandbox.scenario.trust import UncheckedScenario
 
 PLUGIN = """\
 from pathlib import Path

@@ -19,7 +19,7 @@ from sandbox.errors import ScenarioError
 def cmd_validate(args: argparse.Namespace) -> int:
     """``sandbox validate FILE...``: check files without running them."""
     from sandbox.scenario import load_scenario
-    from sandbox.scenario.parse import UncheckedScenario
+    from sandbox.scenario.trust import UncheckedScenario
     from sandbox.study.sweep import SweepError, check_sweep_file
 
     status = EXIT_OK

@@ -5,22 +5,13 @@ validates a document: the plug-ins the scenario lists (after the ``--set`` overr
 of ``plugins`` itself), the other ``--set`` overrides, its ``randomize`` draws, every
 section, and the checks across sections.
 
-A scenario is data: the code of the plug-ins it lists (``plugins:``, files or modules)
-is run only on an explicit opt-in, ``trust_plugins=True`` (the command line's
-``--trust-plugins``, or ``SANDBOX_TRUST_PLUGINS=1`` in the environment); without it a
-scenario that lists a plug-in not yet loaded is refused with one line naming the
-entries. ``check_only=True`` (``sandbox validate``) never runs them: it checks the
-listed paths and names, and reports the sections that select a name such a plug-in
-may own as not checked (:class:`UncheckedScenario`). Plug-ins named on the command
-line (``--plugin``) and installed entry points are trusted: the user named or
-installed them.
+The plug-in code a scenario lists runs only on trust (:mod:`sandbox.scenario.trust`);
+``--set`` overrides are applied by :mod:`sandbox.scenario.overrides`.
 """
 
 from __future__ import annotations
 
 import copy
-import os
-import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -31,20 +22,17 @@ from sandbox import plugins
 from sandbox.errors import Problem, ScenarioError
 from sandbox.model.tunnelling import tunnelling_warning
 from sandbox.plugins.registration import (
-    KINDS,
     Param,
-    PluginError,
 )
 from sandbox.scenario import randomize
 from sandbox.scenario.checks import _check_consistency
-from sandbox.scenario.expectations import allowed_keys as expect_keys
 from sandbox.scenario.expectations import read_expectations
+from sandbox.scenario.overrides import _apply_override, _mark_overrides
 from sandbox.scenario.reader import (
     _BAD_TEXT,
     MAX_VEHICLES,
     NAME_RULE,
     _describe,
-    _hint,
     _Reader,
     _says,
     name_problem,
@@ -52,11 +40,8 @@ from sandbox.scenario.reader import (
 from sandbox.scenario.sections import (
     METRICS,
     METRICS_KEYS,
-    PLUGIN_SECTIONS,
     RECONFIGURE,
-    RECONFIGURE_KEYS,
     SENSING,
-    SENSING_KEYS,
     TOP,
     TOP_KEYS,
     _detection,
@@ -77,11 +62,15 @@ from sandbox.scenario.specs import (
     VehicleSpec,
     _from_loader,
 )
+from sandbox.scenario.trust import (
+    _PLUGIN_OWNED,
+    PLUGIN_CODE,
+    TRUST_ENV,
+    UncheckedScenario,
+    _load_plugins,
+    trusted_by_environment,
+)
 from sandbox.scenario.vehicles import (
-    DRIVE_KEYS,
-    GAIN_KEYS,
-    PLATOON_KEYS,
-    VEHICLE_KEYS,
     VEHICLE_PARAM_KEYS,
     _expand_platoon,
     _platoon,
@@ -100,48 +89,13 @@ from sandbox.scenario.yamlfile import (
     _YAMLLoader,
 )
 
-#: The environment variable that trusts the plug-in code scenarios list.
-TRUST_ENV = "SANDBOX_TRUST_PLUGINS"
-#: What the loader does with the plug-in code a scenario lists: run it, refuse the
-#: scenario, or leave it unrun and its sections unchecked.
-PLUGIN_CODE = ("load", "refuse", "skip")
-#: The sections a plug-in can own (their names select a registered plug-in).
-_PLUGIN_OWNED = tuple(kind.section for kind in KINDS.values())
-
-
-#: A dotted module name.
-_MODULE_NAME = r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*"
-
-
-def _under(path: str, section: str) -> bool:
-    """Whether a field path lies in a section (or is it)."""
-    return path == section or path.startswith((f"{section}.", f"{section}["))
-
-
-def trusted_by_environment() -> bool:
-    """Whether ``SANDBOX_TRUST_PLUGINS`` trusts the plug-ins scenarios list."""
-    return os.environ.get(TRUST_ENV, "").strip().lower() in ("1", "true", "yes")
-
-
-class UncheckedScenario(ScenarioError):
-    """A scenario valid as far as it was checked, with sections left unchecked.
-
-    Raised under ``check_only=True`` when a section selects a name that may belong to
-    a listed plug-in whose code was not run. ``unchecked`` holds ``(path, what)`` of
-    each such section; ``plugins`` the entries not loaded.
-    """
-
-    def __init__(
-        self, unchecked: list[tuple[str, str]], plugins: tuple[str, ...], source: str
-    ) -> None:
-        self.unchecked = list(unchecked)
-        self.plugins = tuple(plugins)
-        sections = ", ".join(f"{path} ({what})" for path, what in self.unchecked)
-        note = (
-            f"not checked: {sections}: they name plug-ins whose code is not run "
-            f"here ({', '.join(self.plugins)}); --trust-plugins loads them"
-        )
-        super().__init__([Problem("", note)], source)
+__all__ = [
+    "TRUST_ENV",
+    "UncheckedScenario",
+    "load_scenario",
+    "parse_scenario",
+    "trusted_by_environment",
+]
 
 
 def parse_scenario(
@@ -427,231 +381,6 @@ def parse_scenario(
             expect=expect,
         )
     return scenario
-
-
-def _load_plugins(
-    rd: _Reader, listed: Any, source: str | None, plugin_code: str
-) -> list[str]:
-    """The plug-ins a scenario lists, as they reload from anywhere, loaded or not.
-
-    Files are relative to the scenario's directory and returned as absolute paths;
-    module names are returned as they are. Under ``load`` each is imported (once per
-    process); under ``refuse`` a scenario listing one not yet loaded is refused with
-    one problem naming them and the opt-in; under ``skip`` none is imported: files
-    must exist, names must be module names, and the entries are kept in
-    ``rd.unloaded``. A plug-in that fails to load is a problem of its ``plugins[i]``.
-    """
-    if listed is None:
-        return []
-    if not isinstance(listed, list):
-        listed = [listed] if isinstance(listed, str) else listed
-        if not isinstance(listed, list):
-            rd.fail(
-                "plugins",
-                "not a list",
-                _describe(listed),
-                "a list of plug-in files (.py) or module names",
-            )
-            return []
-    base = Path(source).resolve().parent if source else None
-    out = []
-    try:
-        plugins.load_entry_points()
-    except PluginError as exc:
-        rd.fail("plugins", str(exc), "a broken entry point", "plug-ins that import")
-    refused, unloaded = [], []
-    for i, spec in enumerate(listed):
-        where = f"plugins[{i}]"
-        if not isinstance(spec, str) or not spec.strip():
-            rd.fail(
-                where, "not a plug-in name", _describe(spec), "a .py file or a module"
-            )
-            continue
-        is_file = plugins.looks_like_file(spec)
-        entry = str(plugins.resolve_file(spec, base)) if is_file else spec.strip()
-        if plugins.is_loaded(spec, base):
-            out.append(entry)
-        elif plugin_code == "refuse":
-            refused.append(spec.strip())
-        elif plugin_code == "skip":
-            if is_file and not (entry.endswith(".py") and Path(entry).is_file()):
-                what = (
-                    "no such plug-in file"
-                    if not Path(entry).exists()
-                    else "not a .py file"
-                )
-                rd.fail(where, what, entry, "a .py file that exists")
-                continue
-            if not is_file and not re.fullmatch(
-                r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*", entry
-            ):
-                rd.fail(where, "not a module name", repr(entry), "a dotted module name")
-                continue
-            unloaded.append(spec.strip())
-            out.append(entry)
-        else:
-            try:
-                plugins.load_plugin(spec, base)
-            except PluginError as exc:
-                rd.fail(
-                    where,
-                    "plug-in cannot be loaded",
-                    str(exc),
-                    "a plug-in that imports",
-                )
-                continue
-            out.append(entry)
-    if refused:
-        raise ScenarioError(
-            [
-                Problem(
-                    "plugins",
-                    _says(
-                        "plug-in code is not run without trust",
-                        ", ".join(refused),
-                        f"--trust-plugins, {TRUST_ENV}=1 or "
-                        "load_scenario(..., trust_plugins=True) to run it",
-                    ),
-                    rd.line("plugins"),
-                )
-            ],
-            source,
-        )
-    rd.unloaded = tuple(unloaded)
-    return out
-
-
-def _mark_overrides(
-    problems: list[Problem], overridden: list[tuple[str, str]]
-) -> list[Problem]:
-    """Point problems in fields set on the command line at their ``--set``.
-
-    The last ``--set`` that wrote the field (or a mapping holding it) is the one that
-    gave it its value.
-    """
-    out = []
-    for p in problems:
-        for where, item in reversed(overridden):
-            if p.path == where or p.path.startswith((f"{where}.", f"{where}[")):
-                p = Problem(p.path, f"{p.message} [from --set {item}]", None)
-                break
-        out.append(p)
-    return out
-
-
-def _apply_override(rd: _Reader, doc: dict[Any, Any], item: str) -> str | None:
-    """Apply one ``path=value`` assignment, e.g. ``recovery.beta=2``.
-
-    Returns the field path it set, or None (a problem is recorded) if it names no field.
-    """
-    path, sep, raw = item.partition("=")
-    path = path.strip()
-    where = f"--set {item}"
-    if not sep or not path:
-        rd.fail(
-            where, "not an assignment", repr(item), "PATH=VALUE, e.g. recovery.beta=2.5"
-        )
-        return None
-    try:
-        value = yaml.load(raw, Loader=_YAMLLoader)
-    except (yaml.YAMLError, RecursionError, ValueError):
-        value = raw
-    tokens = re.findall(r"[^.\[\]]+|\[\d+\]", path)
-    if "".join(t if t.startswith("[") else f".{t}" for t in tokens).lstrip(".") != path:
-        rd.fail(
-            where,
-            "names no field",
-            repr(path),
-            "a dotted path like recovery.beta or vehicles[1].pose",
-        )
-        return None
-    target: Any = doc
-    for k, tok in enumerate(tokens):
-        last = k == len(tokens) - 1
-        if tok.startswith("["):
-            idx = int(tok[1:-1])
-            if not isinstance(target, list) or idx >= len(target):
-                size = (
-                    f"a list of {len(target)}"
-                    if isinstance(target, list)
-                    else "no list"
-                )
-                rd.fail(
-                    where,
-                    "names no field",
-                    f"{size} at {path[: path.rfind(tok)]}",
-                    f"an index below {len(target) if isinstance(target, list) else 0}",
-                )
-                return None
-            if last:
-                target[idx] = value
-            else:
-                target = target[idx]
-            continue
-        if not isinstance(target, dict):
-            rd.fail(
-                where,
-                "names no field",
-                f"{tok!r} under {_describe(target)}",
-                "a key under a mapping",
-            )
-            return None
-        allowed = _allowed_keys(tokens[:k], target)
-        if tok not in allowed:
-            rd.fail(
-                where,
-                f"names no field{_hint(tok, allowed)}",
-                repr(tok),
-                f"one of: {', '.join(allowed)}",
-            )
-            return None
-        if last:
-            target[tok] = value
-        else:
-            if target.get(tok) is None:
-                if tokens[k + 1].startswith("["):
-                    rd.fail(
-                        where,
-                        "names no field",
-                        f"no list at {tok}",
-                        f"an existing item of {tok}, or --set {tok}=[...]",
-                    )
-                    return None
-                target[tok] = {}
-            target = target[tok]
-    return path
-
-
-def _allowed_keys(parents: list[str], node: dict[Any, Any]) -> tuple[str, ...]:
-    """Keys allowed at a position in the document (for ``--set``)."""
-    names = [t for t in parents if not t.startswith("[")]
-    if not names:
-        return TOP_KEYS
-    if names[0] == "expect":
-        return expect_keys(names[1:], node)
-    head = names[-1]
-    if head == "gains":
-        return GAIN_KEYS
-    table: dict[str, tuple[str, ...]] = {
-        "vehicle": VEHICLE_PARAM_KEYS,
-        "vehicles": VEHICLE_KEYS,
-        "platoon": PLATOON_KEYS,
-        "metrics": METRICS_KEYS,
-        "sensing": SENSING_KEYS,
-        "reconfigure": RECONFIGURE_KEYS,
-        "drive": DRIVE_KEYS,
-    }
-    if head in table:
-        return table[head]
-    for kind, own in PLUGIN_SECTIONS.items():
-        if KINDS[kind].section != head:
-            continue
-        name = node.get(KINDS[kind].selector, own[KINDS[kind].selector].default)
-        registered = plugins.registry(kind)
-        if isinstance(name, str) and name in registered and not KINDS[kind].lenient:
-            return (*own, *registered[name].params)
-        return (*own, *plugins.all_params(kind))
-    return tuple(str(k) for k in node)
 
 
 def load_scenario(
