@@ -13,5 +13,8 @@ from setuptools import find_packages, setup
 setup(
     packages=[*find_packages(include=["sandbox", "sandbox.*"]), "sandbox.scenarios"],
     package_dir={"sandbox.scenarios": "scenarios"},
-    package_data={"sandbox.scenarios": ["*.yaml", "**/*.yaml"]},
+    package_data={
+        "sandbox.scenarios": ["*.yaml", "**/*.yaml"],
+        "sandbox.replay": ["assets/*"],
+    },
 )
