@@ -17,6 +17,7 @@ Tests drive a page through ``window.sandboxReplay`` (``seek(t)``, ``play()``,
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -97,8 +98,9 @@ def write_sweep_html(
     path: str | os.PathLike[str] | None = None,
     *,
     replays: bool = True,
+    log: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Write the page of a sweep (see :func:`sandbox.replay.sweep.write_sweep_html`)."""
     from sandbox.replay.sweep import write_sweep_html as write
 
-    return write(root, path, replays=replays)
+    return write(root, path, replays=replays, log=log)
