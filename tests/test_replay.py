@@ -208,6 +208,7 @@ def test_same_run_gives_the_same_bytes(tmp_path: Path, headon: object) -> None:
     assert a == b == c
 
 
+@pytest.mark.slow
 def test_sixty_seconds_of_ten_vehicles_fit_in_two_megabytes(tmp_path: Path) -> None:
     run = simulate(load_scenario_doc(TEN))
     assert run.n_vehicles == 10 and len(run.t) == 6001  # every control period
@@ -322,7 +323,7 @@ def test_sweep_keep_runs_and_view(
     html = (out / "sweep.html").read_text(encoding="utf-8")
     data = embedded(html)
     assert sorted(data["links"]) == kept
-    for run_id, link in data["links"].items():
+    for link in data["links"].values():
         page = out / link
         assert page.is_file()
         assert embedded(page.read_text(encoding="utf-8"))["names"] == ["east", "west"]

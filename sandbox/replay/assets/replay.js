@@ -433,8 +433,8 @@
     drawTrails(s, xy);
     drawReference(s);
     drawSlots(s);
+    drawContacts(xy); // under the bodies: the vehicles in contact stay visible
     drawBodies(s, xy, th);
-    drawContacts(xy);
     drawLabels(xy);
     drawScaleBar();
     drawn = { t: now, xy };
