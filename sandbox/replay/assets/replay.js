@@ -522,11 +522,20 @@
     const all = events.map((e, j) => ({ ...e, index: j }));
     if (DATA.closest) all.push({ ...DATA.closest, kind: "closest", index: -1 });
     all.sort((a, b) => a.t - b.t);
+    // one lane per kind present, so that marks at the same time do not hide each other
+    const lanes = [...new Set(all.map((e) => (e.kind === "closest" ? "collision" : e.kind)))];
+    const LANE = 15; // [px]
+    $("marks").style.height = `${Math.max(1, lanes.length) * LANE}px`;
+    $("track").style.top = `${Math.max(1, lanes.length) * LANE + 2}px`;
+    $("timeline").style.height = `${Math.max(1, lanes.length) * LANE + 12}px`;
+    $("cursor").style.top = `${-Math.max(1, lanes.length) * LANE}px`;
+    $("cursor").style.height = `${Math.max(1, lanes.length) * LANE + 10}px`;
     const frag = document.createDocumentFragment(), items = document.createDocumentFragment();
     all.forEach((e, j) => {
       const b = document.createElement("button");
       b.className = "mark"; b.dataset.kind = e.kind; b.dataset.t = String(e.t);
       b.style.left = (100 * (e.t - t0) / span) + "%";
+      b.style.top = `${LANE * lanes.indexOf(e.kind === "closest" ? "collision" : e.kind)}px`;
       b.title = `${fmt(e.t, 2)} s: ${describe(e)}`;
       b.setAttribute("aria-label", b.title);
       b.innerHTML = glyph(e);
