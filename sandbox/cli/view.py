@@ -75,13 +75,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         [
             "sandbox view runs/fig13_discontinuous_beta1   # RUN_DIR/replay.html",
             "sandbox view runs/door -o door.html",
-            "sandbox run paper/fig12_no_recovery --html    # run, then the replay",
         ],
         description=(
             "Write one self-contained HTML file that replays a run directory written "
             "by sandbox run: play, scrub a timeline of its collisions, failures, "
             "detections, reassignments and leader changes, zoom, follow a vehicle. "
-            "It needs no network; open it from disk in Chromium or Firefox."
+            "It needs no network; open it from disk in Chromium or Firefox. "
+            "sandbox run FILE --html writes it right after a run."
         ),
     )
     p.add_argument("run_dir", metavar="RUN_DIR", help="a run directory")
