@@ -296,3 +296,68 @@ def test_a_large_fleet_plays_at_an_interactive_rate(
         assert "1,000 vehicles" in p.page.locator("#notes").inner_text()
     finally:
         p.context.close()
+
+
+def odd_run(kind: str) -> Run:
+    """Runs the page must show without an error (see the ids of the test below)."""
+    if kind == "one_failed_diverged_vehicle":
+        doc = {
+            "name": "alone",
+            "duration": 0.5,
+            "reference": {"type": "point", "position": [0, 0]},
+            "vehicles": [{"name": "solo", "pose": [1, 0, 0]}],
+            "failures": [{"vehicle": "solo", "kind": "stop", "at": 0.1}],
+        }
+        import tempfile
+
+        from helpers import write_yaml
+
+        with tempfile.TemporaryDirectory() as tmp:
+            run = simulate(load_scenario(write_yaml(Path(tmp), doc)))
+        run.status = "diverged"
+        run.info["diverged"] = {"t": 0.45, "vehicle": "solo", "reason": "test"}
+        run.pose[-5:] = np.nan
+        return run
+    if kind == "one_sample":
+        run = odd_run("one_failed_diverged_vehicle")
+        for key in ("t", "pose", "cmd", "chi", "slot", "target", "mode", "failed"):
+            setattr(run, key, getattr(run, key)[:1])
+        run.reference = run.reference[:1]
+        run.pose[:] = 0.0
+        return run
+    files = {
+        "obstacles_no_events": ("failures", "obstacle_field.yaml"),
+        "walls": ("safety", "door.yaml"),
+    }
+    folder, name = files[kind]
+    return simulate(
+        load_scenario(SCENARIOS / folder / name, overrides=["duration=1.5"])
+    )
+
+
+@pytest.mark.parametrize(
+    "kind",
+    ["one_failed_diverged_vehicle", "one_sample", "obstacles_no_events", "walls"],
+)
+def test_odd_runs_open_play_and_seek(
+    browser: object, tmp_path: Path, kind: str
+) -> None:
+    run = odd_run(kind)
+    p = Page(browser, write_html(run, tmp_path / "odd.html"))
+    try:
+        p.js("window.sandboxReplay.play()")
+        p.page.wait_for_timeout(100)
+        p.js(f"window.sandboxReplay.seek({float(run.t[-1])})")
+        state = p.js("window.sandboxReplay.state()")
+        assert state["t"] == pytest.approx(run.t[-1])
+        assert sorted(state["vehicles"]) == sorted(run.names)
+        p.page.keyboard.press("ArrowLeft")
+        p.page.keyboard.press("n")
+        p.page.mouse.click(100, 100)
+        assert p.errors == []
+        assert p.page.locator("#message").is_hidden()
+        if kind == "one_failed_diverged_vehicle":
+            assert state["vehicles"]["solo"] is None  # not finite: not drawn
+            assert "diverged" in p.page.locator("#summary").inner_text()
+    finally:
+        p.context.close()

@@ -20,15 +20,15 @@ DEFAULT_NAME = "replay.html"
 
 def cmd_view(args: argparse.Namespace) -> int:
     """``sandbox view RUN_DIR [-o FILE.html]``: write the replay page of a run."""
+    import sandbox
     from sandbox.errors import SandboxError
-    from sandbox.output import load_run_dir
     from sandbox.replay import check_output
 
     run_dir = Path(args.run_dir)
     out = Path(args.output) if args.output else run_dir / DEFAULT_NAME
     try:
         check_output(out)  # before reading a large run
-        run = load_run_dir(run_dir)
+        run = sandbox.load_run(run_dir)
         written = write_run_html(run, out)
     except SandboxError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -60,8 +60,8 @@ def _replays(
     root: Path, run_ids: list[str], log: Callable[[str], None] | None
 ) -> dict[str, str]:
     """Write the missing replay pages of the kept runs; their addresses by run id."""
+    import sandbox
     from sandbox.errors import SandboxError
-    from sandbox.output import load_run_dir
     from sandbox.replay import write_html
 
     links = {}
@@ -72,7 +72,7 @@ def _replays(
         page = run_dir / REPLAY_NAME
         if not page.is_file():
             try:
-                write_html(load_run_dir(run_dir), page)
+                write_html(sandbox.load_run(run_dir), page)
             except SandboxError as exc:
                 if log is not None:
                     log(f"warning: {run_id}: no replay ({exc})")
