@@ -637,48 +637,72 @@
   }
 
   function drawChart() {
+    // The lines are drawn once into an off-screen canvas (again when the selection or
+    // the size changes); each frame copies it and draws the time cursor.
     const box = $("chart-box"), w = box.clientWidth, h = box.clientHeight;
+    const dpr = window.devicePixelRatio || 1, pad = 14;
     if (!chartCache) {
       const series = chartSeries();
       let top = 0;
       for (const s of series) for (const v of s.y) if (Number.isFinite(v) && v > top) top = v;
       top = top > 0 ? top * 1.05 : 1;
-      chartCache = { series, top };
+      chartCache = { series, top, image: null, selected: null };
     }
-    const { series, top } = chartCache;
-    const g = chartCtx, pad = 14;
-    g.fillStyle = "#fff"; g.fillRect(0, 0, w, h);
-    const X = (t) => (w * (t - t0)) / span, Y = (v) => h - pad - ((h - 2 * pad) * v) / top;
-    g.strokeStyle = "#e0e0e0"; g.lineWidth = 1;
-    g.beginPath(); g.moveTo(0, Y(0)); g.lineTo(w, Y(0)); g.moveTo(0, Y(top / 1.05)); g.lineTo(w, Y(top / 1.05)); g.stroke();
-    const step = Math.max(1, Math.floor(M.T / Math.max(w * 2, 1)));
-    for (const s of series) {
-      g.strokeStyle = s.color; g.lineWidth = s.vehicle === selected ? 2.5 : 1.2;
-      g.globalAlpha = selected >= 0 && s.vehicle !== undefined && s.vehicle !== selected ? 0.45 : 1;
-      g.beginPath();
-      let pen = false;
-      for (let k = 0; k < M.T; k += step) {
-        const v = s.y[k];
-        if (!Number.isFinite(v)) { pen = false; continue; }
-        if (pen) g.lineTo(X(M.t[k]), Y(v)); else g.moveTo(X(M.t[k]), Y(v));
-        pen = true;
+    const X = (t) => (w * (t - t0)) / span, Y = (v) => h - pad - ((h - 2 * pad) * v) / chartCache.top;
+    if (!chartCache.image || chartCache.selected !== selected) {
+      const { series, top } = chartCache;
+      const image = document.createElement("canvas");
+      image.width = Math.max(1, Math.round(w * dpr)); image.height = Math.max(1, Math.round(h * dpr));
+      const g = image.getContext("2d");
+      g.setTransform(dpr, 0, 0, dpr, 0, 0);
+      g.fillStyle = "#fff"; g.fillRect(0, 0, w, h);
+      g.strokeStyle = "#e0e0e0"; g.lineWidth = 1;
+      g.beginPath(); g.moveTo(0, Y(0)); g.lineTo(w, Y(0)); g.moveTo(0, Y(top / 1.05)); g.lineTo(w, Y(top / 1.05)); g.stroke();
+      for (const e of events) {
+        if (e.kind !== "collision") continue;
+        g.strokeStyle = "rgba(225,0,0,0.35)"; g.beginPath(); g.moveTo(X(e.t), pad); g.lineTo(X(e.t), h - pad); g.stroke();
       }
-      g.stroke();
+      const step = Math.max(1, Math.floor(M.T / Math.max(w * 2, 1)));
+      const order = series.map((s, j) => j).sort((a, b) => (series[a].vehicle === selected) - (series[b].vehicle === selected));
+      for (const j of order) {
+        const s = series[j];
+        g.strokeStyle = s.color; g.lineWidth = s.vehicle === selected ? 2.5 : 1.2;
+        g.globalAlpha = selected >= 0 && s.vehicle !== undefined && s.vehicle !== selected ? 0.45 : 1;
+        g.beginPath();
+        let pen = false;
+        for (let k = 0; k < M.T; k += step) {
+          const v = s.y[k];
+          if (!Number.isFinite(v)) { pen = false; continue; }
+          if (pen) g.lineTo(X(M.t[k]), Y(v)); else g.moveTo(X(M.t[k]), Y(v));
+          pen = true;
+        }
+        g.stroke();
+      }
+      g.globalAlpha = 1;
+      g.fillStyle = "#333"; g.font = "11px system-ui, sans-serif"; g.textBaseline = "top";
+      const label = series.length && series[0].label ? " (red: largest, black: mean)" : "";
+      const what = M.hasSlots ? `formation error [m]${label}; top ${fmt(top / 1.05, 3)} m` : "formation error: no vehicle has a slot";
+      g.fillText(what, 4, 1);
+      g.textBaseline = "bottom";
+      g.fillText(`${fmt(t0, 1)} s`, 2, h);
+      const endLabel = `${fmt(t1, 1)} s`;
+      g.fillText(endLabel, w - g.measureText(endLabel).width - 2, h);
+      chartCache.image = image; chartCache.selected = selected;
     }
-    g.globalAlpha = 1;
-    for (const e of events) {
-      if (e.kind !== "collision") continue;
-      g.strokeStyle = "rgba(225,0,0,0.35)"; g.beginPath(); g.moveTo(X(e.t), pad); g.lineTo(X(e.t), h - pad); g.stroke();
-    }
+    const g = chartCtx;
+    g.setTransform(1, 0, 0, 1, 0, 0);
+    g.drawImage(chartCache.image, 0, 0);
+    g.setTransform(dpr, 0, 0, dpr, 0, 0);
     g.strokeStyle = "#0078ff"; g.lineWidth = 2;
     g.beginPath(); g.moveTo(X(now), 0); g.lineTo(X(now), h); g.stroke();
-    g.fillStyle = "#333"; g.font = "11px system-ui, sans-serif"; g.textBaseline = "top";
-    const label = series.length && series[0].label ? " (red: largest, black: mean)" : "";
-    g.fillText(`formation error [m]${label}; top ${fmt(top / 1.05, 3)} m`, 4, 1);
-    g.textBaseline = "bottom";
-    g.fillText(`${fmt(t0, 1)} s`, 2, h);
-    const endLabel = `${fmt(t1, 1)} s`;
-    g.fillText(endLabel, w - g.measureText(endLabel).width - 2, h);
+    if (selected >= 0 && n <= 20) {
+      const v = lerp(M.err, 1, 0, sampleAt(now), selected);
+      if (Number.isFinite(v)) {
+        g.fillStyle = colors[selected];
+        g.beginPath(); g.arc(X(now), Y(v), 4, 0, 2 * Math.PI); g.fill();
+        g.strokeStyle = "#000"; g.lineWidth = 1; g.stroke();
+      }
+    }
   }
 
   // ------------------------------------------------------------------ control
