@@ -601,7 +601,7 @@
   function buildLegend() {
     const rows = [];
     if (n <= 20) names.forEach((name, i) => rows.push(`<div>${swatch(colors[i])}${esc(name)}${i === DATA.leader ? " (leader)" : ""}</div>`));
-    else rows.push(`<div>${swatch(colors[0])}${n} vehicles</div>`);
+    else rows.push(`<div>${swatch(new Set(colors).size === 1 ? colors[0] : COLOR.neutral)}${n} vehicles</div>`);
     const svg = (body) => `<svg width="14" height="14" viewBox="0 0 14 14">${body}</svg>`;
     if (!large && M.hasSlots) rows.push(`<div>${svg('<circle cx="7" cy="7" r="4" fill="none" stroke="#555" stroke-width="2"/>')}slot (ring) / target (cross)</div>`);
     if (DATA.reference_path) rows.push(`<div>${svg('<path d="M0 7H5M9 7H14" stroke="#808080"/>')}reference path</div>`);
