@@ -1,8 +1,9 @@
-"""``sandbox sweep FILE ...`` runs a study; ``sandbox sweep plot|table DIR`` shows it.
+"""``sandbox sweep FILE`` runs a study; ``sandbox sweep plot|table|view DIR`` shows it.
 
 ``FILE`` is a scenario or a sweep file (``base:`` plus ``grid``, ``zip``, ``seeds``);
-see :mod:`sandbox.study.spec`. A file literally named ``plot`` or ``table`` is given as
-``./plot``.
+see :mod:`sandbox.study.spec`. ``sandbox sweep view DIR`` writes the HTML page of the
+results (:mod:`sandbox.replay.sweep`). A file literally named ``plot``, ``table`` or
+``view`` is given as ``./plot``.
 """
 
 from __future__ import annotations
