@@ -361,3 +361,43 @@ def test_odd_runs_open_play_and_seek(
             assert "diverged" in p.page.locator("#summary").inner_text()
     finally:
         p.context.close()
+
+
+def test_sweep_page_sorts_filters_and_links(browser: object, tmp_path: Path) -> None:
+    """Two runs of the head-on pair: cut before the contact (0.5 s) and after it."""
+    from helpers import HEADON, write_yaml
+
+    from sandbox.cli import main
+
+    scenario = str(write_yaml(tmp_path, HEADON))
+    out = tmp_path / "study"
+    args = ["sweep", scenario, "--grid", "duration=0.5,1.5", "--out", str(out)]
+    assert main([*args, "--keep-runs"]) == 0
+    assert main(["sweep", "view", str(out)]) == 0
+    ctx = browser.new_context()
+    page = ctx.new_page()
+    requests: list[str] = []
+    page.on("request", lambda r: requests.append(r.url))
+    url = (out / "sweep.html").resolve().as_uri()
+    page.goto(url)
+    try:
+        rows = page.locator("#results tbody tr")
+        assert rows.count() == 2
+        duration = page.locator("#results th", has_text="duration")
+        duration.click()
+        duration.click()  # descending: the longer run first
+        first = rows.nth(0).locator("td").nth(2).inner_text()
+        assert first == "1.5"
+        page.select_option("#collisions", "none")
+        assert rows.count() == 1
+        assert rows.nth(0).locator("td").nth(2).inner_text() == "0.5"
+        page.select_option("#collisions", "some")
+        assert rows.count() == 1
+        rows.nth(0).locator("a").click()
+        page.wait_for_load_state()
+        assert page.evaluate("window.sandboxReplay.ready") is True
+        kinds = {e["kind"] for e in page.evaluate("window.sandboxReplay.events()")}
+        assert kinds == {"collision"}
+        assert all(r.startswith("file://") for r in requests)
+    finally:
+        ctx.close()
