@@ -130,8 +130,12 @@ def test_reconfiguration_events_are_marked() -> None:
     assert kinds.count("failure") == len(run.info["failures"]) == 1
     assert kinds.count("leader_change") == len(run.info["leader_changes"]) == 1
     assert kinds.count("reassignment") == len(run.info["reassignments"]) >= 1
-    lead = next(e for e in replay_data(run)["events"] if e["kind"] == "leader_change")
+    data = replay_data(run)
+    lead = next(e for e in data["events"] if e["kind"] == "leader_change")
     assert (lead["from"], lead["to"]) == ("leader", "red")
+    # Run.leader is the leader at the end; the page's timeline starts with the first
+    assert run.names[run.leader] == "red"
+    assert data["leaders"] == [[0.0, "leader"], [lead["t"], "red"]]
 
 
 def test_detections_are_marked() -> None:
@@ -198,6 +202,18 @@ def embedded_text(html: str) -> str:
     start = html.index('<script id="replay-data"')
     start = html.index(">", start) + 1
     return html[start : html.index("</script>", start)]
+
+
+def test_sweep_page_is_deterministic(tmp_path: Path) -> None:
+    from sandbox.replay import write_sweep_html
+
+    scenario = str(write_yaml(tmp_path, {**HEADON, "duration": 0.3}))
+    out = tmp_path / "study"
+    assert main(["sweep", scenario, "--seeds", "0:2", "--out", str(out)]) == 0
+    a = write_sweep_html(out, tmp_path / "a.html")["path"].read_bytes()
+    b = write_sweep_html(out, tmp_path / "b.html")["path"].read_bytes()
+    assert a == b
+    assert embedded(a.decode())["links"] == {}  # nothing kept: nothing linked
 
 
 def test_same_run_gives_the_same_bytes(tmp_path: Path, headon: object) -> None:

@@ -389,7 +389,8 @@ def replay_data(
         ``diameter``, ``leader``, ``arrays`` (packed ``t``, ``pose``, ``cmd``,
         ``slot``, ``target``, ``reference``, ``state``, ``slot_index``), ``events``,
         ``closest``, ``summary``, ``obstacles``, ``reference_path``, ``bounds``,
-        ``recovery``, ``camera``, ``modes``, ``samples``, ``stride``, ``notes``.
+        ``recovery``, ``camera``, ``leaders`` (``[t, name]``: who leads from ``t``;
+        None: the reference), ``modes``, ``samples``, ``stride``, ``notes``.
     """
     if metrics is None:
         import sandbox
@@ -447,6 +448,15 @@ def replay_data(
         size = 640
         scale = Camera.for_run(run, size, "leader", legend=False).scale
         camera = {"follow": run.names[run.leader], "width": _rounded(size / scale)}
+    # Who leads when: ``Run.leader`` is the leader at the end; before the first leader
+    # change the lead is that change's ``from``.
+    changes = _info(run, "leader_changes") or []
+    first = changes[0].get("from") if changes else None
+    if not changes and run.leader >= 0:
+        first = run.names[run.leader]
+    leaders = [[_rounded(t[0]), first]] + [
+        [_rounded(c["t"]), c.get("to")] for c in changes
+    ]
     rec = _info(run, "recovery")
     rec = rec if isinstance(rec, dict) else {}
     label = _info(run, "scenario_name")
@@ -477,6 +487,7 @@ def replay_data(
             "r": _rounded(rec.get("r")),
         },
         "camera": camera,
+        "leaders": leaders,
         "modes": list(MODE_NAMES),
         "large": n > LARGE_FLEET,
         "notes": notes,

@@ -68,7 +68,7 @@
   let now = 0, t0 = 0, t1 = 0, span = 1;
   let playing = false, speed = 1, lastTick = null;
   let selected = -1, follow = -1; // the vehicle shown in the panel, the one the camera follows
-  const cam = { scale: 1, cx: 0, cy: 0, w: 1, h: 1, fitted: false };
+  const cam = { scale: 1, fitScale: 1, cx: 0, cy: 0, w: 1, h: 1, fitted: false };
   let drawn = null; // {t, xy: Float64Array(2n)} of the last frame
   const stats = { frames: 0, drawMs: 0, lastDrawMs: 0 };
   const ctx = $("world").getContext("2d");
@@ -144,10 +144,9 @@
   }
 
   function leaderAt(time) {
-    let lead = DATA.leader >= 0 ? names[DATA.leader] : null;
-    for (const e of events) {
-      if (e.kind === "leader_change" && e.t <= time + 1e-9) lead = e.to;
-    }
+    // who leads at ``time``: a name, or null (the reference, or no leader)
+    let lead = null;
+    for (const [t, name] of DATA.leaders) if (t <= time + 1e-9) lead = name;
     return lead;
   }
 
@@ -173,6 +172,7 @@
     const sx = (cam.w * (1 - 2 * pad)) / Math.max(x1 - x0, 1e-9);
     const sy = (cam.h * (1 - 2 * pad)) / Math.max(y1 - y0, 1e-9);
     cam.scale = Math.max(Math.min(sx, sy), 1e-9);
+    cam.fitScale = cam.scale;
     cam.cx = (x0 + x1) / 2; cam.cy = (y0 + y1) / 2;
     cam.fitted = true;
   }
@@ -442,6 +442,7 @@
     updatePanel(s);
     drawChart();
     $("cursor").style.left = (100 * (now - t0) / span) + "%";
+    markNear();
     stats.frames += 1;
     stats.lastDrawMs = performance.now() - start;
     stats.drawMs += stats.lastDrawMs;
@@ -452,7 +453,7 @@
     const hits = events.filter((e) => e.kind === "collision" && e.t <= now + 1e-9).length;
     const lead = leaderAt(now);
     let text = `t = ${now.toFixed(2)} s \u00b7 collisions so far: ${hits}`;
-    if (lead !== null && events.some((e) => e.kind === "leader_change")) text += ` \u00b7 lead: ${lead || "reference"}`;
+    if (DATA.leaders.length > 1) text += ` \u00b7 lead: ${lead || "reference"}`;
     if (follow >= 0) text += ` \u00b7 following ${names[follow]}`;
     $("hud").textContent = text;
     $("time").textContent = `t = ${now.toFixed(2)} s of ${t1.toFixed(2)} s`;
@@ -559,6 +560,21 @@
     if (!all.length) { const li = document.createElement("li"); li.className = "hint"; li.textContent = "no events"; list.appendChild(li); }
   }
 
+  let nearItem = null;
+  function markNear() {
+    // the latest event at or before the time shown, highlighted in the list
+    const items = $("events-list").children;
+    let best = null;
+    for (const li of items) {
+      if (li.dataset.t === undefined) continue;
+      if (Number(li.dataset.t) <= now + 1e-9) best = li; else break;
+    }
+    if (best === nearItem) return;
+    if (nearItem) nearItem.classList.remove("near");
+    if (best) best.classList.add("near");
+    nearItem = best;
+  }
+
   function jumpTo(e) {
     // Seek to the event; a contact is also brought into view: centred, and zoomed in
     // until its vehicles are at least MIN_CONTACT_PX in radius.
@@ -600,7 +616,9 @@
 
   function buildLegend() {
     const rows = [];
-    if (n <= 20) names.forEach((name, i) => rows.push(`<div>${swatch(colors[i])}${esc(name)}${i === DATA.leader ? " (leader)" : ""}</div>`));
+    const leads = (name) => DATA.leaders.filter(([, who]) => who === name).map(([t], j) =>
+      (DATA.leaders[0][1] === name && j === 0 ? "leader" : `leader from ${fmt(t, 2)} s`));
+    if (n <= 20) names.forEach((name, i) => rows.push(`<div>${swatch(colors[i])}${esc(name)}${leads(name).length ? ` (${leads(name).join(", ")})` : ""}</div>`));
     else rows.push(`<div>${swatch(new Set(colors).size === 1 ? colors[0] : COLOR.neutral)}${n} vehicles</div>`);
     const svg = (body) => `<svg width="14" height="14" viewBox="0 0 14 14">${body}</svg>`;
     if (!large && M.hasSlots) rows.push(`<div>${svg('<circle cx="7" cy="7" r="4" fill="none" stroke="#555" stroke-width="2"/>')}slot (ring) / target (cross)</div>`);
@@ -806,7 +824,7 @@
       const r = $("world").getBoundingClientRect();
       const u = follow >= 0 ? cam.w / 2 : e.clientX - r.left, v = follow >= 0 ? cam.h / 2 : e.clientY - r.top;
       const [wx, wy] = p2w(u, v);
-      cam.scale *= Math.pow(1.0015, -e.deltaY);
+      cam.scale = Math.min(cam.fitScale * 1e4, Math.max(cam.fitScale / 100, cam.scale * Math.pow(1.0015, -e.deltaY)));
       cam.cx = wx - (u - cam.w / 2) / cam.scale; cam.cy = wy + (v - cam.h / 2) / cam.scale;
       render();
     }, { passive: false });
