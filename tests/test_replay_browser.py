@@ -337,13 +337,21 @@ def odd_run(kind: str) -> Run:
 
 @pytest.mark.parametrize(
     "kind",
-    ["one_failed_diverged_vehicle", "one_sample", "obstacles_no_events", "walls"],
+    [
+        "one_failed_diverged_vehicle",
+        "one_sample",
+        "obstacles_no_events",
+        "walls",
+        "decimated",
+    ],
 )
 def test_odd_runs_open_play_and_seek(
     browser: object, tmp_path: Path, kind: str
 ) -> None:
-    run = odd_run(kind)
-    p = Page(browser, write_html(run, tmp_path / "odd.html"))
+    run = odd_run(kind if kind != "decimated" else "walls")
+    budget = run.n_vehicles * len(run.t) // 7 if kind == "decimated" else None
+    page = write_html(run, tmp_path / "odd.html", max_vehicle_samples=budget)
+    p = Page(browser, page)
     try:
         p.js("window.sandboxReplay.play()")
         p.page.wait_for_timeout(100)
@@ -356,6 +364,14 @@ def test_odd_runs_open_play_and_seek(
         p.page.mouse.click(100, 100)
         assert p.errors == []
         assert p.page.locator("#message").is_hidden()
+        if kind == "decimated":  # said on the page; drawn between the samples kept
+            assert "Decimated in time" in p.page.locator("#notes").inner_text()
+            t = float(run.t[len(run.t) // 2])
+            p.js(f"window.sandboxReplay.seek({t})")
+            drawn = p.js("window.sandboxReplay.state()")["vehicles"]
+            for i, name in enumerate(run.names):
+                want = [np.interp(t, run.t, run.pose[:, i, c]) for c in (0, 1)]
+                assert drawn[name] == pytest.approx(want, abs=0.02)  # [m] 7 samples
         if kind == "one_failed_diverged_vehicle":
             assert state["vehicles"]["solo"] is None  # not finite: not drawn
             assert "diverged" in p.page.locator("#summary").inner_text()
