@@ -12,7 +12,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from sandbox.cli.common import EXIT_INVALID, EXIT_OK, add_command, nonempty
+from sandbox.cli.common import (
+    EXIT_INVALID,
+    EXIT_OK,
+    add_command,
+    add_plugin_option,
+    nonempty,
+)
 
 #: The page's name in the run directory.
 DEFAULT_NAME = "replay.html"
@@ -93,4 +99,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"output file (default RUN_DIR/{DEFAULT_NAME}); an existing file is "
         "replaced only if it is an earlier replay",
     )
+    add_plugin_option(p)  # a run of a plug-in's obstacle or strategy reads it back
     p.set_defaults(func=cmd_view)
