@@ -904,23 +904,26 @@
   };
 
   async function start() {
-    buildHeader();
+    // Any error on the way is shown on the page and rejects ``ready`` (never a page
+    // that waits for ever).
     try {
+      buildHeader();
       await load();
+      buildLegend();
+      buildMarks();
+      resize();
+      firstView();
+      wire();
+      setSpeed(1);
+      render();
     } catch (err) {
       const box = $("message");
       box.hidden = false;
       box.textContent = "This replay cannot be shown: " + (err && err.message ? err.message : err);
+      document.body.dataset.ready = "error";
       rejectReady(err);
       return;
     }
-    buildLegend();
-    buildMarks();
-    resize();
-    firstView();
-    wire();
-    setSpeed(1);
-    render();
     document.body.dataset.ready = "1";
     resolveReady(true);
     requestAnimationFrame(tick);
