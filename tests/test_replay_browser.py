@@ -423,3 +423,24 @@ def test_sweep_page_sorts_filters_and_links(browser: object, tmp_path: Path) -> 
         assert all(r.startswith("file://") for r in requests)
     finally:
         ctx.close()
+
+
+def test_a_damaged_page_says_so(
+    browser: object, collision_run: Run, tmp_path: Path
+) -> None:
+    path = write_html(collision_run, tmp_path / "replay.html")
+    html = path.read_text(encoding="utf-8")
+    start = html.index('"pose":{"data":"') + len('"pose":{"data":"')
+    path.write_text(html[:start] + "AAAA" + html[start + 4 :], encoding="utf-8")
+    ctx = browser.new_context()
+    ctx.set_default_timeout(TIMEOUT_MS)
+    page = ctx.new_page()
+    try:
+        page.goto(path.resolve().as_uri())
+        page.wait_for_function("document.body.dataset.ready !== undefined")
+        assert page.evaluate("document.body.dataset.ready") == "error"
+        message = page.locator("#message")
+        assert message.is_visible()
+        assert "cannot be shown" in message.inner_text()
+    finally:
+        ctx.close()
