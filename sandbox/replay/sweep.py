@@ -14,7 +14,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sandbox.replay.page import ReplayError, build_page, check_output, write_page
+from sandbox.replay.page import (
+    ReplayError,
+    build_page,
+    check_output,
+    is_page,
+    write_page,
+)
 from sandbox.study.sweep import KEPT_RUNS
 
 __all__ = ["KEPT_RUNS", "sweep_data", "write_sweep_html"]
@@ -70,6 +76,10 @@ def _replays(
         if not (run_dir / "run.npz").is_file():
             continue
         page = run_dir / REPLAY_NAME
+        if page.is_file() and not is_page(page):
+            if log is not None:
+                log(f"warning: {page}: not a replay page; not linked")
+            continue
         if not page.is_file():
             try:
                 write_html(sandbox.load_run(run_dir), page)
