@@ -725,4 +725,6 @@ def write_gif(
         "duration": stream.duration_ms / 1000.0,
         "path": str(path),
     }
+
+
 from sandbox.replay import write_html  # noqa: E402,F401
