@@ -28,6 +28,7 @@ from sandbox.cli import (
     scenarios,
     sweep,
     validate,
+    view,
 )
 from sandbox.cli.common import (
     EXIT_FAILED,
@@ -42,7 +43,7 @@ from sandbox.cli.common import (
 from sandbox.errors import PluginError, SandboxError, ScenarioError
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
-COMMANDS = (run, validate, check, scenarios, figures, compare, sweep, plugins)
+COMMANDS = (run, validate, check, scenarios, figures, view, compare, sweep, plugins)
 
 EPILOG = """\
 examples:

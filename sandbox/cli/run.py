@@ -30,7 +30,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     from sandbox.loop.simulation import Simulation
     from sandbox.run.metrics import compute_metrics
     from sandbox.run.output import check_out_dir, write_run_dir
-    from sandbox.run.record import STATUS_DIVERGED, STATUS_ERROR, STATUS_INTERRUPTED
+    from sandbox.run.record import (
+        STATUS_DIVERGED,
+        STATUS_ERROR,
+        STATUS_INTERRUPTED,
+    )
     from sandbox.scenario import load_scenario
 
     if args.format == "parquet":
@@ -48,6 +52,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"warning: {line}", file=sys.stderr)
     out_dir = Path(args.out) if args.out is not None else Path("runs") / scenario.name
     check_out_dir(out_dir)  # before simulating: refuse early, not after a long run
+    if args.html:
+        from sandbox.cli.view import EXIT_INVALID, html_problem
+
+        problem = html_problem(out_dir)
+        if problem:
+            print(f"error: {problem}", file=sys.stderr)
+            return EXIT_INVALID
     check_mp4(args)
     if args.gif:
         check_gif_frames(scenario.duration, args)
@@ -78,6 +89,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         )
     elif args.gif or args.mp4:
         render_gif(run, args)
+    if args.html and run.status != STATUS_INTERRUPTED:
+        from sandbox.cli.view import print_written, write_run_html
+
+        print_written(write_run_html(run, out_dir / "replay.html", metrics))
+    elif args.html:
+        print(f"html: skipped, the run was interrupted (sandbox view {out_dir})")
     if run.status == STATUS_DIVERGED:
         d = metrics.get("diverged", {})
         print(
@@ -203,5 +220,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--gif", type=nonempty, help="also render the run to this GIF file")
     add_gif_options(p)
+    p.add_argument(
+        "--html",
+        action="store_true",
+        help="also write the interactive replay OUT/replay.html (see sandbox view)",
+    )
     add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_run)

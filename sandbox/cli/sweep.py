@@ -1,8 +1,9 @@
-"""``sandbox sweep FILE ...`` runs a study; ``sandbox sweep plot|table DIR`` shows it.
+"""``sandbox sweep FILE`` runs a study; ``sandbox sweep plot|table|view DIR`` shows it.
 
 ``FILE`` is a scenario or a sweep file (``base:`` plus ``grid``, ``zip``, ``seeds``);
-see :mod:`sandbox.study.spec`. A file literally named ``plot`` or ``table`` is given as
-``./plot``.
+see :mod:`sandbox.study.spec`. ``sandbox sweep view DIR`` writes the HTML page of the
+results (:mod:`sandbox.study.sweep_page`). A file literally named ``plot``, ``table`` or
+``view`` is given as ``./plot``.
 """
 
 from __future__ import annotations
@@ -24,9 +25,11 @@ from sandbox.errors import SandboxError
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    """Dispatch ``sandbox sweep FILE`` / ``plot DIR`` / ``table DIR``."""
+    """Dispatch ``sandbox sweep FILE`` / ``plot DIR`` / ``table DIR`` / ``view DIR``."""
     target = args.target
-    if target[0] in ("plot", "table"):
+    if target[0] == "view" and len(target) == 2:
+        return _view(args, Path(target[1]))
+    if target[0] in ("plot", "table", "view"):
         if len(target) != 2:
             print(
                 f"error: sandbox sweep {target[0]} DIR: expected one DIR",
@@ -93,6 +96,7 @@ def _run(args: argparse.Namespace, file: str) -> int:
             scheduler_file=args.scheduler_file,
             retry_failed=args.retry_failed,
             progress=progress,
+            keep_runs=args.keep_runs,
         )
     except SweepError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -163,6 +167,27 @@ def _plot(args: argparse.Namespace, root: Path) -> int:
     return EXIT_OK
 
 
+def _view(args: argparse.Namespace, root: Path) -> int:
+    """``sandbox sweep view DIR``: the page of the results, linking kept replays."""
+    from sandbox.render.replay import ReplayError
+    from sandbox.study.sweep_page import write_sweep_html
+
+    try:
+        done = write_sweep_html(
+            root,
+            Path(args.out) if args.out else None,
+            log=lambda line: print(line, file=sys.stderr),
+        )
+    except ReplayError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    print(
+        f"sweep page: {done['path']} ({done['rows']} runs, {done['replays']} with a "
+        "replay); open it in a browser"
+    )
+    return EXIT_OK
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``sweep`` command."""
     p = add_command(
@@ -174,17 +199,19 @@ def register(sub: argparse._SubParsersAction) -> None:
             "--seeds 0:20 --out study/",
             "sandbox sweep table study/ --by recovery.beta",
             "sandbox sweep plot study/",
+            "sandbox sweep view study/        # study/sweep.html, linking replays",
         ],
         description=(
-            "sandbox sweep FILE --out DIR [...] runs a study; sandbox sweep plot DIR "
-            "and sandbox sweep table DIR look at one."
+            "sandbox sweep FILE --out DIR [...] runs a study; sandbox sweep plot DIR, "
+            "sandbox sweep table DIR and sandbox sweep view DIR (an HTML page of the "
+            "results, linking each kept run's replay) look at one."
         ),
     )
     p.add_argument(
         "target",
         nargs="+",
-        metavar="FILE | plot DIR | table DIR",
-        help="a scenario or sweep file; or 'plot DIR' / 'table DIR'",
+        metavar="FILE | plot DIR | table DIR | view DIR",
+        help="a scenario or sweep file; or 'plot DIR' / 'table DIR' / 'view DIR'",
     )
     p.add_argument(
         "--grid",
@@ -207,7 +234,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--out",
-        help="results directory (sweep); figures directory (plot, default DIR/figures)",
+        help="results directory (sweep); figures directory (plot, default "
+        "DIR/figures); the page (view, default DIR/sweep.html)",
+    )
+    p.add_argument(
+        "--keep-runs",
+        action="store_true",
+        help="also keep each computed run's directory in DIR/run_dirs/<run id>/ (for "
+        "sandbox view and sweep view)",
     )
     p.add_argument(
         "--jobs",

@@ -1,4 +1,4 @@
-"""Pictures of a recorded run: animated GIFs, MP4 videos and report-style figures.
+"""Pictures of a recorded run: GIFs, MP4 videos, report-style figures, the replay page.
 
 Everything here reads a :class:`~sandbox.Run` and draws it, headless; nothing here
 simulates (but :mod:`~sandbox.render.gallery`, which runs the scenarios it shows)::
@@ -30,6 +30,7 @@ _EXPORTS = {
     "write_mp4": "sandbox.render.video",
     "FIGURES": "sandbox.render.figures",
     "plot_run": "sandbox.render.figures",
+    "write_html": "sandbox.render.replay",
 }
 
 __all__ = [
@@ -43,6 +44,7 @@ __all__ = [
     "render_frames",
     "video_available",
     "write_gif",
+    "write_html",
     "write_mp4",
 ]
 
@@ -55,6 +57,7 @@ if TYPE_CHECKING:
         write_gif,
     )
     from sandbox.render.figures import FIGURES, plot_run
+    from sandbox.render.replay import write_html
     from sandbox.render.video import (
         VideoError,
         VideoUnavailable,

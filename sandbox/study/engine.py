@@ -87,6 +87,7 @@ def run_task(
     source: str,
     overrides: list[str],
     should_stop: Callable[[], bool] | None = None,
+    keep: str | None = None,
 ) -> dict[str, Any] | None:
     """Simulate one run of a sweep; return ``{"row": ..., "metrics": ...}``.
 
@@ -100,11 +101,13 @@ def run_task(
         The run's ``--set`` assignments (fixed ones, its values, its seed).
     should_stop : callable, optional
         Polled every step; a run it stops returns None (nothing to store).
+    keep : str, optional
+        Also write the run's directory (as ``sandbox run --out``) there.
     """
     sim = _simulation(base_doc, source, overrides)
     if isinstance(sim, dict):
         return sim
-    return _single(sim, should_stop)
+    return _single(sim, should_stop, keep)
 
 
 def _simulation(base_doc: dict[str, Any], source: str, overrides: list[str]) -> Any:
@@ -127,22 +130,40 @@ def _error(exc: BaseException) -> dict[str, Any]:
     return {"row": {"status": STATUS_ERROR}, "error": text}
 
 
-def _single(sim: Any, should_stop: Callable[[], bool] | None) -> dict[str, Any] | None:
+def _single(
+    sim: Any, should_stop: Callable[[], bool] | None, keep: str | None = None
+) -> dict[str, Any] | None:
     """Run one Simulation to its row and metrics (None when stopped)."""
     try:
         run = sim.run(should_stop=should_stop)
         if run.status == "interrupted":
             return None
-        return _result(run)
+        return _result(run, keep)
     except Exception as exc:  # a row with its status, never a missing row
         return _error(exc)
 
 
-def _result(run: Any) -> dict[str, Any]:
+def _result(run: Any, keep: str | None = None) -> dict[str, Any]:
     from sandbox.run.metrics import compute_metrics
 
     metrics = compute_metrics(run)
-    return {"row": row_of(run, metrics), "metrics": metrics}
+    out = {"row": row_of(run, metrics), "metrics": metrics}
+    if keep is not None:  # --keep-runs: the run directory, as sandbox run writes it
+        from pathlib import Path
+
+        from sandbox.run.output import write_run_dir
+
+        try:
+            write_run_dir(run, metrics, Path(keep))
+            out["kept"] = Path(keep).name
+        except SandboxError as exc:  # the run itself is fine: its row stays
+            out["kept_error"] = str(exc)
+    return out
+
+
+def _keep(job: tuple[Any, ...]) -> str | None:
+    """Where a job keeps its run directory (its optional fourth item), or None."""
+    return job[3] if len(job) > 3 else None
 
 
 def run_tasks(
@@ -162,8 +183,9 @@ def run_tasks(
     out: dict[str, dict[str, Any] | None] = {}
     groups: dict[str, list[tuple[str, Any]]] = {}
     stopped = False
+    keep = {run_id: _keep(job) for run_id, job in jobs}
     for run_id, job in jobs:
-        sim = _simulation(*job)
+        sim = _simulation(*job[:3])
         if isinstance(sim, dict):
             out[run_id] = sim
         elif batch_reason(sim) is None:
@@ -171,7 +193,7 @@ def run_tasks(
         elif stopped:
             out[run_id] = None
         else:
-            out[run_id] = _single(sim, should_stop)
+            out[run_id] = _single(sim, should_stop, keep[run_id])
             stopped = out[run_id] is None
     for members in groups.values():
         if stopped:
@@ -189,7 +211,7 @@ def run_tasks(
             continue
         for (run_id, _), run in zip(members, runs, strict=True):
             try:
-                out[run_id] = _result(run)
+                out[run_id] = _result(run, keep[run_id])
             except Exception as exc:
                 out[run_id] = _error(exc)
     return [(run_id, out[run_id]) for run_id, _ in jobs]
@@ -201,8 +223,8 @@ def _rebuilt(sim: Any) -> Any:
     return Simulation(sim.scenario)
 
 
-def _call(job: tuple[dict[str, Any], str, list[str]]) -> dict[str, Any] | None:
-    return run_task(*job)
+def _call(job: tuple[Any, ...]) -> dict[str, Any] | None:
+    return run_task(*job[:3], keep=_keep(job))
 
 
 def _call_group(jobs: list[Job]) -> list[tuple[str, dict[str, Any] | None]]:
@@ -214,7 +236,8 @@ def _ignore_interrupts() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-Job = tuple[str, tuple[dict[str, Any], str, list[str]]]
+#: ``(run id, (base document, source, overrides[, directory to keep the run in]))``.
+Job = tuple[str, tuple[Any, ...]]
 
 
 def usable_cores() -> int:

@@ -27,6 +27,8 @@ from sandbox.study.store import Store, digest
 
 #: A sweep file is a few lines; larger files are not read as one.
 MAX_SWEEP_BYTES = 1_000_000
+#: With ``keep_runs``, each computed run's directory is ``DIR/run_dirs/<run id>/``.
+KEPT_RUNS = "run_dirs"
 
 
 @dataclass
@@ -98,6 +100,7 @@ def run_sweep(
     scheduler_file: str | None = None,
     retry_failed: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    keep_runs: bool = False,
 ) -> SweepReport:
     """Compute the missing runs of ``spec`` into the store ``out``.
 
@@ -114,6 +117,10 @@ def run_sweep(
         Also rerun the stored runs whose status is a failure.
     progress : callable, optional
         Called as ``progress(done, total)`` after each run.
+    keep_runs : bool
+        Also write the run directory of every run computed now (as ``sandbox run``
+        does) into ``out/run_dirs/<run id>/``, for ``sandbox view`` and ``sandbox
+        sweep view``. A Dask worker writes it where it runs (a shared ``out``).
 
     Returns
     -------
@@ -123,7 +130,15 @@ def run_sweep(
     """
     with StopOnSignal() as stop:
         return _run_sweep(
-            spec, out, jobs, scheduler, scheduler_file, retry_failed, progress, stop
+            spec,
+            out,
+            jobs,
+            scheduler,
+            scheduler_file,
+            retry_failed,
+            progress,
+            stop,
+            keep_runs,
         )
 
 
@@ -136,6 +151,7 @@ def _run_sweep(
     retry_failed: bool,
     progress: Callable[[int, int], None] | None,
     stop: StopOnSignal,
+    keep_runs: bool = False,
 ) -> SweepReport:
     base_doc = read_base(spec)
     check_points(spec, base_doc)
@@ -147,8 +163,13 @@ def _run_sweep(
     report = SweepReport(len(tasks), len(tasks) - len(todo), 0, 0, 0)
     if todo:
         by_id = {t.run_id: t for t in todo}
+        kept = Path(out).resolve() / KEPT_RUNS
         jobs_list = [
-            (t.run_id, (base_doc, str(spec.base), t.overrides(spec.fixed)))
+            (
+                t.run_id,
+                (base_doc, str(spec.base), t.overrides(spec.fixed))
+                + ((str(kept / t.run_id),) if keep_runs else ()),
+            )
             for t in todo
         ]
         if scheduler or scheduler_file:

@@ -1,0 +1,92 @@
+"""Interactive replay of a run in the browser: one self-contained HTML file.
+
+:func:`write_html` writes a page that shows a recorded run as the GIF does (vehicles as
+discs of their diameter with their heading, slots, targets, obstacles and walls,
+trails, contact marks) and lets one play it, scrub a timeline on which every
+collision, failure, detection, reassignment and leader change is marked, zoom, pan,
+follow a vehicle and read its state beside a formation-error chart. The page needs no
+network: its data (:mod:`sandbox.render.replay.encode`), style and plain-JavaScript
+script are inlined, and it opens from disk in current Chromium and Firefox. ``sandbox
+view RUN_DIR`` and ``sandbox run FILE --html`` call it; the page of a sweep (``sandbox
+sweep view DIR``) is :func:`sandbox.study.sweep_page.write_sweep_html`'s. See
+``docs/replay.md``.
+
+Tests drive a page through ``window.sandboxReplay`` (``seek(t)``, ``play()``,
+``pause()``, ``state()``, ``events()``; documented in ``docs/replay.md``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from sandbox.render.replay.page import GENERATOR, ReplayError, build_page, check_output
+from sandbox.render.replay.page import write_page as _write_page
+
+__all__ = [
+    "GENERATOR",
+    "ReplayError",
+    "check_output",
+    "replay_html",
+    "write_html",
+]
+
+
+def replay_html(
+    run: Any,
+    metrics: dict[str, Any] | None = None,
+    *,
+    title: str | None = None,
+    max_vehicle_samples: int | None = None,
+) -> str:
+    """The HTML text of the replay page of ``run`` (see :func:`write_html`)."""
+    from sandbox.render.replay.encode import replay_data
+
+    data = replay_data(
+        run, metrics, title=title, max_vehicle_samples=max_vehicle_samples
+    )
+    return build_page("replay.html", data["scenario"], data, ["replay.js"])
+
+
+def write_html(
+    run: Any,
+    path: str | os.PathLike[str],
+    *,
+    metrics: dict[str, Any] | None = None,
+    title: str | None = None,
+    max_vehicle_samples: int | None = None,
+) -> Path:
+    """Write the interactive replay page of ``run`` to ``path``.
+
+    Parameters
+    ----------
+    run : Run
+        A recorded run (``sandbox.load_run(DIR)`` or ``Simulation.run()``).
+    path : str or os.PathLike
+        An ``.html`` file: missing, or an earlier replay page (any other file is never
+        overwritten). Written atomically; its directory is created if needed.
+    metrics : dict, optional
+        The run's metrics (``metrics.json``); computed when not given.
+    title : str, optional
+        The name shown; default the scenario's name.
+    max_vehicle_samples : int, optional
+        Most vehicle-samples embedded before the record is decimated in time
+        (default :data:`sandbox.render.replay.encode.MAX_VEHICLE_SAMPLES`).
+
+    Returns
+    -------
+    Path
+        ``path``. The same run gives the same bytes.
+
+    Raises
+    ------
+    ReplayError
+        ``path`` must not be written, or cannot be.
+    """
+    path = Path(path)
+    check_output(path)  # before the work, not after it
+    text = replay_html(
+        run, metrics, title=title, max_vehicle_samples=max_vehicle_samples
+    )
+    return _write_page(path, text)
