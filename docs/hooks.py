@@ -38,6 +38,13 @@ def _generators():
     return module.GENERATORS
 
 
+def on_config(config):
+    """Read the snippets (``CHANGELOG.md``) from the repository, whatever the cwd."""
+    snippets = config["mdx_configs"].setdefault("pymdownx.snippets", {})
+    snippets["base_path"] = [str(ROOT)]
+    return config
+
+
 def on_files(files, config):
     """Serve the pictures of ``renders/`` and ``studies/figures/`` at those paths."""
     for folder in PICTURES:
