@@ -8,6 +8,8 @@
   ``studies/figures/`` are added to the site as they are (nothing is copied into
   ``docs/``); a page links them relatively, ``../renders/rotating_circle.gif`` from a
   page one folder down.
+- The docstrings' Sphinx roles (``:func:`load_scenario```): mkdocstrings renders the
+  name as code and leaves the role's text before it; the role is dropped.
 - The changelog: ``docs/changelog.md`` includes the top-level ``CHANGELOG.md`` (through
   the ``pymdownx.snippets`` extension, whose base path is the repository).
 """
@@ -26,6 +28,8 @@ ROOT = Path(__file__).resolve().parent.parent
 PICTURES = ("renders", "studies/figures")
 SUFFIXES = {".gif", ".png", ".svg", ".jpg", ".mp4"}
 MARKER = re.compile(r"<!-- generated: ([a-z-]+) -->")
+#: A Sphinx cross-reference role left in a docstring (``:func:`name```), as rendered.
+ROLE = re.compile(r":(?:mod|func|class|meth|data|attr|exc|obj|const):(?=<code>)")
 
 
 def _generators():
@@ -74,3 +78,8 @@ def on_page_markdown(markdown, page, config, files):
         return generators[name]()
 
     return MARKER.sub(generate, markdown)
+
+
+def on_page_content(html, page, config, files):
+    """Drop the text of Sphinx roles (``:func:``) in front of the names they mark."""
+    return ROLE.sub("", html)
