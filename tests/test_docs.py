@@ -151,3 +151,39 @@ def test_the_site_builds_strictly(tmp_path: Path) -> None:
     api = (site / "reference" / "api.html").read_text(encoding="utf-8")
     assert "with_overrides" in api and "assert_no_collisions" in api
     assert (site / "renders" / "rotating_circle.gif").is_file()
+
+
+def generators():
+    """``docs/gen_reference.py``, imported from its file."""
+    spec = importlib.util.spec_from_file_location(
+        "gen_reference", DOCS / "gen_reference.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_scenario_reference_lists_every_declared_key() -> None:
+    # The page's tables come from the declarations the loader and the schema read:
+    # every key of every section and of every registered plug-in is a row.
+    from sandbox.scenario.schema import sections
+
+    text = generators().scenario_reference()
+    rows = 0
+    for section, params in sections().items():
+        for key, p in params.items():
+            assert f"| `{key}` |" in text, (section, key)
+            if p.unit:
+                assert f"| `{key}` | {p.type} | {p.unit} |" in text, (section, key)
+            rows += 1
+    assert text.count("\n| `") == rows
+
+
+def test_the_cli_reference_has_every_command() -> None:
+    from sandbox.cli import build_parser
+
+    text = generators().cli_reference()
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    for command in sub.choices:
+        assert f"### `sandbox {command}`" in text, command
+        assert f"usage: sandbox {command}" in text, command
