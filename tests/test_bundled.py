@@ -51,6 +51,32 @@ def test_an_existing_file_wins_over_a_bundled_name(elsewhere: Path) -> None:
     )
 
 
+@pytest.mark.parametrize(
+    "name", ["paper/rotating_circle", "paper/rotating_circle.yaml"]
+)
+def test_load_scenario_takes_a_bundled_name(name: str, elsewhere: Path) -> None:
+    # As on the command line: load_scenario (and the environments, which call it)
+    # accept a bundled name from any directory.
+    from sandbox import load_scenario
+
+    by_name = load_scenario(name)
+    by_file = load_scenario(SCENARIOS / "paper" / "rotating_circle.yaml")
+    assert by_name.name == "rotating_circle"
+    assert by_name.to_dict() == by_file.to_dict()
+
+
+def test_load_scenario_prefers_an_existing_file(elsewhere: Path) -> None:
+    from sandbox import ScenarioError, load_scenario
+
+    mine = elsewhere / "paper" / "rotating_circle.yaml"
+    mine.parent.mkdir()
+    mine.write_text("name: [", encoding="utf-8")
+    with pytest.raises(ScenarioError):
+        load_scenario("paper/rotating_circle.yaml")
+    with pytest.raises(ScenarioError, match="no such file"):
+        load_scenario("paper/no_such_scenario")
+
+
 @pytest.mark.parametrize("name", ["../pyproject", "/etc/passwd", "", "paper/../../x"])
 def test_a_name_never_reaches_outside_the_folder(name: str) -> None:
     assert bundled.find(name) is None
@@ -125,3 +151,13 @@ def test_copy_of_an_unknown_name_fails_cleanly(elsewhere: Path, capsys) -> None:
     assert main(["copy", "paper/nope"]) == 2
     assert "cannot read the scenario" in capsys.readouterr().err
     assert list(elsewhere.iterdir()) == []
+
+
+def test_the_environments_take_a_bundled_name(elsewhere: Path) -> None:
+    pytest.importorskip("gymnasium")
+    from sandbox.envs import VehicleEnv
+
+    env = VehicleEnv("failures/follower_stop", agent="red")
+    obs, _ = env.reset(seed=0)
+    assert env.task.source.scenario.name == "follower_stop"
+    assert obs.shape == (7 + 6 * 3,)

@@ -63,7 +63,7 @@ def test_no_more_healthy_collisions_than_under_the_oracle(name, vehicle, kind):
 )
 def test_a_crash_is_told_from_a_stop_by_its_deceleration(name, kind):
     # A stop brakes at max_accel = 5 m/s^2, a crash within a substep: told apart on
-    # other seeds' noise too (20 of 20 seeds each measured, README).
+    # other seeds' noise too (20 of 20 seeds each measured, docs/concepts/detection.md).
     for seed in (1, 2, 3, 4):
         _, m = result(name, seed=seed, duration=4)
         (failure,) = m["detection"]["failures"]
@@ -114,7 +114,8 @@ def test_a_cleared_failure_is_withdrawn():
 
 
 def test_fault_free_runs_give_no_false_alarm():
-    # 4 vehicles x 30 s of another seed's noise (the vehicle-hours: README).
+    # 4 vehicles x 30 s of another seed's noise (the vehicle-hours:
+    # docs/concepts/detection.md).
     run, m = result("detect_fault_free", seed=7, duration=30)
     assert m["detections"] == []
     assert m["detection"]["false_alarms"] == 0

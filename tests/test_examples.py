@@ -111,7 +111,14 @@ def test_the_keep_right_plug_in_is_selected_from_yaml_and_avoids_the_collision(
     assert listed.returncode == 0, listed.stderr
     assert "keep_right" in listed.stdout
     assert re.search(r"radius: length, default 3d \[m\]", listed.stdout)
-    bad = sandbox_cli("validate", scenario, "--set", "recovery.gain=-1")
+    # validate never runs the file's plug-in code: its keys are checked once the
+    # plug-in is named (trusted) with --plugin
+    unchecked = sandbox_cli("validate", scenario, "--set", "recovery.gain=-1")
+    assert unchecked.returncode == 0 and "not checked: recovery" in unchecked.stdout
+    plugin = str(EXAMPLES / "keep_right.py")
+    bad = sandbox_cli(
+        "validate", scenario, "--plugin", plugin, "--set", "recovery.gain=-1"
+    )
     assert bad.returncode == 2 and "recovery.gain" in bad.stderr
 
 

@@ -374,23 +374,23 @@ def test_with_overrides_validates_and_names_the_change() -> None:
     assert "recovery.beta: must be at least 0" in text
 
 
-# ------------------------------------------------------------ the README's example
-README = Path(__file__).resolve().parent.parent / "README.md"
+# ------------------------------------------------------ the plug-in tutorial's example
+TUTORIAL = Path(__file__).resolve().parent.parent / "docs" / "tutorials" / "plugins.md"
 
 
-def readme_block(name: str) -> str:
-    """The code block after ``<!-- plugin-example: NAME -->`` in the README."""
-    text = README.read_text(encoding="utf-8")
+def tutorial_block(name: str) -> str:
+    """The code block after ``<!-- plugin-example: NAME -->`` in the tutorial."""
+    text = TUTORIAL.read_text(encoding="utf-8")
     after = text.split(f"<!-- plugin-example: {name} -->", 1)[1]
     return after.split("```", 2)[1].split("\n", 1)[1]
 
 
-def test_the_readmes_plugin_example_of_each_kind_runs(
+def test_the_tutorials_plugin_example_of_each_kind_runs(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], registry_snapshot: None
 ) -> None:
-    (tmp_path / "my_plugins.py").write_text(readme_block("my_plugins.py"), "utf-8")
+    (tmp_path / "my_plugins.py").write_text(tutorial_block("my_plugins.py"), "utf-8")
     path = tmp_path / "plugins_demo.yaml"
-    path.write_text(readme_block("plugins_demo.yaml"), encoding="utf-8")
+    path.write_text(tutorial_block("plugins_demo.yaml"), encoding="utf-8")
     out = tmp_path / "run"
     assert main(["run", str(path), "--out", str(out), "--duration", "10"]) == 0
     assert "status ok" in capsys.readouterr().out

@@ -145,10 +145,12 @@ def test_without_the_option_no_gif_is_written(pytester: pytest.Pytester) -> None
     assert sorted(p.name for p in pytester.path.iterdir()) == ["test_headon.yaml"]
 
 
-def test_the_readmes_examples_pass(pytester: pytest.Pytester) -> None:
-    # The README's user test file and test_*.yaml, run as a user would: the Python
-    # test uses platoon.yaml, the same platoon without its expect: section.
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text("utf-8")
+def test_the_testing_tutorials_examples_pass(pytester: pytest.Pytester) -> None:
+    # The testing tutorial's user test file and test_*.yaml (docs/tutorials/testing.md),
+    # run as a user would: the Python test uses platoon.yaml, the same platoon without
+    # its expect: section.
+    docs = Path(__file__).resolve().parent.parent / "docs"
+    readme = (docs / "tutorials" / "testing.md").read_text("utf-8")
     test_py = re.search(
         r"```python\n(# tests/test_my_strategy\.py\n.*?)```", readme, re.S
     )

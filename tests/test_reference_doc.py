@@ -1,11 +1,12 @@
-"""scenarios/reference.yaml and the README say what the declarations say.
+"""scenarios/reference.yaml and the scenario page say what the declarations say.
 
 Every key of the format is declared once (a ``Param``: type, default, unit, bounds).
 These tests read the documented example ``scenarios/reference.yaml`` and check its
 comments against those declarations: every key is mentioned, and a key's comment that
 states a default, a unit, a bound or REQUIRED states the declared one. The numbers
-the README quotes about the format (the dt bound, the limits) are checked against the
-code's constants.
+the scenario reference page (``docs/reference/scenario.md``) quotes about the format
+(the dt bound, the limits) are checked against the code's constants; its tables of
+keys are generated from the declarations (``docs/gen_reference.py``).
 """
 
 from __future__ import annotations
@@ -173,7 +174,8 @@ def test_the_reference_example_loads_and_states_the_dt_bound() -> None:
     assert stated == [REPORT_DT_BOUND]
 
 
-README = " ".join((REPO / "README.md").read_text(encoding="utf-8").split())
+SCENARIO_PAGE = REPO / "docs" / "reference" / "scenario.md"
+PAGE = " ".join(SCENARIO_PAGE.read_text(encoding="utf-8").split())
 
 
 def _int(text: str) -> int:
@@ -204,9 +206,9 @@ def _int(text: str) -> int:
         (r"are at most (\d+) characters", lambda: MAX_NAME),
     ],
 )
-def test_the_readme_states_the_codes_numbers(pattern: str, value: Any) -> None:
-    found = re.findall(pattern, README)
-    assert found, f"the README no longer says {pattern!r}: update this test with it"
+def test_the_scenario_page_states_the_codes_numbers(pattern: str, value: Any) -> None:
+    found = re.findall(pattern, PAGE)
+    assert found, f"{SCENARIO_PAGE.name} no longer says {pattern!r}: update this test"
     for text in found:
         text = text.rstrip(".,;")
         number = _int(text) if re.fullmatch(r"[\d,^-]+", text) else float(text)

@@ -1,14 +1,14 @@
 """The safety benchmark (``scenarios/safety/``): what each case shows, as measured.
 
 Each case runs under the report's continuous approach as its file writes it (beta = 1,
-R = 3d, no tangential term) and with the tangential term (kappa = 1), and a few
-under another strategy where that one differs. The assertions are the outcomes of the
-README's benchmark table: the report's field stalls every exactly symmetric case and
-the door (a deadlock), the tangential term removes those deadlocks (except the
-20-vehicle ring under the continuous approach), and at 2 m/s against R = 1.5 m no
-strategy of the report prevents the contacts of the closing approach; with the CBF
-filter as well (the recommended configuration, whose right-hand rule leaves the
-filter's own stalls) no case has a contact or a deadlock.
+R = 3d, no tangential term) and with the tangential term (kappa = 1), and a few under
+another strategy where that one differs. The assertions are the outcomes of the
+benchmark table of docs/results/safety-benchmark.md: the report's field stalls every
+exactly symmetric case and the door (a deadlock), the tangential term removes those
+deadlocks (except the 20-vehicle ring under the continuous approach), and at 2 m/s
+against R = 1.5 m no strategy of the report prevents the contacts of the closing
+approach; with the CBF filter as well (the recommended configuration, whose right-hand
+rule leaves the filter's own stalls) no case has a contact or a deadlock.
 """
 
 from __future__ import annotations

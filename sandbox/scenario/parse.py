@@ -24,7 +24,7 @@ from sandbox.model.tunnelling import tunnelling_warning
 from sandbox.plugins.registration import (
     Param,
 )
-from sandbox.scenario import randomize
+from sandbox.scenario import bundled, randomize
 from sandbox.scenario.checks import _check_consistency
 from sandbox.scenario.expectations import read_expectations
 from sandbox.scenario.overrides import _apply_override, _mark_overrides
@@ -395,7 +395,9 @@ def load_scenario(
     Parameters
     ----------
     source : path or mapping
-        A ``.yaml`` file, or an already-loaded document (a dict).
+        A ``.yaml`` file, the name of a bundled scenario (``paper/rotating_circle``,
+        see :mod:`sandbox.scenario.bundled`; a file of that name wins), or an
+        already-loaded document (a dict).
     overrides : list of str, optional
         ``path=value`` assignments applied before validation.
     trust_plugins : bool, optional
@@ -422,6 +424,10 @@ def load_scenario(
         return parse_scenario(source, overrides=overrides, plugin_code=code)
     path = Path(source)
     name = str(source)
+    if not path.exists() and not path.is_absolute():
+        # A bundled scenario's name (``paper/rotating_circle``), as on the command
+        # line: a file that exists under the name given always wins.
+        path = bundled.find(name) or path
     expected = "a readable YAML scenario file"
     try:
         data = _read_limited(path)
