@@ -114,7 +114,10 @@ def test_the_keep_right_plug_in_is_selected_from_yaml_and_avoids_the_collision(
     # validate never runs the file's plug-in code: its keys are checked once the
     # plug-in is named (trusted) with --plugin
     unchecked = sandbox_cli("validate", scenario, "--set", "recovery.gain=-1")
-    assert unchecked.returncode == 0 and "not checked: recovery" in unchecked.stdout
+    assert (
+        unchecked.returncode == 0
+        and "recovery (strategy keep_right)" in unchecked.stdout
+    )
     plugin = str(EXAMPLES / "keep_right.py")
     bad = sandbox_cli(
         "validate", scenario, "--plugin", plugin, "--set", "recovery.gain=-1"
