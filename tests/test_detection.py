@@ -33,6 +33,7 @@ def result(name: str, *sets: str, **fields):
     return run_scenario(FAILURES / f"{name}.yaml", *sets, **fields)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "vehicle", "kind"), BUNDLED)
 def test_every_bundled_failure_is_detected_within_half_a_second(name, vehicle, kind):
     _, m = result(name)
@@ -50,6 +51,7 @@ def test_every_bundled_failure_is_detected_within_half_a_second(name, vehicle, k
     assert m["detection"]["false_alarms"] == 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "vehicle", "kind"), BUNDLED)
 def test_no_more_healthy_collisions_than_under_the_oracle(name, vehicle, kind):
     residual = result(name)[1]["collisions"]["healthy"]
@@ -57,6 +59,7 @@ def test_no_more_healthy_collisions_than_under_the_oracle(name, vehicle, kind):
     assert residual <= oracle
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "kind"),
     [("detect_follower_stop", "stop"), ("detect_follower_crash", "crash")],
@@ -113,6 +116,7 @@ def test_a_cleared_failure_is_withdrawn():
     assert 7.0 < d["cleared"] < 8.0
 
 
+@pytest.mark.slow
 def test_fault_free_runs_give_no_false_alarm():
     # 4 vehicles x 30 s of another seed's noise (the vehicle-hours: README).
     run, m = result("detect_fault_free", seed=7, duration=30)
@@ -196,6 +200,7 @@ def test_delayed_and_lost_packets(sets, least):
     assert m["detection"]["false_alarms"] == 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "vehicle"),
     [
