@@ -142,6 +142,7 @@ def test_other_laws_and_strategies_match(tmp_path, law):
         assert_same_run(Simulation(sc).run(), run)
 
 
+@pytest.mark.slow
 def test_what_the_batch_does_not_implement_runs_alone(tmp_path):
     sc = load_scenario(PAPER / "fig15_continuous_beta1.yaml", overrides=["duration=1"])
     assert batch_reason(Simulation(sc)) is None

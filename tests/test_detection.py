@@ -95,6 +95,7 @@ def test_the_stop_and_crash_fits():
     assert crash < stop
 
 
+@pytest.mark.slow
 def test_a_runaway_is_told_from_a_stuck_steering_by_its_speed():
     # At the alarm green's runaway looks like a stuck steering (its speed is near what
     # its controller asks for); read on through the isolation time its speed departs
@@ -108,6 +109,7 @@ def test_a_runaway_is_told_from_a_stuck_steering_by_its_speed():
     )
 
 
+@pytest.mark.slow
 def test_a_cleared_failure_is_withdrawn():
     # The leader spins from 3 s to 7 s; once it drives as commanded again the
     # detection is withdrawn.

@@ -111,6 +111,7 @@ def test_the_column_closes_when_the_detector_finds_the_stop_under_noise() -> Non
         assert slot_error(run, name)[late].max() < 0.1, name
 
 
+@pytest.mark.slow
 def test_the_run_records_who_holds_which_slot() -> None:
     # red stops at 3 s; from the next period everyone behind it holds the slot ahead
     run, m = result("column_close")
@@ -156,6 +157,7 @@ def test_a_leader_change_is_in_the_slot_record(mode) -> None:
     assert run.slot_index[-1].tolist() == [-1, 0, 2, 1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("mode", "heir"), [("virtual", None), ("elect", "red")])
 def test_after_a_leader_crash_the_formation_settles_again(mode, heir) -> None:
     run, m = result(f"leader_crash_{mode}")

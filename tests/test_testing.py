@@ -133,6 +133,7 @@ def test_the_fixture_caches_runs_for_identical_arguments(sandbox_run) -> None:
         a.pose[0, 0, 0] = 1.0  # shared by every test: it cannot be changed
 
 
+@pytest.mark.slow
 def test_a_scenarios_own_expectations(sandbox_run, tmp_path) -> None:
     assert_expectations(sandbox_run(PAPER / "rotating_circle.yaml"))
     short = sandbox_run(PAPER / "stabilization.yaml", set=["duration=0.5"])

@@ -168,6 +168,8 @@ def test_what_the_loader_accepts_the_schema_accepts(doc: Any) -> None:
     assert [e.message for e in VALIDATOR.iter_errors(doc)] == []
 
 
+@pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::sandbox.SandboxWarning")  # valid: warns
 @settings(max_examples=30, deadline=None)
 @given(mutated(most=1))
 def test_an_accepted_scenario_can_be_simulated(doc: Any) -> None:
@@ -179,6 +181,7 @@ def test_an_accepted_scenario_can_be_simulated(doc: Any) -> None:
     assert len(run.t) >= 1
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::sandbox.SandboxWarning")  # valid: warns
 @SETTINGS
 @given(doc=mutated())
