@@ -18,8 +18,8 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 import sandbox._startup  # noqa: F401  (first: quiet Ctrl-C while the command starts)
+from sandbox._about import __version__ as __version__
 from sandbox._moved import install as _install_moved_paths
-from sandbox._version import __version__ as __version__
 
 _install_moved_paths()  # the v0.2 module paths, for one release (sandbox._moved)
 
@@ -28,6 +28,7 @@ _EXPORTS = {
     "Observation": ("sandbox.loop.observation", "Observation"),
     "Run": ("sandbox.run.record", "Run"),
     "SandboxError": ("sandbox.errors", "SandboxError"),
+    "SandboxWarning": ("sandbox.errors", "SandboxWarning"),
     "Scenario": ("sandbox.scenario", "Scenario"),
     "ScenarioError": ("sandbox.errors", "ScenarioError"),
     "Simulation": ("sandbox.loop.simulation", "Simulation"),
@@ -42,6 +43,7 @@ __all__ = [
     "Observation",
     "Run",
     "SandboxError",
+    "SandboxWarning",
     "Scenario",
     "ScenarioError",
     "Simulation",
@@ -53,7 +55,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports lazily
-    from sandbox.errors import SandboxError, ScenarioError
+    from sandbox.errors import SandboxError, SandboxWarning, ScenarioError
     from sandbox.loop.observation import Observation
     from sandbox.loop.simulation import Simulation, simulate
     from sandbox.run.analysis import VehicleTrack

@@ -70,6 +70,17 @@ class OutputError(SandboxError):
     """Outputs of a run could not be written."""
 
 
+class SandboxWarning(UserWarning):
+    """Something a user should know that does not stop the work (a scenario's warning).
+
+    Issued with :func:`warnings.warn`, so the usual filters apply: ``python -W error``
+    (or pytest's ``filterwarnings = error``) turns it into an error, and
+    ``warnings.simplefilter("ignore", SandboxWarning)`` silences it. The loader also
+    keeps a scenario's warnings in ``Scenario.warnings``; the command line prints each
+    one as one line ``warning: ...``.
+    """
+
+
 class PluginError(SandboxError):
     """A plug-in could not be imported or registered (the message names it).
 

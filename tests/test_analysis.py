@@ -143,11 +143,11 @@ def test_without_the_extra_the_message_says_what_to_install(
     err = capsys.readouterr().err.strip()
     assert err == (
         "error: --format parquet needs pyarrow, which is not installed: "
-        "pip install 'sandbox[analysis]'"
+        "pip install 'platoon-sandbox[analysis]'"
     )
     assert not out.exists()  # refused before simulating
     with pytest.raises(
-        sandbox.SandboxError, match=r"pip install 'sandbox\[analysis\]'"
+        sandbox.SandboxError, match=r"pip install 'platoon-sandbox\[analysis\]'"
     ):
         sandbox.load_run(run_dir).to_dataframe()
 

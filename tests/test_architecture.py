@@ -16,7 +16,13 @@ PACKAGE = Path(__file__).resolve().parents[1] / "sandbox"
 
 #: The stages, lowest first: a module may import its own stage and those listed before.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("sandbox.errors", "sandbox._startup", "sandbox._version", "sandbox._moved"),
+    (
+        "sandbox.errors",
+        "sandbox._startup",
+        "sandbox._about",
+        "sandbox._version",
+        "sandbox._moved",
+    ),
     ("sandbox.geometry",),
     ("sandbox.plugins",),
     ("sandbox.model",),

@@ -98,6 +98,7 @@ def test_an_unknown_name_is_one_line_with_a_suggestion(elsewhere: Path, capsys) 
     assert not (elsewhere / "runs").exists()
 
 
+@pytest.mark.slow
 def test_list_prints_names_that_run_and_validate_accept(elsewhere: Path, capsys):
     assert main(["list"]) == 0
     listing, footer = capsys.readouterr().out.split("\n\n")

@@ -31,6 +31,7 @@ def check(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str
     return code, out, err
 
 
+@pytest.mark.slow
 def test_the_bundled_claims_hold(capsys: pytest.CaptureFixture[str]) -> None:
     assert len(CLAIMS) >= 18
     code, out, err = check(capsys, *map(str, CLAIMS), "--jobs", "2")

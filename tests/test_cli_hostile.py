@@ -249,6 +249,7 @@ def test_a_signal_during_start_up_prints_no_traceback(
         assert err.strip().splitlines()[-1] == "interrupted"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["INT", "TERM"])
 def test_a_signal_while_the_gif_renders_exits_130_and_leaves_no_file(
     sig: signal.Signals, tmp_path: Path
@@ -310,6 +311,7 @@ INTERRUPTED_COMMANDS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("where", sorted(INTERRUPTED_COMMANDS))
 def test_an_interrupt_python_mishandles_still_exits_130(
     where: str, tmp_path: Path

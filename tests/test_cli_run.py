@@ -179,6 +179,7 @@ def test_bad_set_is_an_input_error(
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_list_shows_the_bundled_scenarios(capsys: pytest.CaptureFixture) -> None:
     assert main(["list"]) == 0
     out = capsys.readouterr().out

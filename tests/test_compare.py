@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 
 import pytest
 from helpers import PAPER, SCENARIOS, run_scenario
@@ -16,6 +17,7 @@ STOP = SCENARIOS / "failures" / "follower_stop.yaml"
 SHORT = ("duration=5",)
 
 
+@pytest.mark.slow
 def test_rows_are_the_runs_metrics():
     rows = compare([FIG13, STOP], ["none", "continuous"], ["hold"], SHORT)
     assert [(r.scenario, r.strategy, r.derivatives) for r in rows] == [
@@ -54,27 +56,47 @@ def test_none_runs_once_and_estimate_differs_from_hold():
     assert rows[0] != rows[1]
 
 
-def test_deterministic_in_one_or_two_processes():
-    args = ([FIG13], ["none", "smooth"], ["hold"], SHORT)
-    one = format_table(compare(*args), "csv")
-    assert one == format_table(compare(*args), "csv")
-    assert one == format_table(compare(*args, jobs=2), "csv")
+#: The arguments of the rows the tests below share (computed once per module).
+FIG13_ARGS = ([FIG13], ["none", "smooth"], ["hold"], SHORT)
 
 
-def test_markdown_and_csv_tables():
-    rows = compare([FIG13], ["none", "discontinuous"], ["hold"], SHORT)
+@pytest.fixture(scope="module")
+def fig13_rows():
+    return compare(*FIG13_ARGS)
+
+
+@pytest.mark.slow
+def test_deterministic_in_one_or_two_processes(fig13_rows):
+    one = format_table(fig13_rows, "csv")
+    assert one == format_table(compare(*FIG13_ARGS), "csv")
+    assert one == format_table(compare(*FIG13_ARGS, jobs=2), "csv")
+
+
+@pytest.mark.slow
+def test_markdown_and_csv_tables(fig13_rows):
+    rows = fig13_rows
     md = format_table(rows).splitlines()
     assert md[0].startswith("| scenario ") and "collisions healthy" in md[0]
     assert set(md[1]) <= {"|", "-", ":", " "}
     assert len(md) == 2 + len(rows)
+    assert format_table(rows, "markdown") == format_table(rows, "md")
     parsed = list(csv.DictReader(io.StringIO(format_table(rows, "csv"))))
-    assert [r["strategy"] for r in parsed] == ["none", "discontinuous"]
-    assert parsed[0]["converged"] in ("yes", "no")
+    assert [r["strategy"] for r in parsed] == ["none", "smooth"]
+    assert parsed[0]["converged"] in ("true", "false")
+    assert [r["status"] for r in parsed] == [r.status for r in rows]
     assert int(parsed[0]["collisions_total"]) == rows[0].collisions_total
+    # full precision in CSV and JSON: the numbers read back exactly
+    assert [float(r["control_effort"]) for r in parsed] == [
+        r.control_effort for r in rows
+    ]
+    doc = json.loads(format_table(rows, "json"))
+    assert [d["min_distance"] for d in doc] == [r.min_distance for r in rows]
+    assert [d["converged"] for d in doc] == [r.converged for r in rows]
     with pytest.raises(ValueError, match="unknown format"):
         format_table(rows, "html")
 
 
+@pytest.mark.slow
 def test_cli(capsys):
     argv = ["compare", str(FIG13), "--strategies", "none,continuous", "--format", "csv"]
     assert main([*argv, "--set", "duration=3"]) == 0
@@ -82,6 +104,10 @@ def test_cli(capsys):
     lines = out.splitlines()
     assert lines[0].startswith("scenario,strategy,derivatives,collisions_healthy")
     assert len(lines) == 3
+    argv[-1] = "json"
+    assert main([*argv, "--set", "duration=1"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert [d["strategy"] for d in doc] == ["none", "continuous"]
 
 
 @pytest.mark.parametrize(
@@ -97,6 +123,7 @@ def test_cli_rejects_bad_input_before_running(capsys, extra, message):
     assert message in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_file_strategy_keeps_each_files_recovery():
     fig12 = PAPER / "fig12_no_recovery.yaml"
     fig15 = PAPER / "fig15_continuous_beta5.yaml"
@@ -116,6 +143,7 @@ def test_file_strategy_keeps_each_files_recovery():
 SWAP = SCENARIOS / "safety" / "head_on_swap.yaml"
 
 
+@pytest.mark.slow
 def test_grid_varies_a_path_per_strategy_and_none_only_once():
     rows = compare(
         [SWAP],

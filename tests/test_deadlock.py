@@ -66,6 +66,7 @@ def test_speed_reads_the_positions_and_a_slow_crawl_is_not_stopped() -> None:
     assert stuck_samples(T, pos, slot, np.zeros((len(T), 1), bool), speed=0.03).all()
 
 
+@pytest.mark.slow
 def test_head_on_stall_is_a_deadlock_and_the_tangential_term_has_none() -> None:
     _, stalled = run_scenario(SWAP, "recovery.tangential=0", duration=6)
     (dead,) = stalled["deadlocks"]

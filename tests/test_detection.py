@@ -33,6 +33,7 @@ def result(name: str, *sets: str, **fields):
     return run_scenario(FAILURES / f"{name}.yaml", *sets, **fields)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "vehicle", "kind"), BUNDLED)
 def test_every_bundled_failure_is_detected_within_half_a_second(name, vehicle, kind):
     _, m = result(name)
@@ -50,6 +51,7 @@ def test_every_bundled_failure_is_detected_within_half_a_second(name, vehicle, k
     assert m["detection"]["false_alarms"] == 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "vehicle", "kind"), BUNDLED)
 def test_no_more_healthy_collisions_than_under_the_oracle(name, vehicle, kind):
     residual = result(name)[1]["collisions"]["healthy"]
@@ -57,6 +59,7 @@ def test_no_more_healthy_collisions_than_under_the_oracle(name, vehicle, kind):
     assert residual <= oracle
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "kind"),
     [("detect_follower_stop", "stop"), ("detect_follower_crash", "crash")],
@@ -92,6 +95,7 @@ def test_the_stop_and_crash_fits():
     assert crash < stop
 
 
+@pytest.mark.slow
 def test_a_runaway_is_told_from_a_stuck_steering_by_its_speed():
     # At the alarm green's runaway looks like a stuck steering (its speed is near what
     # its controller asks for); read on through the isolation time its speed departs
@@ -105,6 +109,7 @@ def test_a_runaway_is_told_from_a_stuck_steering_by_its_speed():
     )
 
 
+@pytest.mark.slow
 def test_a_cleared_failure_is_withdrawn():
     # The leader spins from 3 s to 7 s; once it drives as commanded again the
     # detection is withdrawn.
@@ -113,6 +118,7 @@ def test_a_cleared_failure_is_withdrawn():
     assert 7.0 < d["cleared"] < 8.0
 
 
+@pytest.mark.slow
 def test_fault_free_runs_give_no_false_alarm():
     # 4 vehicles x 30 s of another seed's noise (the vehicle-hours:
     # docs/concepts/detection.md).
@@ -197,6 +203,7 @@ def test_delayed_and_lost_packets(sets, least):
     assert m["detection"]["false_alarms"] == 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "vehicle"),
     [

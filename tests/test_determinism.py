@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from helpers import PAPER, REPO, SCENARIOS, run_scenario
 
 from sandbox.cli import main
@@ -34,6 +35,7 @@ def cli_run(path: Path, out: Path, sets: list[str]) -> None:
     assert main(argv + [a for s in sets for a in ("--set", s)]) == 0
 
 
+@pytest.mark.slow
 def test_two_cli_runs_write_identical_files(tmp_path: Path) -> None:
     for case, (path, sets) in {
         "reference": (SCENARIOS / "reference.yaml", REFERENCE_SETS),
@@ -56,6 +58,7 @@ def test_crossing_case_really_collides() -> None:
     assert metrics["collisions"]["vehicle_vehicle"] >= 1
 
 
+@pytest.mark.slow
 def test_identical_across_processes(tmp_path: Path) -> None:
     here, there = tmp_path / "here", tmp_path / "there"
     cli_run(PAPER / "rotating_circle.yaml", here, CROSSING_SETS)

@@ -36,6 +36,7 @@ def load_example(name: str):
     return module
 
 
+@pytest.mark.slow
 def test_pure_pursuit_keeps_red_on_its_circle(tmp_path) -> None:
     out = run_example(
         "pure_pursuit.py", "--duration", "15", "--gif", str(tmp_path / "pp.gif")
@@ -59,6 +60,7 @@ def test_pure_pursuit_steers_the_circle_exactly_when_on_it() -> None:
     assert v2_out > v2
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(
     importlib.util.find_spec("pettingzoo") is None and not os.environ.get("CI"),
     reason="needs the rl extra",
@@ -86,6 +88,7 @@ def sandbox_cli(*args: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_the_keep_right_plug_in_is_selected_from_yaml_and_avoids_the_collision(
     tmp_path,
 ) -> None:

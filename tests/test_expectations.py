@@ -12,7 +12,7 @@ import pytest
 from helpers import HEADON, PAPER
 
 from sandbox import compute_metrics, load_scenario, simulate
-from sandbox.errors import ScenarioError
+from sandbox.errors import SandboxWarning, ScenarioError
 from sandbox.run.expectations import closest_approach, evaluate
 from sandbox.scenario.expectations import Bound, Expectations
 from sandbox.scenario.schema import build_schema
@@ -258,7 +258,8 @@ def test_null_means_not_given_for_the_loader_and_the_schema() -> None:
     ],
 )
 def test_an_expectation_that_cannot_fail_is_warned_of(expect: dict) -> None:
-    scenario = load_scenario(doc_with(expect))
+    with pytest.warns(SandboxWarning, match="this expectation cannot fail"):
+        scenario = load_scenario(doc_with(expect))
     assert any("cannot fail" in w for w in scenario.warnings), scenario.warnings
 
 

@@ -17,6 +17,9 @@ from helpers import SCENARIOS, run_scenario, window
 
 from sandbox.testing import assert_expectations
 
+#: Every test of this module takes seconds: the full suite only (not in -m "not slow").
+pytestmark = pytest.mark.slow
+
 FAILURES = SCENARIOS / "failures"
 NONE = "recovery.strategy=none"
 

@@ -137,6 +137,7 @@ def test_a_crashed_vehicle_does_not_move_even_when_pushed():
     assert np.max(np.abs(pos - pos[0])) < 1e-3
 
 
+@pytest.mark.slow
 def test_spin_keeps_the_position_and_turns_at_v2():
     run, m = run_doc(
         platoon([{"vehicle": "red", "at": 2.0, "kind": "spin", "v2": 1.5}])

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import imageio.v3 as iio
+import pytest
 from helpers import run_scenario, write_yaml
 
 from sandbox.cli import main
@@ -38,6 +39,7 @@ def test_camera_follows_the_leader_only_on_runs_spread_along_a_line() -> None:
     assert camera_follow(run) is None
 
 
+@pytest.mark.slow
 def test_gallery_writes_one_gif_per_scenario(tmp_path: Path) -> None:
     folder = tmp_path / "scenarios"
     folder.mkdir()

@@ -158,6 +158,7 @@ CASES: dict[str, tuple[bytes | str, int, str]] = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(CASES))
 def test_validate_survives_the_hostile_file(
     case: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]

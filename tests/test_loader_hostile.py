@@ -20,7 +20,7 @@ import yaml
 
 from sandbox import scenario as sc
 from sandbox.cli import main
-from sandbox.errors import ScenarioError
+from sandbox.errors import SandboxWarning, ScenarioError
 from sandbox.scenario import (
     MAX_FILE_BYTES,
     MAX_NAME,
@@ -46,6 +46,7 @@ def write(tmp_path: Path, text: str, name: str = "s.yaml") -> Path:
 
 
 # ------------------------------------------------------------------- crowded starts
+@pytest.mark.slow
 def test_20000_vehicles_on_one_spot_are_rejected_with_little_memory(
     tmp_path: Path,
 ) -> None:
@@ -339,13 +340,20 @@ def slot_doc(gap: float, strategy: str) -> dict:
 def test_a_slot_within_R_of_the_leaders_warns_while_recovery_is_on(
     gap: float, strategy: str, warned: bool
 ) -> None:
-    warnings = parse_scenario(slot_doc(gap, strategy)).warnings
+    if warned:
+        with pytest.warns(SandboxWarning, match="within recovery.R = 1.5 m"):
+            warnings = parse_scenario(slot_doc(gap, strategy)).warnings
+    else:
+        warnings = parse_scenario(
+            slot_doc(gap, strategy)
+        ).warnings  # a warning: an error
     hits = [w for w in warnings if "within recovery.R = 1.5 m" in w]
     assert bool(hits) == warned, warnings
     if warned:
         assert f"slots of leader and red are {gap:.3g} m apart" in hits[0]
 
 
+@pytest.mark.slow
 def test_the_reference_example_converges_and_its_lag_is_the_one_it_states() -> None:
     """reference.yaml states its steady lag, 0.025 |delta| m, and settles within it."""
     from helpers import SCENARIOS, run_scenario

@@ -31,6 +31,9 @@ from sandbox import load_scenario, simulate
 from sandbox.run.metrics import compute_metrics
 from sandbox.study.ideal import ideal_encounters
 
+#: Every test of this module takes seconds: the full suite only (not in -m "not slow").
+pytestmark = pytest.mark.slow
+
 PAPER = Path(__file__).resolve().parent.parent / "scenarios" / "paper"
 #: The report's idealization: vehicles without speed, acceleration or turn-rate limits.
 UNBOUNDED = ("vehicle.v1_max=null", "vehicle.max_accel=null", "vehicle.v2_max=null")

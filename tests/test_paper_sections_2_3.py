@@ -189,6 +189,7 @@ def test_single_vehicle_converges_onto_the_circle_to_millimetres() -> None:
 
 
 # ---------------------------------------------------------------------------- 3.2
+@pytest.mark.slow
 def test_fixed_keeps_world_offsets_while_leader_frame_positions_turn() -> None:
     run, metrics = run_scenario(
         PAPER / "fixed_circle.yaml", duration=FORMATION_DURATION
@@ -252,6 +253,7 @@ def test_rotating_steady_state_error_matches_eq12(rotating_run) -> None:
         assert rms == pytest.approx(np.linalg.norm(predicted), rel=0.02)
 
 
+@pytest.mark.slow
 def test_rotating_error_grows_with_distance_and_curvature() -> None:
     # Eq. (12): the error scales with |delta| and with the curvature (w = V / Rc).
     far, _ = run_scenario(
@@ -279,6 +281,7 @@ def test_rotating_error_grows_with_distance_and_curvature() -> None:
 
 
 # ---------------------------------------------------------------------------- 3.5
+@pytest.mark.slow
 def test_own_estimate_is_ten_times_more_accurate_than_rotating() -> None:
     # Same file, same initial conditions; only the law differs.
     path = PAPER / "own_estimate_circle.yaml"
@@ -343,6 +346,7 @@ def test_virtual_with_rotation_turns_with_eq12_error() -> None:
         )
 
 
+@pytest.mark.slow
 def test_leader_ref_follows_a_drifting_leader_poorly() -> None:
     # Fig. 9: the leader drives the reference circle open loop, then goes straight; the
     # followers keep using the reference's derivatives (eq. (16)).

@@ -65,6 +65,7 @@ def make_run(
     )
 
 
+@pytest.mark.slow
 def test_plot_run_writes_four_pngs_deterministically(tmp_path: Path) -> None:
     run = make_run()
     paths = plot.plot_run(run, tmp_path / "out", dpi=DPI)
@@ -167,6 +168,7 @@ def test_plot_does_not_import_pyplot(module) -> None:
     assert "matplotlib.backends.backend_agg.FigureCanvasAgg" in imported
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt, magic", [("pdf", b"%PDF"), ("svg", b"<?xml")])
 def test_vector_formats_are_deterministic(tmp_path: Path, fmt: str, magic: bytes):
     run = make_run(duration=2.0, dt=0.1)
@@ -292,6 +294,7 @@ def test_large_fleet_draws_median_and_percentile_bands() -> None:
     assert len(top.get_lines()) < 10
 
 
+@pytest.mark.slow
 def test_cli_plot_writes_into_the_run_directory_figures_that_a_rerun_keeps(
     tmp_path: Path,
 ) -> None:
@@ -335,6 +338,7 @@ def test_cli_dpi_bounds_are_the_plot_module_s() -> None:
     assert figures.DPI_RANGE == plot.DPI_RANGE
 
 
+@pytest.mark.slow
 def test_plot_run_reports_progress_after_each_figure(tmp_path: Path) -> None:
     run = make_run()
     calls: list[tuple[int, int]] = []

@@ -54,7 +54,7 @@ def scenario(tmp_path: Path, name: str, action: str) -> Path:
         f"recovery: {{strategy: {name}}}\n"
         "vehicles:\n"
         "  - {name: leader, pose: [0, 0, 0], leader: true}\n"
-        "  - {name: red, pose: [-1, 0.5, 0], offset: [-1, 0.5]}\n",
+        "  - {name: red, pose: [-2, 0.5, 0], offset: [-2, 0.5]}\n",
         encoding="utf-8",
     )
     return path

@@ -62,7 +62,7 @@ def scenario(tmp_path: Path, name: str, plugins: list[str] | None = None) -> Pat
         f"recovery: {{strategy: {name}, amount: 0.2}}\n"
         "vehicles:\n"
         "  - {name: leader, pose: [0, 0, 0], leader: true}\n"
-        "  - {name: red, pose: [-1, 0.5, 0], offset: [-1, 0.5]}\n"
+        "  - {name: red, pose: [-2, 0.5, 0], offset: [-2, 0.5]}\n"
     )
     path = tmp_path / "trust.yaml"
     path.write_text(text, encoding="utf-8")

@@ -18,7 +18,7 @@ import yaml
 
 from sandbox import plugins
 from sandbox.cli import main
-from sandbox.errors import ScenarioError
+from sandbox.errors import SandboxWarning, ScenarioError
 from sandbox.plugins import registration
 from sandbox.scenario import load_scenario
 
@@ -145,7 +145,8 @@ def test_a_users_strategy_runs_validates_compares_and_is_in_the_schema(
     plugin = str(tmp_path / "my_plugins.py")
     assert main(["validate", str(path), "--plugin", plugin]) == 0  # named: trusted
     assert "ok (3 vehicles" in capsys.readouterr().out
-    sc = load_scenario(path)
+    with pytest.warns(SandboxWarning, match="within recovery.R"):  # slots 0.8 m apart
+        sc = load_scenario(path)
     assert sc.recovery.strategy == "repel"
     assert sc.recovery.params == {"gain": 0.3, "reach": 1.0}  # "2d" with d = 0.5 m
 
@@ -153,7 +154,8 @@ def test_a_users_strategy_runs_validates_compares_and_is_in_the_schema(
     assert main(["run", str(path), "--out", str(out)]) == 0
     capsys.readouterr()
     # the run's scenario.yaml reloads with the plug-in (an absolute path)
-    again = load_scenario(out / "scenario.yaml")
+    with pytest.warns(SandboxWarning, match="within recovery.R"):
+        again = load_scenario(out / "scenario.yaml")
     assert again.recovery == sc.recovery
     modes = np.load(out / "run.npz")["mode"]
     assert (modes == 1).any()  # MODE_AVOID: the strategy shifted targets

@@ -17,6 +17,8 @@ from PIL import Image
 pytest_plugins = ["pytester"]
 #: Options of the inner sessions: no cache folder, none of the plugins they do not need.
 QUIET = ("-p", "no:cacheprovider", "-p", "no:hypothesispytest")
+#: The ini option that makes test_*.yaml files test items, given on the command line.
+YAML = ("-o", "sandbox_yaml=true")
 
 #: The head-on pair of the helpers, shorter: they touch at 0.75 s.
 HEADON = dict(HEADON_RUN, duration=1.2)
@@ -53,6 +55,7 @@ def test_yaml_files_with_expectations_are_test_items(pytester: pytest.Pytester) 
     write(pytester.path, "test_plain.yaml")  # no expect: section: not a test
     write(pytester.path, "headon.yaml", {"collisions": {"total": 0}})  # not test_*
     (pytester.path / "test_data.yaml").write_text("[1, 2, 3]\n", encoding="utf-8")
+    pytester.makepyprojecttoml("[tool.pytest.ini_options]\nsandbox_yaml = true\n")
     result = pytester.runpytest(*QUIET, "-rf")
     result.assert_outcomes(passed=1, failed=1)
     result.stdout.fnmatch_lines(
@@ -65,11 +68,33 @@ def test_yaml_files_with_expectations_are_test_items(pytester: pytest.Pytester) 
     assert "test_collides.yaml::expect FAILED" not in result.stdout.str()
 
 
+def test_yaml_files_are_collected_only_in_a_project_that_asks(
+    pytester: pytest.Pytester,
+) -> None:
+    # Without sandbox_yaml, another project's test_*.yaml files stay data; the fixture
+    # and the assertions work all the same.
+    write(pytester.path, "test_collides.yaml", {"collisions": {"total": 0}})
+    write(pytester.path, "headon.yaml")
+    pytester.makepyfile(
+        test_fixture="""
+        def test_fixture(sandbox_run):
+            assert sandbox_run("headon.yaml").events
+        """
+    )
+    result = pytester.runpytest(*QUIET, "-v")
+    result.assert_outcomes(passed=1)
+    assert "test_collides.yaml" not in result.stdout.str()
+    pytester.makeini("[pytest]\nsandbox_yaml = false\n")
+    pytester.runpytest(*QUIET).assert_outcomes(passed=1)
+    pytester.makeini("[pytest]\nsandbox_yaml = true\n")
+    pytester.runpytest(*QUIET).assert_outcomes(passed=1, failed=1)
+
+
 def test_an_invalid_yaml_test_fails_with_the_loaders_message(
     pytester: pytest.Pytester,
 ) -> None:
     write(pytester.path, "test_typo.yaml", {"colisions": {"total": 0}})
-    result = pytester.runpytest(*QUIET)
+    result = pytester.runpytest(*QUIET, *YAML)
     result.assert_outcomes(failed=1)
     result.stdout.fnmatch_lines(
         ["test_typo.yaml:*: expect.colisions: unknown key; did you mean 'collisions'?*"]
@@ -114,7 +139,7 @@ def test_gifs_of_failing_tests_are_written_and_named(pytester: pytest.Pytester) 
         """
     )
     gifs = pytester.path / "gifs"
-    result = pytester.runpytest(*QUIET, "--sandbox-gifs", str(gifs))
+    result = pytester.runpytest(*QUIET, *YAML, "--sandbox-gifs", str(gifs))
     result.assert_outcomes(passed=1, failed=2)
     written = sorted(p.name for p in gifs.iterdir())
     assert written == [
@@ -139,12 +164,13 @@ def test_gifs_of_failing_tests_are_written_and_named(pytester: pytest.Pytester) 
 
 def test_without_the_option_no_gif_is_written(pytester: pytest.Pytester) -> None:
     write(pytester.path, "test_headon.yaml", {"collisions": {"total": 0}})
-    result = pytester.runpytest(*QUIET)
+    result = pytester.runpytest(*QUIET, *YAML)
     result.assert_outcomes(failed=1)
     assert "GIF" not in result.stdout.str()
     assert sorted(p.name for p in pytester.path.iterdir()) == ["test_headon.yaml"]
 
 
+@pytest.mark.slow
 def test_the_testing_tutorials_examples_pass(pytester: pytest.Pytester) -> None:
     # The testing tutorial's user test file and test_*.yaml (docs/tutorials/testing.md),
     # run as a user would: the Python test uses platoon.yaml, the same platoon without
@@ -164,7 +190,7 @@ def test_the_testing_tutorials_examples_pass(pytester: pytest.Pytester) -> None:
     platoon = yaml.safe_load(test_yaml[2])
     del platoon["expect"]
     (pytester.path / "platoon.yaml").write_text(yaml.safe_dump(platoon), "utf-8")
-    result = pytester.runpytest(*QUIET, "-v")
+    result = pytester.runpytest(*QUIET, *YAML, "-v")
     result.assert_outcomes(passed=2)
     result.stdout.fnmatch_lines([f"*{test_yaml[1]}::expect PASSED*"])
 

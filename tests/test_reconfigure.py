@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from helpers import SCENARIOS, run_scenario, window, write_yaml
 
-from sandbox import load_scenario
+from sandbox import SandboxWarning, load_scenario
 from sandbox.cli import main
 from sandbox.errors import ScenarioError
 from sandbox.loop.simulation import Simulation
@@ -58,6 +58,7 @@ def column(**changes) -> dict:
 
 
 # ------------------------------------------------------------------ the targets
+@pytest.mark.slow
 def test_the_column_closes_to_four_slots_within_10_s_without_contact() -> None:
     run, m = result("column_close")
     assert m["collisions"]["total"] == 0
@@ -84,6 +85,7 @@ def test_the_column_closes_to_four_slots_within_10_s_without_contact() -> None:
     assert np.isnan(run.slot[-1, run.names.index("red")]).all()  # no slot any more
 
 
+@pytest.mark.slow
 def test_the_column_closes_when_the_detector_finds_the_stop_under_noise() -> None:
     # what the platoon believes, not the truth: the event is the detection
     run, m = result(
@@ -109,6 +111,7 @@ def test_the_column_closes_when_the_detector_finds_the_stop_under_noise() -> Non
         assert slot_error(run, name)[late].max() < 0.1, name
 
 
+@pytest.mark.slow
 def test_the_run_records_who_holds_which_slot() -> None:
     # red stops at 3 s; from the next period everyone behind it holds the slot ahead
     run, m = result("column_close")
@@ -139,6 +142,7 @@ def test_the_run_records_who_holds_which_slot() -> None:
     assert {c["t"] for c in changes} == {3.01}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["virtual", "elect"])
 def test_a_leader_change_is_in_the_slot_record(mode) -> None:
     # Either way red ends in slot 0 (elect: as the leader; virtual: the reference's
@@ -153,6 +157,7 @@ def test_a_leader_change_is_in_the_slot_record(mode) -> None:
     assert run.slot_index[-1].tolist() == [-1, 0, 2, 1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("mode", "heir"), [("virtual", None), ("elect", "red")])
 def test_after_a_leader_crash_the_formation_settles_again(mode, heir) -> None:
     run, m = result(f"leader_crash_{mode}")
@@ -251,6 +256,7 @@ def test_without_close_gap_the_failed_slot_stays_empty() -> None:
     np.testing.assert_allclose(run.pose[:, healthy], v01.pose[:, healthy], atol=1e-3)
 
 
+@pytest.mark.slow
 def test_the_defaults_are_bit_identical_to_no_keys() -> None:
     doc = column()
     explicit = dict(
@@ -312,7 +318,8 @@ def test_a_handover_without_a_reference_is_one_line_and_exit_2(
 
 def test_a_handover_without_a_leader_warns_that_it_has_no_effect() -> None:
     doc = column(on_leader_failure="elect", formation={"law": "virtual"})
-    sc = load_scenario(doc)
+    with pytest.warns(SandboxWarning, match="on_leader_failure: elect has no effect"):
+        sc = load_scenario(doc)
     assert any("on_leader_failure" in w and "no effect" in w for w in sc.warnings)
 
 

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from sandbox import load_scenario, simulate
+from sandbox import SandboxWarning, load_scenario, simulate
 from sandbox.behaviour.recovery import WEIGHTS, avoidance_shift
 from sandbox.model.laws import LAWS, BackwardDifference
 from sandbox.model.obstacle_field import ObstacleField
@@ -228,6 +228,7 @@ def crossing(law: str, strategy: str, **recovery) -> dict:
     return doc
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("law", sorted(LAWS))
 def test_recovery_acts_with_every_formation_law(law):
     # The followers cross each other's path: without recovery they collide; with the
@@ -260,9 +261,11 @@ def test_leader_avoids_only_when_asked():
 def test_estimated_target_derivatives_change_nothing_without_avoidance():
     # With nobody in a safe zone the shift is zero, so are its estimated derivatives.
     doc = crossing("rotating", "continuous", R=0.3, r=0.2)  # zones smaller than d
-    hold = simulate(load_scenario(doc))
+    with pytest.warns(SandboxWarning, match="smaller than the vehicle diameter"):
+        hold = simulate(load_scenario(doc))
     doc["recovery"]["target_derivatives"] = "estimate"
-    est = simulate(load_scenario(doc))
+    with pytest.warns(SandboxWarning, match="smaller than the vehicle diameter"):
+        est = simulate(load_scenario(doc))
     assert not (hold.mode == MODE_AVOID).any()
     np.testing.assert_array_equal(hold.pose, est.pose)
 
@@ -294,6 +297,7 @@ def lone_vehicle_past_a_post(beta: float) -> dict:
     }
 
 
+@pytest.mark.slow
 def test_estimated_shift_derivatives_destabilize_a_steep_shift():
     # The shift depends on the vehicle's own position: its estimated acceleration feeds
     # the vehicle's acceleration back with the gain J = d shift / d x. A gentle push

@@ -155,7 +155,7 @@ def test_mp4_without_its_extra_fails_before_the_run(
     argv = ["run", str(scenario), "--out", str(out), "--mp4", str(tmp_path / "x.mp4")]
     assert main(argv) == 1
     err = capsys.readouterr().err
-    assert "pip install 'sandbox[video]'" in err
+    assert "pip install 'platoon-sandbox[video]'" in err
     assert not out.exists()  # refused before simulating
 
 

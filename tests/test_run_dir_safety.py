@@ -107,8 +107,11 @@ def test_the_manifest_lists_the_files_and_the_version(
     assert doc["product"] == "sandbox" and doc["version"] == __version__
     assert doc["files"] == [f for f in PRODUCT if f != MANIFEST]
     assert read_manifest(out) == set(PRODUCT)
+    metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+    assert next(iter(metrics)) == "version" and metrics["version"] == __version__
 
 
+@pytest.mark.slow
 def test_a_rerun_keeps_figures_notes_and_nested_runs(src: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
     assert run_cli(src, out) == 0
@@ -187,6 +190,7 @@ def test_an_old_run_left_between_the_two_renames_is_put_back(
     assert read_manifest(out) == set(PRODUCT)
 
 
+@pytest.mark.slow
 def test_two_processes_creating_the_same_new_directory_both_succeed(
     src: Path, tmp_path: Path
 ) -> None:

@@ -19,6 +19,9 @@ from helpers import SCENARIOS, run_scenario
 
 from sandbox import load_scenario
 
+#: Every test of this module takes seconds: the full suite only (not in -m "not slow").
+pytestmark = pytest.mark.slow
+
 SAFETY = SCENARIOS / "safety"
 KAPPA = "recovery.tangential=1"
 REC = ("safety.filter=cbf", KAPPA)

@@ -60,6 +60,7 @@ def centre_distances(r) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ scenario level
+@pytest.mark.slow
 def test_head_on_vehicles_collide_without_the_filter_and_not_with_it() -> None:
     sets = ["duration=6", "recovery.strategy=none"]
     _, bare = run(HEAD_ON, *sets)
@@ -75,6 +76,7 @@ def test_head_on_vehicles_collide_without_the_filter_and_not_with_it() -> None:
     assert m["safety"]["infeasible_steps"] == 0
 
 
+@pytest.mark.slow
 def test_a_vehicle_stops_short_of_a_failed_one() -> None:
     # a's slot (3, 0) lies straight beyond b, stopped at the origin from t = 0.
     doc = point_doc(
@@ -97,6 +99,7 @@ def test_a_vehicle_stops_short_of_a_failed_one() -> None:
     assert abs(r.cmd[-1, 0, 0]) < 1e-3
 
 
+@pytest.mark.slow
 def test_the_right_hand_rule_passes_the_stopped_vehicle() -> None:
     # The same case with the filter's defaults (pass_right pi/2): held back nose to
     # nose, a turns its nominal velocity right, passes b and settles on its slot,
@@ -120,6 +123,7 @@ def test_the_right_hand_rule_passes_the_stopped_vehicle() -> None:
     assert np.all(r.pose[passing, 0, 1] < -0.5)
 
 
+@pytest.mark.slow
 def test_a_vehicle_dodges_a_runaway_driving_at_it() -> None:
     # r is driven open loop at 1 m/s straight at a, which holds its slot at the origin:
     # a neighbour that does not filter is the filter's full responsibility.
@@ -140,6 +144,7 @@ def test_a_vehicle_dodges_a_runaway_driving_at_it() -> None:
     assert centre_distances(r).min() >= D + 0.04
 
 
+@pytest.mark.slow
 def test_a_wall_is_respected() -> None:
     doc = point_doc(
         [{"name": "a", "pose": [-3, 0, 0], "offset": [3, 0]}],
@@ -161,6 +166,7 @@ def test_a_wall_is_respected() -> None:
     assert m["vehicles"]["a"]["formation_error"]["final"] < 0.05
 
 
+@pytest.mark.slow
 def test_infeasible_steps_are_counted_in_the_metrics() -> None:
     # 1 m/s^2 of braking against gamma = 20 1/s (a braking of 20 v demanded): the
     # barrier cannot be kept by the input bounds, the slack is used and counted.
@@ -186,6 +192,7 @@ def test_filter_none_is_the_run_without_the_section() -> None:
     assert "safety" not in load_scenario(HEAD_ON, overrides=doc_sets).to_dict()
 
 
+@pytest.mark.slow
 def test_the_filtered_run_is_deterministic_and_works_with_sensing() -> None:
     sets = ["duration=3", "recovery.strategy=none", "safety.filter=cbf"]
     a, ma = run(HEAD_ON, *sets)

@@ -21,6 +21,11 @@ from sandbox.scenario.schema import (
     sections,
 )
 
+#: A far start without v1_max warns of tunnelling: not what these tests check.
+pytestmark = pytest.mark.filterwarnings(
+    "ignore:.*per physics substep:sandbox.SandboxWarning"
+)
+
 REPO = Path(__file__).resolve().parent.parent
 # Sweep files (scenarios/studies/, with a ``base:`` key) are not scenarios.
 BUNDLED = sorted(

@@ -142,6 +142,8 @@ def test_every_row_is_reproduced_by_sandbox_run(tmp_path, base):
         assert code == 0
         metrics = json.loads((run_dir / "metrics.json").read_text())
         stored = json.loads((out / "runs" / f"{r['run_id']}.json").read_text())
+        # the same metrics; metrics.json also names the version, as the store does
+        assert metrics.pop("version") == stored["sandbox"]
         assert stored["metrics"] == metrics
         assert r["collisions.total"] == str(metrics["collisions"]["total"])
         assert r["min_distance"] == repr(metrics["min_distance"])
@@ -206,6 +208,7 @@ def test_interrupted_sweep_resumes(tmp_path, base, monkeypatch, capsys):
     assert "3 runs computed, 2 already stored" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_sigint_to_a_running_sweep_then_resume(tmp_path):
     base = write_yaml(tmp_path, base_doc(duration=3.0), "base.yaml")
     out = tmp_path / "out"
@@ -277,6 +280,7 @@ def test_a_store_of_another_sandbox_version_is_refused(tmp_path, base, capsys):
     assert len(list((out / "runs").glob("*.json"))) == 1  # nothing computed
 
 
+@pytest.mark.slow
 def test_failed_runs_are_rows_and_retry_failed_reruns_only_them(tmp_path, base, capsys):
     # With d = 4 m no three vehicles fit apart in the 6 m square: every draw overlaps,
     # so those runs are invalid rows, not missing ones.
@@ -312,6 +316,7 @@ def test_failed_runs_are_rows_and_retry_failed_reruns_only_them(tmp_path, base, 
     assert "2 runs computed, 2 already stored" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_process_pool_gives_the_same_results(tmp_path, base):
     cmd = ["sweep", str(base), "--grid", "recovery.beta=1,3", "--seeds", "0:3"]
     assert main([*cmd, "--out", str(tmp_path / "one")]) == 0
@@ -406,7 +411,7 @@ def test_scheduler_without_dask_says_how_to_install(
         )
         == 1
     )
-    assert "pip install 'sandbox[dask]'" in capsys.readouterr().err
+    assert "pip install 'platoon-sandbox[dask]'" in capsys.readouterr().err
 
 
 def test_split_values():
@@ -423,6 +428,7 @@ def test_wilson_interval():
     assert wilson(10, 10)[1] == 1.0
 
 
+@pytest.mark.slow
 def test_table_and_plot(tmp_path, base, capsys):
     out = tmp_path / "out"
     assert (
@@ -463,6 +469,15 @@ def test_table_and_plot(tmp_path, base, capsys):
         md.startswith("| recovery.beta | recovery.strategy | runs |")
         and md.count("\n") == 6
     )
+    assert (
+        main(["sweep", "table", str(out), "--by", "recovery.beta", "--format", "json"])
+        == 0
+    )
+    doc = json.loads(capsys.readouterr().out)
+    assert [(d["recovery.beta"], d["runs"]) for d in doc] == [("1", 6), ("4", 6)]
+    assert [d["collision_rate"] for d in doc] == [
+        float(t["collision_rate"]) for t in table
+    ]
     assert main(["sweep", "plot", str(out)]) == 0
     figs = sorted(p.name for p in (out / "figures").glob("*.png"))
     assert figs == [
@@ -472,6 +487,7 @@ def test_table_and_plot(tmp_path, base, capsys):
     assert main(["sweep", "table", str(tmp_path)]) == 1
 
 
+@pytest.mark.slow
 def test_zipped_paths_are_one_axis_of_the_figures(tmp_path, base):
     out = tmp_path / "out"
     argv = ["sweep", str(base), "--seeds", "0:1", "--set", "duration=0.2"]
@@ -489,6 +505,7 @@ def test_zipped_paths_are_one_axis_of_the_figures(tmp_path, base):
     assert (out / "figures" / "heatmap_vehicles_2_offset_recovery_beta.png").is_file()
 
 
+@pytest.mark.slow
 def test_deadlocks_are_a_column_and_a_rate(tmp_path, capsys):
     swap = REPO / "scenarios" / "safety" / "head_on_swap.yaml"
     out = tmp_path / "out"

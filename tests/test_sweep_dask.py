@@ -19,6 +19,9 @@ import pytest
 from helpers import REPO, write_yaml
 from test_sweep import base_doc, read_csv
 
+#: Every test of this module takes seconds: the full suite only (not in -m "not slow").
+pytestmark = pytest.mark.slow
+
 pytest.importorskip("distributed")
 
 DASK = Path(sys.executable).parent / "dask"

@@ -105,6 +105,7 @@ def test_tangential_is_declared_with_its_bound() -> None:
         load_scenario(SWAP, overrides=["recovery.tangential=-1"])
 
 
+@pytest.mark.slow
 def test_head_on_swap_stalls_without_and_passes_with_the_tangential_term() -> None:
     _, stalled = run_scenario(SWAP, "recovery.tangential=0")
     _, passed = run_scenario(SWAP)

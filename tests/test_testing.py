@@ -81,6 +81,7 @@ def test_converged_names_the_last_vehicle_and_its_time(sandbox_run) -> None:
     )
 
 
+@pytest.mark.slow
 def test_not_converged_names_the_unsettled_vehicles(sandbox_run) -> None:
     run = sandbox_run(PAPER / "leader_ref_drift.yaml")
     with pytest.raises(
@@ -107,6 +108,7 @@ def test_min_distance_names_the_pair_and_time(sandbox_run) -> None:
     ), str(err.value)
 
 
+@pytest.mark.slow
 def test_formation_error_names_the_vehicle_its_error_and_when(sandbox_run) -> None:
     run = sandbox_run(PAPER / "rotating_circle.yaml")
     # eq. (12): the red follower's steady error is 5.657 cm; the start-up is larger.
@@ -131,6 +133,7 @@ def test_the_fixture_caches_runs_for_identical_arguments(sandbox_run) -> None:
         a.pose[0, 0, 0] = 1.0  # shared by every test: it cannot be changed
 
 
+@pytest.mark.slow
 def test_a_scenarios_own_expectations(sandbox_run, tmp_path) -> None:
     assert_expectations(sandbox_run(PAPER / "rotating_circle.yaml"))
     short = sandbox_run(PAPER / "stabilization.yaml", set=["duration=0.5"])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from helpers import PAPER, SCENARIOS, write_yaml
 
-from sandbox import load_scenario
+from sandbox import SandboxWarning, load_scenario
 from sandbox.cli import main
 from sandbox.model.tunnelling import peak_gain_speed
 
@@ -31,11 +31,14 @@ def tunnelling(sc) -> list[str]:
 def test_fast_small_vehicles_are_warned_with_the_safe_substeps(tmp_path, capsys):
     # 100 m/s x 2.5 ms = 0.25 m per substep for d = 0.2 m: 4 x 100 x 0.01 / 0.2 = 20
     path = write_yaml(tmp_path, head_on(100.0))
-    (warning,) = tunnelling(load_scenario(path))
+    with pytest.warns(SandboxWarning, match="per physics substep") as caught:
+        (warning,) = tunnelling(load_scenario(path))
+    assert [str(w.message) for w in caught] == [warning]
     assert "vehicle 'a' can move 0.25 m per physics substep" in warning
     assert "substeps >= 20 would be safe" in warning
     assert tunnelling(load_scenario(path, overrides=["substeps=20"])) == []
-    assert tunnelling(load_scenario(path, overrides=["substeps=19"])) != []
+    with pytest.warns(SandboxWarning, match="per physics substep"):
+        assert tunnelling(load_scenario(path, overrides=["substeps=19"])) != []
     assert main(["validate", str(path)]) == 0
     assert "warning:" in capsys.readouterr().err and "substeps >= 20" in warning
 
@@ -53,7 +56,8 @@ def test_without_v1_max_the_speed_the_gains_ask_for_is_used(tmp_path):
         "reference": {"type": "point", "position": [100, 0]},
         "vehicles": [{"name": "far", "pose": [0, 0, 0]}],
     }
-    (warning,) = tunnelling(load_scenario(write_yaml(tmp_path, doc)))
+    with pytest.warns(SandboxWarning, match="per physics substep"):
+        (warning,) = tunnelling(load_scenario(write_yaml(tmp_path, doc)))
     assert "the speed the gains ask for" in warning and "far" in warning
     limited = load_scenario(write_yaml(tmp_path, doc), overrides=["vehicle.v1_max=2"])
     assert tunnelling(limited) == []

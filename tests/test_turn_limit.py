@@ -38,6 +38,7 @@ def platoon_on_a_path_that_ends(rotate: bool, duration: float = 20.0) -> dict:
     }
 
 
+@pytest.mark.slow
 def test_the_platoon_parks_when_its_path_ends() -> None:
     # Without the turn limit in the anti-windup: orbits of 0.47 m, v2 = -3 rad/s, for
     # ever. With it every vehicle parks on its slot.
@@ -80,6 +81,7 @@ def test_limit_turn_keeps_chi_in_the_cone_of_the_heading() -> None:
     assert np.isnan(aim[3])
 
 
+@pytest.mark.slow
 def test_rotated_slots_keep_the_last_tangent_when_the_path_ends() -> None:
     # Eq. (15) at rest was atan2(0, 0) = 0: red's slot jumped 1.5 m when the path
     # ended and the formation turned to the world frame.

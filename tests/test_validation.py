@@ -211,6 +211,7 @@ def test_utf16_file_is_not_utf8(
     assert lines[0].startswith(f"{path}:1: not UTF-8 text (got byte 0xff at offset 0")
 
 
+@pytest.mark.slow
 def test_deeply_nested_document(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:

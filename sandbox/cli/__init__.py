@@ -11,14 +11,23 @@ parser (``sandbox --help``) stays fast; ``tests/test_cli_help.py`` checks it.
 
 Exit status: 0 success; 1 a run diverged or a command failed; 2 invalid input;
 130 a run was interrupted (its outputs so far are written, flagged ``interrupted``).
+
+Warnings of the package (:class:`~sandbox.errors.SandboxWarning`, e.g. a scenario's)
+are printed as one line each, ``warning: ...``, on stderr. Python started with warning
+options decides instead: ``python -W error -m sandbox ...`` (or ``PYTHONWARNINGS``)
+makes each one an error (exit 2), ``-W ignore::sandbox.SandboxWarning`` hides them.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
 
-from sandbox._version import __version__
+from sandbox._about import __version__
 from sandbox.cli import (
     check,
     compare,
@@ -40,7 +49,7 @@ from sandbox.cli.common import (
     forget_caught_interrupt,
     load_cli_plugins,
 )
-from sandbox.errors import PluginError, SandboxError, ScenarioError
+from sandbox.errors import PluginError, SandboxError, SandboxWarning, ScenarioError
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
 COMMANDS = (run, validate, check, scenarios, figures, view, compare, sweep, plugins)
@@ -94,6 +103,29 @@ def main(argv: list[str] | None = None) -> int:
     return status
 
 
+@contextmanager
+def _one_line_warnings() -> Iterator[None]:
+    """Show each :class:`SandboxWarning` as one line ``warning: ...`` on stderr.
+
+    Other warnings are shown as Python shows them. Without ``-W`` or
+    ``PYTHONWARNINGS`` options each distinct warning is shown once (whatever filters
+    the caller set, e.g. a test session's); with them, their filters decide.
+    """
+    with warnings.catch_warnings():
+        if not sys.warnoptions:
+            warnings.simplefilter("default", SandboxWarning)
+        shown = warnings.showwarning
+
+        def show(message: Any, category: type[Warning], *args: Any, **kw: Any) -> None:
+            if issubclass(category, SandboxWarning):
+                print(f"warning: {message}", file=sys.stderr)
+            else:
+                shown(message, category, *args, **kw)
+
+        warnings.showwarning = show
+        yield
+
+
 def _dispatch(argv: list[str] | None) -> int:
     """Parse the command line and run the command; errors become messages."""
     parser = build_parser()
@@ -102,8 +134,12 @@ def _dispatch(argv: list[str] | None) -> int:
         parser.print_help()
         return EXIT_OK
     try:
-        load_cli_plugins(args)
-        return args.func(args)
+        with _one_line_warnings():
+            load_cli_plugins(args)
+            return args.func(args)
+    except SandboxWarning as exc:  # -W error
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
     except ScenarioError as exc:
         for line in exc.lines:
             print(line, file=sys.stderr)

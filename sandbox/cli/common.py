@@ -291,9 +291,7 @@ def check_target(target: str | None, kind: str, force: bool) -> None:
     if not target or force:
         return
     path = Path(target)
-    if path.is_dir():
-        raise GifOptionError(f"--{kind} {target}: a directory (expected a file path)")
-    if not path.exists():
+    if not path.exists() or path.is_dir():  # a directory: the write names it (exit 1)
         return
     try:
         with open(path, "rb") as fh:

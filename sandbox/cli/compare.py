@@ -105,9 +105,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--format",
-        choices=("markdown", "csv"),
-        default="markdown",
-        help="table format (default markdown)",
+        choices=("md", "csv", "json", "markdown"),
+        default="md",
+        help="table format: md (Markdown, 4 significant digits; the default; "
+        "'markdown' is the same), or csv / json (full precision)",
     )
     p.add_argument(
         "--jobs",

@@ -48,8 +48,6 @@ def cmd_run(args: argparse.Namespace) -> int:
         scenario = load_scenario(scenario_file(args.file), overrides=overrides)
     except ScenarioError as exc:
         raise _blame_duration_option(exc, args.duration) from None
-    for line in scenario.warnings:
-        print(f"warning: {line}", file=sys.stderr)
     out_dir = Path(args.out) if args.out is not None else Path("runs") / scenario.name
     check_out_dir(out_dir)  # before simulating: refuse early, not after a long run
     if args.html:

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 from sandbox.cli.common import EXIT_FAILED, EXIT_OK, add_command, add_plugin_option
-from sandbox.errors import ScenarioError
+from sandbox.errors import SandboxWarning, ScenarioError
 
 
 def cmd_list(args: argparse.Namespace) -> int:
@@ -23,8 +24,10 @@ def cmd_list(args: argparse.Namespace) -> int:
     for name in shown:
         path = root / f"{name}.yaml"
         try:  # a sweep file (sandbox sweep) is described by its grid
-            sweep = check_sweep_file(path)
-            sc = load_scenario(path, check_only=True) if sweep is None else None
+            with warnings.catch_warnings():  # a list, not a check: validate warns
+                warnings.simplefilter("ignore", SandboxWarning)
+                sweep = check_sweep_file(path)
+                sc = load_scenario(path, check_only=True) if sweep is None else None
             desc = (sc.description.splitlines() or [""])[0] if sc else sweep
         except ScenarioError as exc:
             desc = f"(invalid: {exc.lines[0]})"

@@ -269,9 +269,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--format",
-        choices=("md", "csv"),
+        choices=("md", "csv", "json", "markdown"),
         default="md",
-        help="table: Markdown (default) or CSV",
+        help="table: md (Markdown, 4 significant digits; the default; 'markdown' is "
+        "the same), or csv / json (full precision)",
     )
     add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_sweep)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 from sandbox.cli.common import (
@@ -13,7 +14,7 @@ from sandbox.cli.common import (
     add_plugin_option,
     scenario_file,
 )
-from sandbox.errors import ScenarioError
+from sandbox.errors import SandboxWarning, ScenarioError
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -26,7 +27,9 @@ def cmd_validate(args: argparse.Namespace) -> int:
     for name in args.files:
         try:  # a sweep file (sandbox sweep): its base and every grid point
             path = scenario_file(name)
-            sweep = check_sweep_file(path)
+            with warnings.catch_warnings():  # the base alone shows its warnings
+                warnings.simplefilter("ignore", SandboxWarning)
+                sweep = check_sweep_file(path)
         except SweepError as exc:
             print(f"error: {exc}", file=sys.stderr)
             status = EXIT_INVALID
@@ -49,8 +52,6 @@ def cmd_validate(args: argparse.Namespace) -> int:
                 print(line, file=sys.stderr)
             status = EXIT_INVALID
             continue
-        for line in scenario.warnings:
-            print(f"warning: {line}", file=sys.stderr)
         print(
             f"{name}: ok ({len(scenario.vehicles)} vehicles, {scenario.duration:g} s)"
         )

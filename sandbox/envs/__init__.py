@@ -5,10 +5,12 @@
   registered as ``gymnasium.make("sandbox/Vehicle-v0", scenario=..., agent=...)``.
 
 Observations, actions and rewards are defined in :mod:`sandbox.envs.core`. Install
-with ``pip install 'sandbox[rl]'`` (gymnasium and pettingzoo).
+with ``pip install 'platoon-sandbox[rl]'`` (gymnasium and pettingzoo).
 """
 
 from __future__ import annotations
+
+from sandbox._about import install_hint
 
 try:
     import gymnasium
@@ -16,7 +18,7 @@ try:
 except ImportError as error:  # pragma: no cover - exercised without the extra
     raise ImportError(
         f"sandbox.envs needs the 'rl' extra ({error.name} is missing): "
-        "pip install 'sandbox[rl]'"
+        f"{install_hint('rl')}"
     ) from error
 
 from sandbox.envs.core import Task, Weights

@@ -6,8 +6,8 @@ the same frames is a fraction of its size and plays in every presentation progra
 :func:`sandbox.render.animation.render_frames` yields (same camera, legend, timing:
 frame ``k`` shows simulated time ``t0 + k * speed / fps``) and pipes them to the ffmpeg
 executable that the optional ``imageio-ffmpeg`` package ships (``pip install
-'sandbox[video]'``). The video has a constant frame rate ``fps``; it lasts ``frames /
-fps`` seconds.
+'platoon-sandbox[video]'``). The video has a constant frame rate ``fps``; it lasts
+``frames / fps`` seconds.
 
 Encoding: H.264 (libx264) in yuv420p, constant quality (CRF 18, visually lossless for
 these flat-colour frames), one encoder thread and ffmpeg's bit-exact flags, so the same
@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox._about import install_hint
 from sandbox.errors import SandboxError
 from sandbox.render.animation import _indexed_frames, frame_plan
 from sandbox.run.record import Run
@@ -71,7 +72,7 @@ def require_video() -> None:
     if not video_available():
         raise VideoUnavailable(
             "MP4 output needs the optional extra 'video' (imageio-ffmpeg): "
-            "pip install 'sandbox[video]'"
+            f"{install_hint('video')}"
         )
 
 

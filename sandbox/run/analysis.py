@@ -9,7 +9,7 @@
   in a compressed columnar file (``sandbox run --format parquet``).
 
 pandas and pyarrow are the optional extra ``analysis`` (``pip install
-'sandbox[analysis]'``); without them the two table functions raise
+'platoon-sandbox[analysis]'``); without them the two table functions raise
 :class:`MissingExtraError`, a one-line message that says what to install.
 
 Example (after ``sandbox run paper/rotating_circle``)::
@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sandbox._about import install_hint
 from sandbox.errors import SandboxError
 from sandbox.run.record import MODE_NAMES, Run
 
@@ -65,7 +66,7 @@ def require(module: str, feature: str) -> ModuleType:
     except ImportError:
         raise MissingExtraError(
             f"{feature} needs {module.split('.')[0]}, which is not installed: "
-            f"pip install 'sandbox[{EXTRA}]'"
+            f"{install_hint(EXTRA)}"
         ) from None
 
 

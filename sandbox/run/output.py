@@ -1,12 +1,13 @@
 """Run directories: writing a run's outputs atomically, and reading them back.
 
-A run directory holds ``trajectory.csv``, ``metrics.json``, ``scenario.yaml`` (the
-resolved scenario, runnable again) and ``run.npz`` (the recorded arrays, for ``sandbox
-render`` and ``sandbox plot``). The whole directory is built under a temporary name
-beside the target and then takes its place (see :func:`write_run_dir`), so a killed run
-never leaves a truncated file that looks complete, and re-running into a directory
-replaces the earlier run as a whole. A directory that does not hold a run is never
-replaced.
+A run directory holds ``trajectory.csv``, ``metrics.json`` (its first entry,
+``version``, names the version of sandbox that computed it, as the manifest does),
+``scenario.yaml`` (the resolved scenario, runnable again) and ``run.npz`` (the recorded
+arrays, for ``sandbox render`` and ``sandbox plot``). The whole directory is built
+under a temporary name beside the target and then takes its place (see
+:func:`write_run_dir`), so a killed run never leaves a truncated file that looks
+complete, and re-running into a directory replaces the earlier run as a whole. A
+directory that does not hold a run is never replaced.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import math
 import os
 import sys
 import tempfile
+import warnings
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -26,7 +28,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from sandbox.errors import OutputError
+from sandbox.errors import OutputError, SandboxWarning
 from sandbox.run.record import MODE_NAMES, Run, RunFileError
 from sandbox.run.recorder import _alive
 from sandbox.scenario import load_scenario
@@ -143,7 +145,7 @@ def write_run_dir(
             write_parquet(run, tmp / "trajectory.parquet")
         else:
             write_csv(run, tmp / "trajectory.csv")
-        write_json(metrics, tmp / "metrics.json")
+        write_json(_versioned(metrics), tmp / "metrics.json")
         if run.scenario is not None:
             text = yaml.safe_dump(run.scenario.to_dict(), sort_keys=False)
             (tmp / "scenario.yaml").write_text(text, encoding="utf-8")
@@ -174,12 +176,22 @@ PRODUCT_FILES = frozenset({*FILES, "trajectory.parquet", MANIFEST})
 _MANIFEST_MAX_BYTES = 65536
 
 
+def _versioned(metrics: dict[str, Any]) -> dict[str, Any]:
+    """``metrics`` with ``version`` first: the version of sandbox writing them."""
+    from sandbox._about import __version__
+
+    return {
+        "version": __version__,
+        **{k: v for k, v in metrics.items() if k != "version"},
+    }
+
+
 def _write_manifest(run_dir: Path) -> None:
     """Write the manifest: the product, its version and the files it wrote.
 
     It holds no time or host, so identical runs give identical manifests.
     """
-    from sandbox._version import __version__
+    from sandbox._about import __version__
 
     files = sorted(p.name for p in run_dir.iterdir() if p.name != MANIFEST)
     doc = {
@@ -452,7 +464,9 @@ def load_run_dir(run_dir: Path) -> Run:
         )
     scenario = None
     if (run_dir / "scenario.yaml").is_file():
-        scenario = load_scenario(run_dir / "scenario.yaml")
+        with warnings.catch_warnings():  # the run is made: its scenario warned then
+            warnings.simplefilter("ignore", SandboxWarning)
+            scenario = load_scenario(run_dir / "scenario.yaml")
     try:
         # An open file we own: numpy leaves its own file open when the zip is damaged.
         with open(npz, "rb") as fh:

@@ -6,12 +6,18 @@ of ``plugins`` itself), the other ``--set`` overrides, its ``randomize`` draws, 
 section, and the checks across sections.
 
 The plug-in code a scenario lists runs only on trust (:mod:`sandbox.scenario.trust`);
-``--set`` overrides are applied by :mod:`sandbox.scenario.overrides`.
+``--set`` overrides are applied by :mod:`sandbox.scenario.overrides`. A valid
+document's warnings are kept in ``Scenario.warnings`` and issued with
+:func:`warnings.warn` as :class:`~sandbox.errors.SandboxWarning`, one per line, pointing
+at the caller's code.
 """
 
 from __future__ import annotations
 
 import copy
+import os
+import sys
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -19,7 +25,7 @@ from typing import Any
 import yaml
 
 from sandbox import plugins
-from sandbox.errors import Problem, ScenarioError
+from sandbox.errors import Problem, SandboxWarning, ScenarioError
 from sandbox.model.tunnelling import tunnelling_warning
 from sandbox.plugins.registration import (
     Param,
@@ -380,7 +386,24 @@ def parse_scenario(
             ),
             expect=expect,
         )
+    for line in scenario.warnings:
+        warnings.warn(line, SandboxWarning, stacklevel=_caller_level())
     return scenario
+
+
+def _caller_level() -> int:
+    """The ``stacklevel`` of the first frame outside sandbox, for :func:`warnings.warn`.
+
+    The frame of ``warnings.warn``'s caller is level 1; the loader's own frames (and
+    those of the sandbox code that called it) are skipped.
+    """
+    package = os.path.join(str(Path(__file__).parents[1]), "")
+    frame = sys._getframe(1)  # the caller of warnings.warn
+    level = 1
+    while frame.f_back is not None and frame.f_code.co_filename.startswith(package):
+        frame = frame.f_back
+        level += 1
+    return level
 
 
 def load_scenario(

@@ -12,8 +12,9 @@ apply to every run), and prints one row per run:
   them never settles;
 - ``switches`` and ``effort``: mode switches and control effort summed over all vehicles
   (see :mod:`sandbox.run.metrics`);
-- ``converged``: every healthy vehicle settled (``yes``/``no``), or the run's status
-  when it did not finish (``diverged``).
+- ``converged``: every healthy vehicle settled (``yes``/``no`` in Markdown,
+  ``true``/``false`` in CSV and JSON, which also have a ``status`` column), or, in
+  Markdown, the run's status when it did not finish (``diverged``).
 
 ``--grid PATH=v1,v2,...`` (repeatable) also varies fields for every strategy, e.g.
 ``recovery.tangential=0,1`` (a ``setting`` column; with strategy ``none`` the
@@ -35,8 +36,6 @@ the same order.
 
 from __future__ import annotations
 
-import csv
-import io
 import itertools
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -48,9 +47,10 @@ from sandbox import plugins
 from sandbox.loop.simulation import simulate
 from sandbox.run.metrics import compute_metrics
 from sandbox.run.record import STATUS_OK, Run
+from sandbox.run.tables import Column, table_format
+from sandbox.run.tables import format_table as write_table
 from sandbox.scenario import RECOVERY, Scenario, load_scenario
 
-FORMATS = ("markdown", "csv")
 #: The ``strategies`` entry that keeps each scenario file's own recovery strategy.
 FILE_STRATEGY = "file"
 #: The task of a scenario's baseline (:func:`ideal_settling`), not a strategy.
@@ -385,24 +385,6 @@ def _collect(
     return done
 
 
-def _cell(value: object, column: str) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, bool):
-        return "yes" if value else "no"
-    if column == "min_distance":
-        return f"{value:.3f}"
-    if column == "settling_time":
-        return f"{value:.2f}"
-    if column == "control_effort":
-        return f"{value:.1f}"
-    if column in ("separation", "extra_settle"):
-        return f"{value:+.3f}" if column == "separation" else f"{value:+.2f}"
-    if column == "control_ms":
-        return f"{value:.2f}"
-    return str(value)
-
-
 HEADERS = {
     "scenario": "scenario",
     "strategy": "strategy",
@@ -433,19 +415,16 @@ SAFETY_HEADERS = {
 COLUMNS = {"default": HEADERS, "safety": SAFETY_HEADERS}
 
 
-def format_table(
-    rows: Sequence[Row], fmt: str = "markdown", columns: str = "default"
-) -> str:
-    """The rows as a Markdown table or CSV text (ending with a newline).
+def format_table(rows: Sequence[Row], fmt: str = "md", columns: str = "default") -> str:
+    """The rows as a table text (:func:`sandbox.run.tables.format_table`).
 
-    ``columns`` is ``default`` (:data:`HEADERS`, plus ``setting`` when a row has one)
-    or ``safety`` (:data:`SAFETY_HEADERS`, with the measured control time: not
-    deterministic).
+    ``fmt`` is ``md`` (Markdown, 4 significant digits; ``markdown`` too), ``csv`` or
+    ``json`` (full precision, with a ``status`` column; in Markdown a run that did not
+    finish shows its status in place of ``converged`` or ``success``). ``columns`` is
+    ``default`` (:data:`HEADERS`, plus ``setting`` when a row has one) or ``safety``
+    (:data:`SAFETY_HEADERS`, with the measured control time: not deterministic).
     """
-    if fmt not in FORMATS:
-        raise ValueError(
-            f"unknown format {fmt!r} (expected one of: {', '.join(FORMATS)})"
-        )
+    fmt = table_format(fmt)
     if columns not in COLUMNS:
         raise ValueError(
             f"unknown columns {columns!r} (expected one of: {', '.join(COLUMNS)})"
@@ -454,43 +433,17 @@ def format_table(
     if columns == "default" and any(r.setting for r in rows):
         headers = {"scenario": "scenario", "strategy": "strategy", "setting": "setting"}
         headers.update({k: v for k, v in HEADERS.items() if k not in headers})
-    columns = list(headers)
-    cells = []
+    if fmt != "md":
+        headers["status"] = "status"
+    text = ("scenario", "strategy", "derivatives", "setting", "status")
+    cols = [
+        Column(k, title, text=k in text, signed=k in ("separation", "extra_settle"))
+        for k, title in headers.items()
+    ]
+    table = []
     for row in rows:
         values = dict(zip([f.name for f in fields(Row)], astuple(row), strict=True))
-        line = [_cell(values[c], c) for c in columns]
-        if row.status != STATUS_OK:
-            key = "converged" if "converged" in columns else "success"
-            line[columns.index(key)] = row.status
-        cells.append(line)
-    if fmt == "csv":
-        buf = io.StringIO()
-        writer = csv.writer(buf, lineterminator="\n")
-        writer.writerow(columns)
-        writer.writerows(cells)
-        return buf.getvalue()
-    header = [headers[c] for c in columns]
-    widths = [max(len(r[i]) for r in [header, *cells]) for i in range(len(columns))]
-    text = ("scenario", "strategy", "derivatives", "setting")
-    numeric = [i for i, c in enumerate(columns) if c not in text]  # right-aligned
-
-    def line(items: list[str]) -> str:
-        return "| " + " | ".join(items) + " |"
-
-    rule = [
-        ("-" * (w - 1) + ":") if i in numeric else "-" * w for i, w in enumerate(widths)
-    ]
-    lines = [
-        line([h.ljust(w) for h, w in zip(header, widths, strict=True)]),
-        line(rule),
-    ]
-    for r in cells:
-        lines.append(
-            line(
-                [
-                    c.rjust(w) if i in numeric else c.ljust(w)
-                    for i, (c, w) in enumerate(zip(r, widths, strict=True))
-                ]
-            )
-        )
-    return "\n".join(lines) + "\n"
+        if fmt == "md" and row.status != STATUS_OK:
+            values["converged" if "converged" in headers else "success"] = row.status
+        table.append(values)
+    return write_table(cols, table, fmt)

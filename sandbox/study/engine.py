@@ -16,10 +16,11 @@ import logging
 import os
 import signal
 import traceback
+import warnings
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from sandbox.errors import SandboxError, ScenarioError
+from sandbox.errors import SandboxError, SandboxWarning, ScenarioError
 
 #: Statuses of a row besides the run's own (ok, diverged): the scenario of the run
 #: is invalid (e.g. no non-overlapping draw), or the run raised an error.
@@ -116,7 +117,9 @@ def _simulation(base_doc: dict[str, Any], source: str, overrides: list[str]) -> 
     from sandbox.scenario import parse_scenario
 
     try:
-        scenario = parse_scenario(base_doc, source=source, overrides=overrides)
+        with warnings.catch_warnings():  # shown once, when the grid was checked
+            warnings.simplefilter("ignore", SandboxWarning)
+            scenario = parse_scenario(base_doc, source=source, overrides=overrides)
     except ScenarioError as exc:
         return {"row": {"status": STATUS_INVALID}, "error": "; ".join(exc.lines)}
     try:
@@ -305,8 +308,10 @@ def dask_client(address: str | None, scheduler_file: str | None) -> Any:
     try:
         from distributed import Client
     except ImportError:
+        from sandbox._about import install_hint
+
         raise EngineError(
-            "--scheduler needs Dask: pip install 'sandbox[dask]' (dask and distributed)"
+            f"--scheduler needs Dask: {install_hint('dask')} (dask and distributed)"
         ) from None
     # Our one-line messages replace distributed's own logging of a lost connection.
     for name in ["distributed", *logging.root.manager.loggerDict]:

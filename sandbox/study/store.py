@@ -29,7 +29,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from sandbox._version import __version__
+from sandbox._about import __version__
 from sandbox.study.spec import SweepError, SweepSpec, Task
 
 #: Measured columns of ``results.csv``, after the run id, the varied paths and the seed.

@@ -20,13 +20,14 @@ them, i.e. one group per grid point). Per group:
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+
+from sandbox.run.tables import Column
+from sandbox.run.tables import format_table as write_table
 
 #: z of a two-sided 95 % interval.
 Z95 = 1.959963984540054
@@ -132,33 +133,16 @@ def summarize(rows: Sequence[dict[str, str]]) -> dict[str, Any]:
     }
 
 
-def _cell(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return "" if math.isnan(value) else repr(value)
-    return str(value)
-
-
 def format_table(
     groups: list[tuple[tuple[str, ...], dict[str, Any]]],
     by: Sequence[str],
     fmt: str = "md",
 ) -> str:
-    """The grouped summary as Markdown or CSV (full precision; no value is rounded)."""
-    header = [*by, *COLUMNS]
-    body = [[*key, *(_cell(s[c]) for c in COLUMNS)] for key, s in groups]
-    if fmt == "csv":
-        buf = io.StringIO()
-        writer = csv.writer(buf, lineterminator="\n")
-        writer.writerow(header)
-        writer.writerows(body)
-        return buf.getvalue()
-    lines = ["| " + " | ".join(header) + " |"]
-    lines.append(
-        "|"
-        + "|".join("---" if i < len(by) else "---:" for i in range(len(header)))
-        + "|"
-    )
-    lines += ["| " + " | ".join(r) + " |" for r in body]
-    return "\n".join(lines) + "\n"
+    """The grouped summary as a table (:func:`sandbox.run.tables.format_table`).
+
+    ``fmt``: ``md`` (Markdown, 4 significant digits), ``csv`` or ``json`` (full
+    precision; no value is rounded).
+    """
+    columns = [*(Column(p, text=True) for p in by), *(Column(c) for c in COLUMNS)]
+    rows = [{**dict(zip(by, key, strict=True)), **s} for key, s in groups]
+    return write_table(columns, rows, fmt)

@@ -4,9 +4,13 @@
   the :class:`~sandbox.run.record.Run` of that scenario. Runs are cached for the whole
   session: identical arguments simulate once (the cached arrays are read-only). A
   relative path is looked up next to the test file first, then in the working directory.
-- Files named ``test_*.yaml`` (or ``.yml``) with an ``expect:`` section, under the paths
-  pytest collects, are test items, one per file (``test_x.yaml::expect``): the item
-  runs the scenario and fails with one ``sandbox check`` line per failed expectation.
+- In a project that asks for it with the ini option ``sandbox_yaml = true`` (in
+  ``[tool.pytest.ini_options]`` of ``pyproject.toml``, or ``pytest.ini``; or
+  ``-o sandbox_yaml=true`` on the command line), files named ``test_*.yaml`` (or
+  ``.yml``) with an ``expect:`` section, under the paths pytest collects, are test
+  items, one per file (``test_x.yaml::expect``): the item runs the scenario and fails
+  with one ``sandbox check`` line per failed expectation. Without the option no YAML
+  file is collected, so installing sandbox changes no other project's test session.
 - ``--sandbox-gifs DIR``: every failing test that ran a scenario (a ``test_*.yaml``
   item, or a test that used ``sandbox_run``) gets a GIF of its run in ``DIR``, and the
   failure report names the file.
@@ -31,13 +35,19 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
-    """Add ``--sandbox-gifs DIR``."""
+    """Add ``--sandbox-gifs DIR`` and the ini option ``sandbox_yaml``."""
     group = parser.getgroup("sandbox", "sandbox scenarios")
     group.addoption(
         "--sandbox-gifs",
         metavar="DIR",
         default=None,
         help="write a GIF of the run of every failing sandbox test into DIR",
+    )
+    parser.addini(
+        "sandbox_yaml",
+        type="bool",
+        default=False,
+        help="collect test_*.yaml scenario files with an expect: section as tests",
     )
 
 
@@ -108,9 +118,10 @@ def _has_expect(path: Path) -> bool:
 def pytest_collect_file(
     file_path: Path, parent: pytest.Collector
 ) -> pytest.Collector | None:
-    """Collect ``test_*.yaml`` files that have an ``expect:`` section."""
+    """Collect ``test_*.yaml`` files that have an ``expect:`` section (if asked)."""
     if (
-        file_path.suffix in (".yaml", ".yml")
+        parent.config.getini("sandbox_yaml")
+        and file_path.suffix in (".yaml", ".yml")
         and file_path.name.startswith("test_")
         and _has_expect(file_path)
     ):
