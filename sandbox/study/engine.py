@@ -12,9 +12,14 @@ twice, can never leave a run twice or half-written in it.
 
 from __future__ import annotations
 
+import ctypes
+import itertools
 import logging
 import os
 import signal
+import sys
+import threading
+import time
 import traceback
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -209,9 +214,71 @@ def _call_group(jobs: list[Job]) -> list[tuple[str, dict[str, Any] | None]]:
     return run_tasks(jobs)
 
 
-def _ignore_interrupts() -> None:
-    """Pool workers leave Ctrl-C to the parent, which stops the sweep cleanly."""
+def _ignore_interrupts(parent: int | None = None) -> None:
+    """Pool workers leave Ctrl-C to the parent, and die with it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if parent is not None:
+        die_with(parent)
+
+
+#: ``prctl`` option of Linux: the signal a process gets when its parent dies.
+PR_SET_PDEATHSIG = 1
+#: How often [s] a worker without ``PR_SET_PDEATHSIG`` checks that its parent lives.
+PARENT_POLL = 0.5
+
+
+def die_with(parent: int) -> None:
+    """Make this worker process die when the process ``parent`` dies, even by SIGKILL.
+
+    On Linux the kernel sends SIGKILL when the worker's parent dies
+    (``PR_SET_PDEATHSIG``, through ctypes); elsewhere, or if ``prctl`` fails, a daemon
+    thread polls ``parent`` every :data:`PARENT_POLL` seconds. A worker forked by a
+    fork server has the server as its parent, and the server stops only when every
+    holder of its "alive" pipe is gone: the worker, which never starts processes of
+    its own, closes its copy, so the server exits when ``parent`` does and takes its
+    workers with it.
+    """
+    _release_fork_server()
+    armed = False
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            armed = libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+    if not _alive(parent):
+        os._exit(1)  # the parent died before the signal was armed
+    if not armed:
+        threading.Thread(target=_watch, args=(parent,), daemon=True).start()
+
+
+def _release_fork_server() -> None:
+    """Close this worker's copy of the fork server's "alive" pipe, if it has one."""
+    server = getattr(sys.modules.get("multiprocessing.forkserver"), "_forkserver", None)
+    fd = getattr(server, "_forkserver_alive_fd", None)
+    if server is None or fd is None:
+        return
+    try:
+        os.close(fd)
+    except OSError:
+        pass
+    server._forkserver_alive_fd = None
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: it exists
+        return True
+    return True
+
+
+def _watch(parent: int) -> None:
+    while _alive(parent):
+        time.sleep(PARENT_POLL)
+    os._exit(1)
 
 
 Job = tuple[str, tuple[dict[str, Any], str, list[str]]]
@@ -240,17 +307,40 @@ def chunks(jobs: list[Job], workers: int, size: int | None = None) -> list[list[
     return [jobs[k : k + size] for k in range(0, len(jobs), size)]
 
 
+def ramped(jobs: list[Job], workers: int) -> Iterator[list[Job]]:
+    """The groups of :func:`chunks`, the first ones cut small.
+
+    The first group of each worker has :data:`MIN_WORLDS` runs, the next twice as
+    many, and so on up to the size :func:`chunks` gives: finished runs come (and are
+    stored) early, and whenever a sweep is interrupted the runs lost in flight are at
+    most about as many as those already finished. Cutting a group changes no result
+    (a batch is bit-identical to single runs).
+    """
+    full = chunks(jobs, workers)
+    size = len(full[0]) if full else 0
+    k = g = 0
+    while k < len(jobs):
+        n = min(size, MIN_WORLDS << min(g // max(1, workers), 30))
+        if n >= size:  # the rest as chunks() cuts it
+            rest = jobs[k:]
+            yield from (rest[i : i + size] for i in range(0, len(rest), size))
+            return
+        yield jobs[k : k + n]
+        k, g = k + n, g + 1
+
+
 def run_local(
     jobs: list[Job], workers: int, should_stop: Callable[[], bool] | None = None
 ) -> Iterator[tuple[str, dict[str, Any] | None]]:
     """Yield ``(run id, result)`` as runs finish: in-process, or on a process pool.
 
-    Tasks go in groups (:func:`chunks`) to :func:`run_tasks`, which steps compatible
-    runs together. In-process, ``should_stop`` also stops the runs under way (their
-    results are None).
+    Tasks go in groups (:func:`ramped`) to :func:`run_tasks`, which steps compatible
+    runs together; every group's results are yielded as soon as it is finished.
+    ``should_stop`` stops the runs under way at once: in-process their results are
+    None; on a pool the groups that finished are yielded and the workers killed.
     """
     if workers <= 1 or len(jobs) <= 1:
-        for group in chunks(jobs, 1):
+        for group in ramped(jobs, 1):
             yield from run_tasks(group, should_stop=should_stop)
             if should_stop is not None and should_stop():
                 return
@@ -265,16 +355,60 @@ def run_local(
         # The server imports the simulation once; every worker forked from it starts
         # with it imported (instead of a third of a second each).
         ctx.set_forkserver_preload(PRELOAD)
-    with cf.ProcessPoolExecutor(
-        max_workers=workers, mp_context=ctx, initializer=_ignore_interrupts
-    ) as pool:
-        futures = [pool.submit(_call_group, group) for group in chunks(jobs, workers)]
-        try:
-            for fut in cf.as_completed(futures):
+    pool = cf.ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=ctx,
+        initializer=_ignore_interrupts,
+        initargs=(os.getpid(),),
+    )
+    groups = ramped(jobs, workers)
+    try:
+        # a few groups queued per worker: the rest are cut as the pool takes them
+        pending = {
+            pool.submit(_call_group, g)
+            for g in itertools.islice(groups, QUEUED_PER_WORKER * workers)
+        }
+        while pending:
+            done, pending = cf.wait(
+                pending, timeout=STOP_POLL, return_when=cf.FIRST_COMPLETED
+            )
+            for fut in done:
                 yield from fut.result()
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
+            if should_stop is not None and should_stop():
+                for fut in pending:  # the groups that finished meanwhile
+                    if fut.done() and not fut.cancelled() and not fut.exception():
+                        yield from fut.result()
+                return
+            for g in itertools.islice(groups, len(done)):
+                pending.add(pool.submit(_call_group, g))
+    finally:
+        stop_pool(pool)
+
+
+#: How often [s] the parent of a pool checks for a stop while groups are under way.
+STOP_POLL = 0.1
+#: Groups submitted to a pool ahead, per worker.
+QUEUED_PER_WORKER = 2
+
+
+def stop_pool(pool: Any) -> None:
+    """Shut a process pool down at once: cancel its queue, kill its workers.
+
+    The runs under way in the workers are lost (they are not finished); what the
+    workers had finished has been taken from them already. Returns without waiting for
+    the groups in flight.
+    """
+    pool.shutdown(wait=False, cancel_futures=True)
+    kill = getattr(pool, "kill_workers", None)  # Python 3.14
+    if kill is not None:
+        kill()
+    else:
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            try:
+                proc.kill()
+            except (OSError, ValueError, AttributeError):
+                pass
+    pool.shutdown(wait=True)
 
 
 def dask_client(address: str | None, scheduler_file: str | None) -> Any:

@@ -1,0 +1,108 @@
+"""Processes of ``sandbox sweep`` and ``sandbox check``: killed, interrupted, cleaned.
+
+Each test starts the command in a session of its own, so that every process it
+starts (the fork server, the pool's workers, the resource tracker) is found by its
+session id, and killed at the end whatever happens.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from helpers import REPO, write_yaml
+from test_sweep import base_doc
+
+pytestmark = pytest.mark.skipif(
+    not Path("/proc/self/stat").exists(), reason="needs Linux's /proc"
+)
+
+ENV = {**os.environ, "PYTHONPATH": str(REPO), "SANDBOX_PROGRESS": "0"}
+
+
+def session(sid: int) -> list[int]:
+    """The pids of the live processes of session ``sid`` (zombies left out)."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2 :].split()
+        if fields[0] != "Z" and int(fields[3]) == sid:
+            out.append(int(entry.name))
+    return out
+
+
+def start(args: list[str]) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "sandbox", *args],
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+
+
+def wait_for(condition, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return condition()
+
+
+def cleanup(proc: subprocess.Popen[str]) -> None:
+    for pid in session(proc.pid):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    try:
+        proc.kill()
+    except ProcessLookupError:
+        pass
+    proc.communicate(timeout=10)
+
+
+def kill_and_count_orphans(proc: subprocess.Popen[str], least: int) -> list[int]:
+    """SIGKILL ``proc`` once it has ``least`` processes; the orphans after 5 s."""
+    assert wait_for(lambda: len(session(proc.pid)) >= least, 30), session(proc.pid)
+    time.sleep(0.5)  # the workers' start-up under way
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=10)
+    wait_for(lambda: not session(proc.pid), 5)
+    return session(proc.pid)
+
+
+def test_sigkill_of_a_sweep_leaves_no_worker(tmp_path):
+    base = write_yaml(tmp_path, base_doc(duration=30.0), "base.yaml")
+    proc = start(
+        ["sweep", str(base), "--seeds", "0:16", "--jobs", "2"]
+        + ["--out", str(tmp_path / "out")]
+    )
+    try:
+        # the sweep, its fork server and two workers (and a resource tracker)
+        assert kill_and_count_orphans(proc, 4) == []
+    finally:
+        cleanup(proc)
+
+
+def test_sigkill_of_check_leaves_no_worker(tmp_path):
+    doc = {**base_doc(duration=60.0), "expect": {"status": "ok"}}
+    files = [str(write_yaml(tmp_path, doc, f"s{k}.yaml")) for k in range(2)]
+    proc = start(["check", *files, "--jobs", "2"])
+    try:
+        assert kill_and_count_orphans(proc, 3) == []
+    finally:
+        cleanup(proc)
