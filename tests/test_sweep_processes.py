@@ -106,3 +106,46 @@ def test_sigkill_of_check_leaves_no_worker(tmp_path):
         assert kill_and_count_orphans(proc, 3) == []
     finally:
         cleanup(proc)
+
+
+def interrupt_when_stored(
+    proc: subprocess.Popen[str], out: Path
+) -> tuple[float, int, str]:
+    """SIGINT ``proc`` once a run is stored; (seconds to exit, runs stored, stderr)."""
+    runs = out / "runs"
+    assert wait_for(lambda: runs.is_dir() and any(runs.glob("*.json")), 60)
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    took = time.monotonic() - sent
+    assert proc.returncode == 130, err
+    return took, len(list(runs.glob("*.json"))), err
+
+
+def rows(out: Path) -> int:
+    with open(out / "results.csv", encoding="utf-8", newline="") as fh:
+        return len(list(csv.DictReader(fh)))
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_ctrl_c_returns_at_once_and_keeps_every_finished_run(tmp_path, jobs):
+    # 64 runs in groups of 8, 16, 32, ... (in-process) or 8, 8, 16, ... (two
+    # workers): the first runs are stored after the first small group, and a
+    # Ctrl-C returns within 2 s with every finished run stored and in the table.
+    base = write_yaml(tmp_path, base_doc(duration=6.0), "base.yaml")
+    out = tmp_path / "out"
+    proc = start(
+        ["sweep", str(base), "--seeds", "0:64", "--jobs", str(jobs), "--out", str(out)]
+    )
+    try:
+        took, kept, err = interrupt_when_stored(proc, out)
+        assert took < 2, f"Ctrl-C took {took:.1f} s"
+        assert kept == rows(out) and f"{kept} of 64 runs stored" in err
+        if jobs == 1:
+            assert kept in (8, 24), kept  # whole groups: 8, then 8 + 16
+        else:
+            assert kept >= 8 and kept % 8 == 0, kept
+        assert wait_for(lambda: session(proc.pid) == [], 1), session(proc.pid)
+        assert not list((out / "runs").glob(".*.tmp"))
+    finally:
+        cleanup(proc)

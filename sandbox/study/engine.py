@@ -398,17 +398,19 @@ def stop_pool(pool: Any) -> None:
     workers had finished has been taken from them already. Returns without waiting for
     the groups in flight.
     """
-    pool.shutdown(wait=False, cancel_futures=True)
     kill = getattr(pool, "kill_workers", None)  # Python 3.14
     if kill is not None:
         kill()
-    else:
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+    else:  # the workers, taken before shutdown() lets go of them
+        workers = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in workers:
             try:
                 proc.kill()
-            except (OSError, ValueError, AttributeError):
+                proc.join(timeout=1)
+            except (OSError, ValueError, AttributeError, AssertionError):
                 pass
-    pool.shutdown(wait=True)
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def dask_client(address: str | None, scheduler_file: str | None) -> Any:

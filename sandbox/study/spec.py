@@ -324,13 +324,14 @@ def _check_axes(grid: list[Axis], zipped: list[Axis], source: str = "") -> None:
         raise SweepError("seed: vary seeds with --seeds A:B, not as a grid path")
 
 
-def read_sweep_document(path: str | Path) -> Any:
+def read_sweep_document(path: str | Path, max_nodes: int | None = None) -> Any:
     """The YAML document of a sweep (or scenario) file, within the loader's limits.
 
     Read by the scenario loader's reader
     (:func:`sandbox.scenario.yamlfile.read_yaml_file`: a regular file, its size, UTF-8,
     aliases that do not expand beyond its limit), with PyYAML's safe loader as
-    ``yaml.safe_load`` uses it (so values and run ids are as before).
+    ``yaml.safe_load`` uses it (so values and run ids are as before). ``max_nodes``
+    replaces the reader's limit of expanded nodes.
 
     Raises
     ------
@@ -342,7 +343,9 @@ def read_sweep_document(path: str | Path) -> Any:
 
     try:
         safe = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-        return read_yaml_file(path, loader=safe)
+        if max_nodes is None:
+            return read_yaml_file(path, loader=safe)
+        return read_yaml_file(path, loader=safe, max_nodes=max_nodes)
     except ScenarioError as exc:
         raise SweepError(exc.lines[0]) from None
 

@@ -329,6 +329,12 @@ def check_sweep_file(path: str | Path) -> str | None:
     try:  # what cannot be read is left to the scenario loader, which says why
         doc = read_sweep_document(path)
     except SweepError:
+        try:  # ... unless it is a sweep file beyond the limits of one
+            unlimited = read_sweep_document(path, max_nodes=sys.maxsize)
+        except SweepError:
+            return None
+        if is_sweep_file(unlimited):
+            raise
         return None
     if not is_sweep_file(doc):
         return None
