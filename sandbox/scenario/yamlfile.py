@@ -279,7 +279,7 @@ def _children(node: yaml.Node) -> list[yaml.Node]:
 def read_yaml_file(
     path: str | Path,
     loader: type | None = None,
-    max_nodes: int = MAX_EXPANDED_NODES,
+    max_nodes: int | None = MAX_EXPANDED_NODES,
 ) -> Any:
     """Read one YAML document from a file, within the limits of scenario files.
 
@@ -294,8 +294,9 @@ def read_yaml_file(
         The file.
     loader : type, optional
         A safe PyYAML loader class (default ``_YAMLLoader``).
-    max_nodes : int
-        Most nodes the document may expand to (see :func:`expanded_nodes`).
+    max_nodes : int or None
+        Most nodes the document may expand to (see :func:`expanded_nodes`); None
+        for no limit (the document is constructed, sharing what aliases name).
 
     Raises
     ------
@@ -329,7 +330,7 @@ def read_yaml_file(
         reader = (loader or _YAMLLoader)(text)
         try:
             node = reader.get_single_node()
-            if expanded_nodes(node, max_nodes) > max_nodes:
+            if max_nodes is not None and expanded_nodes(node, max_nodes) > max_nodes:
                 refuse(
                     "aliases expand too far",
                     f"more than {max_nodes:,} values once expanded",

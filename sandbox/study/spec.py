@@ -99,7 +99,7 @@ class SweepSpec:
 
     def count(self) -> int:
         """The number of runs, by arithmetic (nothing is built)."""
-        return self.n_points() * len(self.seeds)
+        return self.n_points() * (self.seeds.stop - self.seeds.start)
 
     def check_size(self, max_runs: int = MAX_RUNS) -> None:
         """Refuse a sweep of more than ``max_runs`` runs, before anything is built.
@@ -111,7 +111,7 @@ class SweepSpec:
         """
         runs = self.count()
         if runs > max_runs:
-            points, seeds = self.n_points(), len(self.seeds)
+            points, seeds = self.n_points(), self.seeds.stop - self.seeds.start
             raise SweepError(
                 f"{self.source}: {runs:,} runs ({points:,} grid point"
                 f"{'s' if points != 1 else ''} x {seeds:,} seed"
@@ -324,14 +324,15 @@ def _check_axes(grid: list[Axis], zipped: list[Axis], source: str = "") -> None:
         raise SweepError("seed: vary seeds with --seeds A:B, not as a grid path")
 
 
-def read_sweep_document(path: str | Path, max_nodes: int | None = None) -> Any:
+def read_sweep_document(path: str | Path, limited: bool = True) -> Any:
     """The YAML document of a sweep (or scenario) file, within the loader's limits.
 
     Read by the scenario loader's reader
     (:func:`sandbox.scenario.yamlfile.read_yaml_file`: a regular file, its size, UTF-8,
     aliases that do not expand beyond its limit), with PyYAML's safe loader as
-    ``yaml.safe_load`` uses it (so values and run ids are as before). ``max_nodes``
-    replaces the reader's limit of expanded nodes.
+    ``yaml.safe_load`` uses it (so values and run ids are as before). With
+    ``limited`` false, aliases may expand without limit (to tell what the document
+    is, never to use its values).
 
     Raises
     ------
@@ -343,9 +344,9 @@ def read_sweep_document(path: str | Path, max_nodes: int | None = None) -> Any:
 
     try:
         safe = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-        if max_nodes is None:
+        if limited:
             return read_yaml_file(path, loader=safe)
-        return read_yaml_file(path, loader=safe, max_nodes=max_nodes)
+        return read_yaml_file(path, loader=safe, max_nodes=None)
     except ScenarioError as exc:
         raise SweepError(exc.lines[0]) from None
 

@@ -330,7 +330,7 @@ def check_sweep_file(path: str | Path) -> str | None:
         doc = read_sweep_document(path)
     except SweepError:
         try:  # ... unless it is a sweep file beyond the limits of one
-            unlimited = read_sweep_document(path, max_nodes=sys.maxsize)
+            unlimited = read_sweep_document(path, limited=False)
         except SweepError:
             return None
         if is_sweep_file(unlimited):
