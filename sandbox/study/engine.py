@@ -441,13 +441,18 @@ def dask_client(address: str | None, scheduler_file: str | None) -> Any:
 
 
 def run_dask(
-    jobs: list[Job], client: Any, on_lost: Callable[[], str]
+    jobs: list[Job],
+    client: Any,
+    on_lost: Callable[[], str],
+    should_stop: Callable[[], bool] | None = None,
 ) -> Iterator[tuple[str, dict[str, Any]]]:
     """Yield ``(run id, result)`` as runs finish on a Dask cluster.
 
     Each task's key is its run id, so the scheduler never computes a run twice for one
     submission; a worker that dies has its tasks rescheduled on the others. A lost
-    scheduler raises :class:`EngineError` with ``on_lost()``'s advice.
+    scheduler raises :class:`EngineError` with ``on_lost()``'s advice. Once
+    ``should_stop`` returns True (it is asked after each finished run), the runs
+    finished meanwhile are yielded and the others cancelled.
     """
     from distributed import as_completed
 
@@ -459,8 +464,16 @@ def run_dask(
     by_key = {f.key: run_id for f, (run_id, _) in zip(futures, jobs, strict=True)}
     lost = (OSError, TimeoutError, *_comm_errors())
     try:
+        seen = set()
         for fut in as_completed(futures):
+            seen.add(fut.key)
             yield by_key[fut.key], fut.result()
+            if should_stop is not None and should_stop():
+                for other in futures:
+                    if other.key not in seen and other.status == "finished":
+                        yield by_key[other.key], other.result()
+                client.cancel([f for f in futures if f.status != "finished"])
+                return
     except lost as exc:
         raise EngineError(
             f"lost the Dask scheduler ({type(exc).__name__}): {on_lost()}"

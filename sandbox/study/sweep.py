@@ -199,6 +199,7 @@ def _compute(
                     f"the finished runs are kept in {out}; run the same command "
                     "again once the scheduler is back to compute only the missing ones"
                 ),
+                should_stop=stop,
             )
         else:
             results = engine.run_local(jobs_list, jobs, should_stop=stop)
