@@ -149,3 +149,18 @@ def test_ctrl_c_returns_at_once_and_keeps_every_finished_run(tmp_path, jobs):
         assert not list((out / "runs").glob(".*.tmp"))
     finally:
         cleanup(proc)
+
+
+def test_groups_start_small_and_grow_to_the_batch_size():
+    from sandbox.study import engine
+
+    jobs = [(f"r{k}", ({}, "", [])) for k in range(1000)]
+    # in-process: 8, 16, 32, 64, then groups of 128 (as engine.chunks cuts them)
+    sizes = [len(g) for g in engine.ramped(jobs, 1)]
+    assert sizes[:5] == [8, 16, 32, 64, 128] and set(sizes[5:-1]) == {128}
+    assert sum(sizes) == 1000
+    # two workers: two of each size
+    sizes = [len(g) for g in engine.ramped(jobs, 2)]
+    assert sizes[:8] == [8, 8, 16, 16, 32, 32, 64, 64] and sum(sizes) == 1000
+    # the runs in order, each once
+    assert [j for g in engine.ramped(jobs, 2) for j in g] == jobs
