@@ -8,6 +8,12 @@ independent worlds (:mod:`sandbox.study.batch`, bit-identical to single runs). R
 come back to the calling process, which alone writes the store
 (:mod:`sandbox.study.store`): a worker that dies, or a task that some scheduler runs
 twice, can never leave a run twice or half-written in it.
+
+A local pool's workers die with the process that started them, even by SIGKILL
+(:func:`die_with`), and its fork server with them. Groups start small and grow
+(:func:`ramped`), every group's runs are handed over as soon as it finishes, and a
+stop asked for while groups are under way kills the workers at once
+(:func:`stop_pool`) instead of waiting for them.
 """
 
 from __future__ import annotations

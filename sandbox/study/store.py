@@ -530,9 +530,8 @@ def rebuilt_text(root: Path, meta: dict[str, Any]) -> tuple[str, list[str]]:
             rejected.append(f"{path}: not a readable run file; left out")
             continue
         problem = run_problem(path, doc, None, digest_)
-        values, seed = doc.get("values") if isinstance(doc, dict) else None, None
         if problem is None:
-            seed = doc.get("seed")
+            values, seed = doc.get("values"), doc.get("seed")
             if not isinstance(values, dict) or list(values) != paths:
                 continue  # a run of another grid of this store
             if not (isinstance(seed, int) and first <= seed < end):
