@@ -198,3 +198,10 @@ def test_distinct_values_are_kept_as_written(tmp_path, base):
         "1.5",
         "2e0",
     ]
+
+
+def test_the_default_of_max_runs_is_the_specs():
+    from sandbox.cli import sweep as cli_sweep
+    from sandbox.study import spec
+
+    assert cli_sweep.MAX_RUNS == spec.MAX_RUNS == 100_000
