@@ -129,9 +129,9 @@ def rows(out: Path) -> int:
 
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_ctrl_c_returns_at_once_and_keeps_every_finished_run(tmp_path, jobs):
-    # 64 runs in groups of 8, 16, 32, ... (in-process) or 8, 8, 16, ... (two
-    # workers): the first runs are stored after the first small group, and a
-    # Ctrl-C returns within 2 s with every finished run stored and in the table.
+    # 64 runs in groups of 16 first, then sized to about 2 s each: the first runs
+    # are stored after the first small group, and a Ctrl-C returns within 2 s with
+    # every finished run stored and in the table.
     base = write_yaml(tmp_path, base_doc(duration=6.0), "base.yaml")
     out = tmp_path / "out"
     proc = start(
@@ -141,26 +141,36 @@ def test_ctrl_c_returns_at_once_and_keeps_every_finished_run(tmp_path, jobs):
         took, kept, err = interrupt_when_stored(proc, out)
         assert took < 2, f"Ctrl-C took {took:.1f} s"
         assert kept == rows(out) and f"{kept} of 64 runs stored" in err
-        if jobs == 1:
-            assert kept in (8, 24), kept  # whole groups: 8, then 8 + 16
-        else:
-            assert kept >= 8 and kept % 8 == 0, kept
+        # whole groups of 16 or more, finished before the signal and all kept
+        assert 16 <= kept < 64 and kept % 8 == 0, kept
         assert wait_for(lambda: session(proc.pid) == [], 1), session(proc.pid)
         assert not list((out / "runs").glob(".*.tmp"))
     finally:
         cleanup(proc)
 
 
-def test_groups_start_small_and_grow_to_the_batch_size():
+def test_groups_start_small_and_are_sized_by_their_time():
     from sandbox.study import engine
 
     jobs = [(f"r{k}", ({}, "", [])) for k in range(1000)]
-    # in-process: 8, 16, 32, 64, then groups of 128 (as engine.chunks cuts them)
-    sizes = [len(g) for g in engine.ramped(jobs, 1)]
-    assert sizes[:5] == [8, 16, 32, 64, 128] and set(sizes[5:-1]) == {128}
+    groups = engine.Groups(jobs, 1)
+    # Fast runs: after the first group of 16, the full batch of 128 (chunks' size).
+    first = next(groups)
+    groups.timed(len(first), 0.01)
+    sizes = [len(first), *(len(g) for g in groups)]
+    assert sizes[:2] == [16, 128] and set(sizes[1:-1]) == {128}
     assert sum(sizes) == 1000
-    # two workers: two of each size
-    sizes = [len(g) for g in engine.ramped(jobs, 2)]
-    assert sizes[:8] == [8, 8, 16, 16, 32, 32, 64, 64] and sum(sizes) == 1000
-    # the runs in order, each once
-    assert [j for g in engine.ramped(jobs, 2) for j in g] == jobs
+    # Runs of 0.1 s each: groups of 2 s / 0.1 s = 20 runs; of 1 s: 8 (MIN_WORLDS).
+    for per_run, size in [(0.1, 20), (1.0, 8), (0.001, 128)]:
+        groups = engine.Groups(jobs, 2)
+        g = next(groups)
+        groups.timed(len(g), per_run * len(g))
+        assert len(next(groups)) == size
+    # every run once, in order, and no group under MIN_WORLDS at the end
+    groups = engine.Groups(jobs[:45], 1)
+    out = []
+    for g in groups:
+        out.append(g)
+        groups.timed(len(g), 0.2 * len(g))  # 10 runs fit in 2 s
+    assert [len(g) for g in out] == [16, 10, 10, 9]
+    assert [j for g in out for j in g] == jobs[:45]

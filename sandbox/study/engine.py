@@ -10,10 +10,10 @@ come back to the calling process, which alone writes the store
 twice, can never leave a run twice or half-written in it.
 
 A local pool's workers die with the process that started them, even by SIGKILL
-(:func:`die_with`), and its fork server with them. Groups start small and grow
-(:func:`ramped`), every group's runs are handed over as soon as it finishes, and a
-stop asked for while groups are under way kills the workers at once
-(:func:`stop_pool`) instead of waiting for them.
+(:func:`die_with`), and its fork server with them. Groups start small and are sized
+by how long the last took (:class:`Groups`); every group's runs are handed over as
+soon as it finishes; and a stop asked for while groups are under way kills the
+workers at once (:func:`stop_pool`) instead of waiting for them.
 """
 
 from __future__ import annotations
@@ -313,26 +313,72 @@ def chunks(jobs: list[Job], workers: int, size: int | None = None) -> list[list[
     return [jobs[k : k + size] for k in range(0, len(jobs), size)]
 
 
-def ramped(jobs: list[Job], workers: int) -> Iterator[list[Job]]:
-    """The groups of :func:`chunks`, the first ones cut small.
+#: Work [s] a group of runs should take: an interrupt loses at most about this much
+#: per process (the groups under way), and groups are as large as it allows.
+GROUP_SECONDS = 2.0
+#: Runs in the first groups, before any group has been timed.
+FIRST_GROUP = 16
+#: Most a group grows from one timed group to the next.
+MAX_GROWTH = 8
 
-    The first group of each worker has :data:`MIN_WORLDS` runs, the next twice as
-    many, and so on up to the size :func:`chunks` gives: finished runs come (and are
-    stored) early, and whenever a sweep is interrupted the runs lost in flight are at
-    most about as many as those already finished. Cutting a group changes no result
-    (a batch is bit-identical to single runs).
+
+class Groups:
+    """The groups of a sweep's tasks, sized by how long the last ones took.
+
+    The first groups have :data:`FIRST_GROUP` runs; then each group is as large as
+    the last timed group says fits in :data:`GROUP_SECONDS` (the time per run of a
+    small group overestimates that of a larger one, whose batch shares the step's
+    fixed cost: the estimate errs on the small side), from :data:`MIN_WORLDS` up to
+    the size :func:`chunks` gives and at most :data:`MAX_GROWTH` times the last. Runs
+    of a few milliseconds reach the full batch size with the second group; runs of
+    seconds stay in small groups, so that finished runs are stored early and an
+    interrupt loses little. A remainder smaller than :data:`MIN_WORLDS` joins the
+    group before it. Cutting groups changes no result (a batch is bit-identical to
+    single runs).
+
+    Parameters
+    ----------
+    jobs : list
+        The tasks, in order.
+    workers : int
+        Processes taking groups (1: in-process).
     """
-    full = chunks(jobs, workers)
-    size = len(full[0]) if full else 0
-    k = g = 0
-    while k < len(jobs):
-        n = min(size, MIN_WORLDS << min(g // max(1, workers), 30))
-        if n >= size:  # the rest as chunks() cuts it
-            rest = jobs[k:]
-            yield from (rest[i : i + size] for i in range(0, len(rest), size))
+
+    def __init__(self, jobs: list[Job], workers: int) -> None:
+        self.jobs = jobs
+        self.next_at = 0
+        full = chunks(jobs, workers) if jobs else [[]]
+        self.cap = max(1, len(full[0]))
+        self.size = min(self.cap, FIRST_GROUP)
+
+    def __iter__(self) -> Iterator[list[Job]]:
+        return self
+
+    def __next__(self) -> list[Job]:
+        left = len(self.jobs) - self.next_at
+        if left <= 0:
+            raise StopIteration
+        n = min(self.size, left)
+        if left - n < MIN_WORLDS and left <= self.cap:
+            n = left  # no small group left at the end
+        group = self.jobs[self.next_at : self.next_at + n]
+        self.next_at += n
+        return group
+
+    def timed(self, runs: int, seconds: float) -> None:
+        """Size the next groups after a group of ``runs`` took ``seconds`` [s]."""
+        if runs <= 0:
             return
-        yield jobs[k : k + n]
-        k, g = k + n, g + 1
+        per_run = max(seconds, 1e-6) / runs
+        fits = int(GROUP_SECONDS / per_run)
+        self.size = max(MIN_WORLDS, min(self.cap, fits, MAX_GROWTH * runs))
+        self.size = min(self.size, self.cap)
+
+
+def _timed_group(jobs: list[Job]) -> tuple[float, list[tuple[str, Any]]]:
+    start = time.perf_counter()
+    out = run_tasks(jobs)
+    return time.perf_counter() - start, out
 
 
 def run_local(
@@ -340,14 +386,18 @@ def run_local(
 ) -> Iterator[tuple[str, dict[str, Any] | None]]:
     """Yield ``(run id, result)`` as runs finish: in-process, or on a process pool.
 
-    Tasks go in groups (:func:`ramped`) to :func:`run_tasks`, which steps compatible
+    Tasks go in groups (:class:`Groups`) to :func:`run_tasks`, which steps compatible
     runs together; every group's results are yielded as soon as it is finished.
     ``should_stop`` stops the runs under way at once: in-process their results are
     None; on a pool the groups that finished are yielded and the workers killed.
     """
     if workers <= 1 or len(jobs) <= 1:
-        for group in ramped(jobs, 1):
-            yield from run_tasks(group, should_stop=should_stop)
+        groups = Groups(jobs, 1)
+        for group in groups:
+            start = time.perf_counter()
+            results = run_tasks(group, should_stop=should_stop)
+            groups.timed(len(group), time.perf_counter() - start)
+            yield from results
             if should_stop is not None and should_stop():
                 return
         return
@@ -367,11 +417,11 @@ def run_local(
         initializer=_ignore_interrupts,
         initargs=(os.getpid(),),
     )
-    groups = ramped(jobs, workers)
+    groups = Groups(jobs, workers)
     try:
         # a few groups queued per worker: the rest are cut as the pool takes them
         pending = {
-            pool.submit(_call_group, g)
+            pool.submit(_timed_group, g)
             for g in itertools.islice(groups, QUEUED_PER_WORKER * workers)
         }
         while pending:
@@ -379,14 +429,16 @@ def run_local(
                 pending, timeout=STOP_POLL, return_when=cf.FIRST_COMPLETED
             )
             for fut in done:
-                yield from fut.result()
+                seconds, results = fut.result()
+                groups.timed(len(results), seconds)
+                yield from results
             if should_stop is not None and should_stop():
                 for fut in pending:  # the groups that finished meanwhile
                     if fut.done() and not fut.cancelled() and not fut.exception():
-                        yield from fut.result()
+                        yield from fut.result()[1]
                 return
             for g in itertools.islice(groups, len(done)):
-                pending.add(pool.submit(_call_group, g))
+                pending.add(pool.submit(_timed_group, g))
     finally:
         stop_pool(pool)
 
