@@ -148,6 +148,18 @@ def plant(kind: str, out: Path) -> tuple[list[str], int, str]:
         (out / "results.csv").unlink()
         (out / "results.csv").mkdir()
         return [], 1, f"{out / 'results.csv'}: cannot write"
+    if kind == "lock_is_a_symlink":
+        victim = out.parent / "victim.txt"
+        victim.write_text("precious", encoding="utf-8")
+        (out / ".lock").unlink()
+        (out / ".lock").symlink_to(victim)
+        return [], 1, f"{out / '.lock'}: cannot write"
+    if kind == "temporary_is_a_planted_symlink":
+        victim = out.parent / "victim.txt"
+        victim.write_text("precious", encoding="utf-8")
+        # the name this process gives its temporary results.csv
+        (out / f".results.csv.{os.getpid()}.tmp").symlink_to(victim)
+        return [], 0, ""
     if kind == "stray_temporary_files":
         (runs / ".x.json.1.tmp").write_text("half", encoding="utf-8")
         return [], 0, ""
@@ -163,6 +175,8 @@ STORES = [
     "sweep_json_is_a_directory",
     "sweep_json_is_huge",
     "results_csv_is_a_directory",
+    "lock_is_a_symlink",
+    "temporary_is_a_planted_symlink",
     "stray_temporary_files",
 ]
 
@@ -181,6 +195,8 @@ def test_a_hostile_store_is_one_line(folder, capsys, kind):
     # at most the warning about the file found and the error writing it
     assert len(lines) <= (2 if kind == "run_file_is_a_directory" else 1), lines
     assert all(".tmp" not in ln for ln in lines), lines
+    victim = folder / "victim.txt"
+    assert not victim.exists() or victim.read_text() == "precious"
 
 
 @pytest.mark.parametrize(

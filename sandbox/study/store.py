@@ -111,6 +111,8 @@ def replace_atomic(path: Path, write: Callable[[Path], Any]) -> None:
     path = Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
+        if os.path.lexists(tmp):  # a stale (or planted) one is never written through
+            os.unlink(tmp)
         write(tmp)
         os.replace(tmp, path)
     except OSError as exc:
@@ -184,7 +186,10 @@ def _read_bounded(path: Path, limit: int) -> bytes:
         raise OSError(0, "not a regular file")
     if st.st_size > limit:
         raise OSError(0, f"larger than {limit:,} bytes")
-    with open(path, "rb") as fh:
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as fh:
+        if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):  # replaced meanwhile
+            raise OSError(0, "not a regular file")
         data = fh.read(limit + 1)
     if len(data) > limit:
         raise OSError(0, f"larger than {limit:,} bytes")
@@ -321,12 +326,14 @@ class Store:
         except ImportError:  # not on POSIX: no lock
             return
         path = self.root / LOCK
-        try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0)
+        try:  # never through a link, never a device or a pipe
+            fd = os.open(path, flags | getattr(os, "O_NONBLOCK", 0), 0o644)
         except OSError as exc:
-            raise OutputError(
-                f"{self.root}: cannot write ({exc.strerror or exc})"
-            ) from None
+            raise OutputError(f"{path}: cannot write ({exc.strerror or exc})") from None
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            raise OutputError(f"{path}: cannot write (not a regular file)")
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
