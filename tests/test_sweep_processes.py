@@ -174,3 +174,30 @@ def test_groups_start_small_and_are_sized_by_their_time():
         groups.timed(len(g), 0.2 * len(g))  # 10 runs fit in 2 s
     assert [len(g) for g in out] == [16, 10, 10, 9]
     assert [j for g in out for j in g] == jobs[:45]
+
+
+def test_a_stop_while_a_group_is_stored_keeps_the_whole_group(
+    tmp_path, monkeypatch, capsys
+):
+    # SIGINT arrives just as the second group of 4 finishes: all 8 runs finished so
+    # far are stored (not 4 and then 1 of the group, as before), and nothing more.
+    from sandbox.cli import main
+    from sandbox.study import engine
+
+    base = write_yaml(tmp_path, base_doc(duration=0.5), "base.yaml")
+    real, calls = engine.run_tasks, []
+
+    def then_interrupted(jobs, should_stop=None):
+        out = real(jobs, should_stop=should_stop)
+        calls.append(len(jobs))
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+        return out
+
+    monkeypatch.setattr(engine, "BATCH_WORLDS", 4)
+    monkeypatch.setattr(engine, "run_tasks", then_interrupted)
+    out = tmp_path / "out"
+    assert main(["sweep", str(base), "--seeds", "0:20", "--out", str(out)]) == 130
+    assert "8 of 20 runs stored" in capsys.readouterr().err
+    assert calls == [4, 4] and rows(out) == 8
+    assert len(list((out / "runs").glob("*.json"))) == 8
