@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from typing import TYPE_CHECKING
@@ -48,7 +49,12 @@ def cmd_check(args: argparse.Namespace) -> int:
     if jobs <= 1:
         results = map(_check, todo)
     else:
-        pool = ProcessPoolExecutor(max_workers=jobs)
+        from sandbox.study.engine import die_with
+
+        # workers die with this process, even when it is killed (SIGKILL)
+        pool = ProcessPoolExecutor(
+            max_workers=jobs, initializer=die_with, initargs=(os.getpid(),)
+        )
         results = pool.map(_check, todo)
     failed = expectations = 0
     try:

@@ -19,9 +19,14 @@ from sandbox.cli.common import (
     EXIT_OK,
     add_command,
     add_plugin_option,
+    positive,
     scenario_file,
 )
 from sandbox.errors import SandboxError
+
+#: Default of ``--max-runs`` (``sandbox.study.spec.MAX_RUNS``, not imported here so
+#: that ``sandbox --help`` stays cheap).
+MAX_RUNS = 100_000
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -71,8 +76,18 @@ def _run(args: argparse.Namespace, file: str) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     out = Path(args.out)
+    try:
+        spec.check_size(args.max_runs)  # counted, before anything is built
+    except SweepError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
     if args.dry_run:
-        for line in describe_dry_run(spec, out, args.retry_failed):
+        try:
+            lines = describe_dry_run(spec, out, args.retry_failed, args.max_runs)
+        except SweepError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_INVALID
+        for line in lines:
             print(line)
         return EXIT_OK
     jobs = args.jobs
@@ -96,6 +111,7 @@ def _run(args: argparse.Namespace, file: str) -> int:
             scheduler_file=args.scheduler_file,
             retry_failed=args.retry_failed,
             progress=progress,
+            max_runs=args.max_runs,
             keep_runs=args.keep_runs,
         )
     except SweepError as exc:
@@ -255,6 +271,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler-file", metavar="F", help="Dask scheduler file")
     p.add_argument(
         "--dry-run", action="store_true", help="say what would run, run nothing"
+    )
+    p.add_argument(
+        "--max-runs",
+        type=positive(int),
+        default=MAX_RUNS,
+        metavar="N",
+        help=f"refuse a sweep of more than N runs (default {MAX_RUNS:,})",
     )
     p.add_argument(
         "--retry-failed",

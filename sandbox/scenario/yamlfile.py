@@ -229,3 +229,121 @@ def _long_integer_problem(node: yaml.Node | None, exc: ValueError) -> Problem:
         ),
         None,
     )
+
+
+#: Most nodes a document read by :func:`read_yaml_file` may expand to through its
+#: aliases (each alias counted as a copy of what it names): a sweep writes its values
+#: out whole, so an alias bomb ("billion laughs") would be expanded there.
+MAX_EXPANDED_NODES = 100_000
+
+
+def expanded_nodes(root: yaml.Node | None, limit: int) -> int:
+    """The nodes of a composed tree with every alias expanded, counted to ``limit``.
+
+    Each node's expanded size is computed once (iteratively, so deep nesting cannot
+    exhaust the stack), so the count costs time linear in the nodes as written; a
+    recursive alias (a node inside itself) expands without end and counts as
+    ``limit + 1``, as does any tree larger than ``limit``.
+
+    >>> expanded_nodes(yaml.compose("a: &x [1, 2]" + chr(10) + "b: [*x, *x]"), 100)
+    13
+    """
+    size: dict[int, int] = {}
+    open_: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [] if root is None else [(root, False)]
+    while stack:
+        node, leaving = stack.pop()
+        kids = _children(node)
+        if leaving:
+            open_.discard(id(node))
+            size[id(node)] = min(limit + 1, 1 + sum(size[id(k)] for k in kids))
+            continue
+        if id(node) in size:
+            continue
+        if id(node) in open_:
+            return limit + 1  # an alias of one of its own ancestors
+        open_.add(id(node))
+        stack.append((node, True))
+        stack.extend((k, False) for k in kids if id(k) not in size)
+    return 0 if root is None else size[id(root)]
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [n for kv in node.value for n in kv]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
+
+
+def read_yaml_file(
+    path: str | Path,
+    loader: type | None = None,
+    max_nodes: int | None = MAX_EXPANDED_NODES,
+) -> Any:
+    """Read one YAML document from a file, within the limits of scenario files.
+
+    The file must be a regular file of at most :data:`MAX_FILE_BYTES` bytes of UTF-8
+    text (devices, pipes and directories are refused before they are read); the
+    document must expand through its aliases to at most ``max_nodes`` nodes. It is
+    composed by ``loader`` (default: the scenario loader) and then constructed.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    loader : type, optional
+        A safe PyYAML loader class (default ``_YAMLLoader``).
+    max_nodes : int or None
+        Most nodes the document may expand to (see :func:`expanded_nodes`); None
+        for no limit (the document is constructed, sharing what aliases name).
+
+    Raises
+    ------
+    ScenarioError
+        One problem, formatted with ``path``: why the file cannot be read or used.
+    """
+    from sandbox.errors import ScenarioError
+
+    name = str(path)
+
+    def refuse(what: str, got: str, expected: str, line: int | None = None) -> None:
+        raise ScenarioError([Problem("", _says(what, got, expected), line)], name)
+
+    expected = "a readable YAML file"
+    try:
+        data = _read_limited(Path(path))
+    except FileNotFoundError:
+        refuse("cannot read the file", "no such file", expected)
+    except IsADirectoryError:
+        refuse("cannot read the file", "a directory", expected)
+    except OSError as exc:  # _NotAFile among them
+        refuse("cannot read the file", exc.strerror or str(exc), expected)
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        got = f"byte {data[exc.start]:#04x} at offset {exc.start}"
+        refuse("not UTF-8 text", got, "a UTF-8 encoded YAML file", line)
+    node = None
+    try:
+        reader = (loader or _YAMLLoader)(text)
+        try:
+            node = reader.get_single_node()
+            if max_nodes is not None and expanded_nodes(node, max_nodes) > max_nodes:
+                refuse(
+                    "aliases expand too far",
+                    f"more than {max_nodes:,} values once expanded",
+                    "a document without recursive or exponential aliases",
+                )
+            return reader.construct_document(node) if node is not None else None
+        finally:
+            reader.dispose()
+    except ValueError as exc:  # an integer beyond Python's digit limit
+        if isinstance(exc, ScenarioError):
+            raise
+        raise ScenarioError([_long_integer_problem(node, exc)], name) from None
+    except yaml.YAMLError as exc:
+        raise ScenarioError([_yaml_problem(exc, text)], name) from None
+    except RecursionError:
+        refuse("the document is nested too deeply", "hundreds of levels", "a few")

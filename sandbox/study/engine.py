@@ -8,13 +8,24 @@ independent worlds (:mod:`sandbox.study.batch`, bit-identical to single runs). R
 come back to the calling process, which alone writes the store
 (:mod:`sandbox.study.store`): a worker that dies, or a task that some scheduler runs
 twice, can never leave a run twice or half-written in it.
+
+A local pool's workers die with the process that started them, even by SIGKILL
+(:func:`die_with`), and its fork server with them. Groups start small and are sized
+by how long the last took (:class:`Groups`); every group's runs are handed over as
+soon as it finishes; and a stop asked for while groups are under way kills the
+workers at once (:func:`stop_pool`) instead of waiting for them.
 """
 
 from __future__ import annotations
 
+import ctypes
+import itertools
 import logging
 import os
 import signal
+import sys
+import threading
+import time
 import traceback
 import warnings
 from collections.abc import Callable, Iterator
@@ -234,9 +245,71 @@ def _call_group(jobs: list[Job]) -> list[tuple[str, dict[str, Any] | None]]:
     return run_tasks(jobs)
 
 
-def _ignore_interrupts() -> None:
-    """Pool workers leave Ctrl-C to the parent, which stops the sweep cleanly."""
+def _ignore_interrupts(parent: int | None = None) -> None:
+    """Pool workers leave Ctrl-C to the parent, and die with it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if parent is not None:
+        die_with(parent)
+
+
+#: ``prctl`` option of Linux: the signal a process gets when its parent dies.
+PR_SET_PDEATHSIG = 1
+#: How often [s] a worker without ``PR_SET_PDEATHSIG`` checks that its parent lives.
+PARENT_POLL = 0.5
+
+
+def die_with(parent: int) -> None:
+    """Make this worker process die when the process ``parent`` dies, even by SIGKILL.
+
+    On Linux the kernel sends SIGKILL when the worker's parent dies
+    (``PR_SET_PDEATHSIG``, through ctypes); elsewhere, or if ``prctl`` fails, a daemon
+    thread polls ``parent`` every :data:`PARENT_POLL` seconds. A worker forked by a
+    fork server has the server as its parent, and the server stops only when every
+    holder of its "alive" pipe is gone: the worker, which never starts processes of
+    its own, closes its copy, so the server exits when ``parent`` does and takes its
+    workers with it.
+    """
+    _release_fork_server()
+    armed = False
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            armed = libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+    if not _alive(parent):
+        os._exit(1)  # the parent died before the signal was armed
+    if not armed:
+        threading.Thread(target=_watch, args=(parent,), daemon=True).start()
+
+
+def _release_fork_server() -> None:
+    """Close this worker's copy of the fork server's "alive" pipe, if it has one."""
+    server = getattr(sys.modules.get("multiprocessing.forkserver"), "_forkserver", None)
+    fd = getattr(server, "_forkserver_alive_fd", None)
+    if server is None or fd is None:
+        return
+    try:
+        os.close(fd)
+    except OSError:
+        pass
+    server._forkserver_alive_fd = None
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: it exists
+        return True
+    return True
+
+
+def _watch(parent: int) -> None:
+    while _alive(parent):
+        time.sleep(PARENT_POLL)
+    os._exit(1)
 
 
 #: ``(run id, (base document, source, overrides[, directory to keep the run in]))``.
@@ -266,18 +339,91 @@ def chunks(jobs: list[Job], workers: int, size: int | None = None) -> list[list[
     return [jobs[k : k + size] for k in range(0, len(jobs), size)]
 
 
+#: Work [s] a group of runs should take: an interrupt loses at most about this much
+#: per process (the groups under way), and groups are as large as it allows.
+GROUP_SECONDS = 2.0
+#: Runs in the first groups, before any group has been timed.
+FIRST_GROUP = 16
+#: Most a group grows from one timed group to the next.
+MAX_GROWTH = 8
+
+
+class Groups:
+    """The groups of a sweep's tasks, sized by how long the last ones took.
+
+    The first groups have :data:`FIRST_GROUP` runs; then each group is as large as
+    the last timed group says fits in :data:`GROUP_SECONDS` (the time per run of a
+    small group overestimates that of a larger one, whose batch shares the step's
+    fixed cost: the estimate errs on the small side), from :data:`MIN_WORLDS` up to
+    the size :func:`chunks` gives and at most :data:`MAX_GROWTH` times the last. Runs
+    of a few milliseconds reach the full batch size with the second group; runs of
+    seconds stay in small groups, so that finished runs are stored early and an
+    interrupt loses little. A remainder smaller than :data:`MIN_WORLDS` joins the
+    group before it. Cutting groups changes no result (a batch is bit-identical to
+    single runs).
+
+    Parameters
+    ----------
+    jobs : list
+        The tasks, in order.
+    workers : int
+        Processes taking groups (1: in-process).
+    """
+
+    def __init__(self, jobs: list[Job], workers: int) -> None:
+        self.jobs = jobs
+        self.next_at = 0
+        full = chunks(jobs, workers) if jobs else [[]]
+        self.cap = max(1, len(full[0]))
+        self.size = min(self.cap, FIRST_GROUP)
+
+    def __iter__(self) -> Iterator[list[Job]]:
+        return self
+
+    def __next__(self) -> list[Job]:
+        left = len(self.jobs) - self.next_at
+        if left <= 0:
+            raise StopIteration
+        n = min(self.size, left)
+        if left - n < MIN_WORLDS and left <= self.cap:
+            n = left  # no small group left at the end
+        group = self.jobs[self.next_at : self.next_at + n]
+        self.next_at += n
+        return group
+
+    def timed(self, runs: int, seconds: float) -> None:
+        """Size the next groups after a group of ``runs`` took ``seconds`` [s]."""
+        if runs <= 0:
+            return
+        per_run = max(seconds, 1e-6) / runs
+        fits = int(GROUP_SECONDS / per_run)
+        self.size = max(MIN_WORLDS, min(self.cap, fits, MAX_GROWTH * runs))
+        self.size = min(self.size, self.cap)
+
+
+def _timed_group(jobs: list[Job]) -> tuple[float, list[tuple[str, Any]]]:
+    start = time.perf_counter()
+    out = run_tasks(jobs)
+    return time.perf_counter() - start, out
+
+
 def run_local(
     jobs: list[Job], workers: int, should_stop: Callable[[], bool] | None = None
 ) -> Iterator[tuple[str, dict[str, Any] | None]]:
     """Yield ``(run id, result)`` as runs finish: in-process, or on a process pool.
 
-    Tasks go in groups (:func:`chunks`) to :func:`run_tasks`, which steps compatible
-    runs together. In-process, ``should_stop`` also stops the runs under way (their
-    results are None).
+    Tasks go in groups (:class:`Groups`) to :func:`run_tasks`, which steps compatible
+    runs together; every group's results are yielded as soon as it is finished.
+    ``should_stop`` stops the runs under way at once: in-process their results are
+    None; on a pool the groups that finished are yielded and the workers killed.
     """
     if workers <= 1 or len(jobs) <= 1:
-        for group in chunks(jobs, 1):
-            yield from run_tasks(group, should_stop=should_stop)
+        groups = Groups(jobs, 1)
+        for group in groups:
+            start = time.perf_counter()
+            results = run_tasks(group, should_stop=should_stop)
+            groups.timed(len(group), time.perf_counter() - start)
+            yield from results
             if should_stop is not None and should_stop():
                 return
         return
@@ -291,16 +437,64 @@ def run_local(
         # The server imports the simulation once; every worker forked from it starts
         # with it imported (instead of a third of a second each).
         ctx.set_forkserver_preload(PRELOAD)
-    with cf.ProcessPoolExecutor(
-        max_workers=workers, mp_context=ctx, initializer=_ignore_interrupts
-    ) as pool:
-        futures = [pool.submit(_call_group, group) for group in chunks(jobs, workers)]
-        try:
-            for fut in cf.as_completed(futures):
-                yield from fut.result()
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
+    pool = cf.ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=ctx,
+        initializer=_ignore_interrupts,
+        initargs=(os.getpid(),),
+    )
+    groups = Groups(jobs, workers)
+    try:
+        # a few groups queued per worker: the rest are cut as the pool takes them
+        pending = {
+            pool.submit(_timed_group, g)
+            for g in itertools.islice(groups, QUEUED_PER_WORKER * workers)
+        }
+        while pending:
+            done, pending = cf.wait(
+                pending, timeout=STOP_POLL, return_when=cf.FIRST_COMPLETED
+            )
+            for fut in done:
+                seconds, results = fut.result()
+                groups.timed(len(results), seconds)
+                yield from results
+            if should_stop is not None and should_stop():
+                for fut in pending:  # the groups that finished meanwhile
+                    if fut.done() and not fut.cancelled() and not fut.exception():
+                        yield from fut.result()[1]
+                return
+            for g in itertools.islice(groups, len(done)):
+                pending.add(pool.submit(_timed_group, g))
+    finally:
+        stop_pool(pool)
+
+
+#: How often [s] the parent of a pool checks for a stop while groups are under way.
+STOP_POLL = 0.1
+#: Groups submitted to a pool ahead, per worker.
+QUEUED_PER_WORKER = 2
+
+
+def stop_pool(pool: Any) -> None:
+    """Shut a process pool down at once: cancel its queue, kill its workers.
+
+    The runs under way in the workers are lost (they are not finished); what the
+    workers had finished has been taken from them already. Returns without waiting for
+    the groups in flight.
+    """
+    kill = getattr(pool, "kill_workers", None)  # Python 3.14
+    if kill is not None:
+        kill()
+    else:  # the workers, taken before shutdown() lets go of them
+        workers = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in workers:
+            try:
+                proc.kill()
+                proc.join(timeout=1)
+            except (OSError, ValueError, AttributeError, AssertionError):
+                pass
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def dask_client(address: str | None, scheduler_file: str | None) -> Any:
@@ -333,13 +527,18 @@ def dask_client(address: str | None, scheduler_file: str | None) -> Any:
 
 
 def run_dask(
-    jobs: list[Job], client: Any, on_lost: Callable[[], str]
+    jobs: list[Job],
+    client: Any,
+    on_lost: Callable[[], str],
+    should_stop: Callable[[], bool] | None = None,
 ) -> Iterator[tuple[str, dict[str, Any]]]:
     """Yield ``(run id, result)`` as runs finish on a Dask cluster.
 
     Each task's key is its run id, so the scheduler never computes a run twice for one
     submission; a worker that dies has its tasks rescheduled on the others. A lost
-    scheduler raises :class:`EngineError` with ``on_lost()``'s advice.
+    scheduler raises :class:`EngineError` with ``on_lost()``'s advice. Once
+    ``should_stop`` returns True (it is asked after each finished run), the runs
+    finished meanwhile are yielded and the others cancelled.
     """
     from distributed import as_completed
 
@@ -351,8 +550,16 @@ def run_dask(
     by_key = {f.key: run_id for f, (run_id, _) in zip(futures, jobs, strict=True)}
     lost = (OSError, TimeoutError, *_comm_errors())
     try:
+        seen = set()
         for fut in as_completed(futures):
+            seen.add(fut.key)
             yield by_key[fut.key], fut.result()
+            if should_stop is not None and should_stop():
+                for other in futures:
+                    if other.key not in seen and other.status == "finished":
+                        yield by_key[other.key], other.result()
+                client.cancel([f for f in futures if f.status != "finished"])
+                return
     except lost as exc:
         raise EngineError(
             f"lost the Dask scheduler ({type(exc).__name__}): {on_lost()}"

@@ -19,11 +19,12 @@ import itertools
 import math
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from sandbox.study.spec import SweepError
-from sandbox.study.store import read_results, varied_axes
+from sandbox.study.store import read_results, replace_atomic, varied_axes
 from sandbox.study.summary import group_rows
 
 #: At most this many heatmap pairs (values of the other paths) are drawn.
@@ -31,6 +32,16 @@ MAX_PANELS = 6
 
 #: Joins the paths (and the values) of the zipped paths into one axis.
 AXIS_JOIN = " & "
+
+
+def save_figure(fig: Any, path: Path) -> None:
+    """Write ``fig`` as a PNG at ``path``, whole or not at all.
+
+    Drawn into a hidden temporary file beside ``path`` and renamed into place, so a
+    killed ``sweep plot`` never leaves a truncated or empty PNG; an ``OSError`` is
+    reported with ``path`` (:func:`~sandbox.study.store.replace_atomic`).
+    """
+    replace_atomic(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
 
 
 def _numeric(values: list[str]) -> list[float] | None:
@@ -168,7 +179,7 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
         if combos != [()]:
             ax.legend(fontsize=7)
     path = out / f"rates_{_slug(x)}.png"
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)
     written.append(path)
 
@@ -224,7 +235,7 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
                 ax.set_title(title + (f"\n{extra}" if extra else ""), fontsize=9)
                 fig.colorbar(im, ax=ax, shrink=0.8)
         path = out / f"heatmap_{_slug(x)}_{_slug(y)}.png"
-        fig.savefig(path, dpi=110)
+        save_figure(fig, path)
         plt.close(fig)
         written.append(path)
     return written

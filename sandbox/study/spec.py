@@ -27,6 +27,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import math
 import os
 import re
 from collections.abc import Iterator, Mapping
@@ -39,6 +40,9 @@ import yaml
 from sandbox.errors import SandboxError
 
 SWEEP_KEYS = ("base", "set", "grid", "zip", "seeds")
+#: Most runs a sweep may have unless ``--max-runs`` allows more (its tasks are counted
+#: before any is built).
+MAX_RUNS = 100_000
 _PATH = re.compile(
     r"^[A-Za-z_][A-Za-z0-9_]*(\[\d+\])*(\.[A-Za-z_][A-Za-z0-9_]*(\[\d+\])*)*$"
 )
@@ -88,39 +92,64 @@ class SweepSpec:
             self, "paths", tuple(a.path for a in (*self.grid, *self.zipped))
         )
 
-    def points(self) -> list[tuple[tuple[str, str, Any], ...]]:
-        """Every grid point: ``(path, text, value)`` for each varied path."""
+    def n_points(self) -> int:
+        """The number of grid points, by arithmetic (nothing is built)."""
+        n = math.prod(len(a.values) for a in self.grid)
+        return n * (len(self.zipped[0].values) if self.zipped else 1)
+
+    def count(self) -> int:
+        """The number of runs, by arithmetic (nothing is built)."""
+        return self.n_points() * (self.seeds.stop - self.seeds.start)
+
+    def check_size(self, max_runs: int = MAX_RUNS) -> None:
+        """Refuse a sweep of more than ``max_runs`` runs, before anything is built.
+
+        Raises
+        ------
+        SweepError
+            The sweep has more runs than ``max_runs``.
+        """
+        runs = self.count()
+        if runs > max_runs:
+            points, seeds = self.n_points(), self.seeds.stop - self.seeds.start
+            raise SweepError(
+                f"{self.source}: {runs:,} runs ({points:,} grid point"
+                f"{'s' if points != 1 else ''} x {seeds:,} seed"
+                f"{'s' if seeds != 1 else ''}); at most {max_runs:,} (fewer values "
+                "or seeds, or a larger --max-runs)"
+            )
+
+    def iter_points(self) -> Iterator[tuple[tuple[str, str, Any], ...]]:
+        """Every grid point, one at a time: ``(path, text, value)`` per varied path."""
         grids = [list(zip(a.texts, a.values, strict=True)) for a in self.grid]
-        zips = [()]
+        zips: list[tuple[tuple[str, str, Any], ...]] = [()]
         if self.zipped:
             n = len(self.zipped[0].values)
             zips = [
                 tuple((a.path, a.texts[i], a.values[i]) for a in self.zipped)
                 for i in range(n)
             ]
-        out = []
         for combo in itertools.product(*grids):
             head = tuple(
                 (a.path, t, v) for a, (t, v) in zip(self.grid, combo, strict=True)
             )
             for z in zips:
-                out.append(head + tuple(z))
-        return out
+                yield head + tuple(z)
+
+    def points(self) -> list[tuple[tuple[str, str, Any], ...]]:
+        """Every grid point: ``(path, text, value)`` for each varied path."""
+        return list(self.iter_points())
+
+    def iter_tasks(self) -> Iterator[Task]:
+        """Every run, one at a time, grid point by grid point, seeds in order."""
+        for k, point in enumerate(self.iter_points()):
+            values = tuple((p, t) for p, t, _ in point)
+            for seed in self.seeds:
+                yield Task(run_id(point, seed), k, values, seed)
 
     def tasks(self) -> list[Task]:
         """Every run, grid point by grid point, seeds in order."""
-        out = []
-        for k, point in enumerate(self.points()):
-            for seed in self.seeds:
-                out.append(
-                    Task(
-                        run_id(point, seed),
-                        k,
-                        tuple((p, t) for p, t, _ in point),
-                        seed,
-                    )
-                )
-        return out
+        return list(self.iter_tasks())
 
 
 def run_id(point: tuple[tuple[str, str, Any], ...], seed: int) -> str:
@@ -200,6 +229,53 @@ def axis_from_list(path: str, values: Any, where: str) -> Axis:
     return Axis(path, tuple(value_text(v) for v in values), tuple(values))
 
 
+def normal_value(text: str) -> Any:
+    """The value ``--set PATH=text`` gives, in a form equal for equal values.
+
+    ``1``, ``01``, ``1.0`` and ``1e0`` are one number, ``[1, 2]`` and ``[1.0, 2]`` one
+    list; booleans stay apart from numbers.
+
+    >>> normal_value("01") == normal_value("1.0") == normal_value("1e0")
+    True
+    """
+    from sandbox.scenario.yamlfile import _YAMLLoader
+
+    try:
+        value = yaml.load(text, Loader=_YAMLLoader)  # noqa: S506 (a SafeLoader)
+    except (yaml.YAMLError, ValueError, RecursionError):
+        return ("text", text)
+    return _normal(value)
+
+
+def _normal(value: Any) -> Any:
+    if isinstance(value, bool) or value is None:
+        return ("const", value)
+    if isinstance(value, int | float):
+        return ("number", value)  # 1 == 1.0, and so are their hashes
+    if isinstance(value, str):
+        return ("text", value)
+    if isinstance(value, list | tuple):
+        return ("list", tuple(_normal(v) for v in value))
+    if isinstance(value, Mapping):
+        items = sorted((str(k), _normal(v)) for k, v in value.items())
+        return ("map", tuple(items))
+    return ("other", str(value))
+
+
+def _check_repeats(texts: tuple[str, ...] | list[str], where: str) -> None:
+    """Refuse a value given twice (after normalising: ``1``, ``01``, ``1.0``)."""
+    first: dict[Any, str] = {}
+    for text in texts:
+        key = normal_value(text)
+        if key in first:
+            same = "again" if first[key] == text else f"the same value as {first[key]}"
+            raise SweepError(
+                f"{where}: {text} is {same} (each value once: a repeated value "
+                "would repeat its runs and count them twice)"
+            )
+        first[key] = text
+
+
 def parse_seeds(text: Any, where: str) -> range:
     """``A:B`` (seeds A to B-1, as ``range``), ``[A, B]`` or a single seed ``A``."""
     if isinstance(text, list) and len(text) == 2:
@@ -224,7 +300,7 @@ def parse_seeds(text: Any, where: str) -> range:
     return range(a, b)
 
 
-def _check_axes(grid: list[Axis], zipped: list[Axis]) -> None:
+def _check_axes(grid: list[Axis], zipped: list[Axis], source: str = "") -> None:
     seen: set[str] = set()
     for a in [*grid, *zipped]:
         if a.path in seen:
@@ -233,8 +309,46 @@ def _check_axes(grid: list[Axis], zipped: list[Axis]) -> None:
     if zipped and len({len(a.values) for a in zipped}) > 1:
         sizes = ", ".join(f"{a.path}: {len(a.values)}" for a in zipped)
         raise SweepError(f"zip: the lists differ in length ({sizes}); expected equal")
+    if zipped:
+        rows: dict[Any, int] = {}
+        for i in range(len(zipped[0].texts)):
+            key = tuple(normal_value(a.texts[i]) for a in zipped)
+            if key in rows:
+                where = f"{source}: zip" if source else "zip"
+                raise SweepError(
+                    f"{where}: entries {rows[key] + 1} and {i + 1} are the same values "
+                    f"of {', '.join(a.path for a in zipped)} (each combination once)"
+                )
+            rows[key] = i
     if "seed" in seen:
         raise SweepError("seed: vary seeds with --seeds A:B, not as a grid path")
+
+
+def read_sweep_document(path: str | Path, limited: bool = True) -> Any:
+    """The YAML document of a sweep (or scenario) file, within the loader's limits.
+
+    Read by the scenario loader's reader
+    (:func:`sandbox.scenario.yamlfile.read_yaml_file`: a regular file, its size, UTF-8,
+    aliases that do not expand beyond its limit), with PyYAML's safe loader as
+    ``yaml.safe_load`` uses it (so values and run ids are as before). With
+    ``limited`` false, aliases may expand without limit (to tell what the document
+    is, never to use its values).
+
+    Raises
+    ------
+    SweepError
+        One line naming the file and why it cannot be used.
+    """
+    from sandbox.errors import ScenarioError
+    from sandbox.scenario.yamlfile import read_yaml_file
+
+    try:
+        safe = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+        if limited:
+            return read_yaml_file(path, loader=safe)
+        return read_yaml_file(path, loader=safe, max_nodes=None)
+    except ScenarioError as exc:
+        raise SweepError(exc.lines[0]) from None
 
 
 def is_sweep_file(doc: Any) -> bool:
@@ -255,16 +369,7 @@ def build_spec(
     replace its values; ``--seeds`` replaces its seeds; ``--set`` adds to its ``set``.
     """
     path = Path(file)
-    try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise SweepError(f"{file}: cannot read ({exc.strerror or exc})") from None
-    except yaml.YAMLError as exc:
-        raise SweepError(
-            f"{file}: malformed YAML ({str(exc).splitlines()[0]})"
-        ) from None
-    except (ValueError, RecursionError):  # e.g. integers of thousands of digits
-        raise SweepError(f"{file}: not a readable sweep or scenario file") from None
+    doc = read_sweep_document(path)
     file_grid: list[Axis] = []
     file_zip: list[Axis] = []
     fixed: list[str] = []
@@ -301,7 +406,12 @@ def build_spec(
     over = {a.path for a in cli_grid + cli_zip}
     all_grid = [a for a in file_grid if a.path not in over] + cli_grid
     all_zip = [a for a in file_zip if a.path not in over] + cli_zip
-    _check_axes(all_grid, all_zip)
+    for a in file_grid:
+        if a.path not in over:
+            _check_repeats(a.texts, f"{file}: grid.{a.path}")
+    for a in cli_grid:
+        _check_repeats(a.texts, f"--grid {a.path}={','.join(a.texts)}")
+    _check_axes(all_grid, all_zip, str(file))
     if seeds is not None:
         seed_range = parse_seeds(seeds, "--seeds")
     return SweepSpec(

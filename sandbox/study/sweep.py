@@ -1,9 +1,15 @@
 """Running a sweep into its store: what is missing, on the chosen engine, with progress.
 
-:func:`run_sweep` is what ``sandbox sweep`` calls: it validates every grid point, opens
+:func:`run_sweep` is what ``sandbox sweep`` calls: it counts the runs (refusing more
+than ``max_runs`` before any is built), validates every grid point, opens and locks
 the store (refusing a changed base), computes the runs without a stored result (and,
 with ``retry_failed``, those whose status is a failure), stores each as it finishes,
 and rebuilds ``results.csv`` at the end, also when interrupted.
+
+Signals: until the runs start, SIGINT and SIGTERM act as they do around the call
+(under ``sandbox`` they raise ``KeyboardInterrupt``: exit status 130, nothing
+written but whole files); while runs are computed they stop the sweep, which keeps
+every finished run and returns at once (:class:`StopOnSignal`).
 """
 
 from __future__ import annotations
@@ -13,7 +19,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,11 +28,19 @@ import yaml
 
 from sandbox.errors import ScenarioError
 from sandbox.study import engine
-from sandbox.study.spec import SweepError, SweepSpec, Task, build_spec, is_sweep_file
+from sandbox.study.spec import (
+    MAX_RUNS,
+    SweepError,
+    SweepSpec,
+    Task,
+    build_spec,
+    is_sweep_file,
+    read_sweep_document,
+)
 from sandbox.study.store import Store, digest
 
-#: A sweep file is a few lines; larger files are not read as one.
-MAX_SWEEP_BYTES = 1_000_000
+#: Most rejected run files named one by one (then their count).
+SHOW_REJECTED = 5
 #: With ``keep_runs``, each computed run's directory is ``DIR/run_dirs/<run id>/``.
 KEPT_RUNS = "run_dirs"
 
@@ -64,11 +78,8 @@ def check_points(spec: SweepSpec, base_doc: dict[str, Any]) -> None:
     from sandbox.scenario import parse_scenario
 
     first = spec.seeds.start
-    seen: set[int] = set()
-    for task in spec.tasks():
-        if task.point in seen or task.seed != first:
-            continue
-        seen.add(task.point)
+    for point in spec.iter_points():
+        task = Task("", 0, tuple((p, t) for p, t, _ in point), first)
         try:
             parse_scenario(
                 base_doc, source=str(spec.base), overrides=task.overrides(spec.fixed)
@@ -80,7 +91,7 @@ def check_points(spec: SweepSpec, base_doc: dict[str, Any]) -> None:
 
 
 def to_compute(
-    tasks: list[Task], done: dict[str, str], retry_failed: bool
+    tasks: Iterable[Task], done: dict[str, str], retry_failed: bool
 ) -> list[Task]:
     """The tasks without a stored run (and the failed ones with ``retry_failed``)."""
     out = []
@@ -100,6 +111,8 @@ def run_sweep(
     scheduler_file: str | None = None,
     retry_failed: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    max_runs: int = MAX_RUNS,
+    warn: Callable[[str], None] | None = None,
     keep_runs: bool = False,
 ) -> SweepReport:
     """Compute the missing runs of ``spec`` into the store ``out``.
@@ -117,6 +130,11 @@ def run_sweep(
         Also rerun the stored runs whose status is a failure.
     progress : callable, optional
         Called as ``progress(done, total)`` after each run.
+    max_runs : int
+        Most runs the sweep may have (:data:`~sandbox.study.spec.MAX_RUNS`).
+    warn : callable, optional
+        Told, one line each, of the stored run files that are not taken (default:
+        printed to standard error as ``warning: ...``).
     keep_runs : bool
         Also write the run directory of every run computed now (as ``sandbox run``
         does) into ``out/run_dirs/<run id>/``, for ``sandbox view`` and ``sandbox
@@ -127,40 +145,55 @@ def run_sweep(
     SweepReport
         An interrupted sweep (SIGINT, SIGTERM) returns with ``interrupted`` set, its
         finished runs stored and ``results.csv`` written.
+
+    Raises
+    ------
+    SweepError
+        Too many runs, or ``out`` cannot hold this sweep (another base, another
+        sweep writing into it).
     """
-    with StopOnSignal() as stop:
-        return _run_sweep(
-            spec,
-            out,
-            jobs,
-            scheduler,
-            scheduler_file,
-            retry_failed,
-            progress,
-            stop,
-            keep_runs,
-        )
+    spec.check_size(max_runs)
+    base_doc = read_base(spec)
+    check_points(spec, base_doc)
+    store = Store(out)
+    store.open(spec, digest(base_doc, spec.fixed))
+    try:
+        done = store.done(spec.iter_tasks())
+        _warn_rejected(store, warn)
+        todo = to_compute(spec.iter_tasks(), done, retry_failed)
+        with StopOnSignal() as stop:
+            engines = (jobs, scheduler, scheduler_file)
+            return _compute(
+                spec, store, base_doc, todo, engines, progress, stop, keep_runs
+            )
+    finally:
+        store.close()
 
 
-def _run_sweep(
+def _warn_rejected(store: Store, warn: Callable[[str], None] | None) -> None:
+    say = warn or (lambda line: print(f"warning: {line}", file=sys.stderr))
+    for line in store.rejected[:SHOW_REJECTED]:
+        say(line)
+    if len(store.rejected) > SHOW_REJECTED:
+        more = len(store.rejected) - SHOW_REJECTED
+        say(f"{store.runs}: {more} more run files not taken; computed again")
+    store.rejected.clear()
+
+
+def _compute(
     spec: SweepSpec,
-    out: Path,
-    jobs: int,
-    scheduler: str | None,
-    scheduler_file: str | None,
-    retry_failed: bool,
+    store: Store,
+    base_doc: dict[str, Any],
+    todo: list[Task],
+    engines: tuple[int, str | None, str | None],
     progress: Callable[[int, int], None] | None,
     stop: StopOnSignal,
     keep_runs: bool = False,
 ) -> SweepReport:
-    base_doc = read_base(spec)
-    check_points(spec, base_doc)
-    tasks = spec.tasks()
-    store = Store(out)
-    store.open(spec, digest(base_doc, spec.fixed))
-    done = store.done()
-    todo = to_compute(tasks, done, retry_failed)
-    report = SweepReport(len(tasks), len(tasks) - len(todo), 0, 0, 0)
+    jobs, scheduler, scheduler_file = engines
+    out = store.root
+    total = spec.count()
+    report = SweepReport(total, total - len(todo), 0, 0, 0)
     if todo:
         by_id = {t.run_id: t for t in todo}
         kept = Path(out).resolve() / KEPT_RUNS
@@ -181,27 +214,28 @@ def _run_sweep(
                     f"the finished runs are kept in {out}; run the same command "
                     "again once the scheduler is back to compute only the missing ones"
                 ),
+                should_stop=stop,
             )
         else:
             results = engine.run_local(jobs_list, jobs, should_stop=stop)
-        try:
+        try:  # every run the engine yields is stored; it stops when asked to
             for run_id, result in results:
                 if result is not None:
                     store.put(by_id[run_id], result)
                     report.computed += 1
                     if progress is not None:
                         progress(report.computed, len(todo))
-                if stop():
-                    break
         except KeyboardInterrupt:
             stop.raised = True
         finally:
             results.close()
-            report.rows = store.write_results(spec, tasks)
+            report.rows = store.write_results(spec, spec.iter_tasks())
         report.interrupted = stop.raised
     else:
-        report.rows = store.write_results(spec, tasks)
-    report.failed = sum(1 for s in store.done().values() if s in engine.FAILED_STATUSES)
+        report.rows = store.write_results(spec, spec.iter_tasks())
+    statuses = store.done(spec.iter_tasks()).values()
+    store.rejected.clear()
+    report.failed = sum(1 for s in statuses if s in engine.FAILED_STATUSES)
     return report
 
 
@@ -258,24 +292,40 @@ class Progress:
         self.stream.flush()
 
 
-def describe_dry_run(spec: SweepSpec, out: Path, retry_failed: bool) -> list[str]:
-    """The lines ``--dry-run`` prints: sizes, what is stored, what would run."""
-    tasks = spec.tasks()
+def describe_dry_run(
+    spec: SweepSpec, out: Path, retry_failed: bool, max_runs: int = MAX_RUNS
+) -> list[str]:
+    """The lines ``--dry-run`` prints: sizes, what is stored, what would run.
+
+    The runs are counted before any is built (more than ``max_runs`` are refused
+    with :class:`SweepError`), then looked at one at a time.
+    """
+    spec.check_size(max_runs)
+    total = spec.count()
     store = Store(out)
-    done = store.done() if store.runs.is_dir() else {}
-    todo = to_compute(tasks, done, retry_failed)
-    points = len(spec.points())
+    if store.runs.is_dir():
+        store.digest = digest(read_base(spec), spec.fixed)
+    first: list[Task] = []
+    todo = 0
+    for task in spec.iter_tasks():
+        status = store.verified(task) if store.runs.is_dir() else None
+        status = None if status is None else status["row"]["status"]
+        if status is None or (retry_failed and status in engine.FAILED_STATUSES):
+            todo += 1
+            if len(first) < 5:
+                first.append(task)
+    points = spec.n_points()
     lines = [
         f"{spec.source}: {points} grid point{'s' if points != 1 else ''} x "
         f"{len(spec.seeds)} seed{'s' if len(spec.seeds) != 1 else ''} "
-        f"({spec.seeds.start}:{spec.seeds.stop}) = {len(tasks)} runs; "
-        f"{len(tasks) - len(todo)} stored in {out}, {len(todo)} to compute",
+        f"({spec.seeds.start}:{spec.seeds.stop}) = {total} runs; "
+        f"{total - todo} stored in {out}, {todo} to compute",
     ]
-    for t in todo[:5]:
+    for t in first:
         sets = " ".join(f"--set {shlex.quote(o)}" for o in t.overrides(spec.fixed))
         lines.append(f"  {t.run_id}: sandbox run {shlex.quote(str(spec.base))} {sets}")
-    if len(todo) > 5:
-        lines.append(f"  ... and {len(todo) - 5} more")
+    if todo > 5:
+        lines.append(f"  ... and {todo - 5} more")
     return lines
 
 
@@ -292,17 +342,22 @@ def check_sweep_file(path: str | Path) -> str | None:
     SweepError, ScenarioError
         The sweep file, its base scenario or one of its grid points is invalid.
     """
-    try:  # anything odd (huge, binary, hostile YAML) is left to the scenario loader
-        if not Path(path).is_file() or Path(path).stat().st_size > MAX_SWEEP_BYTES:
+    try:  # what cannot be read is left to the scenario loader, which says why
+        doc = read_sweep_document(path)
+    except SweepError:
+        try:  # ... unless it is a sweep file beyond the limits of one
+            unlimited = read_sweep_document(path, limited=False)
+        except SweepError:
             return None
-        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError, yaml.YAMLError):
+        if is_sweep_file(unlimited):
+            raise
         return None
     if not is_sweep_file(doc):
         return None
     spec = build_spec(path)
+    spec.check_size()
     check_points(spec, read_base(spec))
-    points = len(spec.points())
+    points = spec.n_points()
     return (
         f"sweep: {points} grid points x {len(spec.seeds)} seeds = "
         f"{points * len(spec.seeds)} runs of {spec.base}"

@@ -1,0 +1,203 @@
+"""Processes of ``sandbox sweep`` and ``sandbox check``: killed, interrupted, cleaned.
+
+Each test starts the command in a session of its own, so that every process it
+starts (the fork server, the pool's workers, the resource tracker) is found by its
+session id, and killed at the end whatever happens.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from helpers import REPO, write_yaml
+from test_sweep import base_doc
+
+pytestmark = pytest.mark.skipif(
+    not Path("/proc/self/stat").exists(), reason="needs Linux's /proc"
+)
+
+ENV = {**os.environ, "PYTHONPATH": str(REPO), "SANDBOX_PROGRESS": "0"}
+
+
+def session(sid: int) -> list[int]:
+    """The pids of the live processes of session ``sid`` (zombies left out)."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2 :].split()
+        if fields[0] != "Z" and int(fields[3]) == sid:
+            out.append(int(entry.name))
+    return out
+
+
+def start(args: list[str]) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "sandbox", *args],
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+
+
+def wait_for(condition, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return condition()
+
+
+def cleanup(proc: subprocess.Popen[str]) -> None:
+    for pid in session(proc.pid):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    try:
+        proc.kill()
+    except ProcessLookupError:
+        pass
+    proc.communicate(timeout=10)
+
+
+def kill_and_count_orphans(proc: subprocess.Popen[str], least: int) -> list[int]:
+    """SIGKILL ``proc`` once it has ``least`` processes; the orphans after 5 s."""
+    assert wait_for(lambda: len(session(proc.pid)) >= least, 30), session(proc.pid)
+    time.sleep(0.5)  # the workers' start-up under way
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=10)
+    wait_for(lambda: not session(proc.pid), 5)
+    return session(proc.pid)
+
+
+def test_sigkill_of_a_sweep_leaves_no_worker(tmp_path):
+    base = write_yaml(tmp_path, base_doc(duration=30.0), "base.yaml")
+    proc = start(
+        ["sweep", str(base), "--seeds", "0:16", "--jobs", "2"]
+        + ["--out", str(tmp_path / "out")]
+    )
+    try:
+        # the sweep, its fork server and two workers (and a resource tracker)
+        assert kill_and_count_orphans(proc, 4) == []
+    finally:
+        cleanup(proc)
+
+
+def test_sigkill_of_check_leaves_no_worker(tmp_path):
+    doc = {**base_doc(duration=60.0), "expect": {"status": "ok"}}
+    files = [str(write_yaml(tmp_path, doc, f"s{k}.yaml")) for k in range(2)]
+    proc = start(["check", *files, "--jobs", "2"])
+    try:
+        assert kill_and_count_orphans(proc, 3) == []
+    finally:
+        cleanup(proc)
+
+
+def interrupt_when_stored(
+    proc: subprocess.Popen[str], out: Path
+) -> tuple[float, int, str]:
+    """SIGINT ``proc`` once a run is stored; (seconds to exit, runs stored, stderr)."""
+    runs = out / "runs"
+    assert wait_for(lambda: runs.is_dir() and any(runs.glob("*.json")), 60)
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    took = time.monotonic() - sent
+    assert proc.returncode == 130, err
+    return took, len(list(runs.glob("*.json"))), err
+
+
+def rows(out: Path) -> int:
+    with open(out / "results.csv", encoding="utf-8", newline="") as fh:
+        return len(list(csv.DictReader(fh)))
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_ctrl_c_returns_at_once_and_keeps_every_finished_run(tmp_path, jobs):
+    # 64 runs in groups of 16 first, then sized to about 2 s each: the first runs
+    # are stored after the first small group, and a Ctrl-C returns within 2 s with
+    # every finished run stored and in the table.
+    base = write_yaml(tmp_path, base_doc(duration=6.0), "base.yaml")
+    out = tmp_path / "out"
+    proc = start(
+        ["sweep", str(base), "--seeds", "0:64", "--jobs", str(jobs), "--out", str(out)]
+    )
+    try:
+        took, kept, err = interrupt_when_stored(proc, out)
+        assert took < 2, f"Ctrl-C took {took:.1f} s"
+        assert kept == rows(out) and f"{kept} of 64 runs stored" in err
+        # whole groups of 16 or more, finished before the signal and all kept
+        assert 16 <= kept < 64 and kept % 8 == 0, kept
+        assert wait_for(lambda: session(proc.pid) == [], 1), session(proc.pid)
+        assert not list((out / "runs").glob(".*.tmp"))
+    finally:
+        cleanup(proc)
+
+
+def test_groups_start_small_and_are_sized_by_their_time():
+    from sandbox.study import engine
+
+    jobs = [(f"r{k}", ({}, "", [])) for k in range(1000)]
+    groups = engine.Groups(jobs, 1)
+    # Fast runs: after the first group of 16, the full batch of 128 (chunks' size).
+    first = next(groups)
+    groups.timed(len(first), 0.01)
+    sizes = [len(first), *(len(g) for g in groups)]
+    assert sizes[:2] == [16, 128] and set(sizes[1:-1]) == {128}
+    assert sum(sizes) == 1000
+    # Runs of 0.1 s each: groups of 2 s / 0.1 s = 20 runs; of 1 s: 8 (MIN_WORLDS).
+    for per_run, size in [(0.1, 20), (1.0, 8), (0.001, 128)]:
+        groups = engine.Groups(jobs, 2)
+        g = next(groups)
+        groups.timed(len(g), per_run * len(g))
+        assert len(next(groups)) == size
+    # every run once, in order, and no group under MIN_WORLDS at the end
+    groups = engine.Groups(jobs[:45], 1)
+    out = []
+    for g in groups:
+        out.append(g)
+        groups.timed(len(g), 0.2 * len(g))  # 10 runs fit in 2 s
+    assert [len(g) for g in out] == [16, 10, 10, 9]
+    assert [j for g in out for j in g] == jobs[:45]
+
+
+def test_a_stop_while_a_group_is_stored_keeps_the_whole_group(
+    tmp_path, monkeypatch, capsys
+):
+    # SIGINT arrives just as the second group of 4 finishes: all 8 runs finished so
+    # far are stored (not 4 and then 1 of the group, as before), and nothing more.
+    from sandbox.cli import main
+    from sandbox.study import engine
+
+    base = write_yaml(tmp_path, base_doc(duration=0.5), "base.yaml")
+    real, calls = engine.run_tasks, []
+
+    def then_interrupted(jobs, should_stop=None):
+        out = real(jobs, should_stop=should_stop)
+        calls.append(len(jobs))
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+        return out
+
+    monkeypatch.setattr(engine, "BATCH_WORLDS", 4)
+    monkeypatch.setattr(engine, "run_tasks", then_interrupted)
+    out = tmp_path / "out"
+    assert main(["sweep", str(base), "--seeds", "0:20", "--out", str(out)]) == 130
+    assert "8 of 20 runs stored" in capsys.readouterr().err
+    assert calls == [4, 4] and rows(out) == 8
+    assert len(list((out / "runs").glob("*.json"))) == 8
