@@ -464,11 +464,13 @@ def test_table_and_plot(tmp_path, base, capsys):
         hits = sum(int(r["collisions.healthy"]) > 0 for r in mine)
         assert float(t["collision_rate"]) == hits / 6
     assert main(["sweep", "table", str(out)]) == 0
-    md = capsys.readouterr().out
+    md, _, paired = capsys.readouterr().out.partition("\n\n")
     assert (
         md.startswith("| recovery.beta | recovery.strategy | runs |")
-        and md.count("\n") == 6
+        and md.count("\n") == 5
     )
+    # below the rates: the 4 settings compared pair by pair over their 3 seeds
+    assert "exact McNemar test" in paired and paired.count("|     3 |") == 12
     assert (
         main(["sweep", "table", str(out), "--by", "recovery.beta", "--format", "json"])
         == 0

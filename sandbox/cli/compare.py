@@ -21,6 +21,7 @@ from sandbox.errors import ScenarioError
 def cmd_compare(args: argparse.Namespace) -> int:
     """``sandbox compare FILE...``: a table of metrics per scenario and strategy."""
     from sandbox.study.compare import compare, format_table
+    from sandbox.study.paired import PAIRED_TITLE, compare_settings, paired_text
 
     def names(text: str) -> list[str]:
         return [x.strip() for x in text.split(",") if x.strip()]
@@ -43,7 +44,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
             raise
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
+    paired = paired_text(compare_settings(rows), args.format)
+    if args.paired:
+        sys.stdout.write(paired or "")
+        return EXIT_OK
     sys.stdout.write(format_table(rows, args.format, args.columns))
+    if paired and args.format in ("md", "markdown"):
+        sys.stdout.write(f"\n{PAIRED_TITLE}\n\n{paired}")
     return EXIT_OK
 
 
@@ -109,6 +116,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="md",
         help="table format: md (Markdown, 4 significant digits; the default; "
         "'markdown' is the same), or csv / json (full precision)",
+    )
+    p.add_argument(
+        "--paired",
+        action="store_true",
+        help="only the paired comparisons of the settings over the same scenarios and "
+        "seeds (--grid seed=...; exact McNemar test; a Markdown table also shows them "
+        "below the metrics)",
     )
     p.add_argument(
         "--jobs",

@@ -144,9 +144,10 @@ def _run(args: argparse.Namespace, file: str) -> int:
 
 
 def _table(args: argparse.Namespace, root: Path) -> int:
+    from sandbox.study.paired import PAIRED_TITLE
     from sandbox.study.spec import SweepError
     from sandbox.study.store import read_results, varied_paths
-    from sandbox.study.summary import format_table, group_rows
+    from sandbox.study.summary import format_table, group_rows, paired_table
 
     try:
         _, rows = read_results(root)
@@ -163,7 +164,13 @@ def _table(args: argparse.Namespace, root: Path) -> int:
             file=sys.stderr,
         )
         return EXIT_INVALID
+    paired = paired_table(rows, by, paths, args.format)
+    if args.paired:
+        sys.stdout.write(paired or "")
+        return EXIT_OK
     sys.stdout.write(format_table(group_rows(rows, by), by, args.format))
+    if paired and args.format in ("md", "markdown"):
+        sys.stdout.write(f"\n{PAIRED_TITLE}\n\n{paired}")
     return EXIT_OK
 
 
@@ -296,6 +303,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="md",
         help="table: md (Markdown, 4 significant digits; the default; 'markdown' is "
         "the same), or csv / json (full precision)",
+    )
+    p.add_argument(
+        "--paired",
+        action="store_true",
+        help="table: only the paired comparisons of the settings over the same seeds "
+        "(exact McNemar test; a Markdown table also shows them below the rates)",
     )
     add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_sweep)

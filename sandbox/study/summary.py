@@ -16,6 +16,10 @@ them, i.e. one group per grid point). Per group:
   ``effort_median``: median total effort [m/s];
 - ``deadlocked``, ``deadlocked_rate``: the runs with at least one deadlock (see
   :mod:`sandbox.run.deadlock`), and their share.
+
+Groups run over the same seeds are also compared pair by pair with the exact McNemar
+test (:func:`paired_table`, :mod:`sandbox.study.paired`): the starts where only one of
+the two settings collided, or stayed unsettled, and the p-value of so lopsided a split.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import numpy as np
 
 from sandbox.run.tables import Column
 from sandbox.run.tables import format_table as write_table
+from sandbox.study.paired import paired_text, sweep_settings
 
 #: z of a two-sided 95 % interval.
 Z95 = 1.959963984540054
@@ -146,3 +151,17 @@ def format_table(
     columns = [*(Column(p, text=True) for p in by), *(Column(c) for c in COLUMNS)]
     rows = [{**dict(zip(by, key, strict=True)), **s} for key, s in groups]
     return write_table(columns, rows, fmt)
+
+
+def paired_table(
+    rows: Sequence[dict[str, str]],
+    by: Sequence[str],
+    varied: Sequence[str],
+    fmt: str = "md",
+) -> str | None:
+    """The McNemar comparisons of the groups of ``by`` over their shared starts.
+
+    None when fewer than two groups share a start, or more than
+    :data:`~sandbox.study.paired.MAX_SETTINGS` groups would be compared.
+    """
+    return paired_text(sweep_settings(rows, by, varied, MEASURED_STATUSES), fmt)
