@@ -45,6 +45,41 @@ def test_overlapping_stalls_are_one_deadlock_and_separate_ones_two() -> None:
     ]
 
 
+def circle(radius: float, speed: float) -> np.ndarray:
+    """Positions (T, 2) on a circle of ``radius`` about (5, 0) at ``speed``."""
+    a = speed * T / radius
+    return np.stack([5 + radius * np.cos(a), radius * np.sin(a)], -1)
+
+
+def test_a_vehicle_creeping_round_a_trap_is_trapped_by_the_headway_rule() -> None:
+    # the stop rule misses it (v0.2: 6 of 25 obstacle fields): moving above the stop
+    # speed, never nearer to the slot; here circling at 0.3 m/s, 0.1 m round a point
+    # 5 m off its slot
+    slot = np.zeros((len(T), 1, 2))
+    creeping = circle(0.1, 0.3)
+    assert deadlocks([creeping], slot=slot) == []  # the default: the stop rule only
+    (got,) = deadlocks([creeping], slot=slot, progress=0.5)
+    assert got == {"vehicles": ["v0"], "t": 0.0, "duration": pytest.approx(10.0)}
+
+
+def test_the_headway_rule_spares_a_vehicle_driving_to_its_slot() -> None:
+    slot = np.full((len(T), 1, 2), [30.0, 0.0])
+    assert deadlocks([track(20, 20, speed=0.5)], slot=slot, progress=0.5) == []
+    # 0.1 m/s toward it: 0.2 m in 2 s, less than half of deadlock_distance
+    (got,) = deadlocks([track(20, 20, speed=0.1)], slot=slot, progress=0.5)
+    assert got["vehicles"] == ["v0"]
+    assert deadlocks([track(20, 20, speed=0.1)], slot=slot, progress=0.3) == []
+
+
+def test_the_headway_rule_dates_a_stop_from_its_first_window_without_headway() -> None:
+    # at 1 m/s, 0.7 of it toward the slot, the 2 s before 2.7 s hold 0.21 m < 0.25 m
+    got = deadlocks([track(1, 4), track(2, 5), track(7, 9.5)], progress=0.5)
+    assert [(d["vehicles"], d["t"]) for d in got] == [
+        (["v0", "v1"], 0.7),
+        (["v2"], 6.7),
+    ]
+
+
 def test_a_short_stop_a_failed_vehicle_and_a_settled_one_are_no_deadlock() -> None:
     assert deadlocks([track(1, 2.5)]) == []  # 1.4 s < 2 s
     assert deadlocks([track(1, 2.5)], duration=1.0) != []

@@ -13,7 +13,6 @@ import pytest
 
 from sandbox import Simulation, load_run, load_scenario
 from sandbox.cli import main
-from sandbox.plugins import registration
 
 STRATEGY = """\
 import numpy as np
@@ -31,17 +30,9 @@ def failing(ctx):
 
 
 @pytest.fixture(autouse=True)
-def registry_snapshot(monkeypatch: pytest.MonkeyPatch):
+def trusted(monkeypatch: pytest.MonkeyPatch, registry_snapshot: None) -> None:
+    """These runs load their own plug-ins; the registry is restored after each."""
     monkeypatch.setenv("SANDBOX_TRUST_PLUGINS", "1")
-    registration._ensure_builtins()
-    saved = {k: dict(v) for k, v in registration._REGISTRY.items()}
-    loaded = dict(registration._LOADED)
-    yield
-    for k, v in saved.items():
-        registration._REGISTRY[k].clear()
-        registration._REGISTRY[k].update(v)
-    registration._LOADED.clear()
-    registration._LOADED.update(loaded)
 
 
 def scenario(tmp_path: Path, name: str, action: str) -> Path:

@@ -14,7 +14,6 @@ import pytest
 from sandbox import load_scenario
 from sandbox.cli import main
 from sandbox.errors import ScenarioError
-from sandbox.plugins import registration
 from sandbox.scenario.trust import UncheckedScenario
 
 PLUGIN = """\
@@ -32,20 +31,6 @@ def strategy(ctx):
 
     return np.zeros((ctx.n, 2)), np.zeros(ctx.n, dtype=bool)
 """
-
-
-@pytest.fixture
-def registry_snapshot():
-    """Restore the registry (and the loaded-file cache) after a test."""
-    registration._ensure_builtins()
-    saved = {k: dict(v) for k, v in registration._REGISTRY.items()}
-    loaded = dict(registration._LOADED)
-    yield
-    for k, v in saved.items():
-        registration._REGISTRY[k].clear()
-        registration._REGISTRY[k].update(v)
-    registration._LOADED.clear()
-    registration._LOADED.update(loaded)
 
 
 @pytest.fixture(autouse=True)

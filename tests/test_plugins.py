@@ -95,20 +95,6 @@ def trusted(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("SANDBOX_TRUST_PLUGINS", "1")
 
 
-@pytest.fixture
-def registry_snapshot():
-    """Restore the registry (and the loaded-file cache) after a test."""
-    registration._ensure_builtins()
-    saved = {k: dict(v) for k, v in registration._REGISTRY.items()}
-    loaded = dict(registration._LOADED)
-    yield
-    for k, v in saved.items():
-        registration._REGISTRY[k].clear()
-        registration._REGISTRY[k].update(v)
-    registration._LOADED.clear()
-    registration._LOADED.update(loaded)
-
-
 def scenario_doc(**recovery) -> dict:
     return {
         "name": "mine",

@@ -1,19 +1,30 @@
-"""Deadlocks of a recorded run: healthy vehicles stopped short of their slots.
+"""Deadlocks of a recorded run: healthy vehicles trapped short of their slots.
 
-A healthy vehicle (no failure active, a slot defined) is *stuck* at a recorded sample
-when its speed is below ``metrics.deadlock_speed`` (default 1 cm/s) while its distance
-to its slot exceeds ``metrics.deadlock_distance`` (default 0.5 m). A stretch of
-consecutive stuck samples that lasts at least ``metrics.deadlock_time`` (default 2 s)
-is a stall of that vehicle; stalls of several vehicles that overlap in time are one
-deadlock (two vehicles nose to nose, a ring of vehicles jammed at the centre of a swap).
-Each deadlock is written to ``metrics.json`` as ``{vehicles, t, duration}``: the names
-of the vehicles involved (in scenario order), the time the first of them got stuck
-[s] and the time from then to the end of the last stall [s] (up to the end of the run
-when a stall lasts until then).
+A healthy vehicle (no failure active, a slot defined) farther than
+``metrics.deadlock_distance`` (default 0.5 m) from its slot is *trapped* over a stretch
+of the run when either
 
-Speeds are the finite differences of the recorded positions, so they read the
-physics, not the commands: a vehicle pressing into another one at full command but not
-moving is stuck.
+- it is **stopped**: its speed stays below ``metrics.deadlock_speed`` (default 1 cm/s)
+  for at least ``metrics.deadlock_time`` (default 2 s); or
+- it **makes no headway**, whatever its speed (with ``metrics.deadlock_progress`` >
+  0; 0, the default for now, turns this rule off): over every window of
+  ``metrics.deadlock_time`` in the stretch it stays that far from its slot and comes
+  nearer to it by less than ``metrics.deadlock_progress`` times
+  ``metrics.deadlock_distance`` (0.5 gives 0.25 m in 2 s). A vehicle creeping along an
+  obstacle, circling, or shuffling in a jam is trapped; one driving to its slot at an
+  eighth of a metre a second (with 0.5) is not. Such a stall is dated from the start
+  of its first window without headway.
+
+Stalls of several vehicles that overlap in time are one deadlock (two vehicles nose to
+nose, a ring of vehicles jammed at the centre of a swap). Each deadlock is written to
+``metrics.json`` as ``{vehicles, t, duration}``: the names of the vehicles involved (in
+scenario order), the time the first of them got trapped [s] and the time from then to
+the end of the last stall [s] (up to the end of the run when a stall lasts until
+then).
+
+Speeds and distances are read from the recorded positions, so they read the physics,
+not the commands: a vehicle pressing into another one at full command but not moving is
+trapped.
 """
 
 from __future__ import annotations
@@ -26,6 +37,7 @@ import numpy as np
 DEADLOCK_SPEED = 0.01  # [m/s]
 DEADLOCK_TIME = 2.0  # [s]
 DEADLOCK_DISTANCE = 0.5  # [m]
+DEADLOCK_PROGRESS = 0.0  # of deadlock_distance, per deadlock_time (0: rule off)
 
 
 def stuck_samples(
@@ -66,6 +78,60 @@ def stuck_samples(
     return (v < speed) & far & ~failed
 
 
+def no_headway(
+    t: np.ndarray,
+    pos: np.ndarray,
+    slot: np.ndarray,
+    failed: np.ndarray,
+    duration: float = DEADLOCK_TIME,
+    distance: float = DEADLOCK_DISTANCE,
+    progress: float = DEADLOCK_PROGRESS,
+) -> list[list[tuple[float, float]]]:
+    """Per vehicle, the ``(t start, t end)`` stretches where it makes no headway.
+
+    Sample ``k`` ends a window without headway when the window ``[t_k - duration,
+    t_k]`` lies within the run, the vehicle is healthy and farther than ``distance``
+    from its slot at every sample of it, and its distance at ``t_k`` is more than the
+    distance at the window's start minus ``progress * distance``. The stretches are the
+    unions of such windows.
+
+    Parameters
+    ----------
+    t, pos, slot, failed
+        As for :func:`stuck_samples`.
+    duration : float [s]
+    distance : float [m]
+    progress : float
+        The headway expected over ``duration``, as a fraction of ``distance``; 0 turns
+        the rule off.
+    """
+    T, n = pos.shape[:2]
+    out: list[list[tuple[float, float]]] = [[] for _ in range(n)]
+    if T < 2 or progress <= 0:  # 0: the headway rule is off (stopped vehicles only)
+        return out
+    error = np.linalg.norm(pos - slot, axis=-1)
+    with np.errstate(invalid="ignore"):
+        far = (error > distance) & ~failed  # NaN (no slot) compares False
+    start = np.searchsorted(t, t - duration - 1e-9)  # first sample of each window
+    full = t - t[0] >= duration - 1e-9
+    bad = np.concatenate((np.zeros((1, n), dtype=np.int64), np.cumsum(~far, axis=0)))
+    for i in range(n):
+        j = start
+        always_far = bad[np.arange(T) + 1, i] - bad[j, i] == 0
+        with np.errstate(invalid="ignore"):
+            stalled = error[:, i] > error[j, i] - progress * distance
+        ends = np.flatnonzero(full & always_far & stalled)
+        spans: list[tuple[float, float]] = []
+        for k in ends:
+            a, b = float(t[j[k]]), float(t[k])
+            if spans and a <= spans[-1][1]:
+                spans[-1] = (spans[-1][0], b)
+            else:
+                spans.append((a, b))
+        out[i] = spans
+    return out
+
+
 def _stretches(stuck: np.ndarray) -> list[tuple[int, int]]:
     """``(first, last)`` sample indices of each run of True in a boolean vector."""
     edges = np.diff(np.concatenate(([0], stuck.astype(np.int8), [0])))
@@ -83,6 +149,7 @@ def find_deadlocks(
     speed: float = DEADLOCK_SPEED,
     duration: float = DEADLOCK_TIME,
     distance: float = DEADLOCK_DISTANCE,
+    progress: float = DEADLOCK_PROGRESS,
 ) -> list[dict[str, Any]]:
     """The deadlocks of a run, as written to ``metrics.json``.
 
@@ -98,6 +165,9 @@ def find_deadlocks(
         Shortest stall that counts.
     distance : float [m]
         Distance to the slot beyond which a stopped vehicle is short of it.
+    progress : float
+        Headway over ``duration`` below which a moving vehicle is trapped, as a
+        fraction of ``distance`` (see :func:`no_headway`).
 
     Returns
     -------
@@ -121,6 +191,10 @@ def find_deadlocks(
         for a, b in _stretches(stuck[:, i]):
             if t[b] - t[a] >= duration - 1e-9:
                 stalls.append((float(t[a]), float(t[b]), i))
+    for i, spans in enumerate(
+        no_headway(t, pos, slot, failed, duration, distance, progress)
+    ):
+        stalls.extend((a, b, i) for a, b in spans)
     stalls.sort()
     groups: list[list[Any]] = []  # [start, end, set of vehicles]
     for a, b, i in stalls:

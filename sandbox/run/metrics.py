@@ -27,9 +27,11 @@ Definitions (the keys of ``metrics.json``):
   aggressive and chattering inputs, not with steady driving; ``mode_switches``: number
   of changes between ``formation`` and ``avoid`` mode; ``failed_at``: time of the
   first failure of the vehicle, or null.
-- ``deadlocks``: ``{vehicles, t, duration}`` for each time healthy vehicles stayed
-  below ``metrics.deadlock_speed`` for ``metrics.deadlock_time`` while farther than
-  ``metrics.deadlock_distance`` from their slots (:mod:`sandbox.run.deadlock`).
+- ``deadlocks``: ``{vehicles, t, duration}`` for each time healthy vehicles were
+  trapped farther than ``metrics.deadlock_distance`` from their slots: stopped (below
+  ``metrics.deadlock_speed``) for ``metrics.deadlock_time``, or making less headway
+  than ``metrics.deadlock_progress`` of that distance over it, whatever their speed
+  (:mod:`sandbox.run.deadlock`).
 - ``converged``: every healthy vehicle (no failure active at the end of the run, with a
   slot) has a settling time.
 - ``detections`` and ``detection`` (with ``detection: {method: residual}`` only, added
@@ -445,6 +447,7 @@ def _deadlocks(run: Run, spec: Any) -> list[dict[str, Any]]:
             "speed": spec.deadlock_speed,
             "duration": spec.deadlock_time,
             "distance": spec.deadlock_distance,
+            "progress": spec.deadlock_progress,
         }
     return find_deadlocks(
         np.asarray(run.t),

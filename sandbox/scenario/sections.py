@@ -303,6 +303,15 @@ METRICS: dict[str, Param] = {
         "deadlock, not a vehicle settling)",
         minimum=0.0,
     ),
+    "deadlock_progress": Param(
+        "number",
+        0.0,
+        "",
+        "Headway toward its slot, as a fraction of deadlock_distance per "
+        "deadlock_time, below which a moving vehicle farther than deadlock_distance "
+        "is trapped (a deadlock); 0: only stopped vehicles are",
+        minimum=0.0,
+    ),
 }
 
 SENSING: dict[str, Param] = {

@@ -202,11 +202,13 @@ class MetricsSpec:
     ``settle_tol`` [m]: formation error of a settled vehicle; ``settle_dwell`` [s]: how
     long the run must go on in band after the settling time; ``settle_speed`` [m/s]:
     largest drift relative to the slot over the run's last ``settle_dwell`` of a
-    settled vehicle; ``contact_release`` [m]:
-    gap between two surfaces that ends a contact episode; ``deadlock_speed`` [m/s],
-    ``deadlock_time`` [s], ``deadlock_distance`` [m]: a healthy vehicle slower than
-    ``deadlock_speed`` for ``deadlock_time`` while farther than ``deadlock_distance``
-    from its slot is in a deadlock (:mod:`sandbox.run.deadlock`).
+    settled vehicle; ``contact_release`` [m]: gap between two surfaces that ends a
+    contact episode; ``deadlock_speed`` [m/s], ``deadlock_time`` [s],
+    ``deadlock_distance`` [m], ``deadlock_progress``: a healthy vehicle farther than
+    ``deadlock_distance`` from its slot is in a deadlock when it stays slower than
+    ``deadlock_speed`` for ``deadlock_time``, or comes nearer to its slot by less than
+    ``deadlock_progress`` times ``deadlock_distance`` over ``deadlock_time``
+    (:mod:`sandbox.run.deadlock`).
     """
 
     settle_tol: float = 0.05
@@ -216,6 +218,7 @@ class MetricsSpec:
     deadlock_speed: float = 0.01
     deadlock_time: float = 2.0
     deadlock_distance: float = 0.5
+    deadlock_progress: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -1,19 +1,11 @@
-"""Assertions on runs for users' tests, and the check of a scenario's expectations.
+"""The assertions of :mod:`sandbox.testing` and the check of a scenario's ``expect:``.
 
 Each ``assert_*`` function raises :class:`AssertionError` with a message that says what
 happened (the first collision events with their time, pair and kind; the vehicle, its
-error and when), so a failing test explains itself without a debugger::
-
-    from sandbox import load_scenario, simulate
-    from sandbox.testing.assertions import assert_converged, assert_no_collisions
-
-    run = simulate(load_scenario("scenarios/paper/fig14_discontinuous_beta5.yaml"))
-    assert_no_collisions(run)            # no contact among healthy vehicles
-    assert_converged(run, within=8.0)    # every healthy vehicle settled by 8 s
-
-:func:`check_scenario` runs a file and evaluates its ``expect:`` section (see
-:mod:`sandbox.run.expectations`); it is what ``sandbox check`` and the pytest plugin
-(:mod:`sandbox.testing.pytest_plugin`) call.
+error and when). :func:`check_scenario` runs a file and evaluates its ``expect:``
+section (:mod:`sandbox.run.expectations`); ``sandbox check`` and the pytest plugin
+(:mod:`sandbox.testing.pytest_plugin`) call it. The public names and an example are in
+:mod:`sandbox.testing`.
 """
 
 from __future__ import annotations
