@@ -85,3 +85,14 @@ def test_the_message_gives_the_line_of_the_plugin(tmp_path: Path) -> None:
     assert run.status == "error"
     # the raise is on line 10 of the plug-in file
     assert f"{tmp_path / 't_line.py'}, line 10" in run.info["error"]["message"]
+
+
+def test_a_plugin_that_exits_while_it_is_imported_is_one_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = scenario(tmp_path, "t_import_exit", "pass")
+    plugin = tmp_path / "t_import_exit.py"
+    plugin.write_text("raise SystemExit(0)\n" + plugin.read_text(), encoding="utf-8")
+    assert main(["run", str(path), "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert "plug-in cannot be loaded" in err and "SystemExit" in err

@@ -106,7 +106,7 @@ def _import(label: str, origin: str, action: Callable[[], Any]) -> Any:
                 "no importable module of that name)"
             ) from None
         raise PluginError(f"plug-in {label} failed to import: {_where(exc)}") from None
-    except Exception as exc:  # any error of a user's file is reported, not raised
+    except (Exception, SystemExit) as exc:  # any error of a user's file is reported
         raise PluginError(f"plug-in {label} failed to import: {_where(exc)}") from None
     finally:
         _plugins._ORIGIN.pop()
