@@ -259,3 +259,28 @@ def test_a_stopped_dask_sweep_yields_whole_groups_and_cancels_the_rest(cluster):
     whole = [g for g in client.submitted if {r for r, _ in g} <= ids]
     assert sum(len(g) for g in whole) == len(ids)  # only whole groups
     assert len(ids) < len(jobs)  # the queued groups were cancelled
+
+
+def test_ctrl_c_of_a_dask_sweep_keeps_the_finished_groups(tmp_path, cluster):
+    # 80 runs of 4 s: groups of 16 first, four under way on two workers. A SIGINT
+    # once the first group is stored returns at once with the finished groups stored
+    # and in the table, and the queued groups cancelled.
+    base = write_yaml(tmp_path, base_doc(duration=4.0), "base.yaml")
+    out = tmp_path / "dask"
+    cmd = [sys.executable, "-m", "sandbox", "sweep", str(base), "--grid"]
+    cmd += ["recovery.beta=1,4", "--seeds", "0:40", "--out", str(out)]
+    cmd += ["--scheduler-file", str(cluster.file)]
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.Popen(
+        cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    wait_for(lambda: stored(out) >= 1)
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    took = time.monotonic() - sent
+    assert proc.returncode == 130, err
+    kept = stored(out)
+    assert kept % 16 == 0 and 16 <= kept < 80  # whole groups, not all of them
+    assert len(read_csv(out / "results.csv")) == kept  # every stored run a row
+    assert took < 5
