@@ -197,3 +197,90 @@ def test_an_unreachable_scheduler(tmp_path, base):
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 1
     assert "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in err
+
+
+class CountingClient:
+    """A ``distributed.Client`` whose ``submit`` calls are recorded."""
+
+    def __init__(self, client) -> None:
+        self.client = client
+        self.submitted: list = []
+
+    def submit(self, func, *args, **kwargs):
+        self.submitted.append(args[0])
+        return self.client.submit(func, *args, **kwargs)
+
+    def __getattr__(self, name: str):
+        return getattr(self.client, name)
+
+
+def seed_jobs(runs: int, duration: float = 2.0) -> list:
+    doc = base_doc(duration=duration)
+    del doc["randomize"]  # runs differing only in their seed: one parse per group
+    return [(f"r{s:03d}", (doc, "base.yaml", [f"seed={s}"])) for s in range(runs)]
+
+
+def test_a_dask_task_is_a_group_of_runs(cluster):
+    from distributed import Client
+
+    from sandbox.study import engine
+
+    jobs = seed_jobs(40)
+    client = CountingClient(Client(scheduler_file=str(cluster.file), timeout="20s"))
+    got = list(engine.run_dask(jobs, client, lambda: "gone"))
+    sizes = [len(group) for group in client.submitted]
+    # 40 runs on 2 worker threads: groups of at most 10 (2 per thread), 8 or more
+    assert len(sizes) < len(jobs) and sum(sizes) == len(jobs)
+    assert all(8 <= n <= 10 for n in sizes[:-1]), sizes
+    assert all(isinstance(job, tuple) for group in client.submitted for job in group)
+    assert sorted(run_id for run_id, _ in got) == [run_id for run_id, _ in jobs]
+    local = dict(engine.run_local(jobs, 1))
+    for run_id, result in got:
+        assert json.dumps(result) == json.dumps(local[run_id])
+
+
+def test_a_stopped_dask_sweep_yields_whole_groups_and_cancels_the_rest(cluster):
+    from distributed import Client
+
+    from sandbox.study import engine
+
+    jobs = seed_jobs(64, duration=4.0)
+    client = CountingClient(Client(scheduler_file=str(cluster.file), timeout="20s"))
+    got: list = []
+
+    def stop() -> bool:
+        return bool(got)  # as soon as the first group is in
+
+    for item in engine.run_dask(jobs, client, lambda: "gone", should_stop=stop):
+        got.append(item)
+    sizes = [len(group) for group in client.submitted]
+    assert len(sizes) == 4  # 2 per worker thread, none after the stop
+    ids = {run_id for run_id, _ in got}
+    whole = [g for g in client.submitted if {r for r, _ in g} <= ids]
+    assert sum(len(g) for g in whole) == len(ids)  # only whole groups
+    assert len(ids) < len(jobs)  # the queued groups were cancelled
+
+
+def test_ctrl_c_of_a_dask_sweep_keeps_the_finished_groups(tmp_path, cluster):
+    # 80 runs of 4 s: groups of 16 first, four under way on two workers. A SIGINT
+    # once the first group is stored returns at once with the finished groups stored
+    # and in the table, and the queued groups cancelled.
+    base = write_yaml(tmp_path, base_doc(duration=4.0), "base.yaml")
+    out = tmp_path / "dask"
+    cmd = [sys.executable, "-m", "sandbox", "sweep", str(base), "--grid"]
+    cmd += ["recovery.beta=1,4", "--seeds", "0:40", "--out", str(out)]
+    cmd += ["--scheduler-file", str(cluster.file)]
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.Popen(
+        cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    wait_for(lambda: stored(out) >= 1)
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    took = time.monotonic() - sent
+    assert proc.returncode == 130, err
+    kept = stored(out)
+    assert kept % 16 == 0 and 16 <= kept < 80  # whole groups, not all of them
+    assert len(read_csv(out / "results.csv")) == kept  # every stored run a row
+    assert took < 5

@@ -1,11 +1,12 @@
 """Running the tasks of a sweep: in-process, on a local process pool, or on Dask.
 
 Every engine simulates exactly what ``sandbox run BASE --set ...`` simulates (the same
-loader, loop and metrics) and returns each run's row and metrics. Dask calls
-:func:`run_task` for each run; in-process and on a local pool the runs go in groups to
-:func:`run_tasks`, which steps the runs of one structure together as a batch of
-independent worlds (:mod:`sandbox.study.batch`, bit-identical to single runs). Results
-come back to the calling process, which alone writes the store
+loader, loop and metrics) and returns each run's row and metrics. On every engine
+the runs go in groups (:class:`Groups`) to :func:`run_tasks`, which parses a grid
+point's base once for its seeds where that gives the same scenario (:class:`Parses`)
+and steps the runs of one structure together as a batch of independent worlds
+(:mod:`sandbox.study.batch`, bit-identical to single runs); on Dask a task is one
+such group. Results come back to the calling process, which alone writes the store
 (:mod:`sandbox.study.store`): a worker that dies, or a task that some scheduler runs
 twice, can never leave a run twice or half-written in it.
 
@@ -22,6 +23,7 @@ import ctypes
 import itertools
 import logging
 import os
+import re
 import signal
 import sys
 import threading
@@ -139,6 +141,112 @@ def _simulation(base_doc: dict[str, Any], source: str, overrides: list[str]) -> 
         return _error(exc)
 
 
+#: A run's seed as :meth:`~sandbox.study.spec.Task.overrides` writes it, last.
+SEED_OVERRIDE = re.compile(r"seed=(0|[1-9][0-9]{0,18})")
+
+
+class Parses:
+    """The runs' Simulations of a group, each base parsed once for runs of other seeds.
+
+    The runs of a sweep's grid point differ only in their last override,
+    ``seed=N``. Where the seed changes nothing the loader makes of the document but
+    the ``seed`` field itself (no ``randomize:`` section, whose draws depend on the
+    seed, in the base or an override; no ``platoon:``, whose jitter does; no
+    plug-ins, whose sections the core cannot vouch for), the first run of a grid
+    point is parsed and the others are its scenario with their seed. The second run
+    is parsed too, and sharing goes on only if its scenario equals the one derived
+    for it: a scenario that differs in anything else is parsed for every run, as
+    :func:`run_task` does. A shared scenario is equal, field by field, to the one
+    the loader makes, so the run and its bytes are the same.
+    """
+
+    def __init__(self) -> None:
+        #: Per (base, source, overrides but the seed): the scenario parsed first,
+        #: False when the runs of that key are each parsed.
+        self.parsed: dict[tuple[Any, ...], Any] = {}
+        #: The keys whose second run's own parse has agreed.
+        self.checked: set[tuple[Any, ...]] = set()
+        #: Runs parsed, and runs that took a shared scenario (for the tests).
+        self.parses = 0
+        self.shared = 0
+
+    def simulation(
+        self, base_doc: dict[str, Any], source: str, overrides: list[str]
+    ) -> Any:
+        """The run's fresh Simulation, or its row when its scenario is invalid."""
+        key, seed = self._key(base_doc, source, overrides)
+        first = self.parsed.get(key) if key is not None else False
+        if key is None or first is False:
+            return self._parse(base_doc, source, overrides)
+        if first is None:  # the first run of the key
+            sim = self._parse(base_doc, source, overrides)
+            ok = not isinstance(sim, dict) and _seed_free(sim.scenario)
+            self.parsed[key] = sim.scenario if ok else False
+            return sim
+        derived = _with_seed(first, seed)
+        if key not in self.checked:  # the second: its own parse must agree
+            sim = self._parse(base_doc, source, overrides)
+            self.checked.add(key)
+            if isinstance(sim, dict) or not _same(sim.scenario, derived):
+                self.parsed[key] = False
+            return sim
+        from sandbox.loop.simulation import Simulation
+
+        self.shared += 1
+        try:
+            return Simulation(derived)
+        except Exception as exc:  # a row with its status, never a missing row
+            return _error(exc)
+
+    def _parse(
+        self, base_doc: dict[str, Any], source: str, overrides: list[str]
+    ) -> Any:
+        self.parses += 1
+        return _simulation(base_doc, source, overrides)
+
+    @staticmethod
+    def _key(
+        base_doc: Any, source: str, overrides: list[str]
+    ) -> tuple[tuple[Any, ...] | None, int]:
+        """The run's key and seed; key None when its scenario is parsed anyway."""
+        from sandbox.scenario import MAX_SEED
+
+        if not overrides or not isinstance(base_doc, dict):
+            return None, 0
+        found = SEED_OVERRIDE.fullmatch(overrides[-1].strip())
+        if found is None or int(found.group(1)) > MAX_SEED:
+            return None, 0
+        rest = tuple(overrides[:-1])
+        if base_doc.get("randomize") is not None or any(
+            o.strip().startswith(("randomize", "plugins", "platoon", "seed"))
+            for o in rest
+        ):
+            return None, 0
+        return (id(base_doc), source, rest), int(found.group(1))
+
+
+def _seed_free(scenario: Any) -> bool:
+    """Whether the loader used the scenario's seed for its ``seed`` field only."""
+    return scenario.platoon is None and not scenario.plugins
+
+
+def _with_seed(scenario: Any, seed: int) -> Any:
+    """The loader's scenario with another seed, built as the loader builds it."""
+    import dataclasses
+
+    from sandbox.scenario.specs import _from_loader
+
+    with _from_loader():
+        return dataclasses.replace(scenario, seed=seed)
+
+
+def _same(a: Any, b: Any) -> bool:
+    try:
+        return bool(a == b)
+    except Exception:  # e.g. arrays in a field: not shown to be equal
+        return False
+
+
 def _error(exc: BaseException) -> dict[str, Any]:
     text = "".join(traceback.format_exception_only(type(exc), exc)).strip()
     return {"row": {"status": STATUS_ERROR}, "error": text}
@@ -198,8 +306,9 @@ def run_tasks(
     groups: dict[str, list[tuple[str, Any]]] = {}
     stopped = False
     keep = {run_id: _keep(job) for run_id, job in jobs}
+    parses = Parses()
     for run_id, job in jobs:
-        sim = _simulation(*job[:3])
+        sim = parses.simulation(*job[:3])
         if isinstance(sim, dict):
             out[run_id] = sim
         elif batch_reason(sim) is None:
@@ -235,14 +344,6 @@ def _rebuilt(sim: Any) -> Any:
     from sandbox.loop.simulation import Simulation
 
     return Simulation(sim.scenario)
-
-
-def _call(job: tuple[Any, ...]) -> dict[str, Any] | None:
-    return run_task(*job[:3], keep=_keep(job))
-
-
-def _call_group(jobs: list[Job]) -> list[tuple[str, dict[str, Any] | None]]:
-    return run_tasks(jobs)
 
 
 def _ignore_interrupts(parent: int | None = None) -> None:
@@ -532,43 +633,86 @@ def run_dask(
     on_lost: Callable[[], str],
     should_stop: Callable[[], bool] | None = None,
 ) -> Iterator[tuple[str, dict[str, Any]]]:
-    """Yield ``(run id, result)`` as runs finish on a Dask cluster.
+    """Yield ``(run id, result)`` as groups of runs finish on a Dask cluster.
 
-    Each task's key is its run id, so the scheduler never computes a run twice for one
-    submission; a worker that dies has its tasks rescheduled on the others. A lost
-    scheduler raises :class:`EngineError` with ``on_lost()``'s advice. Once
-    ``should_stop`` returns True (it is asked after each finished run), the runs
-    finished meanwhile are yielded and the others cancelled.
+    Each Dask task is a group of runs (:class:`Groups`, as on a local pool: sized by
+    how long the last group took, about :data:`GROUP_SECONDS` of work, at most
+    :data:`BATCH_WORLDS` runs) that :func:`run_tasks` computes on the worker, stepping
+    the runs of one structure together; :data:`QUEUED_PER_WORKER` groups per worker
+    thread are under way, the next one cut and submitted as one finishes, and each
+    group's runs are yielded as it finishes (``distributed.as_completed``). A task's
+    key names its runs, so the scheduler never computes a group twice for one
+    submission; a worker that dies has its groups rescheduled on the others (it
+    loses the groups it held, no finished one). A lost scheduler raises
+    :class:`EngineError` with ``on_lost()``'s advice. Once ``should_stop`` returns
+    True (it is asked every :data:`STOP_POLL` seconds), the groups finished
+    meanwhile are yielded and the others cancelled.
     """
     from distributed import as_completed
 
-    futures = []
-    for run_id, job in jobs:
-        futures.append(
-            client.submit(_call, job, key=f"sandbox-run-{run_id}", pure=False)
-        )
-    by_key = {f.key: run_id for f, (run_id, _) in zip(futures, jobs, strict=True)}
+    groups = Groups(jobs, _threads(client))
     lost = (OSError, TimeoutError, *_comm_errors())
+    futures: dict[str, Any] = {}  # key -> future, of the groups not yet yielded
+
+    def submit(n: int) -> list[Any]:
+        made = []
+        for group in itertools.islice(groups, n):
+            key = "sandbox-group-" + _group_key(group)
+            fut = client.submit(_timed_group, group, key=key, pure=False)
+            futures[fut.key] = fut
+            made.append(fut)
+        return made
+
     try:
-        seen = set()
-        for fut in as_completed(futures):
-            seen.add(fut.key)
-            yield by_key[fut.key], fut.result()
+        ready = as_completed(submit(QUEUED_PER_WORKER * _threads(client)))
+        while not ready.is_empty():
+            done = ready.next_batch(block=False)
+            if not done:
+                if should_stop is not None and should_stop():
+                    for fut in list(futures.values()):  # finished meanwhile
+                        if fut.status == "finished":
+                            del futures[fut.key]
+                            yield from fut.result()[1]
+                    return
+                time.sleep(STOP_POLL)
+                continue
+            for fut in done:
+                seconds, results = fut.result()
+                del futures[fut.key]
+                groups.timed(len(results), seconds)
+                yield from results
             if should_stop is not None and should_stop():
-                for other in futures:
-                    if other.key not in seen and other.status == "finished":
-                        yield by_key[other.key], other.result()
-                client.cancel([f for f in futures if f.status != "finished"])
-                return
+                continue  # the groups under way: yielded if done, else cancelled
+            wanted = QUEUED_PER_WORKER * _threads(client) - len(futures)
+            for fut in submit(max(len(done), wanted)):
+                ready.add(fut)
     except lost as exc:
         raise EngineError(
             f"lost the Dask scheduler ({type(exc).__name__}): {on_lost()}"
         ) from None
     finally:
         try:
+            if futures:
+                client.cancel(list(futures.values()))
+        except Exception:  # the scheduler is gone: nothing left to cancel
+            pass
+        try:
             client.close(timeout=2)
         except Exception:  # the scheduler is gone: nothing left to close
             pass
+
+
+def _threads(client: Any) -> int:
+    """The worker threads of a Dask cluster (at least 1)."""
+    return max(1, sum(client.nthreads().values()))
+
+
+def _group_key(group: list[Job]) -> str:
+    """A name for a group of runs: a digest of their ids, and the first id."""
+    import hashlib
+
+    ids = "\n".join(run_id for run_id, _ in group)
+    return f"{group[0][0]}-{len(group)}-{hashlib.sha256(ids.encode()).hexdigest()[:16]}"
 
 
 def _comm_errors() -> tuple[type[BaseException], ...]:
