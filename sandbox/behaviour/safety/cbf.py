@@ -75,6 +75,7 @@ import numpy as np
 
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
 from sandbox.geometry.neighbours import NeighbourList
+from sandbox.model.barriers import braking_speed, sensing_margin
 from sandbox.plugins.contexts import FilterContext
 from sandbox.plugins.registration import Param, register_filter
 
@@ -91,14 +92,30 @@ STALL_START = 0.5
 STALL_FULL = 0.1
 STALL_SPEED = 0.2
 MIN_SPEED = 1e-9
+#: The braking barrier's time step T = BRAKING_PERIODS dt in F(g) = sqrt((A T / 2)^2
+#: + 2 A g) - A T / 2 [1]: one period for the sampling, two for the drive, which
+#: reaches a commanded speed within a period (so a vehicle travels up to two periods
+#: at its old speed before its braking shows).
+BRAKING_PERIODS = 3.0
 
 PARAMS = {
+    "barrier": Param(
+        "choice",
+        "velocity",
+        doc="velocity: h = |p_i - p_j|^2 - D^2 with h' >= -gamma h (assumes the "
+        "speed can change at once); braking: the braking-distance barrier h = "
+        "F(|p_i - p_j| - D) + dp.dv / |dp| with the drive's max_accel, feasible from "
+        "every safe state, braking when unsafe, with a margin for the declared "
+        "sensing noise and delay (needs every vehicle's max_accel and v1_max)",
+        choices=("velocity", "braking"),
+    ),
     "gamma": Param(
         "number",
         2.0,
         "1/s",
         "Rate of the barrier condition h' >= -gamma h: near a barrier the gap may "
-        "close at about gamma times itself (a braking of about gamma v)",
+        "close at about gamma times itself (a braking of about gamma v); not used "
+        "by barrier: braking",
         minimum=0.0,
         exclusive=True,
     ),
@@ -181,11 +198,18 @@ class FilterStep:
         The least largest violation of a barrier condition (0: feasible).
     rows : int
         Barrier conditions that could bind (after pruning).
+    min_barrier : float
+        The least barrier value of the step (``inf`` with none): [m/s] for
+        ``braking``, at the last period's velocities; [m^2] for ``velocity``.
+    fallback : ndarray, shape (n,), bool
+        Vehicles in an unsafe state (a braking barrier below 0), which brake.
     """
 
     active: np.ndarray
     slack: np.ndarray
     rows: int
+    min_barrier: float = np.inf
+    fallback: np.ndarray | None = None
 
 
 def _per_vehicle(value: float | np.ndarray, n: int) -> np.ndarray:
@@ -222,6 +246,40 @@ def auto_range(
     return q + float(np.sqrt(q * q + big_d * big_d)) + look_ahead
 
 
+def braking_range(
+    v1_max: np.ndarray,
+    lateral: np.ndarray,
+    accel: np.ndarray,
+    diameter: np.ndarray,
+    margin: float,
+    look_ahead: float,
+    dt: float,
+) -> float:
+    """Distance [m] beyond which no braking-barrier condition can bind.
+
+    Look-ahead points move at most ``s = sqrt(v1_max^2 + lateral^2)`` and their
+    velocity changes in one period by at most ``q = a_max dt + 2 lateral``; a
+    condition ``-n . (w - w^) <= rho h`` (``h = F(gap) - c^``, ``c^ <= 2 s``) can
+    bind only if ``rho h < q``. With ``rho >= a_min / (2 a_max)`` (1 toward a
+    vehicle that does not brake, an obstacle, a wall) none binds once ``F(gap) >= K
+    = 2 s + 2 q a_max / a_min`` at the least braking ``a_min``: ``gap >= (K^2 +
+    a_min dt K) / (2 a_min)``, plus the largest ``D`` and ``l``.
+
+    >>> round(braking_range(np.array([2.0]), np.array([0.4]), np.array([5.0]),
+    ...                     np.array([0.5]), 0.05, 0.1, 0.01), 3)
+    4.219
+    """
+    s = float(np.max(np.hypot(v1_max, lateral)))
+    a_min, a_max = float(np.min(accel)), float(np.max(accel))
+    if not (np.isfinite(s) and np.isfinite(a_max) and a_min > 0):
+        return np.inf
+    q = a_max * dt + 2.0 * float(np.max(lateral))
+    k = 2.0 * s + 2.0 * q * a_max / a_min
+    gap = (k * k + a_min * dt * k) / (2.0 * a_min)
+    big_d = float(np.max(diameter)) + 2.0 * look_ahead + margin
+    return gap + big_d + look_ahead
+
+
 class CBFState:
     """What the filter keeps between steps: parameters, limits, the neighbour index."""
 
@@ -243,6 +301,18 @@ class CBFState:
         # The look-ahead point's sideways speed l v2 (v1_max where v2 is unlimited).
         self.lateral = np.where(np.isfinite(v2_max), self.look * v2_max, self.v1_max)
         self.accel = _per_vehicle(ctx.accel_max, n).copy()
+        self.braking = p.get("barrier", "velocity") == "braking"
+        #: The margin for what the vehicles sense of each other [m] (braking only).
+        self.sensed = 0.0
+        if self.braking and ctx.sensing is not None:
+            top = float(np.max(np.hypot(self.v1_max, self.lateral)))
+            self.sensed = sensing_margin(
+                ctx.sensing.get("position_noise", 0.0),
+                ctx.sensing.get("heading_noise", 0.0),
+                ctx.sensing.get("delay", 0.0),
+                top,
+                self.look,
+            )
         radius = p.get("range")
         if radius is None:
             radius = auto_range(
@@ -251,6 +321,16 @@ class CBFState:
         if not np.isfinite(radius):
             radius = auto_range(
                 self.v1_max, v2_max, ctx.diameter, self.gamma, self.margin, self.look
+            )
+        if self.braking and p.get("range") is None:
+            radius = braking_range(
+                self.v1_max,
+                self.lateral,
+                self.accel,
+                ctx.diameter,
+                self.margin + self.sensed,
+                self.look,
+                ctx.dt,
             )
         self.range = float(radius)
         self.neighbours = NeighbourList(self.range)
@@ -281,6 +361,7 @@ def barrier_rows(
     ctx: FilterContext,
     filtered: np.ndarray,
     reach: np.ndarray | None = None,
+    found: dict[str, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every barrier condition of the step as a half-plane ``a . w <= b``.
 
@@ -294,6 +375,9 @@ def barrier_rows(
         The largest change of each vehicle's look-ahead velocity from the last
         period's within its bounds; conditions no such change can violate may be
         left out (default: all are made).
+    found : dict, optional
+        Receives ``min_barrier``, the least ``h`` [m^2] (and [m] toward obstacles)
+        of the conditions made or pruned.
 
     Returns
     -------
@@ -318,6 +402,7 @@ def barrier_rows(
     if reach is None:
         reach = np.full(len(pos), np.inf)
     out_v, out_a, out_b = [], [], []
+    least = np.inf
 
     if ctx.v1_prev is not None:
         w_hat = heading * ctx.v1_prev[:, None]
@@ -334,6 +419,9 @@ def barrier_rows(
         dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
         big_d = 0.5 * (d[i] + d[j]) + 2.0 * look + margin
         h = dist * dist - big_d * big_d
+        pair = cooperative[i] | cooperative[j]
+        if pair.any():
+            least = min(least, float(h[pair].min()))
         base = 0.25 * gamma * h / dist
         if w_hat is None:
             slack_i = slack_j = base
@@ -361,6 +449,8 @@ def barrier_rows(
         dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
         big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
         h = dist * dist - big_d * big_d
+        if len(h):
+            least = min(least, float(h.min()))
         if w_hat is not None and state.broadcast:
             shared = w_hat[me] + w_hat[other]
             share = np.einsum("kd,kd->k", rel, shared)
@@ -384,13 +474,143 @@ def barrier_rows(
             norm = np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)
             away /= norm[:, None]
             clearance = 0.5 * d[rows] + look + margin
+            least = min(least, float(np.min(signed - clearance)))
             out_v.append(rows)
             out_a.append(-away)
             out_b.append(gamma * (signed - clearance))
+    if found is not None:
+        found["min_barrier"] = least
     if not out_v:
         empty = np.zeros(0, dtype=np.intp)
         return empty, np.zeros((0, 2)), np.zeros(0)
     return np.concatenate(out_v), np.concatenate(out_a), np.concatenate(out_b)
+
+
+def braking_rows(
+    state: CBFState, ctx: FilterContext, filtered: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every braking-barrier condition of the step, ``a . w <= b``, with its ``h``.
+
+    For vehicle ``i`` toward ``j`` (look-ahead points ``p``, ``dp = p_i - p_j``,
+    ``n = dp / |dp|``, gap ``g = |dp| - D``, the last period's velocities ``w^``)::
+
+        c^ = -n . (w^_i - w^_j),   A = a_i + a_j,   h = F_A(g) + A dt - c^,
+        -n . (w_i - w^_i) <= rho_i (F_A(g) - c^),   rho_i = a_i / A,
+
+    with ``F_A`` of :func:`sandbox.model.barriers.braking_speed` (``h = min(h, g)``
+    inside ``D``); the two conditions of a pair add up to ``c <= F_A(g)``, and ask
+    each vehicle to slow its closing by at most ``a_i dt`` when ``h >= 0``. Toward a vehicle believed failed or driven
+    open loop ``a_j = 0`` (``rho_i = 1``) and ``w^_j`` is its centre's measured
+    velocity, against its centre (``D' = (d_i + d_j) / 2 + l + margin``); toward an
+    obstacle ``a_j = 0``, ``w^_j = 0`` and the gap is ``s(p) - (d_i / 2 + l +
+    margin)``. Neighbours' poses are the sensed ones and ``D``, ``D'`` grow by the
+    sensing margin.
+
+    Returns
+    -------
+    vehicle : ndarray, shape (r,) int
+    a : ndarray, shape (r, 2)
+        Unit normal in ``w`` [1].
+    b : ndarray, shape (r,) [m/s]
+    h : ndarray, shape (r,) [m/s]
+        The barrier at the last period's velocities (< 0: unsafe).
+    """
+    look, margin, dt = state.look, state.margin + state.sensed, ctx.dt
+    lag = BRAKING_PERIODS * dt
+    pos, theta, d, accel = ctx.pos, ctx.theta, ctx.diameter, state.accel
+    heading = np.stack((np.cos(theta), np.sin(theta)), -1)
+    p = pos + look * heading
+    if ctx.seen is None:
+        centre_seen, p_seen = pos, p
+    else:
+        centre_seen = ctx.seen[:, :2]
+        seen_heading = np.stack((np.cos(ctx.seen[:, 2]), np.sin(ctx.seen[:, 2])), -1)
+        p_seen = centre_seen + look * seen_heading
+    if ctx.v1_prev is not None:
+        w_hat = heading * ctx.v1_prev[:, None]
+        w_hat += look * ctx.v2_prev[:, None] * heading[:, ::-1] * [-1.0, 1.0]
+    else:
+        w_hat = np.zeros_like(pos)
+    out_v, out_a, out_b, out_h = [], [], [], []
+    i, j, _ = state.neighbours.near(p_seen)
+    if len(i):
+        me = np.concatenate((i, j))
+        other = np.concatenate((j, i))
+        keep = np.flatnonzero(filtered[me])
+        me, other = me[keep], other[keep]
+        coop = filtered[other]
+        target = np.where(coop[:, None], p_seen[other], centre_seen[other])
+        rel = p[me] - target
+        dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
+        unit = rel / dist[:, None]
+        big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
+        # Braking along the line of centres: a vehicle changes its closing speed
+        # through v1 at a_i |cos| of its heading to that line.
+        a_me = accel[me] * np.abs(np.einsum("kd,kd->k", unit, heading[me]))
+        along = np.abs(np.einsum("kd,kd->k", unit, heading[other]))
+        a_other = np.where(coop, accel[other] * along, 0.0)
+        pair = a_me + a_other
+        w_other = np.where(coop[:, None], w_hat[other], ctx.vel[other])
+        closing = -np.einsum("kd,kd->k", unit, w_hat[me] - w_other)
+        budget = braking_speed(dist - big_d, pair, lag) - closing
+        h = budget + pair * dt
+        h = np.where(dist >= big_d, h, np.minimum(h, dist - big_d))
+        rho = np.where(
+            pair > 0, a_me / np.maximum(pair, MIN_SPEED), np.where(coop, 0.5, 1.0)
+        )
+        out_v.append(me)
+        out_a.append(-unit)
+        out_b.append(rho * budget - np.einsum("kd,kd->k", unit, w_hat[me]))
+        out_h.append(h)
+
+    field = ctx.obstacle_field
+    if field is not None and not field.empty:
+        rows, cols = state.neighbours.obstacle_pairs(p, field)
+        keep = np.flatnonzero(filtered[rows])
+        rows, cols = rows[keep], cols[keep]
+        if len(rows):
+            signed, point = field.pair_distance(p, rows, cols)
+            away = (p[rows] - point) * np.where(signed < 0, -1.0, 1.0)[:, None]
+            norm = np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)
+            away /= norm[:, None]
+            gap = signed - (0.5 * d[rows] + state.look + state.margin)
+            closing = -np.einsum("kd,kd->k", away, w_hat[rows])
+            a_me = accel[rows] * np.abs(np.einsum("kd,kd->k", away, heading[rows]))
+            budget = braking_speed(gap, a_me, lag) - closing
+            h = budget + a_me * dt
+            h = np.where(gap >= 0, h, np.minimum(h, gap))
+            out_v.append(rows)
+            out_a.append(-away)
+            out_b.append(budget - np.einsum("kd,kd->k", away, w_hat[rows]))
+            out_h.append(h)
+    if not out_v:
+        empty = np.zeros(0, dtype=np.intp)
+        return empty, np.zeros((0, 2)), np.zeros(0), np.zeros(0)
+    return (
+        np.concatenate(out_v),
+        np.concatenate(out_a),
+        np.concatenate(out_b),
+        np.concatenate(out_h),
+    )
+
+
+def braking_fallback(
+    state: CBFState, ctx: FilterContext, rows: np.ndarray
+) -> np.ndarray:
+    """The braking command ``z = (v1, l v2)`` of vehicles in an unsafe state.
+
+    The last period's ``z^`` scaled by ``sigma = max(0, 1 - a dt / |v1^|)``: the
+    look-ahead velocity keeps its direction and loses ``a dt`` of its speed (all of
+    it below), within every bound (``|v1 - v1^| <= a dt``, ``|l v2| <= |l v2^|``);
+    at the first step (no last period) the vehicle stands still.
+    """
+    if ctx.v1_prev is None:
+        return np.zeros((len(rows), 2))
+    v1, v2 = ctx.v1_prev[rows], ctx.v2_prev[rows]
+    step = state.accel[rows] * ctx.dt
+    speed = np.abs(v1)
+    sigma = np.where(speed > step, 1.0 - step / np.maximum(speed, MIN_SPEED), 0.0)
+    return np.stack((sigma * v1, sigma * state.look * v2), -1)
 
 
 def stall_turn(z0: np.ndarray, z: np.ndarray, angle: float) -> np.ndarray:
@@ -485,7 +705,7 @@ def filter_commands(
     active = np.zeros(n, dtype=bool)
     who = np.flatnonzero(filtered)
     if len(who) == 0:
-        return v1, v2, FilterStep(active, slack, 0)
+        return v1, v2, FilterStep(active, slack, 0, np.inf, np.zeros(n, dtype=bool))
     lo1, hi1, lo2, hi2 = (np.zeros(n) for _ in range(4))
     lo1[who], hi1[who], lo2[who], hi2[who] = _box(state, ctx, z0[:, 1], who)
     if ctx.v1_prev is None:
@@ -497,7 +717,14 @@ def filter_commands(
         np.maximum(np.abs(lo2 - z_hat[:, 1]), np.abs(hi2 - z_hat[:, 1])),
     )
     reach = reach * (1.0 + 1e-9) + 1e-9 if prune else None
-    veh, a_w, b = barrier_rows(state, ctx, filtered, reach)
+    fallback = np.zeros(n, dtype=bool)
+    if state.braking:
+        veh, a_w, b, h = braking_rows(state, ctx, filtered)
+        least = float(h.min()) if len(h) else np.inf
+    else:
+        found: dict[str, float] = {}
+        veh, a_w, b = barrier_rows(state, ctx, filtered, reach, found)
+        least = found.get("min_barrier", np.inf)
     # In z = (v1, l v2): w = R(x3) z, so a . w = (R^T a) . z and |w - w0| = |z - z0|.
     c, s = np.cos(ctx.theta[veh]), np.sin(ctx.theta[veh])
     a = np.stack((c * a_w[:, 0] + s * a_w[:, 1], -s * a_w[:, 0] + c * a_w[:, 1]), -1)
@@ -543,13 +770,20 @@ def filter_commands(
         if state.pass_right > 0 and not state.speed_only:
             zg, sg = _pass_right(state, z0[group], zg, sg, mat, off, soft)
         z[group], slack[group] = zg, sg
+        if state.braking:  # no command keeps every condition: brake
+            fallback[group[sg > TOLERANCE]] = True
+    braking = np.flatnonzero(fallback)
+    if len(braking):
+        z[braking] = braking_fallback(state, ctx, braking)
     changed = np.any(z != z0, axis=1)
     rows = np.flatnonzero(changed)
     v1[rows] = z[rows, 0]
     if not state.speed_only:  # else v2 is the controller's, exactly
         v2[rows] = z[rows, 1] / look
+    if len(braking):  # v2 of the braking command, whatever the projection
+        v2[braking] = z[braking, 1] / look
     active[rows] = True
-    return v1, v2, FilterStep(active, slack, len(veh))
+    return v1, v2, FilterStep(active, slack, len(veh), least, fallback)
 
 
 @register_filter("cbf", params=PARAMS)
@@ -566,4 +800,20 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + int(bad.sum())
     worst = float(step.slack.max()) if len(step.slack) else 0.0
     stats["max_slack"] = max(stats.get("max_slack", 0.0), worst)
+    if np.isfinite(step.min_barrier):
+        least = stats.get("min_barrier")
+        stats["min_barrier"] = (
+            step.min_barrier if least is None else min(least, step.min_barrier)
+        )
+    if state.braking:
+        braking = int(step.fallback.sum())
+        stats["fallback_steps"] = stats.get("fallback_steps", 0) + braking
+    if "unsafe_start" not in stats:  # the first step: reported, never silently
+        stats["unsafe_start"] = {
+            "t": float(ctx.t),
+            "min_barrier": (
+                step.min_barrier if np.isfinite(step.min_barrier) else None
+            ),
+            "unsafe": bool(step.min_barrier < -TOLERANCE),
+        }
     return v1, v2
