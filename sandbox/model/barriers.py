@@ -91,8 +91,4 @@ def sensing_margin(
     >>> round(sensing_margin(0.01, 0.0, 0.02, 2.0, 0.1), 6)
     0.07
     """
-    return (
-        SIGMAS * position_noise
-        + SIGMAS * look_ahead * heading_noise
-        + speed * delay
-    )
+    return SIGMAS * position_noise + SIGMAS * look_ahead * heading_noise + speed * delay

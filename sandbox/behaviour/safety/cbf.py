@@ -97,6 +97,10 @@ MIN_SPEED = 1e-9
 #: reaches a commanded speed within a period (so a vehicle travels up to two periods
 #: at its old speed before its braking shows).
 BRAKING_PERIODS = 3.0
+#: The share kappa of the braking along the line of centres the barrier plans with,
+#: F = F_{kappa A} [1]: the rest, (1 - kappa) A dt a period, is the reserve for the
+#: line of centres and the headings turning, which the sampled barrier holds fixed.
+BRAKING_SHARE = 0.75
 
 PARAMS = {
     "barrier": Param(
@@ -492,19 +496,22 @@ def braking_rows(
     """Every braking-barrier condition of the step, ``a . w <= b``, with its ``h``.
 
     For vehicle ``i`` toward ``j`` (look-ahead points ``p``, ``dp = p_i - p_j``,
-    ``n = dp / |dp|``, gap ``g = |dp| - D``, the last period's velocities ``w^``)::
+    ``n = dp / |dp|``, gap ``g = |dp| - D``, the last period's velocities ``w^``,
+    headings ``e``)::
 
-        c^ = -n . (w^_i - w^_j),   A = a_i + a_j,   h = F_A(g) + A dt - c^,
-        -n . (w_i - w^_i) <= rho_i (F_A(g) - c^),   rho_i = a_i / A,
+        c^ = -n . (w^_i - w^_j),   a_i^n = a_i |n . e_i|,   A = a_i^n + a_j^n,
+        h = F_A(g) + A dt - c^,
+        -n . (w_i - w^_i) <= rho_i (F_A(g) - c^),   rho_i = a_i^n / A,
 
-    with ``F_A`` of :func:`sandbox.model.barriers.braking_speed` (``h = min(h, g)``
-    inside ``D``); the two conditions of a pair add up to ``c <= F_A(g)``, and ask
-    each vehicle to slow its closing by at most ``a_i dt`` when ``h >= 0``. Toward a vehicle believed failed or driven
-    open loop ``a_j = 0`` (``rho_i = 1``) and ``w^_j`` is its centre's measured
-    velocity, against its centre (``D' = (d_i + d_j) / 2 + l + margin``); toward an
-    obstacle ``a_j = 0``, ``w^_j = 0`` and the gap is ``s(p) - (d_i / 2 + l +
-    margin)``. Neighbours' poses are the sensed ones and ``D``, ``D'`` grow by the
-    sensing margin.
+    with ``F_A`` of :func:`sandbox.model.barriers.braking_speed` over ``T = 3 dt``
+    (``h = min(h, g)`` inside ``D``; ``rho_i = 1/2`` where ``A = 0``). The two
+    conditions of a pair add up to ``c <= F_A(g)``; where ``h >= 0`` each asks its
+    vehicle to slow its closing by at most ``a_i^n dt``, which a change of ``v1`` by
+    ``a_i dt`` does. Toward a vehicle believed failed or driven open loop ``a_j =
+    0`` (``rho_i = 1``) and ``w^_j`` is its centre's measured velocity, against its
+    centre (``D' = (d_i + d_j) / 2 + l + margin``); toward an obstacle ``a_j = 0``,
+    ``w^_j = 0`` and the gap is ``s(p) - (d_i / 2 + l + margin)``. Neighbours' poses
+    are the sensed ones and ``D``, ``D'`` grow by the sensing margin.
 
     Returns
     -------
@@ -531,6 +538,12 @@ def braking_rows(
         w_hat += look * ctx.v2_prev[:, None] * heading[:, ::-1] * [-1.0, 1.0]
     else:
         w_hat = np.zeros_like(pos)
+    # The way each drives: +1 forward (or at rest), -1 reversing.
+    drive = (
+        np.ones(len(pos))
+        if ctx.v1_prev is None
+        else np.where(ctx.v1_prev < 0, -1.0, 1.0)
+    )
     out_v, out_a, out_b, out_h = [], [], [], []
     i, j, _ = state.neighbours.near(p_seen)
     if len(i):
@@ -544,20 +557,26 @@ def braking_rows(
         dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
         unit = rel / dist[:, None]
         big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
-        # Braking along the line of centres: a vehicle changes its closing speed
-        # through v1 at a_i |cos| of its heading to that line.
-        a_me = accel[me] * np.abs(np.einsum("kd,kd->k", unit, heading[me]))
-        along = np.abs(np.einsum("kd,kd->k", unit, heading[other]))
-        a_other = np.where(coop, accel[other] * along, 0.0)
+        # Braking along the line of centres: slowing v1 down slows the closing at
+        # a_i cos(heading, line) when the vehicle drives toward the other (0 away).
+        a_me = accel[me] * np.maximum(
+            -drive[me] * np.einsum("kd,kd->k", unit, heading[me]), 0.0
+        )
+        toward = drive[other] * np.einsum("kd,kd->k", unit, heading[other])
+        a_other = np.where(coop, accel[other] * np.maximum(toward, 0.0), 0.0)
         pair = a_me + a_other
         w_other = np.where(coop[:, None], w_hat[other], ctx.vel[other])
         closing = -np.einsum("kd,kd->k", unit, w_hat[me] - w_other)
-        budget = braking_speed(dist - big_d, pair, lag) - closing
+        budget = braking_speed(dist - big_d, BRAKING_SHARE * pair, lag) - closing
         h = budget + pair * dt
         h = np.where(dist >= big_d, h, np.minimum(h, dist - big_d))
-        rho = np.where(
+        # A budget to spend is shared by the drives' bounds, a deficit to brake
+        # away by the braking along the line (half each where neither can).
+        share = np.where(coop, accel[me] / (accel[me] + accel[other]), 1.0)
+        owed = np.where(
             pair > 0, a_me / np.maximum(pair, MIN_SPEED), np.where(coop, 0.5, 1.0)
         )
+        rho = np.where(budget >= 0, share, owed)
         out_v.append(me)
         out_a.append(-unit)
         out_b.append(rho * budget - np.einsum("kd,kd->k", unit, w_hat[me]))
@@ -575,8 +594,10 @@ def braking_rows(
             away /= norm[:, None]
             gap = signed - (0.5 * d[rows] + state.look + state.margin)
             closing = -np.einsum("kd,kd->k", away, w_hat[rows])
-            a_me = accel[rows] * np.abs(np.einsum("kd,kd->k", away, heading[rows]))
-            budget = braking_speed(gap, a_me, lag) - closing
+            a_me = accel[rows] * np.maximum(
+                -drive[rows] * np.einsum("kd,kd->k", away, heading[rows]), 0.0
+            )
+            budget = braking_speed(gap, BRAKING_SHARE * a_me, lag) - closing
             h = budget + a_me * dt
             h = np.where(gap >= 0, h, np.minimum(h, gap))
             out_v.append(rows)
