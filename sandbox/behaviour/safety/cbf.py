@@ -807,7 +807,34 @@ def filter_commands(
     return v1, v2, FilterStep(active, slack, len(veh), least, fallback)
 
 
-@register_filter("cbf", params=PARAMS)
+def _check(values: dict, section: dict) -> list[tuple]:
+    """Cross-key checks of the section: what ``barrier: braking`` works with."""
+    if values.get("barrier") != "braking":
+        return []
+    out = []
+    if values.get("neighbour_velocity") == "zero":
+        out.append(
+            (
+                "neighbour_velocity",
+                "barrier: braking shares the change from the broadcast velocities",
+                "zero with barrier: braking",
+                "broadcast, or barrier: velocity",
+            )
+        )
+    if values.get("projection") == "speed":
+        out.append(
+            (
+                "projection",
+                "barrier: braking needs the turn rate free to be feasible from every "
+                "safe state",
+                "speed with barrier: braking",
+                "look_ahead, or barrier: velocity",
+            )
+        )
+    return out
+
+
+@register_filter("cbf", params=PARAMS, check=_check)
 def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     """Control-barrier-function filter through the look-ahead point (sandbox/safety)."""
     state = ctx.memory.get("cbf")
