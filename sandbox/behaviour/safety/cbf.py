@@ -83,9 +83,11 @@ the braking distance of a sampled loop (:func:`sandbox.model.barriers.braking_sp
 which reaches a commanded speed within a period) and ``kappa = 3/4``
 (:data:`BRAKING_SHARE`, the rest a reserve for the line of centres and the headings
 turning). ``A`` is the pair's braking along the line of centres with the drive's real
-bound: ``a_i^n = max_accel_i max(0, cos)`` of the angle between the way vehicle ``i``
-drives and the direction to the other (braking ``v1`` slows the closing at that
-rate; 0 driving away), ``A = a_i^n + a_j^n``; ``a_j = 0`` toward a vehicle believed
+bound: changing ``v1`` by ``max_accel_i dt`` (down when vehicle ``i`` heads toward
+the other, up when away; less where ``v1_max`` or ``reverse`` leave less room)
+changes the closing at ``a_i^n = |cos phi_i| min(max_accel_i, room_i / dt)``,
+``phi_i`` the angle between its heading and the direction to the other; ``A = a_i^n
++ a_j^n``; ``a_j = 0`` toward a vehicle believed
 failed or driven open loop (against its centre and measured velocity, ``D'``), and
 against obstacles and walls. The state's barrier, reported as
 ``safety.min_barrier`` [m/s], is::
@@ -102,10 +104,10 @@ What it guarantees, and under which assumptions:
 
 1. **Feasible from every safe state**: if every condition of a vehicle has ``h >=
    0`` and it has one condition (two vehicles, a vehicle and a failed one or an
-   obstacle), ``v1^`` slowed by ``max_accel dt`` in the way it drives, ``v2 = v2^``
-   (or ``w^`` itself where the budget is positive) keeps it within every bound
-   (``reverse: true``, the default, lets ``v1`` pass 0), so the QP needs no slack:
-   a deficit asks ``rho_i (c^ - F) <= a_i^n dt`` of it. Checked on 3,000 random
+   obstacle), ``v1^`` changed by ``a_i^n dt / |cos phi_i|`` in the way that slows
+   the closing, ``v2 = v2^`` (or ``w^`` itself where the budget is positive) keeps
+   it within every bound, so the QP needs no slack: a deficit asks ``rho_i (c^ - F)
+   <= a_i^n dt`` of it. Checked on 3,000 random
    states each (``tests/test_safety_braking.py``). With several conditions a
    vehicle between two others may owe both; no common point is not excluded.
 2. **Invariance along the line of centres**: from ``c <= F(g)``, one period later
@@ -572,19 +574,23 @@ def braking_rows(
     ``n = dp / |dp|``, gap ``g = |dp| - D``, the last period's velocities ``w^``,
     headings ``e``)::
 
-        c^ = -n . (w^_i - w^_j),   a_i^n = a_i |n . e_i|,   A = a_i^n + a_j^n,
+        c^ = -n . (w^_i - w^_j),   a_i^n = |n . e_i| min(a_i, room_i / dt),
+        A = a_i^n + a_j^n,
         h = F_A(g) + A dt - c^,
-        -n . (w_i - w^_i) <= rho_i (F_A(g) - c^),   rho_i = a_i^n / A,
+        -n . (w_i - w^_i) <= rho_i (F_A(g) - c^),
 
     with ``F_A`` of :func:`sandbox.model.barriers.braking_speed` over ``T = 3 dt``
-    (``h = min(h, g)`` inside ``D``; ``rho_i = 1/2`` where ``A = 0``). The two
-    conditions of a pair add up to ``c <= F_A(g)``; where ``h >= 0`` each asks its
-    vehicle to slow its closing by at most ``a_i^n dt``, which a change of ``v1`` by
-    ``a_i dt`` does. Toward a vehicle believed failed or driven open loop ``a_j =
-    0`` (``rho_i = 1``) and ``w^_j`` is its centre's measured velocity, against its
-    centre (``D' = (d_i + d_j) / 2 + l + margin``); toward an obstacle ``a_j = 0``,
-    ``w^_j = 0`` and the gap is ``s(p) - (d_i / 2 + l + margin)``. Neighbours' poses
-    are the sensed ones and ``D``, ``D'`` grow by the sensing margin.
+    and ``kappa A`` (``h = min(h, g)`` inside ``D``); ``rho_i = a_i / (a_i + a_j)``
+    of a budget (``F_A >= c^``), ``a_i^n / A`` of a deficit (1/2 where ``A = 0``).
+    The two conditions of a pair add up to ``c <= F_A(g)``; where ``h >= 0`` each
+    asks its vehicle to slow its closing by at most ``a_i^n dt``, which a change of
+    ``v1`` within its bounds (``room_i``: down to ``-v1_max``, or 0 without
+    ``reverse``, heading toward; up to ``v1_max`` heading away) does. Toward a
+    vehicle believed failed or driven open loop ``a_j = 0`` (``rho_i = 1``) and
+    ``w^_j`` is its centre's measured velocity, against its centre (``D' = (d_i +
+    d_j) / 2 + l + margin``); toward an obstacle ``a_j = 0``, ``w^_j = 0`` and the
+    gap is ``s(p) - (d_i / 2 + l + margin)``. Neighbours' poses are the sensed ones
+    and ``D``, ``D'`` grow by the sensing margin.
 
     Returns
     -------
@@ -611,12 +617,21 @@ def braking_rows(
         w_hat += look * ctx.v2_prev[:, None] * heading[:, ::-1] * [-1.0, 1.0]
     else:
         w_hat = np.zeros_like(pos)
-    # The way each drives: +1 forward (or at rest), -1 reversing.
-    drive = (
-        np.ones(len(pos))
-        if ctx.v1_prev is None
-        else np.where(ctx.v1_prev < 0, -1.0, 1.0)
-    )
+    # The braking each can apply a period through v1 [m/s^2]: slowing the closing
+    # (cos > 0: heading toward, v1 down; else up) by a dt, or what its bounds leave.
+    lo = -state.v1_max if state.reverse else np.zeros(len(pos))
+    if ctx.v1_prev is None:
+        room = (np.full(len(pos), np.inf), np.full(len(pos), np.inf))
+    else:
+        room = (
+            np.maximum(ctx.v1_prev - lo, 0.0) / dt,
+            np.maximum(state.v1_max - ctx.v1_prev, 0.0) / dt,
+        )
+
+    def along_line(cos: np.ndarray, room: tuple, rows: np.ndarray) -> np.ndarray:
+        down, up = room[0][rows], room[1][rows]
+        return np.abs(cos) * np.minimum(accel[rows], np.where(cos > 0, down, up))
+
     out_v, out_a, out_b, out_h = [], [], [], []
     i, j, _ = state.neighbours.near(p_seen)
     if len(i):
@@ -630,13 +645,11 @@ def braking_rows(
         dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
         unit = rel / dist[:, None]
         big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
-        # Braking along the line of centres: slowing v1 down slows the closing at
-        # a_i cos(heading, line) when the vehicle drives toward the other (0 away).
-        a_me = accel[me] * np.maximum(
-            -drive[me] * np.einsum("kd,kd->k", unit, heading[me]), 0.0
-        )
-        toward = drive[other] * np.einsum("kd,kd->k", unit, heading[other])
-        a_other = np.where(coop, accel[other] * np.maximum(toward, 0.0), 0.0)
+        # Braking along the line of centres: changing v1 by a_i dt within its
+        # bounds changes the closing at a_i^n = |cos| of the heading to that line.
+        a_me = along_line(-np.einsum("kd,kd->k", unit, heading[me]), room, me)
+        toward = np.einsum("kd,kd->k", unit, heading[other])
+        a_other = np.where(coop, along_line(toward, room, other), 0.0)
         pair = a_me + a_other
         w_other = np.where(coop[:, None], w_hat[other], ctx.vel[other])
         closing = -np.einsum("kd,kd->k", unit, w_hat[me] - w_other)
@@ -667,9 +680,7 @@ def braking_rows(
             away /= norm[:, None]
             gap = signed - (0.5 * d[rows] + state.look + state.margin)
             closing = -np.einsum("kd,kd->k", away, w_hat[rows])
-            a_me = accel[rows] * np.maximum(
-                -drive[rows] * np.einsum("kd,kd->k", away, heading[rows]), 0.0
-            )
+            a_me = along_line(-np.einsum("kd,kd->k", away, heading[rows]), room, rows)
             budget = braking_speed(gap, BRAKING_SHARE * a_me, lag) - closing
             h = budget + a_me * dt
             h = np.where(gap >= 0, h, np.minimum(h, gap))
