@@ -212,6 +212,10 @@ def test_the_head_on_swap_under_max_accel_keeps_every_condition() -> None:
 
 @pytest.mark.slow
 def test_a_seven_vehicle_ring_swap_relaxes_only_the_velocity_barrier() -> None:
+    # Seed 1 of ten jittered rings (0.05 rad). As measured over seeds 0-9: the
+    # velocity barrier relaxes in 9 of 10 (216 vehicle-steps), the braking barrier
+    # brakes in 8 of 10 (25 vehicle-steps, 1-5 each; 0 on seeds 1 and 2); no contact
+    # under either, all ten converge under braking, 8 under velocity.
     doc = ring_doc(7, jitter=0.05, seed=1)
     _, m = run({**doc, "safety": {"filter": "cbf"}})
     assert m["collisions"]["total"] == 0
