@@ -26,6 +26,16 @@ step. dt = 0.01 s, 4 substeps, ``record_every: 10``. N = 3 is a short column.
 
 ``--scenario FILE [--steps K]`` times a scenario file instead (its first K steps, with
 ``--set safety.filter=none`` and ``cbf``), e.g. one where the filter is busy.
+
+``--barriers [--duration S] [CASE ...]`` compares the two barriers instead: for every
+safety benchmark case of ``scenarios/safety/`` whose vehicles have a ``max_accel``
+(all of them; or the named ones), as its file writes it with ``safety.filter: cbf``
+and ``barrier: velocity``, then ``braking``, it prints the contact episodes, the
+relaxed steps (``safety.infeasible_steps``: vehicle-steps whose conditions had no
+common point; the velocity barrier then relaxes them by the least slack, the braking
+one brakes, ``safety.fallback_steps``), the largest slack [m/s], ``safety.min_barrier``
+(``velocity``: [m^2], ``braking``: [m/s]) and whether the run converged. ``--duration``
+caps each run [s] (default: the file's).
 """
 
 from __future__ import annotations
@@ -90,13 +100,53 @@ def time_run(
     return run.info["wall_time"] / k, run.info["control_time"] / k, compute_metrics(run)
 
 
+SAFETY = ROOT / "scenarios" / "safety"
+
+
+def barrier_table(cases: list[str], duration: float | None) -> None:
+    """Print the comparison of the two barriers (``--barriers``)."""
+    header = (
+        "| case | barrier | contacts | relaxed steps | fallback steps | max slack "
+        "[m/s] | min_barrier | converged |"
+    )
+    print(header)
+    print("|" + "---|" * (header.count("|") - 1), flush=True)
+    for case in cases:
+        path = SAFETY / f"{case}.yaml"
+        base = load_scenario(path)
+        if any(v.max_accel is None for v in base.vehicles):
+            continue
+        for barrier in ("velocity", "braking"):
+            sets = ["safety.filter=cbf", f"safety.barrier={barrier}"]
+            if duration is not None:
+                sets.append(f"duration={min(duration, base.duration)!r}")
+            metrics = compute_metrics(Simulation(load_scenario(path, sets)).run())
+            s = metrics["safety"]
+            print(
+                f"| {case} | {barrier} | {metrics['collisions']['total']} | "
+                f"{s['infeasible_steps']:,} | {s.get('fallback_steps', '-')} | "
+                f"{s['max_slack']:.3g} | {s.get('min_barrier', float('nan')):.3g} | "
+                f"{metrics['converged']} |",
+                flush=True,
+            )
+
+
 def main(argv: list[str] | None = None) -> int:
     """Print the table (see the module docstring)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="2 repetitions, not 3")
     parser.add_argument("--scenario", help="time this scenario file instead")
     parser.add_argument("--steps", type=int, default=0, help="its first K steps")
+    parser.add_argument(
+        "--barriers", action="store_true", help="compare barrier velocity and braking"
+    )
+    parser.add_argument("--duration", type=float, help="cap each --barriers run [s]")
+    parser.add_argument("cases", nargs="*", help="--barriers: these cases only")
     args = parser.parse_args(argv)
+    if args.barriers:
+        names = args.cases or sorted(p.stem for p in SAFETY.glob("*.yaml"))
+        barrier_table(names, args.duration)
+        return 0
     cases = dict(STEPS)
     if args.scenario:
         n = len(load_scenario(args.scenario).vehicles)

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -143,6 +143,7 @@ class Simulation:
         self._filter_started = False
         # What the vehicles see of each other (None: the truth; behaviour.sensing).
         self.broadcast = make_broadcast(scenario.sensing, self.h, scenario.seed)
+        self._sensing = asdict(scenario.sensing)
         #: The broadcast poses received at t_k, shape (n, 3), or None without sensing.
         self.seen: np.ndarray | None = None
         n = self.fleet.n
@@ -484,6 +485,7 @@ class Simulation:
                 commanded=fleet.commanded,
                 obstacle_field=self.obstacles,
                 seen=self.seen,
+                sensing=None if self.broadcast is None else self._sensing,
                 memory=self._filter_memory,
                 stats=self._filter_stats,
             )

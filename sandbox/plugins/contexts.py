@@ -236,6 +236,10 @@ class FilterContext:
     seen : ndarray (n, 3) or None
         The broadcast poses ``(x1, x2, x3)`` each vehicle receives of the others
         (``sensing:``); None: the truth.
+    sensing : dict or None
+        The declared ``sensing:`` values (``position_noise`` [m], ``heading_noise``
+        [rad], ``delay`` [s], ``loss``), from which a filter may derive a margin;
+        None: no sensing.
     memory : dict
         Kept from one step to the next (the filter's own state).
     stats : dict
@@ -260,6 +264,7 @@ class FilterContext:
     commanded: np.ndarray | None = None
     obstacle_field: Any = None
     seen: np.ndarray | None = None
+    sensing: dict[str, float] | None = None
     memory: dict[str, Any] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
 

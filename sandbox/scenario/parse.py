@@ -15,6 +15,7 @@ at the caller's code.
 from __future__ import annotations
 
 import copy
+import math
 import os
 import sys
 import warnings
@@ -22,10 +23,13 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from sandbox import plugins
 from sandbox.errors import Problem, SandboxWarning, ScenarioError
+from sandbox.geometry.neighbours import NeighbourList
+from sandbox.model.barriers import sensing_margin
 from sandbox.model.tunnelling import tunnelling_warning
 from sandbox.plugins.registration import (
     Param,
@@ -334,6 +338,7 @@ def parse_scenario(
         recovery,
     )
     _safety_range(rd, safety, listed + generated)
+    _safety_braking(rd, safety, listed + generated, sensing)
     _check_handover(
         rd,
         on_leader_failure,
@@ -601,6 +606,74 @@ def _safety_range(rd: _Reader, safety: Any, vehicles: list[tuple[str, Any]]) -> 
             "distance beyond which no barrier can bind at the speed limits",
             "no range",
             "a range [m], or vehicle.v1_max",
+        )
+
+
+def _safety_braking(
+    rd: _Reader, safety: Any, vehicles: list[tuple[str, Any]], sensing: Any
+) -> None:
+    """A braking barrier's needs: drive limits, a broadcast it covers, a safe start.
+
+    ``barrier: braking`` needs every vehicle's finite ``max_accel`` and ``v1_max``
+    (an error); a lossy broadcast is not covered by its margin, a margin for the
+    sensing noise and delay larger than a vehicle, or a start whose look-ahead
+    points are closer than the barrier's ``D`` are warned of (the start is also
+    reported in ``metrics.json``, ``safety.unsafe_start``).
+    """
+    if safety.params.get("barrier") != "braking":
+        return
+    specs = [v for _, v in vehicles]
+    for key in ("max_accel", "v1_max"):
+        slow = [v.name for v in specs if getattr(v, key) is None]
+        if slow:
+            rd.fail(
+                "safety.barrier",
+                f"braking needs every vehicle's {key}: vehicle {slow[0]} has none",
+                "barrier: braking",
+                f"vehicle.{key} (a finite bound), or barrier: velocity",
+            )
+            return
+    if not specs:
+        return
+    look = float(safety.params["look_ahead"])
+    margin = float(safety.params["margin"])
+    lateral = [look * v.v2_max if v.v2_max is not None else v.v1_max for v in specs]
+    top = max(math.hypot(v.v1_max, q) for v, q in zip(specs, lateral, strict=True))
+    sensed = 0.0
+    if sensing is not None:
+        sensed = sensing_margin(
+            sensing.position_noise, sensing.heading_noise, sensing.delay, top, look
+        )
+        if sensing.loss > 0:
+            rd.warn(
+                "sensing.loss",
+                f"{sensing.loss:g}: the braking barrier's margin covers the noise and "
+                "the delay, not lost packets (a held copy grows older than the delay)",
+            )
+        smallest = min(v.diameter for v in specs)
+        if sensed > smallest:
+            rd.warn(
+                "sensing.position_noise",
+                f"the braking barrier's sensing margin 3 sigma + 3 l sigma_theta + "
+                f"v tau = {sensed:.3g} m is larger than a vehicle ({smallest:g} m): "
+                "the filter keeps the platoon that much further apart",
+            )
+    pose = np.array([v.pose for v in specs], dtype=float).reshape(-1, 3)
+    point = pose[:, :2] + look * np.stack((np.cos(pose[:, 2]), np.sin(pose[:, 2])), -1)
+    diameter = np.array([v.diameter for v in specs], dtype=float)
+    reach = float(diameter.max()) + 2.0 * look + margin + sensed
+    i, j, rel = NeighbourList(reach).near(point)
+    gap = np.hypot(rel[:, 0], rel[:, 1])
+    big_d = 0.5 * (diameter[i] + diameter[j]) + 2.0 * look + margin + sensed
+    close = np.flatnonzero(gap < big_d)
+    if len(close):
+        k = close[np.argmin(gap[close] - big_d[close])]
+        rd.warn(
+            "safety.margin",
+            f"the start is unsafe for barrier: braking: the look-ahead points of "
+            f"{specs[i[k]].name} and {specs[j[k]].name} are {gap[k]:.3g} m apart, "
+            f"below D = {big_d[k]:.3g} m (d + 2 l + margin + sensing margin); the "
+            "filter brakes them from t = 0 (metrics.json: safety.unsafe_start)",
         )
 
 

@@ -65,6 +65,81 @@ Wang, Ames and Egerstedt's perturbation when the filtered velocity collapses).
 Only vehicles driven by the controller are filtered (not the open-loop ones, not those
 believed failed); the filter acts before the step API's command overrides and the
 failures (which replace the commands of the vehicles they hit).
+
+**The braking barrier** (``barrier: braking``; ``velocity``, all of the above, stays
+the default). The velocity barrier asks ``h' >= -gamma h`` of a velocity the drive
+can change only by ``max_accel dt`` a period, so near a barrier its conditions may
+have no common point (the slack). The braking barrier, in the spirit of Wang, Ames
+and Egerstedt's safety barrier certificates (for a pair of double integrators
+braking at ``a``, ``h = sqrt(4 a (|dp| - D)) + dp . dv / |dp|``), asks of the
+velocity ``w`` to be applied that the closing speed ``c = -n . (w_i - w_j)`` (``n =
+dp / |dp|``, ``dp = p_i - p_j`` of the look-ahead points) can still be braked away
+before the gap ``g = |dp| - D`` is gone::
+
+    c <= F(g),   F(g) = sqrt((kappa A T / 2)^2 + 2 kappa A g) - kappa A T / 2,
+
+the braking distance of a sampled loop (:func:`sandbox.model.barriers.braking_speed`;
+``sqrt(2 kappa A g)`` as ``T -> 0``), with ``T = 3 dt`` (the sampling and the drive,
+which reaches a commanded speed within a period) and ``kappa = 3/4``
+(:data:`BRAKING_SHARE`, the rest a reserve for the line of centres and the headings
+turning). ``A`` is the pair's braking along the line of centres with the drive's real
+bound: changing ``v1`` by ``max_accel_i dt`` (down when vehicle ``i`` heads toward
+the other, up when away; less where ``v1_max`` or ``reverse`` leave less room)
+changes the closing at ``a_i^n = |cos phi_i| min(max_accel_i, room_i / dt)``,
+``phi_i`` the angle between its heading and the direction to the other; ``A = a_i^n
++ a_j^n``; ``a_j = 0`` toward a vehicle believed
+failed or driven open loop (against its centre and measured velocity, ``D'``), and
+against obstacles and walls. The state's barrier, reported as
+``safety.min_barrier`` [m/s], is::
+
+    h = F(g) + A dt - c^        (h = min(h, g) inside D),
+
+with ``c^`` the closing speed at the last period's velocities ``w^`` (the commands
+applied, at today's headings). Each vehicle takes its share of the pair's
+condition, ``-n . (w_i - w^_i) <= rho_i (F(g) - c^)``, ``rho_i = a_i / (a_i + a_j)``
+of a budget (``F >= c^``) and ``rho_i = a_i^n / A`` of a deficit; the two add up to
+``c <= F(g)``.
+
+What it guarantees, and under which assumptions:
+
+1. **Feasible from every safe state**: if every condition of a vehicle has ``h >=
+   0`` and it has one condition (two vehicles, a vehicle and a failed one or an
+   obstacle), ``v1^`` changed by ``a_i^n dt / |cos phi_i|`` in the way that slows
+   the closing, ``v2 = v2^`` (or ``w^`` itself where the budget is positive) keeps
+   it within every bound, so the QP needs no slack: a deficit asks ``rho_i (c^ - F)
+   <= a_i^n dt`` of it. Checked on 3,000 random
+   states each (``tests/test_safety_braking.py``). With several conditions a
+   vehicle between two others may owe both; no common point is not excluded.
+2. **Invariance along the line of centres**: from ``c <= F(g)``, one period later
+   the gap is at least ``g - c dt`` and ``F(g - c T) >= c - kappa A T`` (exact at
+   equality), so braking keeps the pair safe until it stops short of ``D``, when
+   the line of centres and the headings do not turn (head-on, a vehicle straight at
+   a wall). Their turning is covered to first order by the reserve ``(1 - kappa) A
+   dt`` a period only; the filter does not prove it.
+3. **An unsafe state** (no command keeps every condition, e.g. a start closer than
+   ``D``) is never relaxed: the vehicle brakes, ``z = sigma z^`` with ``sigma = max(0,
+   1 - max_accel dt / |v1^|)`` (its look-ahead velocity keeps its direction and
+   loses ``max_accel dt``; always within the bounds), counted in
+   ``safety.fallback_steps`` and ``safety.infeasible_steps`` (``max_slack``: the
+   slack the velocity barrier's relaxation would have used). The barrier at the
+   first step is reported as ``safety.unsafe_start``.
+4. **Sensing**: a vehicle knows its own pose, and filters against the broadcast
+   poses of the others (``seen``: noisy, delayed, held when lost), ``D`` grown by
+   the margin :func:`sandbox.model.barriers.sensing_margin`, ``m_s = 3 sigma_p + 3 l
+   sigma_theta + s_max tau`` (``s_max`` the look-ahead points' top speed): the
+   conditions hold for the true positions while the noise stays within 3 standard
+   deviations (per step and pair, 99.87 % one-sided) and the copies are no older
+   than ``tau``. A lost packet makes an older copy, which is not covered (a loader
+   warning). What it still takes as known: the other's last commands and heading
+   (``w^_j``), and the measured velocity of a failed vehicle.
+5. **Who failed**: ``known_failed``, what the platoon believes (the oracle or
+   ``detection: {method: residual}``); a failed vehicle not yet detected is treated
+   as a cooperative one that brakes, so the guarantee toward it holds only from its
+   detection on.
+
+It needs every vehicle's finite ``max_accel`` and ``v1_max`` (a loader error) and
+``neighbour_velocity: broadcast``, ``projection: look_ahead`` (the filter's check);
+``gamma`` is not used. The automatic ``range`` is :func:`braking_range`.
 """
 
 from __future__ import annotations
@@ -75,6 +150,7 @@ import numpy as np
 
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
 from sandbox.geometry.neighbours import NeighbourList
+from sandbox.model.barriers import braking_speed, sensing_margin
 from sandbox.plugins.contexts import FilterContext
 from sandbox.plugins.registration import Param, register_filter
 
@@ -91,14 +167,34 @@ STALL_START = 0.5
 STALL_FULL = 0.1
 STALL_SPEED = 0.2
 MIN_SPEED = 1e-9
+#: The braking barrier's time step T = BRAKING_PERIODS dt in F(g) = sqrt((A T / 2)^2
+#: + 2 A g) - A T / 2 [1]: one period for the sampling, two for the drive, which
+#: reaches a commanded speed within a period (so a vehicle travels up to two periods
+#: at its old speed before its braking shows).
+BRAKING_PERIODS = 3.0
+#: The share kappa of the braking along the line of centres the barrier plans with,
+#: F = F_{kappa A} [1]: the rest, (1 - kappa) A dt a period, is the reserve for the
+#: line of centres and the headings turning, which the sampled barrier holds fixed.
+BRAKING_SHARE = 0.75
 
 PARAMS = {
+    "barrier": Param(
+        "choice",
+        "velocity",
+        doc="velocity: h = |p_i - p_j|^2 - D^2 with h' >= -gamma h (assumes the "
+        "speed can change at once); braking: the braking-distance barrier h = "
+        "F(|p_i - p_j| - D) + dp.dv / |dp| with the drive's max_accel, feasible from "
+        "every safe state, braking when unsafe, with a margin for the declared "
+        "sensing noise and delay (needs every vehicle's max_accel and v1_max)",
+        choices=("velocity", "braking"),
+    ),
     "gamma": Param(
         "number",
         2.0,
         "1/s",
         "Rate of the barrier condition h' >= -gamma h: near a barrier the gap may "
-        "close at about gamma times itself (a braking of about gamma v)",
+        "close at about gamma times itself (a braking of about gamma v); not used "
+        "by barrier: braking",
         minimum=0.0,
         exclusive=True,
     ),
@@ -181,11 +277,18 @@ class FilterStep:
         The least largest violation of a barrier condition (0: feasible).
     rows : int
         Barrier conditions that could bind (after pruning).
+    min_barrier : float
+        The least barrier value of the step (``inf`` with none): [m/s] for
+        ``braking``, at the last period's velocities; [m^2] for ``velocity``.
+    fallback : ndarray, shape (n,), bool
+        Vehicles in an unsafe state (a braking barrier below 0), which brake.
     """
 
     active: np.ndarray
     slack: np.ndarray
     rows: int
+    min_barrier: float = np.inf
+    fallback: np.ndarray | None = None
 
 
 def _per_vehicle(value: float | np.ndarray, n: int) -> np.ndarray:
@@ -222,6 +325,40 @@ def auto_range(
     return q + float(np.sqrt(q * q + big_d * big_d)) + look_ahead
 
 
+def braking_range(
+    v1_max: np.ndarray,
+    lateral: np.ndarray,
+    accel: np.ndarray,
+    diameter: np.ndarray,
+    margin: float,
+    look_ahead: float,
+    dt: float,
+) -> float:
+    """Distance [m] beyond which no braking-barrier condition can bind.
+
+    Look-ahead points move at most ``s = sqrt(v1_max^2 + lateral^2)`` and their
+    velocity changes in one period by at most ``q = a_max dt + 2 lateral``; a
+    condition ``-n . (w - w^) <= rho h`` (``h = F(gap) - c^``, ``c^ <= 2 s``) can
+    bind only if ``rho h < q``. With ``rho >= a_min / (2 a_max)`` (1 toward a
+    vehicle that does not brake, an obstacle, a wall) none binds once ``F(gap) >= K
+    = 2 s + 2 q a_max / a_min`` at the least braking ``a_min``: ``gap >= (K^2 +
+    a_min dt K) / (2 a_min)``, plus the largest ``D`` and ``l``.
+
+    >>> round(braking_range(np.array([2.0]), np.array([0.4]), np.array([5.0]),
+    ...                     np.array([0.5]), 0.05, 0.1, 0.01), 3)
+    4.219
+    """
+    s = float(np.max(np.hypot(v1_max, lateral)))
+    a_min, a_max = float(np.min(accel)), float(np.max(accel))
+    if not (np.isfinite(s) and np.isfinite(a_max) and a_min > 0):
+        return np.inf
+    q = a_max * dt + 2.0 * float(np.max(lateral))
+    k = 2.0 * s + 2.0 * q * a_max / a_min
+    gap = (k * k + a_min * dt * k) / (2.0 * a_min)
+    big_d = float(np.max(diameter)) + 2.0 * look_ahead + margin
+    return gap + big_d + look_ahead
+
+
 class CBFState:
     """What the filter keeps between steps: parameters, limits, the neighbour index."""
 
@@ -243,6 +380,18 @@ class CBFState:
         # The look-ahead point's sideways speed l v2 (v1_max where v2 is unlimited).
         self.lateral = np.where(np.isfinite(v2_max), self.look * v2_max, self.v1_max)
         self.accel = _per_vehicle(ctx.accel_max, n).copy()
+        self.braking = p.get("barrier", "velocity") == "braking"
+        #: The margin for what the vehicles sense of each other [m] (braking only).
+        self.sensed = 0.0
+        if self.braking and ctx.sensing is not None:
+            top = float(np.max(np.hypot(self.v1_max, self.lateral)))
+            self.sensed = sensing_margin(
+                ctx.sensing.get("position_noise", 0.0),
+                ctx.sensing.get("heading_noise", 0.0),
+                ctx.sensing.get("delay", 0.0),
+                top,
+                self.look,
+            )
         radius = p.get("range")
         if radius is None:
             radius = auto_range(
@@ -251,6 +400,16 @@ class CBFState:
         if not np.isfinite(radius):
             radius = auto_range(
                 self.v1_max, v2_max, ctx.diameter, self.gamma, self.margin, self.look
+            )
+        if self.braking and p.get("range") is None:
+            radius = braking_range(
+                self.v1_max,
+                self.lateral,
+                self.accel,
+                ctx.diameter,
+                self.margin + self.sensed,
+                self.look,
+                ctx.dt,
             )
         self.range = float(radius)
         self.neighbours = NeighbourList(self.range)
@@ -281,6 +440,7 @@ def barrier_rows(
     ctx: FilterContext,
     filtered: np.ndarray,
     reach: np.ndarray | None = None,
+    found: dict[str, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every barrier condition of the step as a half-plane ``a . w <= b``.
 
@@ -294,6 +454,9 @@ def barrier_rows(
         The largest change of each vehicle's look-ahead velocity from the last
         period's within its bounds; conditions no such change can violate may be
         left out (default: all are made).
+    found : dict, optional
+        Receives ``min_barrier``, the least ``h`` [m^2] (and [m] toward obstacles)
+        of the conditions made or pruned.
 
     Returns
     -------
@@ -318,6 +481,7 @@ def barrier_rows(
     if reach is None:
         reach = np.full(len(pos), np.inf)
     out_v, out_a, out_b = [], [], []
+    least = np.inf
 
     if ctx.v1_prev is not None:
         w_hat = heading * ctx.v1_prev[:, None]
@@ -334,6 +498,9 @@ def barrier_rows(
         dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
         big_d = 0.5 * (d[i] + d[j]) + 2.0 * look + margin
         h = dist * dist - big_d * big_d
+        pair = cooperative[i] | cooperative[j]
+        if pair.any():
+            least = min(least, float(h[pair].min()))
         base = 0.25 * gamma * h / dist
         if w_hat is None:
             slack_i = slack_j = base
@@ -361,6 +528,8 @@ def barrier_rows(
         dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
         big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
         h = dist * dist - big_d * big_d
+        if len(h):
+            least = min(least, float(h.min()))
         if w_hat is not None and state.broadcast:
             shared = w_hat[me] + w_hat[other]
             share = np.einsum("kd,kd->k", rel, shared)
@@ -384,13 +553,169 @@ def barrier_rows(
             norm = np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)
             away /= norm[:, None]
             clearance = 0.5 * d[rows] + look + margin
+            least = min(least, float(np.min(signed - clearance)))
             out_v.append(rows)
             out_a.append(-away)
             out_b.append(gamma * (signed - clearance))
+    if found is not None:
+        found["min_barrier"] = least
     if not out_v:
         empty = np.zeros(0, dtype=np.intp)
         return empty, np.zeros((0, 2)), np.zeros(0)
     return np.concatenate(out_v), np.concatenate(out_a), np.concatenate(out_b)
+
+
+def braking_rows(
+    state: CBFState, ctx: FilterContext, filtered: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every braking-barrier condition of the step, ``a . w <= b``, with its ``h``.
+
+    For vehicle ``i`` toward ``j`` (look-ahead points ``p``, ``dp = p_i - p_j``,
+    ``n = dp / |dp|``, gap ``g = |dp| - D``, the last period's velocities ``w^``,
+    headings ``e``)::
+
+        c^ = -n . (w^_i - w^_j),   a_i^n = |n . e_i| min(a_i, room_i / dt),
+        A = a_i^n + a_j^n,
+        h = F_A(g) + A dt - c^,
+        -n . (w_i - w^_i) <= rho_i (F_A(g) - c^),
+
+    with ``F_A`` of :func:`sandbox.model.barriers.braking_speed` over ``T = 3 dt``
+    and ``kappa A`` (``h = min(h, g)`` inside ``D``); ``rho_i = a_i / (a_i + a_j)``
+    of a budget (``F_A >= c^``), ``a_i^n / A`` of a deficit (1/2 where ``A = 0``).
+    The two conditions of a pair add up to ``c <= F_A(g)``; where ``h >= 0`` each
+    asks its vehicle to slow its closing by at most ``a_i^n dt``, which a change of
+    ``v1`` within its bounds (``room_i``: down to ``-v1_max``, or 0 without
+    ``reverse``, heading toward; up to ``v1_max`` heading away) does. Toward a
+    vehicle believed failed or driven open loop ``a_j = 0`` (``rho_i = 1``) and
+    ``w^_j`` is its centre's measured velocity, against its centre (``D' = (d_i +
+    d_j) / 2 + l + margin``); toward an obstacle ``a_j = 0``, ``w^_j = 0`` and the
+    gap is ``s(p) - (d_i / 2 + l + margin)``. Neighbours' poses are the sensed ones
+    and ``D``, ``D'`` grow by the sensing margin.
+
+    Returns
+    -------
+    vehicle : ndarray, shape (r,) int
+    a : ndarray, shape (r, 2)
+        Unit normal in ``w`` [1].
+    b : ndarray, shape (r,) [m/s]
+    h : ndarray, shape (r,) [m/s]
+        The barrier at the last period's velocities (< 0: unsafe).
+    """
+    look, margin, dt = state.look, state.margin + state.sensed, ctx.dt
+    lag = BRAKING_PERIODS * dt
+    pos, theta, d, accel = ctx.pos, ctx.theta, ctx.diameter, state.accel
+    heading = np.stack((np.cos(theta), np.sin(theta)), -1)
+    p = pos + look * heading
+    if ctx.seen is None:
+        centre_seen, p_seen = pos, p
+    else:
+        centre_seen = ctx.seen[:, :2]
+        seen_heading = np.stack((np.cos(ctx.seen[:, 2]), np.sin(ctx.seen[:, 2])), -1)
+        p_seen = centre_seen + look * seen_heading
+    if ctx.v1_prev is not None:
+        w_hat = heading * ctx.v1_prev[:, None]
+        w_hat += look * ctx.v2_prev[:, None] * heading[:, ::-1] * [-1.0, 1.0]
+    else:
+        w_hat = np.zeros_like(pos)
+    # The braking each can apply a period through v1 [m/s^2]: slowing the closing
+    # (cos > 0: heading toward, v1 down; else up) by a dt, or what its bounds leave.
+    lo = -state.v1_max if state.reverse else np.zeros(len(pos))
+    if ctx.v1_prev is None:
+        room = (np.full(len(pos), np.inf), np.full(len(pos), np.inf))
+    else:
+        room = (
+            np.maximum(ctx.v1_prev - lo, 0.0) / dt,
+            np.maximum(state.v1_max - ctx.v1_prev, 0.0) / dt,
+        )
+
+    def along_line(cos: np.ndarray, room: tuple, rows: np.ndarray) -> np.ndarray:
+        down, up = room[0][rows], room[1][rows]
+        return np.abs(cos) * np.minimum(accel[rows], np.where(cos > 0, down, up))
+
+    out_v, out_a, out_b, out_h = [], [], [], []
+    i, j, _ = state.neighbours.near(p_seen)
+    if len(i):
+        me = np.concatenate((i, j))
+        other = np.concatenate((j, i))
+        keep = np.flatnonzero(filtered[me])
+        me, other = me[keep], other[keep]
+        coop = filtered[other]
+        target = np.where(coop[:, None], p_seen[other], centre_seen[other])
+        rel = p[me] - target
+        dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
+        unit = rel / dist[:, None]
+        big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
+        # Braking along the line of centres: changing v1 by a_i dt within its
+        # bounds changes the closing at a_i^n = |cos| of the heading to that line.
+        a_me = along_line(-np.einsum("kd,kd->k", unit, heading[me]), room, me)
+        toward = np.einsum("kd,kd->k", unit, heading[other])
+        a_other = np.where(coop, along_line(toward, room, other), 0.0)
+        pair = a_me + a_other
+        w_other = np.where(coop[:, None], w_hat[other], ctx.vel[other])
+        closing = -np.einsum("kd,kd->k", unit, w_hat[me] - w_other)
+        budget = braking_speed(dist - big_d, BRAKING_SHARE * pair, lag) - closing
+        h = budget + pair * dt
+        h = np.where(dist >= big_d, h, np.minimum(h, dist - big_d))
+        # A budget to spend is shared by the drives' bounds, a deficit to brake
+        # away by the braking along the line (half each where neither can).
+        share = np.where(coop, accel[me] / (accel[me] + accel[other]), 1.0)
+        owed = np.where(
+            pair > 0, a_me / np.maximum(pair, MIN_SPEED), np.where(coop, 0.5, 1.0)
+        )
+        rho = np.where(budget >= 0, share, owed)
+        out_v.append(me)
+        out_a.append(-unit)
+        out_b.append(rho * budget - np.einsum("kd,kd->k", unit, w_hat[me]))
+        out_h.append(h)
+
+    field = ctx.obstacle_field
+    if field is not None and not field.empty:
+        rows, cols = state.neighbours.obstacle_pairs(p, field)
+        keep = np.flatnonzero(filtered[rows])
+        rows, cols = rows[keep], cols[keep]
+        if len(rows):
+            signed, point = field.pair_distance(p, rows, cols)
+            away = (p[rows] - point) * np.where(signed < 0, -1.0, 1.0)[:, None]
+            norm = np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)
+            away /= norm[:, None]
+            gap = signed - (0.5 * d[rows] + state.look + state.margin)
+            closing = -np.einsum("kd,kd->k", away, w_hat[rows])
+            a_me = along_line(-np.einsum("kd,kd->k", away, heading[rows]), room, rows)
+            budget = braking_speed(gap, BRAKING_SHARE * a_me, lag) - closing
+            h = budget + a_me * dt
+            h = np.where(gap >= 0, h, np.minimum(h, gap))
+            out_v.append(rows)
+            out_a.append(-away)
+            out_b.append(budget - np.einsum("kd,kd->k", away, w_hat[rows]))
+            out_h.append(h)
+    if not out_v:
+        empty = np.zeros(0, dtype=np.intp)
+        return empty, np.zeros((0, 2)), np.zeros(0), np.zeros(0)
+    return (
+        np.concatenate(out_v),
+        np.concatenate(out_a),
+        np.concatenate(out_b),
+        np.concatenate(out_h),
+    )
+
+
+def braking_fallback(
+    state: CBFState, ctx: FilterContext, rows: np.ndarray
+) -> np.ndarray:
+    """The braking command ``z = (v1, l v2)`` of vehicles in an unsafe state.
+
+    The last period's ``z^`` scaled by ``sigma = max(0, 1 - a dt / |v1^|)``: the
+    look-ahead velocity keeps its direction and loses ``a dt`` of its speed (all of
+    it below), within every bound (``|v1 - v1^| <= a dt``, ``|l v2| <= |l v2^|``);
+    at the first step (no last period) the vehicle stands still.
+    """
+    if ctx.v1_prev is None:
+        return np.zeros((len(rows), 2))
+    v1, v2 = ctx.v1_prev[rows], ctx.v2_prev[rows]
+    step = state.accel[rows] * ctx.dt
+    speed = np.abs(v1)
+    sigma = np.where(speed > step, 1.0 - step / np.maximum(speed, MIN_SPEED), 0.0)
+    return np.stack((sigma * v1, sigma * state.look * v2), -1)
 
 
 def stall_turn(z0: np.ndarray, z: np.ndarray, angle: float) -> np.ndarray:
@@ -485,7 +810,7 @@ def filter_commands(
     active = np.zeros(n, dtype=bool)
     who = np.flatnonzero(filtered)
     if len(who) == 0:
-        return v1, v2, FilterStep(active, slack, 0)
+        return v1, v2, FilterStep(active, slack, 0, np.inf, np.zeros(n, dtype=bool))
     lo1, hi1, lo2, hi2 = (np.zeros(n) for _ in range(4))
     lo1[who], hi1[who], lo2[who], hi2[who] = _box(state, ctx, z0[:, 1], who)
     if ctx.v1_prev is None:
@@ -497,7 +822,14 @@ def filter_commands(
         np.maximum(np.abs(lo2 - z_hat[:, 1]), np.abs(hi2 - z_hat[:, 1])),
     )
     reach = reach * (1.0 + 1e-9) + 1e-9 if prune else None
-    veh, a_w, b = barrier_rows(state, ctx, filtered, reach)
+    fallback = np.zeros(n, dtype=bool)
+    if state.braking:
+        veh, a_w, b, h = braking_rows(state, ctx, filtered)
+        least = float(h.min()) if len(h) else np.inf
+    else:
+        found: dict[str, float] = {}
+        veh, a_w, b = barrier_rows(state, ctx, filtered, reach, found)
+        least = found.get("min_barrier", np.inf)
     # In z = (v1, l v2): w = R(x3) z, so a . w = (R^T a) . z and |w - w0| = |z - z0|.
     c, s = np.cos(ctx.theta[veh]), np.sin(ctx.theta[veh])
     a = np.stack((c * a_w[:, 0] + s * a_w[:, 1], -s * a_w[:, 0] + c * a_w[:, 1]), -1)
@@ -543,16 +875,50 @@ def filter_commands(
         if state.pass_right > 0 and not state.speed_only:
             zg, sg = _pass_right(state, z0[group], zg, sg, mat, off, soft)
         z[group], slack[group] = zg, sg
+        if state.braking:  # no command keeps every condition: brake
+            fallback[group[sg > TOLERANCE]] = True
+    braking = np.flatnonzero(fallback)
+    if len(braking):
+        z[braking] = braking_fallback(state, ctx, braking)
     changed = np.any(z != z0, axis=1)
     rows = np.flatnonzero(changed)
     v1[rows] = z[rows, 0]
     if not state.speed_only:  # else v2 is the controller's, exactly
         v2[rows] = z[rows, 1] / look
+    if len(braking):  # v2 of the braking command, whatever the projection
+        v2[braking] = z[braking, 1] / look
     active[rows] = True
-    return v1, v2, FilterStep(active, slack, len(veh))
+    return v1, v2, FilterStep(active, slack, len(veh), least, fallback)
 
 
-@register_filter("cbf", params=PARAMS)
+def _check(values: dict, section: dict) -> list[tuple]:
+    """Cross-key checks of the section: what ``barrier: braking`` works with."""
+    if values.get("barrier") != "braking":
+        return []
+    out = []
+    if values.get("neighbour_velocity") == "zero":
+        out.append(
+            (
+                "neighbour_velocity",
+                "barrier: braking shares the change from the broadcast velocities",
+                "zero with barrier: braking",
+                "broadcast, or barrier: velocity",
+            )
+        )
+    if values.get("projection") == "speed":
+        out.append(
+            (
+                "projection",
+                "barrier: braking needs the turn rate free to be feasible from every "
+                "safe state",
+                "speed with barrier: braking",
+                "look_ahead, or barrier: velocity",
+            )
+        )
+    return out
+
+
+@register_filter("cbf", params=PARAMS, check=_check)
 def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     """Control-barrier-function filter through the look-ahead point (sandbox/safety)."""
     state = ctx.memory.get("cbf")
@@ -566,4 +932,20 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + int(bad.sum())
     worst = float(step.slack.max()) if len(step.slack) else 0.0
     stats["max_slack"] = max(stats.get("max_slack", 0.0), worst)
+    if np.isfinite(step.min_barrier):
+        least = stats.get("min_barrier")
+        stats["min_barrier"] = (
+            step.min_barrier if least is None else min(least, step.min_barrier)
+        )
+    if state.braking:
+        braking = int(step.fallback.sum())
+        stats["fallback_steps"] = stats.get("fallback_steps", 0) + braking
+    if "unsafe_start" not in stats:  # the first step: reported, never silently
+        stats["unsafe_start"] = {
+            "t": float(ctx.t),
+            "min_barrier": (
+                step.min_barrier if np.isfinite(step.min_barrier) else None
+            ),
+            "unsafe": bool(step.min_barrier < -TOLERANCE),
+        }
     return v1, v2
