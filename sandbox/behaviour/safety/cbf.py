@@ -314,7 +314,7 @@ def auto_range(
 
     >>> round(auto_range(np.array([2.0]), np.array([4.0]), np.array([0.5]),
     ...                  2.0, 0.05, 0.1), 3)
-    4.347
+    4.313
     """
     lateral = np.where(np.isfinite(v2_max), look_ahead * v2_max, v1_max)
     s = float(np.max(np.hypot(v1_max, lateral)))
