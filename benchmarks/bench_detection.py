@@ -83,11 +83,13 @@ def one(task: tuple) -> dict:
 
 def table(results: list[dict]) -> str:
     """The Markdown table of the results."""
-    lines = [
-        "| method | fault | noise [m] | seeds | missed | median delay [s] "
-        "| max delay [s] | kind right | false alarms in failure runs |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|",
-    ]
+    lines = []
+    if any(r["fault"] for r in results):
+        lines += [
+            "| method | fault | noise [m] | seeds | missed | median delay [s] "
+            "| max delay [s] | kind right | false alarms in failure runs |",
+            "|---|---|---|---:|---:|---:|---:|---:|---:|",
+        ]
     keys = sorted(
         {(r["method"], r["fault"], r["noise"]) for r in results if r["fault"]},
         key=lambda k: (k[0], list(FAULTS).index(k[1]), k[2]),
@@ -111,7 +113,7 @@ def table(results: list[dict]) -> str:
     free = [r for r in results if r["fault"] is None]
     if free:
         lines += [
-            "",
+            *([""] if lines else []),
             "| method | noise [m] | fault-free runs | vehicle-hours | false alarms |",
             "|---|---|---:|---:|---:|",
         ]
