@@ -279,7 +279,7 @@ def test_every_kind_is_declared_with_a_builtin() -> None:
         ]
         assert builtins, kind
     assert plugins.names("filter") == ("none", "cbf")
-    assert plugins.names("detector") == ("none", "oracle", "residual")
+    assert plugins.names("detector") == ("none", "oracle", "residual", "glr")
     assert len(plugins.names("law")) >= 5 and len(plugins.names("failure")) >= 5
     assert len(plugins.names("reference")) >= 5 and len(plugins.names("obstacle")) >= 4
 

@@ -129,7 +129,8 @@ def test_every_declared_key_is_documented() -> None:
     tables.append(RECONFIGURE)
     tables.append(FAILURE)
     tables.append(SAFETY)
-    for kind in ("law", "strategy", "failure", "reference", "obstacle", "filter"):
+    kinds = ("law", "strategy", "failure", "reference", "obstacle", "filter")
+    for kind in (*kinds, "detector"):
         for plugin in plugins.registry(kind).values():
             if plugin.origin.startswith("built-in"):
                 tables.append(plugin.params)

@@ -10,6 +10,7 @@ module that registers into it. Registration order within a kind is the order her
 BUILTIN_MODULES: tuple[str, ...] = (
     "sandbox.model.laws",
     "sandbox.behaviour.detection",
+    "sandbox.behaviour.glr",
     "sandbox.model.failures",
     "sandbox.model.obstacles",
     "sandbox.behaviour.recovery",
