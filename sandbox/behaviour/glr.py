@@ -79,6 +79,7 @@ import numpy as np
 from sandbox.behaviour.detection import (
     CRASH_CONTACT_WINDOW,
     RECENT_SPEED_WINDOW,
+    RESIDUAL_PARAMS,
     SHAPE_HISTORY,
     STILL_SPEED,
     DetectorState,
@@ -144,22 +145,9 @@ GLR_PARAMS = {
         "failed drive could have braked to rest, plus 0.1 s)",
         minimum=0.0,
     ),
-    "noise_floor": Param(
-        "number",
-        0.001,
-        "m",
-        "Least position noise assumed (what the prediction misses without noise)",
-        minimum=0.0,
-        exclusive=True,
-    ),
-    "heading_floor": Param(
-        "number",
-        0.001,
-        "rad",
-        "Least heading noise assumed",
-        minimum=0.0,
-        exclusive=True,
-    ),
+    # the floors of the residual detector, declared once
+    "noise_floor": RESIDUAL_PARAMS["noise_floor"],
+    "heading_floor": RESIDUAL_PARAMS["heading_floor"],
 }
 
 
