@@ -81,6 +81,7 @@ def test_no_runnable_block_reads_the_repository(page: Path) -> None:
         assert "scenarios/" not in block["code"], (name(page), block["code"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("page", RUNNABLE, ids=name)
 def test_the_runnable_blocks_of_a_page_run(page: Path, tmp_path: Path) -> None:
     env = dict(os.environ)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -62,6 +63,20 @@ def collision_run() -> Run:
     return run
 
 
+def wait_until(page: object, expr: str) -> None:
+    """Poll ``expr`` in the page until it is true, for at most TIMEOUT_MS.
+
+    Not ``page.wait_for_function``: when its first check fails it polls through an
+    ``eval`` in the page, which the replay's content security policy forbids (a slow
+    machine then fails the test instead of waiting).
+    """
+    deadline = time.monotonic() + TIMEOUT_MS / 1000
+    while not page.evaluate(expr):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the page never showed {expr}")
+        page.wait_for_timeout(20)
+
+
 class Page:
     """A replay page open in the browser, with the requests it made."""
 
@@ -76,7 +91,7 @@ class Page:
         self.page.on("pageerror", lambda e: self.errors.append(str(e)))
         self.page.goto(self.url)
         # bounded: a page that never gets ready fails the test, never hangs it
-        self.page.wait_for_function("document.body.dataset.ready !== undefined")
+        wait_until(self.page, "document.body.dataset.ready !== undefined")
         assert self.page.evaluate("document.body.dataset.ready") == "1", self.errors
         assert self.page.evaluate("window.sandboxReplay.ready") is True
 
@@ -262,6 +277,7 @@ def blob(img: np.ndarray, uv: np.ndarray, r: float, rgb: tuple) -> np.ndarray:
     return np.array([cols[hit].mean() + 0.5, rows[hit].mean() + 0.5])
 
 
+@pytest.mark.slow
 def test_a_large_fleet_plays_at_an_interactive_rate(
     browser: object, tmp_path: Path
 ) -> None:
@@ -417,7 +433,7 @@ def test_sweep_page_sorts_filters_and_links(browser: object, tmp_path: Path) -> 
         page.select_option("#collisions", "some")
         assert rows.count() == 1
         rows.nth(0).locator("a").click()
-        page.wait_for_function("document.body.dataset.ready === '1'")
+        wait_until(page, "document.body.dataset.ready === '1'")
         kinds = {e["kind"] for e in page.evaluate("window.sandboxReplay.events()")}
         assert kinds == {"collision"}
         assert all(r.startswith("file://") for r in requests)
@@ -437,7 +453,7 @@ def test_a_damaged_page_says_so(
     page = ctx.new_page()
     try:
         page.goto(path.resolve().as_uri())
-        page.wait_for_function("document.body.dataset.ready !== undefined")
+        wait_until(page, "document.body.dataset.ready !== undefined")
         assert page.evaluate("document.body.dataset.ready") == "error"
         message = page.locator("#message")
         assert message.is_visible()

@@ -128,6 +128,7 @@ def _random_states(rng, kind: str, count: int):
             )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["pair", "failed", "obstacle"])
 def test_every_safe_state_is_feasible_without_slack(kind) -> None:
     rng = np.random.default_rng({"pair": 1, "failed": 2, "obstacle": 3}[kind])

@@ -85,6 +85,7 @@ def kill_and_count_orphans(proc: subprocess.Popen[str], least: int) -> list[int]
     return session(proc.pid)
 
 
+@pytest.mark.slow
 def test_sigkill_of_a_sweep_leaves_no_worker(tmp_path):
     base = write_yaml(tmp_path, base_doc(duration=30.0), "base.yaml")
     proc = start(
@@ -98,6 +99,7 @@ def test_sigkill_of_a_sweep_leaves_no_worker(tmp_path):
         cleanup(proc)
 
 
+@pytest.mark.slow
 def test_sigkill_of_check_leaves_no_worker(tmp_path):
     doc = {**base_doc(duration=60.0), "expect": {"status": "ok"}}
     files = [str(write_yaml(tmp_path, doc, f"s{k}.yaml")) for k in range(2)]
@@ -127,6 +129,7 @@ def rows(out: Path) -> int:
         return len(list(csv.DictReader(fh)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_ctrl_c_returns_at_once_and_keeps_every_finished_run(tmp_path, jobs):
     # 64 runs in groups of 16 first, then sized to about 2 s each: the first runs
