@@ -17,13 +17,8 @@ import numpy as np
 import pytest
 
 from sandbox import load_scenario
-from sandbox.behaviour.safety.cbf import (
-    PARAMS,
-    CBFState,
-    braking_rows,
-    cbf,
-    filter_commands,
-)
+from sandbox.behaviour.safety.braking import braking_rows
+from sandbox.behaviour.safety.cbf import PARAMS, CBFState, cbf, filter_commands
 from sandbox.cli import main
 from sandbox.loop.simulation import Simulation
 from sandbox.model.barriers import braking_speed, sensing_margin

@@ -27,6 +27,12 @@ import numpy as np
 SIGMAS = 3.0
 
 
+#: Shortest distance treated as a direction [m].
+MIN_DIST = 1e-9
+#: Smallest speed a division by a speed is guarded with [m/s].
+MIN_SPEED = 1e-9
+
+
 def braking_speed(s: np.ndarray, accel: np.ndarray, dt: float) -> np.ndarray:
     """Largest closing speed [m/s] from which a gap ``s`` can be braked away.
 
