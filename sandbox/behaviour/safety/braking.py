@@ -63,6 +63,30 @@ def braking_range(
     return gap + big_d + look_ahead
 
 
+def obstacle_normals(
+    state: CBFState, ctx: FilterContext, p: np.ndarray, filtered: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The filtered vehicles near an obstacle: rows, signed distances, unit normals.
+
+    For each candidate pair of a filtered vehicle's look-ahead point ``p`` and a static
+    obstacle: the vehicle's row, the signed distance of ``p`` to the surface [m] and
+    the unit normal away from it there; None when there is no such pair.
+    """
+    field = ctx.obstacle_field
+    if field is None or field.empty:
+        return None
+    rows, cols = state.neighbours.obstacle_pairs(p, field)
+    keep = np.flatnonzero(filtered[rows])
+    rows, cols = rows[keep], cols[keep]
+    if not len(rows):
+        return None
+    signed, point = field.pair_distance(p, rows, cols)
+    away = (p[rows] - point) * np.where(signed < 0, -1.0, 1.0)[:, None]
+    norm = np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)
+    away /= norm[:, None]
+    return rows, signed, away
+
+
 def braking_rows(
     state: CBFState, ctx: FilterContext, filtered: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -166,26 +190,19 @@ def braking_rows(
         out_b.append(rho * budget - np.einsum("kd,kd->k", unit, w_hat[me]))
         out_h.append(h)
 
-    field = ctx.obstacle_field
-    if field is not None and not field.empty:
-        rows, cols = state.neighbours.obstacle_pairs(p, field)
-        keep = np.flatnonzero(filtered[rows])
-        rows, cols = rows[keep], cols[keep]
-        if len(rows):
-            signed, point = field.pair_distance(p, rows, cols)
-            away = (p[rows] - point) * np.where(signed < 0, -1.0, 1.0)[:, None]
-            norm = np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)
-            away /= norm[:, None]
-            gap = signed - (0.5 * d[rows] + state.look + state.margin)
-            closing = -np.einsum("kd,kd->k", away, w_hat[rows])
-            a_me = along_line(-np.einsum("kd,kd->k", away, heading[rows]), room, rows)
-            budget = braking_speed(gap, BRAKING_SHARE * a_me, lag) - closing
-            h = budget + a_me * dt
-            h = np.where(gap >= 0, h, np.minimum(h, gap))
-            out_v.append(rows)
-            out_a.append(-away)
-            out_b.append(budget - np.einsum("kd,kd->k", away, w_hat[rows]))
-            out_h.append(h)
+    near = obstacle_normals(state, ctx, p, filtered)
+    if near is not None:
+        rows, signed, away = near
+        gap = signed - (0.5 * d[rows] + state.look + state.margin)
+        closing = -np.einsum("kd,kd->k", away, w_hat[rows])
+        a_me = along_line(-np.einsum("kd,kd->k", away, heading[rows]), room, rows)
+        budget = braking_speed(gap, BRAKING_SHARE * a_me, lag) - closing
+        h = budget + a_me * dt
+        h = np.where(gap >= 0, h, np.minimum(h, gap))
+        out_v.append(rows)
+        out_a.append(-away)
+        out_b.append(budget - np.einsum("kd,kd->k", away, w_hat[rows]))
+        out_h.append(h)
     if not out_v:
         empty = np.zeros(0, dtype=np.intp)
         return empty, np.zeros((0, 2)), np.zeros(0), np.zeros(0)

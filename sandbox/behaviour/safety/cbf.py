@@ -152,6 +152,7 @@ from sandbox.behaviour.safety.braking import (
     braking_fallback,
     braking_range,
     braking_rows,
+    obstacle_normals,
 )
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
 from sandbox.geometry.neighbours import NeighbourList
@@ -501,21 +502,14 @@ def barrier_rows(
         out_a.append(-rel / dist[:, None])
         out_b.append(-rhs / (2.0 * dist))
 
-    field = ctx.obstacle_field
-    if field is not None and not field.empty:
-        rows, cols = state.neighbours.obstacle_pairs(p, field)
-        keep = np.flatnonzero(filtered[rows])
-        rows, cols = rows[keep], cols[keep]
-        if len(rows):
-            signed, point = field.pair_distance(p, rows, cols)
-            away = (p[rows] - point) * np.where(signed < 0, -1.0, 1.0)[:, None]
-            norm = np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)
-            away /= norm[:, None]
-            clearance = 0.5 * d[rows] + look + margin
-            least = min(least, float(np.min(signed - clearance)))
-            out_v.append(rows)
-            out_a.append(-away)
-            out_b.append(gamma * (signed - clearance))
+    near = obstacle_normals(state, ctx, p, filtered)
+    if near is not None:
+        rows, signed, away = near
+        clearance = 0.5 * d[rows] + look + margin
+        least = min(least, float(np.min(signed - clearance)))
+        out_v.append(rows)
+        out_a.append(-away)
+        out_b.append(gamma * (signed - clearance))
     if found is not None:
         found["min_barrier"] = least
     if not out_v:
