@@ -193,24 +193,28 @@ def smooth(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.
     return np.clip((np.tanh(steepness * (c - dist) / w) + t) / (2.0 * t), 0.0, 1.0)
 
 
-@register_strategy("none")
+@register_strategy("none", batched=True)
 def no_recovery(ctx: StrategyContext) -> tuple[np.ndarray, np.ndarray]:
     """No recovery: targets are never shifted."""
     return np.zeros((ctx.n, 2)), np.zeros(ctx.n, dtype=bool)
 
 
 WEIGHTS["none"] = no_avoidance
-register_strategy("discontinuous", {"beta": BETA, "tangential": TANGENTIAL})(
+register_strategy(
+    "discontinuous", {"beta": BETA, "tangential": TANGENTIAL}, batched=True
+)(
     _weighted("discontinuous", discontinuous)
 )
 register_strategy(
     "continuous",
     {"beta": BETA, "r": SMALL_R, "tangential": TANGENTIAL},
+    batched=True,
     check=_inner_radius,
 )(_weighted("continuous", continuous))
 register_strategy(
     "smooth",
     {"beta": BETA, "r": SMALL_R, "steepness": STEEPNESS, "tangential": TANGENTIAL},
+    batched=True,
     check=_inner_radius,
 )(_weighted("smooth", smooth))
 

@@ -1,51 +1,62 @@
-"""The fixed-step simulation loop, step-wise: sense, plan, act, record, advance.
+"""The fixed-step simulation loop, for one world or K worlds of one structure at once.
 
-Every control period ``h = dt`` runs these stages over whole-fleet arrays:
+Every control period ``h = dt`` runs these stages over the stacked arrays of all
+worlds' vehicles (``K * n`` rows, world after world; a single run is K = 1):
 
-1. **sense** (:meth:`Simulation._sense`): read all vehicles' poses from the physics in
-   one bulk call; a non-finite or runaway state ends the run as ``diverged``;
+1. **sense** (:meth:`Simulation._sense`): read every world's poses from the physics;
+   a world whose state is non-finite or runaway ends alone as ``diverged``; each
+   world's broadcast (``sensing:``) draws from its own random stream;
 2. **plan** (:meth:`Simulation._plan`): evaluate the reference and the formation law
-   (each vehicle's slot, ``x_ref'``, ``x_ref''``), start the failures due now, shift
-   the targets by the recovery strategy (eqs. (21)-(27));
-3. **act** (:meth:`Simulation._act`): advance the flatness controller (eqs. (5)-(6))
-   for the whole fleet, then apply open-loop schedules, the user's overrides and the
-   failures;
-4. **record** a sample every ``record_every`` periods;
+   (each vehicle's slot, ``x_ref'``, ``x_ref''``), start the failures due now, ask
+   the detector what has failed, re-form on a change, shift the targets by the
+   recovery strategy (eqs. (21)-(27));
+3. **act** (:meth:`Simulation._act`): advance the flatness controller (eqs. (5)-(6)),
+   filter the commands for safety, then apply open-loop schedules, the user's
+   overrides and the failures, in that order;
+4. **record** a sample every ``record_every`` periods, and the loop metrics;
 5. **advance**: write the commands to the physics and step it ``substeps`` times.
+
+The built-in laws and strategies (and a plug-in registered with ``batched=True``)
+are called once for all worlds; the detector, the reconfiguration, the safety filter,
+command schedules and plug-ins without the flag are called world by world inside the
+same loop (:mod:`sandbox.loop.worlds`). Each world's numbers are those it has alone:
+the functions are elementwise over rows, neighbour pairs never cross worlds, and
+every world keeps its own random streams, memories and contact episodes.
 
 :meth:`Simulation.step` runs one period with optional overrides and returns an
 :class:`~sandbox.loop.observation.Observation`; :meth:`Simulation.run` is the loop of
-steps without overrides, and :meth:`Simulation.result` the recorded
-:class:`~sandbox.Run`. The physics is reached only through the
-:class:`~sandbox.physics.Physics` interface. Nothing here draws or computes metrics.
+steps without overrides; :meth:`Simulation.batch` runs many scenarios, stacking those
+of one structure. The physics is reached only through
+:class:`~sandbox.loop.stepping.WorldsPhysics`. Nothing here draws or computes metrics.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from sandbox.behaviour.detection import Detection
 from sandbox.behaviour.reconfigure import Reconfiguration
-from sandbox.behaviour.sensing import make_broadcast
 from sandbox.errors import PluginRunError
-from sandbox.geometry.neighbours import NeighbourList
+from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList
 from sandbox.loop.divergence import diverged
 from sandbox.loop.observation import Observation, Overrides, override_rows
-from sandbox.loop.run_info import run_description
-from sandbox.loop.state import Fleet
-from sandbox.model.failures import FailureSchedule
-from sandbox.model.flatness import (
-    Gains,
-    advance_extension,
-    extension_rate,
-    flat_inputs,
+from sandbox.loop.plan import Plan, structure_key
+from sandbox.loop.recording import WorldsRecorder
+from sandbox.loop.state import Fleet, uniform
+from sandbox.loop.stepping import WorldsPhysics
+from sandbox.loop.tally import LoopTally
+from sandbox.loop.worlds import (
+    StackedDifference,
+    StackedFailures,
+    WorldDifference,
+    WorldPairs,
+    WorldState,
 )
-from sandbox.model.laws import BackwardDifference
-from sandbox.model.obstacle_field import ObstacleField
+from sandbox.model.flatness import Gains, advance_extension, extension_rate, flat_inputs
+from sandbox.model.references import TABULATED_REFERENCES
 from sandbox.physics.interface import Physics
 from sandbox.physics.world import World
 from sandbox.plugins.registration import (
@@ -56,7 +67,6 @@ from sandbox.plugins.registration import (
     make_law,
     runnable,
 )
-from sandbox.run.metrics import LoopMetrics
 from sandbox.run.record import (
     MODE_AVOID,
     MODE_EXTERNAL,
@@ -65,15 +75,13 @@ from sandbox.run.record import (
     STATUS_DIVERGED,
     STATUS_ERROR,
     STATUS_INTERRUPTED,
-    STATUS_OK,
     Run,
 )
-from sandbox.run.recorder import Recorder
 from sandbox.scenario import Scenario
 
 
 class Simulation:
-    """One run of a scenario.
+    """One run of a scenario; or, built with :meth:`stacked`, K runs stepped together.
 
     Parameters
     ----------
@@ -100,174 +108,290 @@ class Simulation:
     ...     obs = sim.step(commands={"red": (0.2, 0.0)} if obs.t < 0.5 else None)
     >>> sim.result().mode[:3, 0].tolist()  # 3: external
     [3, 3, 3]
+
+    Three seeds at once, each run the bytes it has alone:
+
+    >>> runs = Simulation.batch([load_scenario({**doc, "seed": s}) for s in range(3)])
+    >>> [r.pose.shape for r in runs]
+    [(101, 1, 3), (101, 1, 3), (101, 1, 3)]
     """
 
     def __init__(self, scenario: Scenario, world: Physics | None = None) -> None:
-        self.scenario = scenario
-        self.h = scenario.dt
-        self.steps = int(round(scenario.duration / scenario.dt))
-        self.fleet = Fleet.from_scenario(scenario)
-        self.world: Physics = (
-            world
-            if world is not None
-            else World(
-                scenario.vehicles,
-                scenario.obstacles,
-                scenario.metrics.contact_release,
-                scenario.substeps,
+        self._build([scenario], [world])
+
+    @classmethod
+    def stacked(
+        cls,
+        scenarios: Sequence[Scenario],
+        worlds: Sequence[Physics | None] | None = None,
+    ) -> Simulation:
+        """K runs of one structure (:func:`~sandbox.loop.plan.structure_key`) at once.
+
+        The step API then takes and gives one world at a time (``world=w``) or
+        arrays with a leading world axis; :meth:`results` returns one
+        :class:`~sandbox.Run` per world.
+
+        Raises
+        ------
+        ValueError
+            The scenarios differ in structure (:meth:`batch` groups them instead).
+        """
+        sim = cls.__new__(cls)
+        scenarios = list(scenarios)
+        sim._build(scenarios, list(worlds) if worlds else [None] * len(scenarios))
+        return sim
+
+    @classmethod
+    def batch(
+        cls,
+        scenarios: Sequence[Scenario],
+        should_stop: Callable[[], bool] | None = None,
+        group_size: int = 128,
+    ) -> list[Run] | None:
+        """Run scenarios, those of one structure stepped together; one Run each.
+
+        Scenarios are grouped by :func:`~sandbox.loop.plan.structure_key` (never
+        refused, never mixed), in groups of at most ``group_size`` worlds; the runs
+        come back in the order of ``scenarios``, each byte for byte the run it is
+        alone. ``should_stop`` is polled every step; when it returns True the batch
+        stops and None is returned.
+        """
+        scenarios = list(scenarios)
+        groups: dict[str, list[int]] = {}
+        for k, sc in enumerate(scenarios):
+            groups.setdefault(structure_key(sc), []).append(k)
+        out: list[Run | None] = [None] * len(scenarios)
+        for members in groups.values():
+            for start in range(0, len(members), group_size):
+                part = members[start : start + group_size]
+                sim = cls.stacked([scenarios[k] for k in part])
+                runs = sim.run_all(should_stop)
+                if runs is None:
+                    return None
+                for k, run in zip(part, runs, strict=True):
+                    out[k] = run
+        return out  # type: ignore[return-value]
+
+    # ------------------------------------------------------------------ set-up
+    def _build(self, scenarios: list[Scenario], worlds: list[Physics | None]) -> None:
+        first = scenarios[0]
+        self.scenario = first
+        self.K = K = len(scenarios)
+        self.h = first.dt
+        self.steps = int(round(first.duration / first.dt))
+        self.substeps, self.record_every = first.substeps, first.record_every
+        physics = [
+            w if w is not None else World(
+                sc.vehicles, sc.obstacles, sc.metrics.contact_release, sc.substeps
             )
-        )
-        self.names = [v.name for v in scenario.vehicles]
-        self.leader = scenario.leader_index
-        self.reference = scenario.reference.build() if scenario.reference else None
-        law_spec = scenario.formation
-        self.law = (
-            make_law(law_spec.law, law_spec.params, self.fleet.offset, self.h)
-            if law_spec
-            else None
-        )
-        self.law_params = dict(law_spec.params) if law_spec else {}
-        self.law_memory: dict = {}
-        self.strategy = runnable(get("strategy", scenario.recovery.strategy))
-        self.strategy_params = dict(scenario.recovery.params)
-        self.obstacles = ObstacleField(scenario.obstacles)
-        self.failures = FailureSchedule(scenario.failures, self.names)
-        self.shift_motion = BackwardDifference(self.h)
-        # The safety filter (safety:); None with filter none: not called at all.
-        safety = scenario.safety
-        self._filter = (
-            None if safety.filter == "none" else runnable(get("filter", safety.filter))
-        )
-        self._filter_memory: dict = {}
-        self._filter_stats: dict = {}
-        self._filter_started = False
-        # What the vehicles see of each other (None: the truth; behaviour.sensing).
-        self.broadcast = make_broadcast(scenario.sensing, self.h, scenario.seed)
-        self._sensing = asdict(scenario.sensing)
-        #: The broadcast poses received at t_k, shape (n, 3), or None without sensing.
-        self.seen: np.ndarray | None = None
-        n = self.fleet.n
-        # Vehicles that track the reference itself (eq. (6)) rather than a slot.
-        self.tracks_reference = np.zeros(n, dtype=bool)
-        if self.law is None:
-            self.tracks_reference[:] = True
-        elif get("law", law_spec.law).options["needs_leader"] and self.leader >= 0:
-            self.tracks_reference[self.leader] = True
-        self.tracks_reference &= ~self.fleet.commanded
-        self._schedules = {
-            i: np.array(v.drive.schedule, dtype=float)
-            for i, v in enumerate(scenario.vehicles)
-            if v.drive.type == "commands"
-        }
+            for sc, w in zip(scenarios, worlds, strict=True)
+        ]
+        fleets = [Fleet.from_scenario(sc) for sc in scenarios]
+        self.states = [
+            WorldState(sc, w, f) for sc, w, f in zip(scenarios, physics, fleets, strict=True)
+        ]
+        if K > 1:
+            keys = {structure_key(sc) for sc in scenarios}
+            if len(keys) > 1:
+                raise ValueError(
+                    "Simulation.stacked: the scenarios differ in structure; "
+                    "use Simulation.batch, which groups them"
+                )
+        self.n = n = fleets[0].n
+        self.N = N = K * n
+        self.fleet = Fleet.stack(fleets)
+        self.physics = WorldsPhysics(physics, n, self.substeps)
+        self.live = np.ones(K, dtype=bool)
+        s0 = self.states[0]
+        self.rec = s0.rec
+        self.reference = s0.reference
+        self._ref_table = None
+        if type(self.reference) in TABULATED_REFERENCES:
+            times = np.array([k * self.h for k in range(self.steps + 1)])
+            self._ref_table = self.reference.evaluate(times)
+        self._setup_law(first)
+        self._setup_strategy()
+        self._setup_limits()
+        self.failures = StackedFailures([s.failures for s in self.states], n)
+        self.shift_motion = StackedDifference(self.h, K, n)
+        for w, state in enumerate(self.states):
+            state.shift_motion = WorldDifference(self.shift_motion, w)
+        # Stacked flags of which each world's are views (a reconfiguration edits them).
+        self.tracks_reference = np.concatenate([s.tracks_reference for s in self.states])
+        self._avoid_candidates = np.concatenate([s._avoid_candidates for s in self.states])
+        for w, state in enumerate(self.states):
+            rows = slice(w * n, (w + 1) * n)
+            state.tracks_reference = self.tracks_reference[rows]
+            state._avoid_candidates = self._avoid_candidates[rows]
         self._track_rows = np.flatnonzero(self.tracks_reference)
         self._commanded_rows = np.flatnonzero(self.fleet.commanded)
-        # Every time at which some schedule changes row, and the rows in force now.
-        self._schedule_rows = np.array(list(self._schedules), dtype=np.intp)
-        self._schedule_changes = np.unique(
-            np.concatenate([tab[:, 0] for tab in self._schedules.values()] or [[]])
-        )
-        self._scheduled = np.zeros((len(self._schedules), 2))
-        self._next_change = 0
-        # Parameters shared by the whole fleet are used as scalars on the hot path (the
-        # same values, broadcast, without streaming (n,) arrays through every step).
-        fl = self.fleet
-        keys = ("k1", "k2", "k3", "k4", "kp")
-        self._gains = Gains(**{k: _uniform(getattr(fl.gains, k)) for k in keys})
-        self._v1_max = _uniform(fl.v1_max)
-        self._v2_max = _uniform(fl.v2_max)
-        self._accel_max = _uniform(fl.accel_max)
-        # The turn-rate limit of the anti-windup: None when no vehicle has one.
-        self._turn_max = None if np.all(np.isinf(fl.v2_max)) else self._v2_max
-        # The loop's state: step index, record, status, and what recovery needs.
-        self.rec = scenario.recovery
-        self._avoid_candidates = ~fl.commanded
-        if not self.rec.leader_avoids and self.leader >= 0:
-            self._avoid_candidates[self.leader] = False
-        self._neighbours = NeighbourList(self.rec.R)
-        self._has_failures = len(self.failures.specs) > 0
-        self._failing = np.zeros(n, dtype=bool)
-        #: The vehicles the platoon believes failed at t_k, shape (n,) bool.
-        self.known_failed = np.zeros(n, dtype=bool)
-        # How it learns of failures: None = the oracle (the truth, at once).
-        self.detection = Detection.make(scenario, self.names)
+        self._sensing = s0.broadcast is not None
+        self.seen: np.ndarray | None = None
+        safety = first.safety
+        self._filter = None if safety.filter == "none" else runnable(get("filter", safety.filter))
+        self._filter_started = False
+        self._failing = np.zeros(N, dtype=bool)
+        self.known_failed = np.zeros(N, dtype=bool)
+        for state in self.states:
+            state.detection = Detection.make(state.scenario, state.names)
+        self._detecting = s0.detection is not None
+        self._schedules = [w for w, s in enumerate(self.states) if s.schedules]
+        for state in self.states:
+            state.next_change, state.scheduled = 0, np.zeros((len(state.schedules), 2))
+            changes = [tab[:, 0] for tab in state.schedules.values()]
+            state.changes = np.unique(np.concatenate(changes or [[]]))
+            state.schedule_rows = np.array(list(state.schedules), dtype=np.intp)
         self.k = 0
-        self.status = STATUS_OK
-        self.info = run_description(scenario, self.reference)
-        self.failed_at: dict[str, float] = {}
-        self.recorder = Recorder(self.steps // scenario.record_every + 1, n)
-        self.tally = LoopMetrics(n, self.h)  # effort, closest approach, motor check
+        self.recorder = WorldsRecorder(self.steps // self.record_every + 1, K, n)
+        self.tally = LoopTally(K, n, self.h)
         self.plan: Plan | None = None
         self._recorded_target: np.ndarray | None = None
         self._closed = False
-        self._run: Run | None = None
+        self._runs: dict[int, Run] = {}
+        self._stopped = False
         self._wall = time.perf_counter()
         #: Wall time spent planning and acting (law, recovery, controller, filters).
         self._control_time = 0.0
-        # Slot reassignment and leader handover on events (None: keep every slot).
-        self.reconfiguration = Reconfiguration.build(self)
+        self._views_at = -1
+        self._view_worlds()
+        for state in self.states:  # slot reassignment and leader handover on events
+            state.reconfiguration = Reconfiguration.build(state)
+        self._reconfiguring = any(s.reconfiguration is not None for s in self.states)
         if self._sense():
             self._guarded(self._plan)
 
-    # ------------------------------------------------------------------ helpers
-    def _scheduled_commands(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
-        """Overwrite the open-loop vehicles' commands with their schedules at ``t``.
+    def _setup_law(self, first: Scenario) -> None:
+        """One law for all worlds, or each world's own (see the module docstring)."""
+        spec = first.formation
+        self.law_params = dict(spec.params) if spec else {}
+        self.law_memory: dict = {}
+        per_world = False
+        if spec is not None:
+            plugin = get("law", spec.law)
+            reconfigure = first.reconfigure.assign != "none" or (
+                first.on_leader_failure != "keep"
+            )
+            per_world = reconfigure or not plugin.options.get("batched", False)
+        self._law_per_world = per_world
+        self.leader = first.leader_index
+        if spec is None or per_world:
+            self.law = None if spec is None else self.states[0].law
+            return
+        offset = self.fleet.offset.reshape(self.K, self.n, 2)
+        self.law = make_law(spec.law, spec.params, offset, self.h)
 
-        A row ``(t_k, v1, v2)`` holds from ``t_k`` until the next row (zero before the
-        first). The rows in force are looked up only when ``t`` passes a row time of
-        some schedule, so a step costs two array writes however many such vehicles.
+    def _setup_strategy(self) -> None:
+        s0 = self.states[0]
+        self.strategy = s0.strategy
+        plugin = get("strategy", s0.scenario.recovery.strategy)
+        self._strategy_per_world = not plugin.options.get("batched", False)
+        params = dict(s0.strategy_params)
+        if "beta" in params:
+            betas = [s.strategy_params["beta"] for s in self.states]
+            if any(b != betas[0] for b in betas):
+                params["beta"] = np.repeat(np.array(betas, dtype=float), self.n)[:, None]
+        self.strategy_params = params
+        self.obstacles = s0.obstacles
+        if self.n <= BRUTE_FORCE_MAX:
+            self.neighbours = WorldPairs(self.K, self.n, self.rec.R)
+        else:  # one world (structure_key): the Verlet list of a large fleet
+            self.neighbours = NeighbourList(self.rec.R)
+
+    def _setup_limits(self) -> None:
+        """Gains and limits: scalars when equal over every row, else row arrays."""
+        fl = self.fleet
+        keys = ("k1", "k2", "k3", "k4", "kp")
+        self._gains = Gains(**{k: uniform(getattr(fl.gains, k)) for k in keys})
+        self._v1_max = uniform(fl.v1_max)
+        self._v2_max = uniform(fl.v2_max)
+        self._accel_max = uniform(fl.accel_max)
+        # The turn-rate limit of the anti-windup: None when no vehicle has one.
+        self._turn_max = None if np.all(np.isinf(fl.v2_max)) else self._v2_max
+
+    # ------------------------------------------------------------------ views
+    def _view_worlds(self) -> None:
+        """Point each world's fleet (and seen poses) at its rows of the stacked arrays.
+
+        Done once per period before the first world-by-world stage; a stage may
+        replace a world's arrays (a reconfiguration sets new offsets).
         """
-        changes, now = self._schedule_changes, t + 1e-12
-        if self._next_change < len(changes) and changes[self._next_change] <= now:
-            self._next_change = int(np.searchsorted(changes, now, side="right"))
-            for k, table in enumerate(self._schedules.values()):
-                row = np.searchsorted(table[:, 0], now, side="right") - 1
-                self._scheduled[k] = (table[row, 1], table[row, 2]) if row >= 0 else 0.0
-        v1[self._schedule_rows] = self._scheduled[:, 0]
-        v2[self._schedule_rows] = self._scheduled[:, 1]
+        if self._views_at == self.k and self.K > 1:
+            return
+        self._views_at = self.k
+        fl, n = self.fleet, self.n
+        if self.K == 1:
+            s = self.states[0]
+            s.fleet, s.seen, s.known_failed = fl, self.seen, self.known_failed
+            return
+        for w, s in enumerate(self.states):
+            rows = slice(w * n, (w + 1) * n)
+            f = s.fleet
+            f.pos, f.theta, f.vel, f.chi = fl.pos[rows], fl.theta[rows], fl.vel[rows], fl.chi[rows]
+            f.v1, f.v2, f.mode, f.failed = fl.v1[rows], fl.v2[rows], fl.mode[rows], fl.failed[rows]
+            s.seen = None if self.seen is None else self.seen[rows]
+            s.known_failed = self.known_failed[rows]
 
-    def law_context(
-        self,
-        t: float,
-        ref: tuple[np.ndarray, ...] | None,
-        offset: np.ndarray | None = None,
-        memory: dict | None = None,
-    ) -> LawContext:
-        """What the formation law sees at ``t``, the reference ``ref`` evaluated there.
+    def _rows(self, w: int) -> slice:
+        return slice(w * self.n, (w + 1) * self.n)
 
-        The followers read the leader's broadcast pose (the truth without sensing).
-        ``offset`` and ``memory`` default to the fleet's offsets and the law's memory;
-        a reconfiguration passes others to try or re-seed the law.
+    def _live_worlds(self) -> list[int]:
+        return [int(w) for w in np.flatnonzero(self.live)]
+
+    # ------------------------------------------------------------------ stages
+    def _sense(self) -> bool:
+        """Read every live world's state at ``t_k``; False when none is left.
+
+        A diverged world ends alone: its sample is recorded as it is (slots and
+        targets NaN, the last commands and modes), its status becomes ``diverged``.
         """
-        fleet, lead, seen = self.fleet, self.leader, self.seen
-        if lead < 0:
-            leader_pos = leader_theta = None
-        elif seen is None:
-            leader_pos, leader_theta = fleet.pos[lead], float(fleet.theta[lead])
-        else:
-            leader_pos, leader_theta = seen[lead, :2], float(seen[lead, 2])
-        return LawContext(
-            t=t,
-            dt=self.h,
-            pos=fleet.pos,
-            theta=fleet.theta,
-            vel=fleet.vel,
-            offset=fleet.offset if offset is None else offset,
-            leader=lead,
-            leader_pos=leader_pos,
-            leader_theta=leader_theta,
-            reference=ref,
-            params=self.law_params,
-            memory=self.law_memory if memory is None else memory,
-        )
+        fleet, t = self.fleet, self.k * self.h
+        pos, theta, vel = self.physics.read()
+        if self.K > 1 and not self.live.all():
+            chi = fleet.chi.reshape(self.K, self.n, 2)
+            chi[~self.live] = 0.0
+        fleet.pos, fleet.theta, fleet.vel = pos, theta, vel
+        self.finite = diverged(fleet) is None
+        if not self.finite:
+            for w in self._live_worlds():
+                bad = diverged(_RowsView(fleet, self._rows(w)))
+                if bad is None:
+                    continue
+                state = self.states[w]
+                state.info["diverged"] = {
+                    "t": t,
+                    "vehicle": state.names[bad[0]],
+                    "reason": bad[1],
+                }
+                self._end_world(w, STATUS_DIVERGED)
+            self.finite = self.live.all() and diverged(fleet) is None
+        if not self.live.any():
+            return False
+        if self._sensing:
+            seen = np.zeros((self.N, 3)) if self.seen is None else self.seen.copy()
+            for w in self._live_worlds():
+                rows = self._rows(w)
+                seen[rows] = self.states[w].broadcast.update(pos[rows], theta[rows])
+            self.seen = seen
+        return True
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
         """Slots, reference point, and the law's ``x_ref'``, ``x_ref''`` at ``t``."""
-        n = self.fleet.n
-        ref = self.reference.evaluate(t) if self.reference is not None else None
-        if self.law is not None:
-            triple = self.law.targets(self.law_context(t, ref))
+        K, n, N = self.K, self.n, self.N
+        if self._ref_table is not None:
+            ref = tuple(a[self.k] for a in self._ref_table)
+        elif self.reference is not None:
+            ref = self.reference.evaluate(t)
         else:
-            triple = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
+            ref = None
+        if self.law is None:
+            triple = [np.zeros((N, 2)), np.zeros((N, 2)), np.zeros((N, 2))]
+        elif self._law_per_world:
+            triple = self._world_law_targets(t, ref)
+        else:
+            triple = [
+                np.broadcast_to(a, (K, n, 2)).reshape(N, 2)
+                for a in self.law.targets(self._law_context(t, ref))
+            ]
         tr, cmd = self._track_rows, self._commanded_rows
         if (ref is not None and len(tr)) or len(cmd):
             # Copies: the law may keep (or broadcast) what it returned.
@@ -280,89 +404,175 @@ class Simulation:
         point = ref[0] if ref is not None else np.full(2, np.nan)
         return slot, v_ref, a_ref, point
 
-    # ------------------------------------------------------------------ stages
-    def _sense(self) -> bool:
-        """Read the fleet state from the physics at ``t_k``; False if it diverged.
+    def _law_context(self, t: float, ref: tuple | None) -> LawContext:
+        """What the one law of all worlds sees: arrays with a leading world axis."""
+        K, n, lead, fl = self.K, self.n, self.leader, self.fleet
+        if lead < 0:
+            leader_pos = leader_theta = None
+        else:
+            src = fl.pos if self.seen is None else self.seen[:, :2]
+            heading = fl.theta if self.seen is None else self.seen[:, 2]
+            leader_pos = np.ascontiguousarray(src.reshape(K, n, 2)[:, lead : lead + 1])
+            leader_theta = np.ascontiguousarray(heading.reshape(K, n)[:, lead : lead + 1])
+        return LawContext(
+            t=t,
+            dt=self.h,
+            pos=fl.pos.reshape(K, n, 2),
+            theta=fl.theta.reshape(K, n),
+            vel=fl.vel.reshape(K, n, 2),
+            offset=fl.offset.reshape(K, n, 2),
+            leader=lead,
+            leader_pos=leader_pos,
+            leader_theta=leader_theta,
+            reference=ref,
+            params=self.law_params,
+            memory=self.law_memory,
+        )
 
-        A diverged state ends the run: its sample is recorded as it is (slots and
-        targets NaN, the last commands and modes) and the status becomes ``diverged``.
-        """
-        fleet, t = self.fleet, self.k * self.h
-        state = self.world.read_state()
-        fleet.pos, fleet.theta, fleet.vel = state.pos, state.theta, state.vel
-        bad = diverged(fleet)
-        if bad is None:
-            if self.broadcast is not None:
-                self.seen = self.broadcast.update(fleet.pos, fleet.theta)
-            return True
-        n = fleet.n
-        self.status = STATUS_DIVERGED
-        self.info["diverged"] = {
-            "t": t,
-            "vehicle": self.names[bad[0]],
-            "reason": bad[1],
-        }
-        self.plan = Plan.undefined(n, failed=fleet.failed)
-        self._record(self.plan, fleet.mode, fleet.failed, always=True)
-        self._finish()
-        return False
+    def _world_law_targets(self, t: float, ref: tuple | None) -> list[np.ndarray]:
+        """Each world's own law on its rows (reconfiguring worlds, plug-in laws)."""
+        self._view_worlds()
+        out = [np.zeros((self.N, 2)) for _ in range(3)]
+        for w in self._live_worlds():
+            s, rows = self.states[w], self._rows(w)
+            try:
+                parts = s.law.targets(s.law_context(t, ref))
+            except PluginRunError as exc:
+                self._plugin_failed(w, exc)
+                continue
+            for a, part in zip(out, parts, strict=True):
+                a[rows] = part
+        return out
 
     def _plan(self) -> None:
-        """What the built-in stack would do at ``t_k``: slots, failures, recovery.
+        """What the built-in stack does at ``t_k``: slots, failures, recovery.
 
-        Evaluates the reference and the formation law (slots and the law's
-        ``x_ref'``, ``x_ref''``), starts the failures due now, and shifts the targets
-        by the recovery strategy (eqs. (21)-(27)). The result is :attr:`plan`, which
+        Evaluates the reference and the formation law, starts the failures due now,
+        asks the detector what has failed, re-forms, and shifts the targets by the
+        recovery strategy (eqs. (21)-(27)). The result is :attr:`plan`, which
         :meth:`observe` shows and :meth:`_act` consumes (with any overrides).
         """
-        fleet, t, n, rec = self.fleet, self.k * self.h, self.fleet.n, self.rec
+        fleet, t = self.fleet, self.k * self.h
         slot, v_ref, a_ref, point = self._targets(t)
         failing = self._failing
-        if self._has_failures:
-            new = self.failures.start_new(t, fleet.v2)
-            for i in self.failures.immovable(new):
-                self.world.immobilize(i)
+        fs = self.failures
+        if len(fs):
+            new = fs.start_new(t, self.live, fleet.v2)
             for j in new:
-                self.failed_at.setdefault(self.failures.specs[j].vehicle, t)
-            failing = np.zeros(n, dtype=bool)
-            failing[self.failures.vehicle[self.failures.active(t)]] = True
+                w = int(fs.world[j])
+                if fs.immovable[j]:
+                    self.physics.immobilize(w, int(fs.local[j]))
+                self.states[w].failed_at.setdefault(fs.specs[j].vehicle, t)
+            failing = fs.active_vehicles(t, self.live)
         # What the platoon believes has failed; everything below reacts to this,
         # never to the truth. The oracle: the truth, known at once.
         known = failing
-        if self.detection is not None:  # else what the detector has found
-            known = self.detection.update(self, t, failing)
+        if self._detecting:
+            known = self._detect(t, failing)
         self.known_failed = known
-        if self.reconfiguration is not None:  # re-forms when `known` changes
-            self.reconfiguration.react(self, t, known)
+        if self._reconfiguring:  # re-forms when `known` changes
+            self._reconfigure(t, known)
         may_avoid = self._avoid_candidates & ~known
-        shift, active = self.strategy(
-            StrategyContext(
-                t=t,
-                dt=self.h,
-                pos=fleet.pos,
-                theta=fleet.theta,
-                vel=fleet.vel,
-                slot=slot,
-                diameter=fleet.diameter,
-                may_avoid=may_avoid,
-                failed=known,
-                params=self.strategy_params,
-                R=rec.R,
-                obstacle_field=self.obstacles,
-                neighbours=self._neighbours,
-                seen_pos=None if self.seen is None else self.seen[:, :2],
+        if self._strategy_per_world:
+            shift, active = self._world_strategy(t, slot, may_avoid, known)
+        else:
+            shift, active = self.strategy(
+                self._strategy_context(t, slot, may_avoid, known)
             )
-        )
         # a strategy never moves a vehicle that may not avoid
         shift = np.where(may_avoid[:, None], shift, 0.0)
         active = np.asarray(active, dtype=bool) & may_avoid
         target = slot + shift  # eq. (22) / (26)
-        if rec.target_derivatives == "estimate":
+        if self.rec.target_derivatives == "estimate":
             d_shift, dd_shift = self.shift_motion.update(shift)
             v_ref = v_ref + d_shift
             a_ref = a_ref + dd_shift
         self._failing = failing
+        if self.K > 1:
+            point = np.broadcast_to(point, (self.K, 2))
+        if self.K == 1 and not self.live[0]:
+            return  # a plug-in failed: the plan stays undefined
         self.plan = Plan(slot, target, v_ref, a_ref, point, active, failing)
+
+    def _strategy_context(self, t, slot, may_avoid, known) -> StrategyContext:
+        fl = self.fleet
+        return StrategyContext(
+            t=t,
+            dt=self.h,
+            pos=fl.pos,
+            theta=fl.theta,
+            vel=fl.vel,
+            slot=slot,
+            diameter=fl.diameter,
+            may_avoid=may_avoid,
+            failed=known,
+            params=self.strategy_params,
+            R=self.rec.R,
+            obstacle_field=self.obstacles,
+            neighbours=self.neighbours,
+            seen_pos=None if self.seen is None else self.seen[:, :2],
+        )
+
+    def _world_strategy(self, t, slot, may_avoid, known) -> tuple[np.ndarray, ...]:
+        """A strategy without ``batched=True``, called world by world."""
+        self._view_worlds()
+        shift, active = np.zeros((self.N, 2)), np.zeros(self.N, dtype=bool)
+        for w in self._live_worlds():
+            s, rows = self.states[w], self._rows(w)
+            f = s.fleet
+            ctx = StrategyContext(
+                t=t,
+                dt=self.h,
+                pos=f.pos,
+                theta=f.theta,
+                vel=f.vel,
+                slot=slot[rows],
+                diameter=self.fleet.diameter[rows],
+                may_avoid=may_avoid[rows],
+                failed=known[rows],
+                params=s.strategy_params,
+                R=s.rec.R,
+                obstacle_field=s.obstacles,
+                neighbours=s.neighbours,
+                seen_pos=None if s.seen is None else s.seen[:, :2],
+            )
+            try:
+                out = s.strategy(ctx)
+            except PluginRunError as exc:
+                self._plugin_failed(w, exc)
+                continue
+            shift[rows], active[rows] = out[0], out[1]
+        return shift, active
+
+    def _detect(self, t: float, failing: np.ndarray) -> np.ndarray:
+        """Each world's detector: what its platoon believes has failed."""
+        self._view_worlds()
+        known = np.zeros(self.N, dtype=bool)
+        for w in self._live_worlds():
+            s, rows = self.states[w], self._rows(w)
+            try:
+                known[rows] = s.detection.update(s, t, failing[rows])
+            except PluginRunError as exc:
+                self._plugin_failed(w, exc)
+        return known
+
+    def _reconfigure(self, t: float, known: np.ndarray) -> None:
+        """Each world's reconfiguration reacts to what its platoon believes."""
+        self._view_worlds()
+        for w in self._live_worlds():
+            s = self.states[w]
+            if s.reconfiguration is None:
+                continue
+            s.known_failed = known[self._rows(w)]
+            try:
+                s.reconfiguration.react(s, t, known[self._rows(w)])
+            except PluginRunError as exc:
+                self._plugin_failed(w, exc)
+            self.fleet.offset[self._rows(w)] = s.fleet.offset
+        self._track_rows = np.flatnonzero(self.tracks_reference)
+        if self.K == 1:
+            self.leader = self.states[0].leader
+            self.law, self.law_params = self.states[0].law, self.states[0].law_params
 
     def _act(
         self,
@@ -372,10 +582,11 @@ class Simulation:
     ) -> np.ndarray:
         """Commands for the period from ``t_k``: controller, overrides, failures.
 
-        Advances the flatness controller (eqs. (5)-(6)) for the whole fleet towards
-        the planned targets (or the overridden ones), applies the open-loop schedules,
-        the user's command overrides (within the vehicle's limits) and the failures, in
-        that order. Sets ``fleet.v1, v2, failed, mode``; returns ``chi`` for ``t_k+1``.
+        Advances the flatness controller (eqs. (5)-(6)) for every vehicle towards the
+        planned targets (or the overridden ones), filters them for safety, applies the
+        open-loop schedules, the user's command overrides (within the vehicle's
+        limits) and the failures, in that order. Sets ``fleet.v1, v2, failed, mode``;
+        returns ``chi`` for ``t_k+1``.
         """
         fleet, plan, h, t = self.fleet, self.plan, self.h, self.k * self.h
         target, v_ref, a_ref = plan.target, plan.v_ref, plan.a_ref
@@ -392,7 +603,6 @@ class Simulation:
             v_ref = np.where(mask[:, None], 0.0, v_ref)
             a_ref = np.where(mask[:, None], 0.0, a_ref)
         aim = np.where(np.isnan(target), fleet.pos, target)
-
         gains = self._gains
         chi_dot = extension_rate(fleet.pos, fleet.chi, aim, v_ref, a_ref, gains)
         aim = None
@@ -430,26 +640,29 @@ class Simulation:
             v2 = np.where(mask, np.clip(rows[:, 1], -self._v2_max, self._v2_max), v2)
             passive = passive | mask
             external = mask if external is None else external | mask
-        if self.detection is not None:  # what the controllers ask for, broadcast
-            self.detection.intended = np.column_stack((v1, v2))
+        if self._detecting:  # what the controllers ask for, broadcast
+            for w in self._live_worlds():
+                rows = self._rows(w)
+                self.states[w].detection.intended = np.column_stack((v1[rows], v2[rows]))
         # The drive executes a failure within its acceleration limit (a crash aside).
-        v1, v2, failed, frozen = self.failures.apply(
-            t, v1, v2, fleet.v1, self._accel_max * h
+        v1, v2, failed, frozen, errors = self.failures.apply(
+            t, self.live, v1, v2, fleet.v1, self._accel_max * h
         )
-        if self.detection is not None:
+        for w, exc in errors:  # a failure plug-in failed: its world ends now
+            self._plugin_failed(w, exc)
+        if self._detecting:
             # A failed controller does not know: it keeps its own state until the
             # failure ends (then it resumes from the applied velocity).
-            frozen = frozen & ~self.failures.active_vehicles(t + h)
+            frozen = frozen & ~self.failures.active_vehicles(t + h, self.live)
         # chi follows the applied velocity of passive vehicles, so that the law resumes
         # without a jump when the failure or the override ends.
         passive = frozen | passive
         if np.any(passive):
             heading = np.stack((np.cos(fleet.theta), np.sin(fleet.theta)), -1)
             chi_next[passive] = v1[passive, None] * heading[passive]
-
         fleet.v1, fleet.v2, fleet.failed = v1, v2, failed
-        self.world.failed = failed  # an episode starting now is not healthy
-        mode = np.full(fleet.n, MODE_FORMATION, dtype=np.int8)
+        self.physics.failed[:] = failed  # an episode starting now is not healthy
+        mode = np.full(self.N, MODE_FORMATION, dtype=np.int8)
         mode[plan.active] = MODE_AVOID
         if external is not None:
             mode[external] = MODE_EXTERNAL
@@ -462,39 +675,67 @@ class Simulation:
     def _safety(
         self, t: float, v1: np.ndarray, v2: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The safety filter's commands for the period (``safety:``)."""
-        fleet, started = self.fleet, self._filter_started
+        """The safety filter's commands for the period (``safety:``), world by world."""
+        started = self._filter_started
         self._filter_started = True
-        out = self._filter(
-            FilterContext(
+        self._view_worlds()
+        fl = self.fleet
+        v1_out, v2_out = v1.copy(), v2.copy()
+        for w in self._live_worlds():
+            s, rows = self.states[w], self._rows(w)
+            f = s.fleet
+            ctx = FilterContext(
                 t=t,
                 dt=self.h,
-                pos=fleet.pos,
-                theta=fleet.theta,
-                vel=fleet.vel,
-                v1=v1,
-                v2=v2,
-                diameter=fleet.diameter,
-                params=dict(self.scenario.safety.params),
-                v1_prev=fleet.v1 if started else None,
-                v2_prev=fleet.v2 if started else None,
-                v1_max=self._v1_max,
-                v2_max=self._v2_max,
-                accel_max=self._accel_max,
-                known_failed=self.known_failed,
-                commanded=fleet.commanded,
-                obstacle_field=self.obstacles,
-                seen=self.seen,
-                sensing=None if self.broadcast is None else self._sensing,
-                memory=self._filter_memory,
-                stats=self._filter_stats,
+                pos=f.pos,
+                theta=f.theta,
+                vel=f.vel,
+                v1=v1[rows],
+                v2=v2[rows],
+                diameter=fl.diameter[rows],
+                params=dict(s.scenario.safety.params),
+                v1_prev=fl.v1[rows] if started else None,
+                v2_prev=fl.v2[rows] if started else None,
+                v1_max=s.v1_max,
+                v2_max=s.v2_max,
+                accel_max=s.accel_max,
+                known_failed=self.known_failed[rows],
+                commanded=fl.commanded[rows],
+                obstacle_field=s.obstacles,
+                seen=None if self.seen is None else self.seen[rows],
+                sensing=None if s.broadcast is None else s.sensing,
+                memory=s.filter_memory,
+                stats=s.filter_stats,
             )
-        )
-        n = fleet.n
-        return (
-            np.broadcast_to(np.asarray(out[0], dtype=float), (n,)).copy(),
-            np.broadcast_to(np.asarray(out[1], dtype=float), (n,)).copy(),
-        )
+            try:
+                out = self._filter(ctx)
+            except PluginRunError as exc:
+                self._plugin_failed(w, exc)
+                continue
+            n = self.n
+            v1_out[rows] = np.broadcast_to(np.asarray(out[0], dtype=float), (n,))
+            v2_out[rows] = np.broadcast_to(np.asarray(out[1], dtype=float), (n,))
+        return v1_out, v2_out
+
+    def _scheduled_commands(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
+        """Overwrite the open-loop vehicles' commands with their schedules at ``t``.
+
+        A row ``(t_k, v1, v2)`` holds from ``t_k`` until the next row (zero before the
+        first). The rows in force are looked up only when ``t`` passes a row time of
+        some schedule of the world.
+        """
+        now = t + 1e-12
+        for w in self._schedules:
+            s = self.states[w]
+            changes = s.changes
+            if s.next_change < len(changes) and changes[s.next_change] <= now:
+                s.next_change = int(np.searchsorted(changes, now, side="right"))
+                for k, table in enumerate(s.schedules.values()):
+                    row = np.searchsorted(table[:, 0], now, side="right") - 1
+                    s.scheduled[k] = (table[row, 1], table[row, 2]) if row >= 0 else 0.0
+            rows = w * self.n + s.schedule_rows
+            v1[rows] = s.scheduled[:, 0]
+            v2[rows] = s.scheduled[:, 1]
 
     def _command_limits(self, v1: np.ndarray) -> np.ndarray:
         """User speeds within ``v1_max`` and, from the last speed, ``max_accel``."""
@@ -502,41 +743,47 @@ class Simulation:
         step = self._accel_max * self.h
         return np.clip(v1, self.fleet.v1 - step, self.fleet.v1 + step)
 
-    def _record(
-        self, plan: Plan, mode: np.ndarray, failed: np.ndarray, always: bool = False
-    ) -> None:
-        """Append the sample of ``t_k`` (every ``record_every`` steps, or now)."""
+    def _record(self, plan: Plan) -> None:
+        """The loop metrics, and the sample of ``t_k`` every ``record_every`` steps."""
         fleet = self.fleet
-        contact = getattr(self.world, "in_contact", None)
-        self.tally.update(
-            fleet.pos,
-            fleet.theta,
-            fleet.vel,
-            fleet.v1,
-            fleet.v2,
-            None if contact is None else contact(),
-        )
-        if self.k % self.scenario.record_every and not always:
+        contact = self.physics.in_contact()
+        self._contact = contact
+        self.tally.update(self, contact, None)
+        if self.k % self.record_every:
             return
         target = self._recorded_target
         self.recorder.append(
             self.k * self.h,
-            _pose(fleet),
-            _cmd(fleet),
+            fleet.pos,
+            fleet.theta,
+            fleet.v1,
+            fleet.v2,
             fleet.chi,
             plan.slot,
             plan.target if target is None else target,
-            mode,
-            failed,
+            fleet.mode,
+            fleet.failed,
             plan.point,
+            self._live_worlds(),
         )
 
     def _advance(self, chi_next: np.ndarray) -> None:
         """Write the commands to the physics and step it to ``t_k+1``."""
         fleet, h = self.fleet, self.h
         fleet.chi = chi_next
-        self.world.write_commands(fleet.theta, fleet.v1, fleet.v2, h)
-        self.world.step(h, self.scenario.substeps, self.k * h)
+        tally = self.tally
+        commanded = tally.commanded if tally.commanded_at == self.k else None
+        contact = self._contact
+        self.physics.advance(
+            fleet.theta,
+            fleet.v1,
+            fleet.v2,
+            commanded,
+            None if contact is None else ~contact,
+            self.k * h,
+            h,
+            first=self.k == 0,
+        )
         self.k += 1
 
     def _step(
@@ -549,50 +796,81 @@ class Simulation:
         """One control period: act, record, advance, sense and plan the next."""
         self._recorded_target = None
         start = time.perf_counter()
-        try:
-            chi_next = self._act(commands, targets, shifts)
-        except PluginRunError as exc:
-            self._plugin_failed(exc)
-            return
+        chi_next = self._act(commands, targets, shifts)
         self._control_time += time.perf_counter() - start
-        self._record(self.plan, self.fleet.mode, self.fleet.failed)
+        self._record(self.plan)
+        if not self.live.any():
+            self._closed = True
+            return
         if should_stop is not None and should_stop():
-            self.status = STATUS_INTERRUPTED
-            self.info["interrupted"] = {"t": self.k * self.h}
-            self._finish()
+            self._stopped = True
+            for w in self._live_worlds():
+                self.states[w].info["interrupted"] = {"t": self.k * self.h}
+                self._end_world(w, STATUS_INTERRUPTED, last=False)
             return
         self._advance(chi_next)
         if self._sense():
             start = time.perf_counter()
             self._guarded(self._plan)
             self._control_time += time.perf_counter() - start
+        else:
+            self._closed = True
 
     def _guarded(self, stage: Callable[[], None]) -> None:
-        """Run a stage that calls plug-ins; one that fails ends the run."""
+        """Run a stage over all worlds; a plug-in that fails there ends every world."""
         try:
             stage()
         except PluginRunError as exc:
-            self._plugin_failed(exc)
+            for w in self._live_worlds():
+                self._plugin_failed(w, exc)
 
-    def _plugin_failed(self, exc: PluginRunError) -> None:
-        """End the run with status ``error``: a plug-in raised or returned NaN.
+    def _plugin_failed(self, w: int, exc: PluginRunError) -> None:
+        """End world ``w`` with status ``error``: a plug-in raised or returned NaN.
 
         The sample of the time it happened is recorded as a diverged state's is (the
         plan undefined, the last commands), and ``info["error"]`` names the plug-in.
         """
-        fleet = self.fleet
-        self.status = STATUS_ERROR
-        self.info["error"] = {
+        self.states[w].info["error"] = {
             "t": self.k * self.h,
             "plugin": exc.plugin,
             "message": exc.message,
         }
-        self.plan = Plan.undefined(fleet.n, failed=fleet.failed)
-        self._record(self.plan, fleet.mode, fleet.failed, always=True)
-        self._finish()
+        self._end_world(w, STATUS_ERROR)
 
-    def _finish(self) -> None:
-        self._closed = True
+    def _end_world(self, w: int, status: str, last: bool = True) -> None:
+        """World ``w`` ends now with ``status``; its run is made at once.
+
+        ``last``: record its sample of now first, with the plan undefined.
+        """
+        if not self.live[w]:
+            return
+        state, fleet = self.states[w], self.fleet
+        state.status = status
+        if last:
+            nan = np.full((self.N, 2), np.nan)
+            arrays = self.recorder.append_last(
+                w,
+                self.k * self.h,
+                fleet.pos,
+                fleet.theta,
+                fleet.v1,
+                fleet.v2,
+                fleet.chi,
+                nan,
+                nan,
+                fleet.mode,
+                fleet.failed,
+                np.full(2, np.nan),
+            )
+            self.tally.update(self, self.physics.in_contact(), np.array([w]))
+        else:
+            arrays = self.recorder.arrays(w)
+        self.live[w] = False
+        self.physics.stop(w)
+        self._runs[w] = self._make_run(w, arrays)
+        if self.K == 1:
+            self.plan = Plan.undefined(self.n, fleet.failed) if last else self.plan
+            self._closed = True
 
     # ------------------------------------------------------------------ the API
     @property
@@ -603,29 +881,75 @@ class Simulation:
     @property
     def done(self) -> bool:
         """Whether the run has reached its duration, diverged or been stopped."""
-        return self._closed or self.k >= self.steps
+        return self._closed or self.k >= self.steps or not self.live.any()
 
-    def observe(self) -> Observation:
-        """The fleet now, and what the built-in stack plans for this period (copies)."""
-        fleet, plan = self.fleet, self.plan
+    @property
+    def names(self) -> list[str]:
+        """Vehicle names, in row order (of each world)."""
+        return self.states[0].names
+
+    @property
+    def world(self) -> Physics:
+        """The physics of the (first) world."""
+        return self.physics.worlds[0]
+
+    @property
+    def status(self) -> str:
+        """The (first) world's status: ``ok``, ``diverged``, ``error``, ..."""
+        return self.states[0].status
+
+    @property
+    def info(self) -> dict:
+        """The (first) world's description (``Run.info`` in the making)."""
+        return self.states[0].info
+
+    @property
+    def detection(self) -> Detection | None:
+        """The (first) world's detector (None: the oracle)."""
+        return self.states[0].detection
+
+    @property
+    def reconfiguration(self) -> Reconfiguration | None:
+        """The (first) world's reconfiguration (None: slots kept)."""
+        return self.states[0].reconfiguration
+
+    @property
+    def broadcast(self):
+        """The (first) world's broadcast (None without sensing)."""
+        return self.states[0].broadcast
+
+    @property
+    def failed_at(self) -> dict[str, float]:
+        """When each failed vehicle of the (first) world failed [s]."""
+        return self.states[0].failed_at
+
+    def law_context(self, t: float, ref, offset=None, memory=None) -> LawContext:
+        """What the (first) world's law sees at ``t`` (see ``WorldState``)."""
+        self._view_worlds()
+        return self.states[0].law_context(t, ref, offset, memory)
+
+    def observe(self, world: int = 0) -> Observation:
+        """World ``world`` now, and what the built-in stack plans for this period."""
+        fleet, plan, rows = self.fleet, self.plan, self._rows(world)
+        ended = not self.live[world] or self._closed
         return Observation(
             t=self.k * self.h,
             names=tuple(self.names),
-            pose=_pose(fleet),
-            vel=fleet.vel.copy(),
-            chi=fleet.chi.copy(),
-            slot=np.array(plan.slot, dtype=float),
-            target=np.array(plan.target, dtype=float),
-            mode=plan.mode(fleet.n) if not self._closed else fleet.mode.copy(),
-            failed=plan.failing.copy(),
+            pose=np.concatenate((fleet.pos[rows], fleet.theta[rows, None]), axis=1),
+            vel=fleet.vel[rows].copy(),
+            chi=fleet.chi[rows].copy(),
+            slot=np.array(plan.slot[rows], dtype=float),
+            target=np.array(plan.target[rows], dtype=float),
+            mode=fleet.mode[rows].copy() if ended else plan.mode(self.N)[rows],
+            failed=plan.failing[rows].copy(),
         )
 
     def step(
         self,
-        commands: Overrides = None,
-        targets: Overrides = None,
-        shifts: Overrides = None,
-    ) -> Observation:
+        commands: Overrides | Sequence[Overrides] = None,
+        targets: Overrides | Sequence[Overrides] = None,
+        shifts: Overrides | Sequence[Overrides] = None,
+    ) -> Observation | list[Observation]:
         """Advance one control period ``h = dt``, with optional overrides.
 
         Parameters
@@ -643,9 +967,12 @@ class Simulation:
             period, the law's feed-forward motion kept: a zero shift drives as the
             built-in stack does. ``targets`` win where both are given.
 
+        With K worlds (:meth:`stacked`) each argument is an array ``(K, n, 2)`` or
+        a sequence of K of the above (None for none).
+
         Returns
         -------
-        Observation
+        Observation, or list of Observation (one per world)
             At the next step ``t_k+1``.
 
         Raises
@@ -660,60 +987,102 @@ class Simulation:
                 f"the run is over (status {self.status!r} at t = {self.t:g} s); "
                 "call result()"
             )
-        cmd = override_rows(commands, self.names, "commands")
-        tgt = override_rows(targets, self.names, "targets")
-        shf = override_rows(shifts, self.names, "shifts")
+        cmd = self._override_rows(commands, "commands")
+        tgt = self._override_rows(targets, "targets")
+        shf = self._override_rows(shifts, "shifts")
         self._step(cmd, tgt, shifts=shf)
-        return self.observe()
+        if self.K == 1:
+            return self.observe()
+        return [self.observe(w) for w in range(self.K)]
 
-    def result(self) -> Run:
+    def _override_rows(self, values, what: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """The stacked ``(N, 2)`` rows and ``(N,)`` mask of one kind of override."""
+        if self.K == 1 or values is None:
+            return override_rows(values, self.names, what)
+        if isinstance(values, np.ndarray):
+            if values.shape != (self.K, self.n, 2):
+                raise ValueError(
+                    f"{what}: expected an array of shape ({self.K}, {self.n}, 2) or "
+                    f"a sequence of {self.K} overrides, got shape {values.shape}"
+                )
+            values = list(values)
+        if len(values) != self.K:
+            raise ValueError(f"{what}: expected {self.K} overrides, got {len(values)}")
+        rows, mask = np.full((self.N, 2), np.nan), np.zeros(self.N, dtype=bool)
+        for w, part in enumerate(values):
+            got = override_rows(part, self.names, what)
+            if got is not None:
+                rows[self._rows(w)], mask[self._rows(w)] = got
+        return (rows, mask) if mask.any() else None
+
+    def _finish_all(self) -> None:
+        """End the live worlds at ``t_k``: the last sample, with the controller's own
+        commands (``interrupted`` before the duration)."""
+        live = self._live_worlds()
+        if not live:
+            self._closed = True
+            return
+        for w in live:
+            if self.k < self.steps:
+                self.states[w].status = STATUS_INTERRUPTED
+                self.states[w].info["interrupted"] = {"t": self.k * self.h}
+        self._recorded_target = None
+        try:
+            self._act(None, None)
+        except PluginRunError as exc:
+            for w in self._live_worlds():
+                self._plugin_failed(w, exc)
+        else:
+            self._record(self.plan)
+        for w in self._live_worlds():
+            status = self.states[w].status
+            self.live[w] = False
+            self._runs[w] = self._make_run(w, self.recorder.arrays(w), status)
+        self._closed = True
+
+    def result(self, world: int = 0) -> Run:
         """The recorded run so far (the whole run once :attr:`done`).
 
         The sample of the last time is recorded with the controller's own commands.
         Called before the run is done, the run ends here with status ``interrupted``.
         Further calls return the same :class:`~sandbox.run.record.Run`.
         """
-        if self._run is not None:
-            return self._run
-        if not self._closed:
-            if self.k < self.steps:
-                self.status = STATUS_INTERRUPTED
-                self.info["interrupted"] = {"t": self.k * self.h}
-            self._recorded_target = None
-            try:
-                self._act(None, None)
-            except PluginRunError as exc:
-                self._plugin_failed(exc)
-            else:
-                self._record(self.plan, self.fleet.mode, self.fleet.failed)
-                self._finish()
-        sc, info = self.scenario, self.info
-        info["failed_at"] = self.failed_at
-        if self.detection is not None:
-            info["detection"] = self.detection.summary()
-        info["loop_metrics"] = self.tally.result()
-        info["wall_time"] = time.perf_counter() - self._wall
-        info["control_time"] = self._control_time
+        if world not in self._runs:
+            self._finish_all()
+        return self._runs[world]
+
+    def results(self) -> list[Run]:
+        """One :class:`~sandbox.run.record.Run` per world (see :meth:`result`)."""
+        return [self.result(w) for w in range(self.K)]
+
+    def _make_run(self, w: int, arrays: dict, status: str | None = None) -> Run:
+        s, rows = self.states[w], self._rows(w)
+        sc, info = s.scenario, s.info
+        info["failed_at"] = s.failed_at
+        if s.detection is not None:
+            info["detection"] = s.detection.summary()
+        info["loop_metrics"] = self.tally.result(w)
+        info["wall_time"] = (time.perf_counter() - self._wall) / self.K
+        info["control_time"] = self._control_time / self.K
         if self._filter is not None:
             info["safety"] = {
                 "filter": sc.safety.filter,
                 "infeasible_steps": 0,
                 "active_steps": 0,
-                **self._filter_stats,
+                **s.filter_stats,
             }
         info["steps"] = self.k
-        self._run = Run(
-            names=list(self.names),
+        return Run(
+            names=list(s.names),
             colors=[v.color for v in sc.vehicles],
-            diameter=self.fleet.diameter.copy(),
-            leader=self.leader,
-            events=list(self.world.events),
-            status=self.status,
+            diameter=self.fleet.diameter[rows].copy(),
+            leader=s.leader,
+            events=list(s.world.events),
+            status=status or s.status,
             info=info,
             scenario=sc,
-            **self.recorder.arrays(),
+            **arrays,
         )
-        return self._run
 
     def run(
         self,
@@ -732,69 +1101,33 @@ class Simulation:
             Polled every step; when it returns True the run stops with status
             ``interrupted`` (the samples so far are kept).
         """
+        self._loop(progress, should_stop)
+        return self.result()
+
+    def run_all(self, should_stop: Callable[[], bool] | None = None) -> list[Run] | None:
+        """Simulate every world to its end; the runs in order (None if stopped)."""
+        stopped = self._loop(None, should_stop)
+        return None if stopped else self.results()
+
+    def _loop(self, progress, should_stop) -> bool:
+        """Steps until done; True when ``should_stop`` stopped them."""
         report_every = max(1, self.steps // 100)
         while not self.done:
             k = self.k
             self._step(should_stop=should_stop)
+            if self._stopped:
+                return True
             if progress is not None and k % report_every == 0 and k < self.k:
                 progress(k, self.steps)
-        return self.result()
+        return False
 
 
-@dataclass
-class Plan:
-    """What the built-in stack plans for one period, arrays indexed by vehicle.
+class _RowsView:
+    """Some rows of the stacked fleet, for ``divergence.diverged``."""
 
-    Attributes
-    ----------
-    slot, target : ndarray, shape (n, 2) [m]
-        Formation slots, and the slots shifted by recovery; NaN where undefined.
-    v_ref, a_ref : ndarray, shape (n, 2) [m/s], [m/s^2]
-        The law's ``x_ref'``, ``x_ref''`` (plus the shift's, when estimated).
-    point : ndarray, shape (2,) [m]
-        The reference point (NaN without a reference).
-    active : ndarray, shape (n,), bool
-        Vehicles whose target recovery shifts.
-    failing : ndarray, shape (n,), bool
-        Vehicles with an active failure.
-    """
-
-    slot: np.ndarray
-    target: np.ndarray
-    v_ref: np.ndarray
-    a_ref: np.ndarray
-    point: np.ndarray
-    active: np.ndarray
-    failing: np.ndarray
-
-    @classmethod
-    def undefined(cls, n: int, failed: np.ndarray) -> Plan:
-        """The plan of a diverged state: nothing defined."""
-        nan = np.full((n, 2), np.nan)
-        return cls(
-            nan, nan, nan, nan, np.full(2, np.nan), np.zeros(n, bool), failed.copy()
-        )
-
-    def mode(self, n: int) -> np.ndarray:
-        """Planned ``run.MODE_*`` codes, shape (n,), int8."""
-        mode = np.full(n, MODE_FORMATION, dtype=np.int8)
-        mode[self.active] = MODE_AVOID
-        mode[self.failing] = MODE_FAILED
-        return mode
-
-
-def _pose(fleet: Fleet) -> np.ndarray:
-    return np.concatenate((fleet.pos, fleet.theta[:, None]), axis=1)
-
-
-def _cmd(fleet: Fleet) -> np.ndarray:
-    return np.stack((fleet.v1, fleet.v2), axis=1)
-
-
-def _uniform(values: np.ndarray) -> float | np.ndarray:
-    """``values[0]`` as a scalar when every entry equals it, else ``values`` itself."""
-    first = values[0]
-    return float(first) if np.all(values == first) else values
+    def __init__(self, fleet: Fleet, rows: slice) -> None:
+        self.pos, self.theta = fleet.pos[rows], fleet.theta[rows]
+        self.vel, self.chi = fleet.vel[rows], fleet.chi[rows]
 
 
 def simulate(scenario: Scenario, **kwargs) -> Run:

@@ -7,6 +7,7 @@ No per-vehicle Python object is touched on the hot path.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,3 +98,29 @@ class Fleet:
             gains=gains,
             commanded=np.array([v.drive.type == "commands" for v in vs], dtype=bool),
         )
+
+    @classmethod
+    def stack(cls, fleets: list[Fleet]) -> Fleet:
+        """The fleets of K worlds as one, rows world after world (copies)."""
+        if len(fleets) == 1:
+            return fleets[0]
+
+        def cat(name: str) -> np.ndarray:
+            return np.concatenate([getattr(f, name) for f in fleets])
+
+        keys = ("k1", "k2", "k3", "k4", "kp")
+        gains = Gains(
+            **{k: np.concatenate([getattr(f.gains, k) for f in fleets]) for k in keys}
+        )
+        names = [f.name for f in dataclasses.fields(cls) if f.name != "gains"]
+        return cls(**{name: cat(name) for name in names}, gains=gains)
+
+
+def uniform(values: np.ndarray) -> float | np.ndarray:
+    """``values[0]`` as a scalar when every entry equals it, else ``values`` itself.
+
+    Parameters shared by a whole fleet are used as scalars on the hot path (the same
+    values, broadcast, without streaming (n,) arrays through every step).
+    """
+    first = values[0]
+    return float(first) if np.all(values == first) else values

@@ -166,7 +166,7 @@ ROTATE = Param(
 )
 
 
-@register_law("fixed", frame="world")
+@register_law("fixed", frame="world", batched=True)
 class FixedFormation(FormationLaw):
     """Section 3.2, eqs. (7)-(9): world-frame offsets, leader derivatives estimated."""
 
@@ -181,7 +181,7 @@ class FixedFormation(FormationLaw):
         return slot, np.broadcast_to(v, slot.shape), np.broadcast_to(a, slot.shape)
 
 
-@register_law("rotating")
+@register_law("rotating", batched=True)
 class RotatingFormation(FixedFormation):
     """Section 3.3, eqs. (10)-(11): leader-frame offsets, estimated leader motion."""
 
@@ -193,7 +193,7 @@ class RotatingFormation(FixedFormation):
         return slot, np.broadcast_to(v, slot.shape), np.broadcast_to(a, slot.shape)
 
 
-@register_law("virtual", {"rotate": ROTATE}, frame="reference")
+@register_law("virtual", {"rotate": ROTATE}, frame="reference", batched=True)
 class VirtualLeaderFormation(FormationLaw):
     """Section 3.4, eqs. (13)-(15): each vehicle tracks the reference + its offset."""
 
@@ -207,7 +207,9 @@ class VirtualLeaderFormation(FormationLaw):
         return slot, np.broadcast_to(dp, slot.shape), np.broadcast_to(ddp, slot.shape)
 
 
-@register_law("leader_ref", {"rotate": ROTATE}, frame="leader_reference")
+@register_law(
+    "leader_ref", {"rotate": ROTATE}, frame="leader_reference", batched=True
+)
 class LeaderReferenceFormation(FormationLaw):
     """Section 3.4, eq. (16): around the real leader, reference derivatives."""
 
@@ -220,7 +222,7 @@ class LeaderReferenceFormation(FormationLaw):
         return slot, np.broadcast_to(dp, slot.shape), np.broadcast_to(ddp, slot.shape)
 
 
-@register_law("own_estimate")
+@register_law("own_estimate", batched=True)
 class OwnEstimateFormation(FormationLaw):
     """Section 3.5, eqs. (17)-(20): each vehicle estimates its own slot's motion."""
 

@@ -186,6 +186,11 @@ Reference = (
 _CENTER = Param("point", (0.0, 0.0), unit="m", doc="Centre")
 
 
+#: References whose ``evaluate`` is elementwise in ``t``: the loop evaluates them for
+#: every step time at once (each row the bits of the scalar evaluation at ``t_k``).
+TABULATED_REFERENCES = (PointReference, LineReference, CircleReference)
+
+
 def _check_waypoints(values: dict, section: dict) -> list[tuple]:
     """Consecutive waypoints must differ (the chord parameterization needs it)."""
     pts = values.get("points") or ()

@@ -384,6 +384,7 @@ def register_law(
     needs_leader: bool | None = None,
     needs_reference: bool | None = None,
     frame: str = "leader",
+    batched: bool = False,
     doc: str | None = None,
     check: Callable | None = None,
 ) -> Callable[[Any], Any]:
@@ -406,6 +407,14 @@ def register_law(
         in the world frame), ``reference`` (around the reference's start, turned by
         its tangent with ``rotate``) or ``leader_reference`` (around the leader,
         turned by the reference's tangent with ``rotate``).
+    batched : bool
+        Whether the law takes the worlds of a batch at once (default False: it is
+        called world by world). A batched law is built with the offsets of all
+        worlds, shape (K, n, 2), and sees ``pos``, ``vel``, ``offset`` of shape
+        (K, n, 2), ``theta`` (K, n), ``leader_pos`` (K, 1, 2) and ``leader_theta``
+        (K, 1); what it returns must broadcast to (K, n, 2), each world's rows the
+        numbers the law gives that world alone (elementwise code over the last axes
+        is). The built-in laws are batched.
     """
     if frame not in LAW_FRAMES:
         raise ValueError(f"law {name!r}: frame {frame!r} is not one of {LAW_FRAMES}")
@@ -429,6 +438,7 @@ def register_law(
             needs_leader=lead,
             needs_reference=ref,
             frame=frame,
+            batched=batched,
         )(obj)
 
     return add
@@ -438,6 +448,7 @@ def register_strategy(
     name: str,
     params: Mapping[str, Any] | None = None,
     *,
+    batched: bool = False,
     doc: str | None = None,
     check: Callable | None = None,
 ) -> Callable[[Any], Any]:
@@ -447,8 +458,15 @@ def register_strategy(
     vehicle's target, shape (n, 2) [m], and whether each vehicle is avoiding (mode
     ``avoid``), shape (n,) bool. Vehicles that may not avoid (``ctx.may_avoid``
     false) keep a zero shift whatever it returns.
+
+    With ``batched=True`` the strategy is called once for all worlds of a batch: the
+    context's arrays hold the rows of K worlds, world after world (``K n`` rows),
+    ``params["beta"]`` may be a column of rows, and ``ctx.neighbours`` never pairs
+    vehicles of two worlds; each world's rows must be the numbers it gets alone.
+    Without it (the default) the strategy is called world by world. The built-in
+    strategies are batched.
     """
-    return register("strategy", name, params, doc=doc, check=check)
+    return register("strategy", name, params, doc=doc, check=check, batched=batched)
 
 
 def register_failure(

@@ -1,10 +1,19 @@
-"""The loop metrics of a batch of worlds: the loop metrics of each, stacked.
+"""The metrics accumulated inside the loop, for K worlds at once (K = 1: one run).
 
-:class:`BatchTally` accumulates, for K worlds of ``n`` vehicles each stepped together by
-:class:`~sandbox.study.batch.Batch`, exactly the numbers ``LoopMetrics`` accumulates
-for each world alone: control effort, closest approach, the motor check. A period only
+:class:`LoopTally` accumulates, for K worlds of ``n`` vehicles each stepped together by
+:class:`~sandbox.loop.simulation.Simulation`, the numbers that do not depend on
+``record_every``: control effort (the total variation of each vehicle's commands,
+``effort_v1 = sum |v1(k) - v1(k-1)|`` [m/s] and ``effort_v2 = sum |v2(k) - v2(k-1)|``
+[rad/s], i.e. the integrals of ``|v1'|`` and ``|v2'|``), the largest applied ``|v1|``
+(the tunnelling check), the closest approach of two vehicles, and the motor check:
+for every vehicle free of contact at both ends of a period, the body's velocity read
+at the end against the velocity commanded for the period (the unicycle of eq. (1)); a
+period whose error exceeds ``MOTOR_REL_TOL`` of the commanded speed and
+``MOTOR_ABS_TOL`` counts as saturated. Above
+:data:`~sandbox.run.metrics.ALL_PAIRS_MAX` vehicles the closest approach comes from a
+:class:`~sandbox.run.metrics.ClosestApproach` (a Verlet list) per world. A period only
 copies what these need (commands, pair distances, velocities, contact flags) into
-buffers of :data:`CHUNK` periods; :meth:`BatchTally.flush` then accounts for the
+buffers of :data:`CHUNK` periods; :meth:`LoopTally.flush` then accounts for the
 buffered periods at once, in arrays over periods and vehicles: the same elementwise
 operations, the sums taken period after period in the order of the loop, and minima,
 maxima and counts (exact whatever the order). Reductions over a world's vehicles run
@@ -18,18 +27,26 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.run.metrics import MOTOR_ABS_TOL, MOTOR_REL_TOL
+from sandbox.run.metrics import (
+    ALL_PAIRS_MAX,
+    MOTOR_ABS_TOL,
+    MOTOR_REL_TOL,
+    ClosestApproach,
+)
 
-#: Periods buffered before :meth:`BatchTally.flush` accounts for them.
+#: Periods buffered before :meth:`LoopTally.flush` accounts for them.
 CHUNK = 64
 
 
-class BatchTally:
-    """The :class:`~sandbox.run.metrics.LoopMetrics` of K worlds, stacked."""
+class LoopTally:
+    """The loop metrics of K worlds of ``n`` vehicles (see the module docstring)."""
 
     def __init__(self, K: int, n: int, h: float) -> None:
         self.K, self.n, self.h = K, n, h
-        N, pairs = K * n, n * (n - 1) // 2
+        #: Per world, above ALL_PAIRS_MAX vehicles: the closest approach's Verlet list.
+        self._closest = [ClosestApproach() for _ in range(K)] if n > ALL_PAIRS_MAX else None
+        N = K * n
+        pairs = 0 if self._closest else n * (n - 1) // 2
         self._m = 0  # periods buffered
         self._buf_d2 = np.empty((CHUNK, K, pairs))
         self._buf_v = np.empty((CHUNK, 2, N))
@@ -54,25 +71,40 @@ class BatchTally:
         self.commanded: np.ndarray | None = None
         self.commanded_at = -1
 
-    def update(self, b: Any, contact: np.ndarray, worlds: np.ndarray | None) -> None:
-        """``LoopMetrics.update`` for all worlds (or only ``worlds``).
+    def update(
+        self, sim: Any, contact: np.ndarray | None, worlds: np.ndarray | None
+    ) -> None:
+        """Account for period ``k`` of all worlds (or only ``worlds``).
 
-        With every world and every position finite the period is buffered (see the
-        module docstring); else the buffer is accounted for and the period at once.
-        The pair distances of the neighbour search of this period are reused where it
-        ran on these positions.
+        ``sim`` gives the state at ``t_k`` and the commands from it (``sim.fleet``),
+        ``contact`` the rows in an open contact episode (None: unknown, no motor
+        check). With every world and every position finite the period is buffered
+        (see the module docstring); else the buffer is accounted for and the period at
+        once. The pair distances of the neighbour search of this period are reused
+        where it ran on these positions.
         """
+        b = _State(sim)
+        if contact is None:  # no contact flags: no vehicle is checked
+            contact = np.ones(self.K * self.n, dtype=bool)
+        if self._closest is not None:
+            self._closest_now(b, worlds)
         if worlds is None and b.finite:
             self._buffer(b, contact)
             return
         self.flush()
         self._update_now(b, contact, worlds)
 
+    def _closest_now(self, b: Any, worlds: np.ndarray | None) -> None:
+        """The closest approach of large fleets, world by world, at once."""
+        n = self.n
+        for w in range(self.K) if worlds is None else worlds:
+            self._closest[w].update(b.pos[w * n : (w + 1) * n])
+
     def _buffer(self, b: Any, contact: np.ndarray) -> None:
         """Copy what period ``b.k`` accounts for into the buffers."""
         K, n, m = self.K, self.n, self._m
-        if n >= 2:
-            d2 = b.neighbours.distances(b.pos)
+        if n >= 2 and self._closest is None:
+            d2 = b.distances(b.pos)
             if d2 is None:
                 pos3 = b.pos.reshape(K, n, 2)
                 d = pos3[:, self._i] - pos3[:, self._j]
@@ -96,7 +128,7 @@ class BatchTally:
         if not m:
             return
         self._m = 0
-        if n >= 2:
+        if n >= 2 and self._closest is None:
             d2 = self._buf_d2[:m].reshape(m * K, -1)
             best = np.sqrt(row_reduce(np.minimum, d2)).reshape(m, K)
             self.best = np.minimum(self.best, np.minimum.reduce(best, axis=0))
@@ -154,8 +186,8 @@ class BatchTally:
             ws = worlds
             vs = (worlds[:, None] * n + np.arange(n)).ravel()
             kw = len(worlds)
-        if n >= 2:
-            d2 = b.neighbours.distances(b.pos) if worlds is None else None
+        if n >= 2 and self._closest is None:
+            d2 = b.distances(b.pos) if worlds is None else None
             if d2 is None:
                 pos3 = b.pos.reshape(K, n, 2)[ws]
                 d = pos3[:, self._i] - pos3[:, self._j]
@@ -215,10 +247,10 @@ class BatchTally:
             self.commanded, self.commanded_at = commanded, b.k
 
     def result(self, w: int) -> dict[str, Any]:
-        """World ``w``'s values, as ``LoopMetrics.result``."""
+        """World ``w``'s values, JSON-ready (``Run.info["loop_metrics"]``)."""
         self.flush()
         rows = slice(w * self.n, (w + 1) * self.n)
-        best = self.best[w]
+        best = self._closest[w].best if self._closest is not None else self.best[w]
         free = int(self.free_periods[w])
         return {
             "effort_v1": [float(x) for x in self.effort_v1[rows]],
@@ -277,3 +309,18 @@ def _raised_max(
     """
     worst = row_reduce(np.maximum, np.where(check, values, -np.inf))
     return np.where(some, np.maximum(current, worst), current)
+
+
+class _State:
+    """What the tally reads of the loop at ``t_k``."""
+
+    def __init__(self, sim: Any) -> None:
+        fleet = sim.fleet
+        self.pos, self.theta, self.vel = fleet.pos, fleet.theta, fleet.vel
+        self.v1, self.v2 = fleet.v1, fleet.v2
+        self.k, self.finite = sim.k, sim.finite
+        self.distances = getattr(sim.neighbours, "distances", _no_distances)
+
+
+def _no_distances(pos: np.ndarray) -> None:
+    return None

@@ -1,0 +1,176 @@
+"""The record of K worlds as the loop writes it: stacked in memory, or one file set each.
+
+A sample of every world is written at once into arrays of shape ``(T, K, n, ...)``;
+a world that ends early (diverged, a plug-in failed, a reconfiguration of the batch)
+has its last sample written alone and its arrays copied out at once, so the samples
+of the others may then overwrite its column. A world whose record is larger than
+:data:`~sandbox.run.recorder.SPILL_BYTES` keeps a
+:class:`~sandbox.run.recorder.Recorder` of its own, streamed to disk, and is appended
+to world by world.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sandbox.run.recorder import Recorder
+
+#: The recorded arrays of one sample: name -> (trailing shape given n, dtype).
+_FIELDS = {
+    "pose": (3, np.float64),
+    "cmd": (2, np.float64),
+    "chi": (2, np.float64),
+    "slot": (2, np.float64),
+    "target": (2, np.float64),
+    "mode": (None, np.int8),
+    "failed": (None, np.bool_),
+}
+
+
+class WorldsRecorder:
+    """Samples of K worlds of ``n`` vehicles, at most ``capacity`` each.
+
+    Parameters
+    ----------
+    capacity, K, n : int
+    spill_bytes : int, optional
+        As for :class:`~sandbox.run.recorder.Recorder` (one world's record).
+    """
+
+    def __init__(
+        self, capacity: int, K: int, n: int, spill_bytes: int | None = None
+    ) -> None:
+        self.capacity, self.K, self.n = capacity, K, n
+        self.count = 0
+        first = Recorder(capacity, n, spill_bytes)
+        self.on_disk = first.on_disk
+        if self.on_disk:
+            self._worlds = [first] + [
+                Recorder(capacity, n, spill_bytes) for _ in range(K - 1)
+            ]
+            return
+        del first
+        T = capacity
+        self._t = np.zeros(T)
+        self._buf = {
+            name: np.zeros((T, K, n) if width is None else (T, K, n, width), dtype)
+            for name, (width, dtype) in _FIELDS.items()
+        }
+        self._reference = np.zeros((T, K, 2))
+
+    def append(
+        self,
+        t: float,
+        pos: np.ndarray,
+        theta: np.ndarray,
+        v1: np.ndarray,
+        v2: np.ndarray,
+        chi: np.ndarray,
+        slot: np.ndarray,
+        target: np.ndarray,
+        mode: np.ndarray,
+        failed: np.ndarray,
+        point: np.ndarray,
+        worlds: list[int],
+    ) -> None:
+        """One sample of the live ``worlds`` (stacked rows ``(K n, ...)``).
+
+        ``point`` is the reference point of every world, shape (K, 2) or (2,).
+        """
+        c = self.count
+        if c >= self.capacity:
+            return
+        K, n = self.K, self.n
+        if self.on_disk:
+            point = np.broadcast_to(point, (K, 2))
+            for w in worlds:
+                self._append_world(w, t, pos, theta, v1, v2, chi, slot, target, mode,
+                                   failed, point[w])
+            self.count = c + 1
+            return
+        b = self._buf
+        self._t[c] = t
+        pose, cmd = b["pose"][c], b["cmd"][c]
+        pose[..., :2] = pos.reshape(K, n, 2)
+        pose[..., 2] = theta.reshape(K, n)
+        cmd[..., 0] = v1.reshape(K, n)
+        cmd[..., 1] = v2.reshape(K, n)
+        b["chi"][c] = chi.reshape(K, n, 2)
+        b["slot"][c] = slot.reshape(K, n, 2)
+        b["target"][c] = target.reshape(K, n, 2)
+        b["mode"][c] = mode.reshape(K, n)
+        b["failed"][c] = failed.reshape(K, n)
+        self._reference[c] = point
+        self.count = c + 1
+
+    def append_last(
+        self,
+        w: int,
+        t: float,
+        pos: np.ndarray,
+        theta: np.ndarray,
+        v1: np.ndarray,
+        v2: np.ndarray,
+        chi: np.ndarray,
+        slot: np.ndarray,
+        target: np.ndarray,
+        mode: np.ndarray,
+        failed: np.ndarray,
+        point: np.ndarray,
+    ) -> dict[str, np.ndarray]:
+        """World ``w``'s last sample (its rows only), then its arrays (it ends now)."""
+        if self.on_disk:
+            rec = self._worlds[w]
+            if rec.count < self.capacity:
+                self._append_world(w, t, pos, theta, v1, v2, chi, slot, target,
+                                   mode, failed, point)
+            return rec.arrays()
+        c = self.count
+        if c >= self.capacity:
+            return self.arrays(w)
+        K, n = self.K, self.n
+        rows = slice(w * n, (w + 1) * n)
+        b = self._buf
+        self._t[c] = t
+        b["pose"][c, w, :, :2] = pos[rows]
+        b["pose"][c, w, :, 2] = theta[rows]
+        b["cmd"][c, w, :, 0] = v1[rows]
+        b["cmd"][c, w, :, 1] = v2[rows]
+        b["chi"][c, w] = chi[rows]
+        b["slot"][c, w] = slot[rows]
+        b["target"][c, w] = target[rows]
+        b["mode"][c, w] = mode[rows]
+        b["failed"][c, w] = failed[rows]
+        self._reference[c, w] = point
+        return self.arrays(w, c + 1)
+
+    def _append_world(self, w, t, pos, theta, v1, v2, chi, slot, target, mode,
+                      failed, point) -> None:
+        n = self.n
+        rows = slice(w * n, (w + 1) * n)
+        self._worlds[w].append(
+            t,
+            np.concatenate((pos[rows], theta[rows, None]), axis=1),
+            np.stack((v1[rows], v2[rows]), axis=1),
+            chi[rows],
+            slot[rows],
+            target[rows],
+            mode[rows],
+            failed[rows],
+            point,
+        )
+
+    def arrays(self, w: int, count: int | None = None) -> dict[str, np.ndarray]:
+        """World ``w``'s first ``count`` samples (default all so far), its own copy.
+
+        A disk-backed world's arrays are its recorder's read-only memory maps.
+        """
+        if self.on_disk:
+            return self._worlds[w].arrays()
+        c = self.count if count is None else count
+        out = {"t": self._t[:c].copy()}
+        for name, buf in self._buf.items():
+            out[name] = np.ascontiguousarray(buf[:c, w])
+        out["reference"] = np.ascontiguousarray(self._reference[:c, w])
+        order = ("t", "pose", "cmd", "chi", "slot", "target", "mode", "failed")
+        return {name: out[name] for name in (*order, "reference")}

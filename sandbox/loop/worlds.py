@@ -1,0 +1,345 @@
+"""What each world of the loop keeps of its own, and the stacked schedules of K worlds.
+
+The loop (:class:`~sandbox.loop.simulation.Simulation`) steps K worlds of one structure
+on stacked arrays of ``K * n`` rows, world after world. What differs from world to
+world and is not a row of those arrays lives in a :class:`WorldState`: the scenario,
+names, status and description, the failure schedule, the broadcast and its random
+stream, the detector, the reconfiguration, the safety filter's memory, and the law
+itself when it is evaluated world by world. A stage that is not evaluated on the
+stacked arrays (a plug-in without ``batched=True``, the detector, the reconfiguration,
+the safety filter) is given the world's :class:`WorldState`, which carries the names a
+single run's loop had (``fleet``, ``leader``, ``law``, ``seen``, ``world``, ...), with
+``fleet`` viewing the world's rows of the stacked arrays.
+
+:class:`WorldPairs` are the neighbour pairs of K worlds (never across worlds),
+:class:`StackedFailures` the failure schedules of K worlds as one, and
+:class:`StackedDifference` the backward differences of the recovery shift with a
+history per world.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+
+from sandbox.behaviour.sensing import make_broadcast
+from sandbox.geometry.neighbours import NeighbourList
+from sandbox.errors import PluginRunError
+from sandbox.loop.run_info import run_description
+from sandbox.loop.state import Fleet, uniform
+from sandbox.model.failures import FailureSchedule, within_drive
+from sandbox.model.obstacle_field import ObstacleField
+from sandbox.physics.interface import Physics
+from sandbox.plugins.registration import (
+    FailureContext,
+    LawContext,
+    get,
+    make_law,
+    runnable,
+)
+from sandbox.run.record import STATUS_OK
+from sandbox.scenario import Scenario
+
+
+class WorldState:
+    """One world of the loop: what it keeps of its own (see the module docstring).
+
+    Parameters
+    ----------
+    scenario : Scenario
+    world : Physics
+        The world's physics.
+    fleet : Fleet
+        The world's fleet at ``t_0``; the loop re-points its arrays at the world's
+        rows of the stacked ones before a world-by-world stage (:meth:`view`).
+    """
+
+    def __init__(self, scenario: Scenario, world: Physics, fleet: Fleet) -> None:
+        sc = scenario
+        self.scenario = sc
+        self.world = world
+        self.fleet = fleet
+        self.h = sc.dt
+        self.names = [v.name for v in sc.vehicles]
+        self.leader = sc.leader_index
+        self.reference = sc.reference.build() if sc.reference else None
+        spec = sc.formation
+        self.law = make_law(spec.law, spec.params, fleet.offset, self.h) if spec else None
+        self.law_params = dict(spec.params) if spec else {}
+        self.law_memory: dict = {}
+        self.strategy = runnable(get("strategy", sc.recovery.strategy))
+        self.strategy_params = dict(sc.recovery.params)
+        self.rec = sc.recovery
+        self.obstacles = ObstacleField(sc.obstacles)
+        self.failures = FailureSchedule(sc.failures, self.names)
+        self.broadcast = make_broadcast(sc.sensing, self.h, sc.seed)
+        self.sensing = asdict(sc.sensing)
+        #: The broadcast poses received at t_k, shape (n, 3), or None without sensing.
+        self.seen: np.ndarray | None = None
+        self.known_failed = np.zeros(fleet.n, dtype=bool)
+        # The limits as a single run of the world sees them (scalars when uniform).
+        self.v1_max = uniform(fleet.v1_max)
+        self.v2_max = uniform(fleet.v2_max)
+        self.accel_max = uniform(fleet.accel_max)
+        n = fleet.n
+        tracks = np.zeros(n, dtype=bool)
+        if self.law is None:
+            tracks[:] = True
+        elif get("law", spec.law).options["needs_leader"] and self.leader >= 0:
+            tracks[self.leader] = True
+        tracks &= ~fleet.commanded
+        self.tracks_reference = tracks
+        self._track_rows = np.flatnonzero(tracks)
+        self._avoid_candidates = ~fleet.commanded
+        if not self.rec.leader_avoids and self.leader >= 0:
+            self._avoid_candidates[self.leader] = False
+        self.status = STATUS_OK
+        self.info = run_description(sc, self.reference)
+        self.failed_at: dict[str, float] = {}
+        self.filter_memory: dict = {}
+        self.filter_stats: dict = {}
+        self.neighbours = NeighbourList(self.rec.R)
+        #: Set by the loop: the world's recovery-shift history, resettable alone.
+        self.shift_motion: Any = None
+        self.detection: Any = None
+        self.reconfiguration: Any = None
+        self.schedules = {
+            i: np.array(v.drive.schedule, dtype=float)
+            for i, v in enumerate(sc.vehicles)
+            if v.drive.type == "commands"
+        }
+
+    def law_context(
+        self,
+        t: float,
+        ref: tuple[np.ndarray, ...] | None,
+        offset: np.ndarray | None = None,
+        memory: dict | None = None,
+    ) -> LawContext:
+        """What the world's formation law sees at ``t`` (the reference ``ref``).
+
+        The followers read the leader's broadcast pose (the truth without sensing).
+        ``offset`` and ``memory`` default to the fleet's offsets and the law's memory;
+        a reconfiguration passes others to try or re-seed the law.
+        """
+        fleet, lead, seen = self.fleet, self.leader, self.seen
+        if lead < 0:
+            leader_pos = leader_theta = None
+        elif seen is None:
+            leader_pos, leader_theta = fleet.pos[lead], float(fleet.theta[lead])
+        else:
+            leader_pos, leader_theta = seen[lead, :2], float(seen[lead, 2])
+        return LawContext(
+            t=t,
+            dt=self.h,
+            pos=fleet.pos,
+            theta=fleet.theta,
+            vel=fleet.vel,
+            offset=fleet.offset if offset is None else offset,
+            leader=lead,
+            leader_pos=leader_pos,
+            leader_theta=leader_theta,
+            reference=ref,
+            params=self.law_params,
+            memory=self.law_memory if memory is None else memory,
+        )
+
+
+class WorldPairs:
+    """Neighbour pairs of K worlds of ``n`` vehicles: never across worlds.
+
+    Every pair of a world is a candidate (as alone, up to
+    :data:`~sandbox.geometry.neighbours.BRUTE_FORCE_MAX` vehicles), in the single
+    run's ``(i, j)`` order, world after world; so the sums over pairs add each
+    vehicle's terms in the order it adds them alone. Obstacle candidates come from a
+    :class:`~sandbox.geometry.neighbours.NeighbourList` over all vehicles (a superset
+    of the pairs in range; the others weigh exactly 0).
+    """
+
+    def __init__(self, worlds: int, n: int, radius: float) -> None:
+        self.radius = float(radius)
+        i, j = np.triu_indices(n, 1)
+        base = (np.arange(worlds) * n)[:, None]
+        self._i = (base + i).ravel().astype(np.intp)
+        self._j = (base + j).ravel().astype(np.intp)
+        self._obstacles = NeighbourList(radius)
+        self._last: tuple[np.ndarray, np.ndarray] | None = None
+
+    def near(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Pairs closer than ``radius``, with ``pos[i] - pos[j]`` (as alone)."""
+        rel = np.take(pos, self._i, axis=0)
+        rel -= np.take(pos, self._j, axis=0)
+        d2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
+        self._last = (pos, d2)
+        keep = np.flatnonzero(d2 < self.radius * self.radius)
+        return self._i.take(keep), self._j.take(keep), np.take(rel, keep, axis=0)
+
+    def distances(self, pos: np.ndarray) -> np.ndarray | None:
+        """Squared distances of every pair, world after world (else None).
+
+        Those of the last :meth:`near`, if it ran on this very array.
+        """
+        last = self._last
+        return last[1] if last is not None and last[0] is pos else None
+
+    def pairs(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs closer than ``radius``."""
+        i, j, _ = self.near(pos)
+        return i, j
+
+    def obstacle_pairs(self, pos: np.ndarray, field: Any) -> tuple[np.ndarray, ...]:
+        """Candidate ``(vehicle, obstacle)`` pairs (see ``NeighbourList``)."""
+        return self._obstacles.obstacle_pairs(pos, field)
+
+
+class StackedFailures:
+    """The failure schedules of K worlds as one, a row per failure (world by world).
+
+    The same onsets, the same kind functions called with the same values, and the
+    same acceleration limit as :class:`~sandbox.model.failures.FailureSchedule` of
+    each world alone.
+    """
+
+    def __init__(self, schedules: Sequence[FailureSchedule], n: int) -> None:
+        world, vehicle, local, funcs, kinds, specs = [], [], [], [], [], []
+        for w, fs in enumerate(schedules):
+            for k, spec in enumerate(fs.specs):
+                world.append(w)
+                local.append(int(fs.vehicle[k]))
+                vehicle.append(w * n + int(fs.vehicle[k]))
+                kinds.append(fs.kinds[k])
+                funcs.append(fs.funcs[k])
+                specs.append(spec)
+        self.world = np.array(world, dtype=np.intp)
+        self.vehicle = np.array(vehicle, dtype=np.intp)
+        self.local = np.array(local, dtype=np.intp)
+        self.kinds, self.funcs, self.specs = kinds, funcs, specs
+        self.start = np.array([s.at for s in specs], dtype=float)
+        self.end = np.array(
+            [s.until if s.until is not None else np.inf for s in specs], dtype=float
+        )
+        self.started = np.zeros(len(specs), dtype=bool)
+        self.v2_onset = np.zeros(len(specs))
+        self.params = [dict(s.params) for s in specs]
+        self.controlled = np.array(
+            [k.options["controlled_speed"] for k in kinds], dtype=bool
+        )
+        self.immovable = np.array([k.options["immovable"] for k in kinds], dtype=bool)
+        self.N = len(schedules) * n
+
+    def __len__(self) -> int:
+        return len(self.specs)
+
+    def active(self, t: float, live: np.ndarray) -> np.ndarray:
+        """Active failures of the live worlds at ``t`` [s] (one flag per failure)."""
+        on = (self.start <= t + 1e-12) & (t + 1e-12 < self.end)
+        return on & live[self.world]
+
+    def active_vehicles(self, t: float, live: np.ndarray) -> np.ndarray:
+        """Rows with an active failure at ``t`` [s], shape (N,) bool."""
+        out = np.zeros(self.N, dtype=bool)
+        out[self.vehicle[self.active(t, live)]] = True
+        return out
+
+    def start_new(self, t: float, live: np.ndarray, last_v2: np.ndarray) -> np.ndarray:
+        """The failures that start at ``t`` (each reported once), their onset noted."""
+        new = np.flatnonzero(self.active(t, live) & ~self.started)
+        self.started[new] = True
+        self.v2_onset[new] = last_v2[self.vehicle[new]]
+        return new
+
+    def apply(
+        self,
+        t: float,
+        live: np.ndarray,
+        v1: np.ndarray,
+        v2: np.ndarray,
+        last_v1: np.ndarray,
+        accel_step: float | np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]:
+        """``FailureSchedule.apply`` of every world: commands, failed, frozen rows.
+
+        Also the ``(world, PluginRunError)`` of each world whose failure plug-in
+        raised (that world's other failures are skipped; the caller ends it).
+        """
+        N = self.N
+        failed = np.zeros(N, dtype=bool)
+        frozen = np.zeros(N, dtype=bool)
+        errors: list[tuple[int, PluginRunError]] = []
+        if not len(self.specs):
+            return v1, v2, failed, frozen, errors
+        v1, v2 = v1.copy(), v2.copy()
+        broken: set[int] = set()
+        for k in np.flatnonzero(self.active(t, live)):
+            w = int(self.world[k])
+            if w in broken:
+                continue
+            i, spec = self.vehicle[k], self.specs[k]
+            ctx = FailureContext(
+                t=t,
+                since=t - spec.at,
+                vehicle=spec.vehicle,
+                index=int(self.local[k]),
+                v1=float(v1[i]),
+                v2=float(v2[i]),
+                v2_onset=float(self.v2_onset[k]),
+                params=dict(self.params[k]),
+            )
+            try:
+                v1[i], v2[i] = self.funcs[k](ctx)
+            except PluginRunError as exc:
+                broken.add(w)
+                errors.append((w, exc))
+                continue
+            if not self.immovable[k]:  # within the drive's max_accel, as alone
+                step = float(np.broadcast_to(accel_step, (N,))[i])
+                v1[i] = within_drive(float(v1[i]), float(last_v1[i]), step)
+            failed[i] = True
+            frozen[i] |= not self.controlled[k]
+        return v1, v2, failed, frozen, errors
+
+
+class StackedDifference:
+    """Backward differences (eqs. (18)-(19)) of K worlds' rows, a history per world.
+
+    Each row gives the numbers :class:`~sandbox.model.laws.BackwardDifference` gives
+    alone; :meth:`reset` forgets one world's history (a reconfiguration).
+    """
+
+    def __init__(self, h: float, K: int, n: int) -> None:
+        self.h, self.n = h, n
+        self.count = np.zeros(K, dtype=np.int64)
+        self.prev_x: np.ndarray | None = None
+        self.prev_v: np.ndarray | None = None
+
+    def update(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Feed the rows' values at this step; return ``(x', x'')``."""
+        x = np.array(x, dtype=float)
+        count = np.repeat(self.count, self.n)[:, None]
+        if self.prev_x is None:
+            v = np.zeros_like(x)
+            a = np.zeros_like(x)
+        else:
+            v = np.where(count == 0, 0.0, (x - self.prev_x) / self.h)
+            a = np.where(count >= 2, (v - self.prev_v) / self.h, 0.0)
+        self.prev_x, self.prev_v = x, v
+        self.count += 1
+        return v, a
+
+    def reset(self, w: int) -> None:
+        """Forget world ``w``'s history (its next update starts again from zero)."""
+        self.count[w] = 0
+
+
+class WorldDifference:
+    """One world's handle on a :class:`StackedDifference` (``reset()`` only)."""
+
+    def __init__(self, stacked: StackedDifference, w: int) -> None:
+        self._stacked, self._w = stacked, w
+
+    def reset(self) -> None:
+        """Forget this world's history."""
+        self._stacked.reset(self._w)
