@@ -1,4 +1,4 @@
-"""Batches of independent worlds (sandbox/study/batch.py): the same bytes as alone."""
+"""K worlds in the one loop (Simulation.stacked, Simulation.batch): the bytes of each alone."""
 
 from __future__ import annotations
 
@@ -12,12 +12,12 @@ from helpers import PAPER, write_yaml
 
 from sandbox import SandboxWarning, compute_metrics, load_scenario
 from sandbox.cli import main
+from sandbox.loop import plan as planning
+from sandbox.loop.plan import structure_key
 from sandbox.loop.simulation import Simulation
-from sandbox.study import batch as batching
-from sandbox.study import batchable, engine, store
-from sandbox.study.batch import Batch
-from sandbox.study.batch_metrics import row_reduce, row_sum
-from sandbox.study.batchable import batch_key, batch_reason
+from sandbox.loop.stepping import WorldsPhysics
+from sandbox.loop.tally import row_reduce, row_sum
+from sandbox.study import engine, store
 
 #: The form-up's slots lie within recovery.R of each other (so avoidance stays on, as
 #: wanted here): the loader's warning of it is not what these tests check.
@@ -63,18 +63,18 @@ def test_a_batched_sweep_stores_the_bytes_of_single_runs(tmp_path, monkeypatch):
     base = write_yaml(tmp_path, formup_doc(), "base.yaml")
     cmd = ["sweep", str(base), "--grid", "recovery.beta=0,2", "--seeds", "0:4"]
     batches = []
-    real = batching.Batch.__init__
+    real = Simulation.stacked.__func__
 
-    def counted(self, sims):
-        batches.append(len(sims))
-        real(self, sims)
+    def counted(cls, scenarios, worlds=None):
+        batches.append(len(scenarios))
+        return real(cls, scenarios, worlds)
 
-    monkeypatch.setattr(batching.Batch, "__init__", counted)
+    monkeypatch.setattr(Simulation, "stacked", classmethod(counted))
     assert main([*cmd, "--out", str(tmp_path / "batched")]) == 0
     assert batches == [8]  # one batch: beta is a value, not structure
-    monkeypatch.setattr(batchable, "batch_reason", lambda sim: "forced alone")
+    monkeypatch.setattr(planning, "structure_key", lambda sc: str(id(sc)))
     assert main([*cmd, "--out", str(tmp_path / "alone")]) == 0
-    assert batches == [8]
+    assert batches == [8, 1, 1, 1, 1, 1, 1, 1, 1]
     files = sorted(p.name for p in (tmp_path / "alone" / "runs").glob("*.json"))
     assert len(files) == 8
     collided = crashed = 0
@@ -104,9 +104,8 @@ def test_a_diverging_world_stops_alone(tmp_path):
                 scenarios.append(load_scenario(path, overrides=[f"seed={seed}"]))
         else:
             scenarios.append(load_scenario(path, overrides=[f"seed={seed}"]))
-    sims = [Simulation(sc) for sc in scenarios]
-    assert len({batch_key(s) for s in sims}) == 1
-    runs = Batch(sims).run()
+    assert len({structure_key(sc) for sc in scenarios}) == 1
+    runs = Simulation.batch(scenarios)
     assert [r.status for r in runs] == ["ok", "diverged", "ok"]
     assert runs[1].t[-1] < runs[0].t[-1]
     for sc, run in zip(scenarios, runs, strict=True):
@@ -137,24 +136,23 @@ def test_other_laws_and_strategies_match(tmp_path, law):
     }
     path = write_yaml(tmp_path, doc)
     scenarios = [load_scenario(path, overrides=[f"seed={s}"]) for s in range(3)]
-    runs = Batch([Simulation(sc) for sc in scenarios]).run()
+    runs = Simulation.stacked(scenarios).run_all()
     for sc, run in zip(scenarios, runs, strict=True):
         assert_same_run(Simulation(sc).run(), run)
 
 
 @pytest.mark.slow
-def test_what_the_batch_does_not_implement_runs_alone(tmp_path):
+def test_structures_are_grouped_never_refused(tmp_path):
     sc = load_scenario(PAPER / "fig15_continuous_beta1.yaml", overrides=["duration=1"])
-    assert batch_reason(Simulation(sc)) is None
     noisy = sc.with_overrides("sensing.position_noise=0.01")
-    assert batch_reason(Simulation(noisy)) == "sensing"
     cart = {"type": "commands", "schedule": [[0.0, 0.5, 0.0]]}
     driven = sc.with_overrides(f"vehicles[2].drive={json.dumps(cart)}")
-    assert batch_reason(Simulation(driven)) == "command schedules"
-    for key in ("safety.filter=cbf", "detection.method=residual"):
-        reason = batch_reason(Simulation(sc.with_overrides(key)))
-        assert reason is not None and key.split(".")[0] in reason
-    # The engine runs those alone, with the rows of single runs.
+    keys = {structure_key(x) for x in (sc, noisy, driven)}
+    assert len(keys) == 3
+    assert structure_key(sc.with_overrides("seed=5")) == structure_key(sc)
+    with pytest.raises(ValueError, match="differ in structure"):
+        Simulation.stacked([sc, noisy])
+    # The engine groups them, with the rows of single runs.
     base = write_yaml(tmp_path, {**formup_doc(), "duration": 1.5}, "base.yaml")
     doc = {**formup_doc(), "duration": 1.5}
     jobs = [
@@ -177,7 +175,8 @@ def test_a_stopped_batch_returns_nothing():
         polls.append(1)
         return len(polls) > 10
 
-    assert Batch([Simulation(sc), Simulation(sc)]).run(should_stop=stop) is None
+    assert Simulation.stacked([sc, sc]).run_all(should_stop=stop) is None
+    assert Simulation.batch([sc, sc], should_stop=lambda: True) is None
     jobs = [("a", ({"duration": 1}, "x.yaml", []))]
     assert engine.chunks(jobs * 100, 1) == [jobs * 50] * 2
     assert [len(c) for c in engine.chunks(jobs * 300, 1)] == [128, 128, 44]
@@ -188,10 +187,9 @@ def test_a_stopped_batch_returns_nothing():
 
 def test_stacked_motor_arrays_stay_the_worlds_own():
     sc = load_scenario(PAPER / "fig15_continuous_beta1.yaml", overrides=["duration=1"])
-    sims = [Simulation(sc), Simulation(sc)]
-    batch = Batch(sims)
-    sims[1].world.immobilize(0)
-    assert not batch._tracking[3] and batch._tracking[0]
+    sim = Simulation.stacked([sc, sc])
+    sim.physics.worlds[1].immobilize(0)
+    assert not sim.physics._tracking[3] and sim.physics._tracking[0]
 
 
 def test_a_batch_that_raises_gives_the_single_runs(tmp_path, monkeypatch):
@@ -202,7 +200,7 @@ def test_a_batch_that_raises_gives_the_single_runs(tmp_path, monkeypatch):
     def broken(self, should_stop=None):
         raise RuntimeError("a bug in the batch")
 
-    monkeypatch.setattr(batching.Batch, "run", broken)
+    monkeypatch.setattr(Simulation, "run_all", broken)
     got = dict(engine.run_tasks(jobs))
     for run_id, job in jobs:
         assert got[run_id]["row"]["status"] == "ok"
@@ -216,13 +214,14 @@ def test_fast_stepping_gives_the_bytes_of_world_by_world(tmp_path, monkeypatch):
     doc = {**formup_doc(), "recovery": {"strategy": "none"}}
     path = write_yaml(tmp_path, doc)
     scenarios = [load_scenario(path, overrides=[f"seed={s}"]) for s in range(6)]
-    fast = Batch([Simulation(sc) for sc in scenarios])
-    fast_runs = fast.run()
-    assert fast._stepper is not None and fast._stepper._order is not None
-    monkeypatch.setattr(Batch, "fast_stepping", False)
-    slow = Batch([Simulation(sc) for sc in scenarios])
-    slow_runs = slow.run()
-    assert slow._stepper is None
+    fast = Simulation.stacked(scenarios)
+    fast_runs = fast.run_all()
+    stepper = fast.physics._stepper
+    assert stepper is not None and stepper._order is not None
+    monkeypatch.setattr(WorldsPhysics, "fast_stepping", False)
+    slow = Simulation.stacked(scenarios)
+    slow_runs = slow.run_all()
+    assert slow.physics._stepper is None
     assert sum(len(r.events) for r in fast_runs) >= 3
     for a, b in zip(slow_runs, fast_runs, strict=True):
         assert_same_run(a, b)
@@ -275,7 +274,7 @@ def test_buffered_loop_metrics_match_with_weak_motors(tmp_path):
     doc["vehicle"] = {**doc["vehicle"], "motor_accel": 2.0}
     path = write_yaml(tmp_path, doc)
     scenarios = [load_scenario(path, overrides=[f"seed={s}"]) for s in range(3)]
-    runs = Batch([Simulation(sc) for sc in scenarios]).run()
+    runs = Simulation.stacked(scenarios).run_all()
     for sc, run in zip(scenarios, runs, strict=True):
         assert_same_run(Simulation(sc).run(), run)
     motors = [r.info["loop_metrics"]["motor"] for r in runs]

@@ -323,13 +323,15 @@ def test_a_handover_without_a_leader_warns_that_it_has_no_effect() -> None:
     assert any("on_leader_failure" in w and "no effect" in w for w in sc.warnings)
 
 
-def test_a_sweep_batch_leaves_reconfiguration_to_the_single_run_path() -> None:
-    # the batch engine does not implement reconfiguration: it must refuse it, never
-    # run such a scenario with every slot kept
-    from sandbox.study.batchable import batch_reason
-
-    sim = Simulation(load_scenario(FAILURES / "column_close.yaml"))
-    assert batch_reason(sim) == "the 'reconfigure' section"
-    sim = Simulation(load_scenario(column(on_leader_failure="elect")))
-    assert batch_reason(sim) == "the 'on_leader_failure' section"
-    assert batch_reason(Simulation(load_scenario(column()))) is None
+def test_reconfiguring_worlds_in_one_loop_give_the_runs_alone() -> None:
+    # each world re-forms on its own events, its law its own, in the one loop
+    base = load_scenario(FAILURES / "column_close.yaml")
+    scenarios = [base.with_overrides(f"seed={s}") for s in range(3)]
+    scenarios.append(base.with_overrides("failures[0].at=1.5"))
+    runs = Simulation.stacked(scenarios).run_all()
+    for sc, run in zip(scenarios, runs, strict=True):
+        alone = Simulation(sc).run()
+        assert run.pose.tobytes() == alone.pose.tobytes()
+        assert run.info["slots"] == alone.info["slots"]
+        assert run.info["reassignments"] == alone.info["reassignments"]
+    assert runs[3].info["reassignments"] != runs[0].info["reassignments"]

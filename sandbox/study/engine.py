@@ -52,7 +52,7 @@ MIN_GROUPS = 2
 MIN_GROUPS_PER_WORKER = 2
 MIN_WORLDS = 8
 #: Modules a local pool's fork server imports before it forks the workers.
-PRELOAD = ["sandbox.study.batch", "sandbox.run.metrics", "sandbox.scenario"]
+PRELOAD = ["sandbox.loop.simulation", "sandbox.run.metrics", "sandbox.scenario"]
 #: How long to wait for a Dask scheduler to answer.
 CONNECT_TIMEOUT = "5s"
 
@@ -118,25 +118,22 @@ def run_task(
     keep : str, optional
         Also write the run's directory (as ``sandbox run --out``) there.
     """
-    sim = _simulation(base_doc, source, overrides)
-    if isinstance(sim, dict):
-        return sim
-    return _single(sim, should_stop, keep)
+    sc = _scenario(base_doc, source, overrides)
+    if isinstance(sc, dict):
+        return sc
+    return _single(sc, should_stop, keep)
 
 
-def _simulation(base_doc: dict[str, Any], source: str, overrides: list[str]) -> Any:
-    """The run's fresh Simulation, or its row when the scenario is invalid."""
-    from sandbox.loop.simulation import Simulation
+def _scenario(base_doc: dict[str, Any], source: str, overrides: list[str]) -> Any:
+    """The run's scenario, or its row when the scenario is invalid."""
     from sandbox.scenario import parse_scenario
 
     try:
         with warnings.catch_warnings():  # shown once, when the grid was checked
             warnings.simplefilter("ignore", SandboxWarning)
-            scenario = parse_scenario(base_doc, source=source, overrides=overrides)
+            return parse_scenario(base_doc, source=source, overrides=overrides)
     except ScenarioError as exc:
         return {"row": {"status": STATUS_INVALID}, "error": "; ".join(exc.lines)}
-    try:
-        return Simulation(scenario)
     except Exception as exc:  # a row with its status, never a missing row
         return _error(exc)
 
@@ -170,39 +167,34 @@ class Parses:
         self.parses = 0
         self.shared = 0
 
-    def simulation(
+    def scenario(
         self, base_doc: dict[str, Any], source: str, overrides: list[str]
     ) -> Any:
-        """The run's fresh Simulation, or its row when its scenario is invalid."""
+        """The run's scenario, or its row when it is invalid."""
         key, seed = self._key(base_doc, source, overrides)
         first = self.parsed.get(key) if key is not None else False
         if key is None or first is False:
             return self._parse(base_doc, source, overrides)
         if first is None:  # the first run of the key
-            sim = self._parse(base_doc, source, overrides)
-            ok = not isinstance(sim, dict) and _seed_free(sim.scenario)
-            self.parsed[key] = sim.scenario if ok else False
-            return sim
+            sc = self._parse(base_doc, source, overrides)
+            ok = not isinstance(sc, dict) and _seed_free(sc)
+            self.parsed[key] = sc if ok else False
+            return sc
         derived = _with_seed(first, seed)
         if key not in self.checked:  # the second: its own parse must agree
-            sim = self._parse(base_doc, source, overrides)
+            sc = self._parse(base_doc, source, overrides)
             self.checked.add(key)
-            if isinstance(sim, dict) or not _same(sim.scenario, derived):
+            if isinstance(sc, dict) or not _same(sc, derived):
                 self.parsed[key] = False
-            return sim
-        from sandbox.loop.simulation import Simulation
-
+            return sc
         self.shared += 1
-        try:
-            return Simulation(derived)
-        except Exception as exc:  # a row with its status, never a missing row
-            return _error(exc)
+        return derived
 
     def _parse(
         self, base_doc: dict[str, Any], source: str, overrides: list[str]
     ) -> Any:
         self.parses += 1
-        return _simulation(base_doc, source, overrides)
+        return _scenario(base_doc, source, overrides)
 
     @staticmethod
     def _key(
@@ -253,11 +245,13 @@ def _error(exc: BaseException) -> dict[str, Any]:
 
 
 def _single(
-    sim: Any, should_stop: Callable[[], bool] | None, keep: str | None = None
+    scenario: Any, should_stop: Callable[[], bool] | None, keep: str | None = None
 ) -> dict[str, Any] | None:
-    """Run one Simulation to its row and metrics (None when stopped)."""
+    """Run one scenario alone to its row and metrics (None when stopped)."""
+    from sandbox.loop.simulation import Simulation
+
     try:
-        run = sim.run(should_stop=should_stop)
+        run = Simulation(scenario).run(should_stop=should_stop)
         if run.status == "interrupted":
             return None
         return _result(run, keep)
@@ -291,16 +285,17 @@ def _keep(job: tuple[Any, ...]) -> str | None:
 def run_tasks(
     jobs: list[Job], should_stop: Callable[[], bool] | None = None
 ) -> list[tuple[str, dict[str, Any] | None]]:
-    """Run a group of tasks in this process, as batches of independent worlds.
+    """Run a group of tasks in this process, in the one loop, K worlds at once.
 
     The tasks whose runs share their structure (the same
-    :func:`~sandbox.study.batchable.batch_key`) are stepped together
-    (:class:`~sandbox.study.batch.Batch`, bit-identical to single runs); the others,
-    and every run of a batch that raised, run alone. Returns ``(run id, result)`` for
-    every task, the result None when ``should_stop`` stopped it.
+    :func:`~sandbox.loop.plan.structure_key`) are stepped together
+    (:meth:`Simulation.stacked <sandbox.loop.simulation.Simulation.stacked>`, each
+    run byte for byte the run alone); a group that raised runs again world by world,
+    each run its own row or error. Returns ``(run id, result)`` for every task, the
+    result None when ``should_stop`` stopped it.
     """
-    from sandbox.study.batch import Batch
-    from sandbox.study.batchable import batch_key, batch_reason
+    from sandbox.loop.plan import structure_key
+    from sandbox.loop.simulation import Simulation
 
     out: dict[str, dict[str, Any] | None] = {}
     groups: dict[str, list[tuple[str, Any]]] = {}
@@ -308,42 +303,38 @@ def run_tasks(
     keep = {run_id: _keep(job) for run_id, job in jobs}
     parses = Parses()
     for run_id, job in jobs:
-        sim = parses.simulation(*job[:3])
-        if isinstance(sim, dict):
-            out[run_id] = sim
-        elif batch_reason(sim) is None:
-            groups.setdefault(batch_key(sim), []).append((run_id, sim))
-        elif stopped:
-            out[run_id] = None
+        sc = parses.scenario(*job[:3])
+        if isinstance(sc, dict):
+            out[run_id] = sc
         else:
-            out[run_id] = _single(sim, should_stop, keep[run_id])
-            stopped = out[run_id] is None
+            groups.setdefault(structure_key(sc), []).append((run_id, sc))
     for members in groups.values():
         if stopped:
             out.update((run_id, None) for run_id, _ in members)
             continue
         try:
-            runs = Batch([sim for _, sim in members]).run(should_stop)
+            sim = Simulation.stacked([sc for _, sc in members])
+            runs = sim.run_all(should_stop)
         except Exception:  # each run again alone: its own row or error
-            runs = [_rebuilt(sim).run(should_stop=should_stop) for _, sim in members]
-            if any(r.status == "interrupted" for r in runs):
-                runs = None
+            runs = []
+            for run_id, sc in members:
+                result = _single(sc, should_stop, keep[run_id])
+                if result is None:
+                    runs = None
+                    break
+                out[run_id] = result
+            else:
+                continue
         if runs is None:
             stopped = True
-            out.update((run_id, None) for run_id, _ in members)
+            out.update((run_id, None) for run_id, _ in members if run_id not in out)
             continue
         for (run_id, _), run in zip(members, runs, strict=True):
             try:
                 out[run_id] = _result(run, keep[run_id])
             except Exception as exc:
                 out[run_id] = _error(exc)
-    return [(run_id, out[run_id]) for run_id, _ in jobs]
-
-
-def _rebuilt(sim: Any) -> Any:
-    from sandbox.loop.simulation import Simulation
-
-    return Simulation(sim.scenario)
+    return [(run_id, out.get(run_id)) for run_id, _ in jobs]
 
 
 def _ignore_interrupts(parent: int | None = None) -> None:
