@@ -1,0 +1,197 @@
+"""The one loop: every feature run K worlds at once gives each world's files alone.
+
+Each case is a bundled scenario (or a small document) with per-world differences
+(seeds, starts, failure times); the worlds run together through
+``Simulation.batch`` and each alone through ``Simulation(scenario).run()``, and
+every output file of ``sandbox run`` (trajectory, metrics, scenario, run.npz,
+manifest) must be the same bytes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import write_yaml
+
+from sandbox import compute_metrics, load_scenario
+from sandbox.errors import PluginRunError
+from sandbox.loop.plan import structure_key
+from sandbox.loop.simulation import Simulation
+from sandbox.plugins import register_strategy, unregister
+from sandbox.run import recorder as recording
+from sandbox.run.output import write_run_dir
+
+pytestmark = pytest.mark.filterwarnings("ignore::sandbox.SandboxWarning")
+
+#: Per-world overrides that vary the runs of one structure.
+STARTS = [
+    ["seed=0"],
+    ["seed=1", "vehicles[1].pose=[-1.2, 0.9, 0.3]"],
+    ["seed=2", "vehicles[2].pose=[-0.8, -1.4, -0.2]"],
+]
+
+#: (bundled scenario, fixed overrides) covering the loop's features.
+CASES = {
+    "laws_and_avoidance": ("paper/fig15_continuous_beta1", ["duration=3"]),
+    "discontinuous_leader_avoids": (
+        "paper/fig16_leader_avoids_discontinuous_beta1",
+        ["duration=3"],
+    ),
+    "tangential": (
+        "paper/fig15_continuous_beta1",
+        ["duration=3", "recovery.tangential=0.5", "recovery.strategy=smooth"],
+    ),
+    "virtual_rotating": ("paper/virtual_rotating", ["duration=3"]),
+    "own_estimate": ("paper/own_estimate_circle", ["duration=3"]),
+    "leader_ref": ("paper/leader_ref_drift", ["duration=3"]),
+    "stuck_steering": ("failures/follower_stuck_steering", ["duration=4"]),
+    "spin": ("failures/follower_spin", ["duration=4"]),
+    "stop": ("failures/follower_stop", ["duration=4"]),
+    "crash": ("failures/follower_crash", ["duration=4"]),
+    "uncontrolled": ("failures/uncontrolled_into_leader", ["duration=4"]),
+    "obstacles": ("failures/obstacle_field", ["duration=4"]),
+    "sensing": (
+        "paper/fig15_continuous_beta1",
+        [
+            "duration=3",
+            "sensing.position_noise=0.02",
+            "sensing.heading_noise=0.01",
+            "sensing.delay=0.02",
+            "sensing.loss=0.1",
+        ],
+    ),
+    "cbf": ("safety/circle_swap_3", ["duration=4"]),
+    "cbf_braking_sensed": (
+        "safety/circle_swap_3_jittered",
+        ["duration=4", "sensing.position_noise=0.01"],
+    ),
+    "residual_detector": ("failures/detect_follower_stop", ["duration=4"]),
+    "reconfigure_handover": ("failures/leader_crash_elect", ["duration=5"]),
+    "reconfigure_hungarian": ("failures/column_close", ["duration=5"]),
+    "command_schedules": ("paper/stabilization", ["duration=3"]),
+}
+
+
+def files_of(run, directory) -> dict[str, bytes]:
+    out = write_run_dir(run, compute_metrics(run), directory)
+    return {p.name: p.read_bytes() for p in sorted(out.iterdir()) if p.is_file()}
+
+
+def assert_batch_is_alone(scenarios, tmp_path, runs=None) -> list:
+    runs = Simulation.batch(scenarios) if runs is None else runs
+    assert len(runs) == len(scenarios)
+    for k, (sc, run) in enumerate(zip(scenarios, runs, strict=True)):
+        alone = files_of(Simulation(sc).run(), tmp_path / f"alone{k}")
+        together = files_of(run, tmp_path / f"batch{k}")
+        assert together.keys() == alone.keys()
+        for name in alone:
+            assert together[name] == alone[name], (sc.name, k, name)
+    return runs
+
+
+def scenarios_of(name: str, fixed: list[str], starts=STARTS) -> list:
+    scenarios = []
+    for extra in starts:
+        try:
+            scenarios.append(load_scenario(name, overrides=[*fixed, *extra]))
+        except Exception:  # a start that does not fit the scenario: the seed alone
+            scenarios.append(load_scenario(name, overrides=[*fixed, extra[0]]))
+    return scenarios
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_every_feature_batched_gives_the_bytes_alone(case, tmp_path):
+    name, fixed = CASES[case]
+    scenarios = scenarios_of(name, fixed)
+    assert len({structure_key(sc) for sc in scenarios}) == 1  # one loop, K = 3
+    assert_batch_is_alone(scenarios, tmp_path)
+
+
+def test_seeds_of_sensing_and_detection_in_one_loop(tmp_path):
+    fixed = ["duration=2", "sensing.position_noise=0.02", "sensing.loss=0.2"]
+    scenarios = scenarios_of("failures/detect_follower_stop", fixed)
+    runs = assert_batch_is_alone(scenarios, tmp_path)
+    assert runs[0].pose.tobytes() != runs[1].pose.tobytes()  # own random streams
+
+
+def test_a_diverging_world_an_ending_one_and_an_interrupted_batch(tmp_path):
+    doc = {
+        "duration": 1.5,
+        "reference": {"type": "line", "start": [0, 0], "heading": 0, "speed": 1},
+        "formation": {"law": "rotating"},
+        "recovery": {"strategy": "flaky", "R": 1.5},
+        "vehicle": {"v1_max": 2.0, "v2_max": 8.0},
+        "vehicles": [
+            {"name": "lead", "pose": [0, 0, 0], "leader": True},
+            {"name": "red", "pose": [-1, 1, 0], "offset": [-1, 1]},
+        ],
+    }
+    calls = []
+
+    @register_strategy("flaky", {"beta": 1.0})
+    def flaky(ctx):  # beta is free per world; 2 breaks the plug-in at 0.7 s
+        calls.append(ctx.n)
+        if ctx.params["beta"] == 2.0 and ctx.t >= 0.7:
+            raise RuntimeError("flaky broke")
+        return np.zeros((ctx.n, 2)), np.zeros(ctx.n, dtype=bool)
+
+    try:
+        path = write_yaml(tmp_path, doc)
+        runaway = {"vehicle": "red", "kind": "uncontrolled", "v1": 2000.0, "at": 0.3}
+        scenarios = [
+            load_scenario(path, overrides=["seed=0"]),
+            load_scenario(path, overrides=["seed=1", "recovery.beta=2"]),
+            load_scenario(path, overrides=["seed=2"]).with_overrides(
+                f"failures=[{runaway}]".replace("'", '"')
+            ),
+        ]
+        assert len({structure_key(sc) for sc in scenarios}) == 1
+        sim = Simulation.stacked(scenarios)
+        runs = sim.run_all()
+        assert [r.status for r in runs] == ["ok", "error", "diverged"]
+        assert "flaky broke" in runs[1].info["error"]["message"]
+        assert set(calls) == {2}  # a plug-in without batched=True: world by world
+        assert_batch_is_alone(scenarios, tmp_path, runs)
+        # Interrupted: the worlds stop together and nothing is returned.
+        polls = []
+        stopped = Simulation.stacked(scenarios[:1] * 2).run_all(
+            should_stop=lambda: polls.append(1) or len(polls) > 20
+        )
+        assert stopped is None
+        alone = Simulation(scenarios[0])
+        run = alone.run(should_stop=lambda: len(polls) > 40 or polls.append(1))
+        assert run.status == "interrupted"
+    finally:
+        unregister("strategy", "flaky")
+    assert PluginRunError  # the error class the loop turns into status "error"
+
+
+def test_the_step_api_over_k_worlds_equals_each_world_stepped_alone():
+    scenarios = scenarios_of("paper/fig15_continuous_beta1", ["duration=1"])
+    together = Simulation.stacked(scenarios)
+    alone = [Simulation(sc) for sc in scenarios]
+    rng = np.random.default_rng(4)
+    while not together.done:
+        speeds = rng.uniform(-0.5, 0.5, size=(3, 3, 2))
+        speeds[:, 0] = np.nan  # the leaders keep their controllers
+        shifts = [None, {"red": (0.1, 0.0)}, None]
+        obs = together.step(commands=speeds, shifts=shifts)
+        for w, sim in enumerate(alone):
+            one = sim.step(commands=speeds[w], shifts=shifts[w])
+            assert one.pose.tobytes() == obs[w].pose.tobytes()
+            assert one.mode.tobytes() == obs[w].mode.tobytes()
+    for w, sim in enumerate(alone):
+        assert together.result(w).pose.tobytes() == sim.result().pose.tobytes()
+    with pytest.raises(ValueError, match=r"shape \(3, 3, 2\)"):
+        Simulation.stacked(scenarios).step(commands=np.zeros((2, 3, 2)))
+
+
+def test_a_record_spilled_to_disk_is_batched_too(tmp_path, monkeypatch):
+    monkeypatch.setattr(recording, "SPILL_BYTES", 10_000)
+    scenarios = scenarios_of("paper/fig15_continuous_beta1", ["duration=1"])
+    sim = Simulation.stacked(scenarios)
+    assert sim.recorder.on_disk
+    runs = sim.run_all()
+    assert isinstance(runs[0].pose, np.memmap) or runs[0].pose.base is not None
+    assert_batch_is_alone(scenarios, tmp_path, runs)
