@@ -379,35 +379,19 @@ class Task:
     # ------------------------------------------------------------------ features
     def features(self) -> np.ndarray:
         """Observations of every agent, shape (m, 7 + 6 k), float32."""
-        obs, m, k = self.obs, len(self.agents), self.k
-        pos, vel = obs.pose[:, :2], obs.vel
-        out = np.zeros((m, self.size))
-        i = self.rows
-        error = obs.slot[i] - pos[i]
-        out[:, 0:2] = np.where(np.isfinite(error), error, 0.0)
-        out[:, 2] = np.cos(obs.pose[i, 2])
-        out[:, 3] = np.sin(obs.pose[i, 2])
-        out[:, 4:6] = vel[i]
-        out[:, 6] = obs.failed[i]
-        n = obs.n
-        if k and n > 1:
-            rel = pos[None, :, :] - pos[i, None, :]  # (m, n, 2)
-            dist = np.hypot(rel[..., 0], rel[..., 1])
-            dist[np.arange(m), i] = np.inf  # not one's own neighbour
-            take = min(k, n - 1)
-            near = np.argsort(dist, axis=1, kind="stable")[:, :take]  # (m, take)
-            rows = np.arange(m)[:, None]
-            block = np.zeros((m, take, NEIGHBOUR_FEATURES))
-            block[..., 0:2] = rel[rows, near]
-            block[..., 2:4] = vel[near] - vel[i, None, :]
-            block[..., 4] = obs.failed[near]
-            block[..., 5] = 1.0
-            out[:, OWN_FEATURES : OWN_FEATURES + NEIGHBOUR_FEATURES * take] = (
-                block.reshape(m, -1)
-            )
+        obs = self.obs
         low, high = self.bounds()
-        out = np.where(np.isfinite(out), out, 0.0)
-        return np.clip(out, low, high).astype(np.float32)
+        return features_of(
+            obs.pose[None, :, :2],
+            obs.pose[None, :, 2],
+            obs.vel[None],
+            obs.slot[None],
+            obs.failed[None],
+            self.rows,
+            self.k,
+            low,
+            high,
+        )[0]
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds of an observation, shape (7 + 6 k,) each."""
@@ -457,6 +441,51 @@ class Task:
             info=dict(sim.info),
             scenario=sim.scenario,
         )
+
+
+def features_of(
+    pos: np.ndarray,
+    theta: np.ndarray,
+    vel: np.ndarray,
+    slot: np.ndarray,
+    failed: np.ndarray,
+    agents: np.ndarray,
+    k: int,
+    low: np.ndarray,
+    high: np.ndarray,
+) -> np.ndarray:
+    """Observations of the agents of W worlds, shape (W, m, 7 + 6 k), float32.
+
+    ``pos``, ``vel``, ``slot`` are (W, n, 2), ``theta`` and ``failed`` (W, n), and
+    ``agents`` the agents' rows (m,); see the module docstring for the layout.
+    """
+    W, n = theta.shape
+    m, i = len(agents), agents
+    out = np.zeros((W, m, OWN_FEATURES + NEIGHBOUR_FEATURES * k))
+    error = slot[:, i] - pos[:, i]
+    out[..., 0:2] = np.where(np.isfinite(error), error, 0.0)
+    out[..., 2] = np.cos(theta[:, i])
+    out[..., 3] = np.sin(theta[:, i])
+    out[..., 4:6] = vel[:, i]
+    out[..., 6] = failed[:, i]
+    if k and n > 1:
+        rel = pos[:, None, :, :] - pos[:, i, None, :]  # (W, m, n, 2)
+        dist = np.hypot(rel[..., 0], rel[..., 1])
+        dist[:, np.arange(m), i] = np.inf  # not one's own neighbour
+        take = min(k, n - 1)
+        near = np.argsort(dist, axis=2, kind="stable")[..., :take]  # (W, m, take)
+        w_ = np.arange(W)[:, None, None]
+        a_ = np.arange(m)[None, :, None]
+        block = np.zeros((W, m, take, NEIGHBOUR_FEATURES))
+        block[..., 0:2] = rel[w_, a_, near]
+        block[..., 2:4] = vel[w_, near] - vel[:, i][:, :, None, :]
+        block[..., 4] = failed[w_, near]
+        block[..., 5] = 1.0
+        out[..., OWN_FEATURES : OWN_FEATURES + NEIGHBOUR_FEATURES * take] = (
+            block.reshape(W, m, -1)
+        )
+    out = np.where(np.isfinite(out), out, 0.0)
+    return np.clip(out, low, high).astype(np.float32)
 
 
 def _positive(value: Any, what: str) -> float:

@@ -949,7 +949,8 @@ class Simulation:
         commands: Overrides | Sequence[Overrides] = None,
         targets: Overrides | Sequence[Overrides] = None,
         shifts: Overrides | Sequence[Overrides] = None,
-    ) -> Observation | list[Observation]:
+        observe: bool = True,
+    ) -> Observation | list[Observation] | None:
         """Advance one control period ``h = dt``, with optional overrides.
 
         Parameters
@@ -966,6 +967,10 @@ class Simulation:
             Displacements [m] added to the planned target (slot plus recovery) this
             period, the law's feed-forward motion kept: a zero shift drives as the
             built-in stack does. ``targets`` win where both are given.
+
+        observe : bool
+            Whether to return the observation (False: None, the arrays untouched
+            in :attr:`fleet` and :attr:`plan`).
 
         With K worlds (:meth:`stacked`) each argument is an array ``(K, n, 2)`` or
         a sequence of K of the above (None for none).
@@ -991,6 +996,8 @@ class Simulation:
         tgt = self._override_rows(targets, "targets")
         shf = self._override_rows(shifts, "shifts")
         self._step(cmd, tgt, shifts=shf)
+        if not observe:
+            return None
         if self.K == 1:
             return self.observe()
         return [self.observe(w) for w in range(self.K)]

@@ -1,0 +1,116 @@
+"""Vector RL environments on the one loop: shapes, autoreset, world k = a single env."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+gym = pytest.importorskip("gymnasium")
+
+from sandbox.envs import (  # noqa: E402
+    VEHICLE_ENV_ID,
+    FormationEnv,
+    FormationVectorEnv,
+    VehicleEnv,
+    VehicleVectorEnv,
+)
+
+#: A short episode (1 s, 3 periods a step: 34 steps) so that episodes end often.
+DOC = {
+    "duration": 1.0,
+    "reference": {"type": "line", "start": [0, 0], "heading": 0, "speed": 0.5},
+    "formation": {"law": "rotating"},
+    "recovery": {"strategy": "continuous", "beta": 1.0, "R": "3d"},
+    "vehicle": {"v1_max": 1.0, "v2_max": 2.0, "max_accel": 4.0},
+    "vehicles": [
+        {"name": "lead", "pose": [0, 0, 0], "leader": True},
+        {"name": "red", "pose": [-1.6, 1.2, 0], "offset": [-1.6, 1.2]},
+        {"name": "blue", "pose": [-1.6, -1.2, 0], "offset": [-1.6, -1.2]},
+    ],
+    "randomize": {"vehicles[1].pose": {"uniform": [[-3, 1, -1], [-1.5, 2.5, 1]]}},
+}
+
+
+def test_world_k_of_the_vector_is_the_single_env_with_seed_plus_k():
+    K = 3
+    env = VehicleVectorEnv(DOC, num_envs=K, agent="red", repeat=3)
+    assert env.observation_space.shape == (K, 25)
+    obs, info = env.reset(seed=10)
+    singles = [VehicleEnv(DOC, agent="red", repeat=3) for _ in range(K)]
+    firsts = [s.reset(seed=10 + k)[0] for k, s in enumerate(singles)]
+    assert all(np.array_equal(obs[k], firsts[k]) for k in range(K))
+    rng = np.random.default_rng(0)
+    ended = [False] * K
+    endings = 0
+    for _ in range(80):  # two episodes and more: autoresets
+        a = rng.uniform(-1, 1, size=(K, 2)).astype(np.float32)
+        obs, reward, terminated, truncated, info = env.step(a)
+        assert obs.shape == (K, 25) and obs.dtype == np.float32
+        assert reward.shape == (K,) and truncated.shape == (K,)
+        for k, single in enumerate(singles):
+            if ended[k]:  # next-step autoreset: the new episode's first observation
+                want, r, te, tr = single.reset()[0], 0.0, False, False
+            else:
+                want, r, te, tr, _ = single.step(a[k])
+            assert np.array_equal(obs[k], want)
+            assert reward[k] == r and terminated[k] == te and truncated[k] == tr
+            ended[k] = te or tr
+            endings += te or tr
+    assert endings >= 2 * K
+
+
+def test_make_vec_builds_the_native_vector_env():
+    env = gym.make_vec(
+        VEHICLE_ENV_ID,
+        num_envs=2,
+        vectorization_mode="vector_entry_point",
+        scenario=DOC,
+    )
+    assert isinstance(env.unwrapped, VehicleVectorEnv)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (2, 25)
+    obs, *_ = env.step(env.action_space.sample())
+    assert obs.shape == (2, 25)
+
+
+def test_the_formation_vector_env_steps_every_agent_of_every_world():
+    K = 2
+    env = FormationVectorEnv(DOC, num_envs=K, repeat=3)
+    obs, _ = env.reset(seed=4)
+    assert obs.shape == (K, 2, 25)
+    single = FormationEnv(DOC, repeat=3)
+    want, _ = single.reset(seed=5)
+    assert np.array_equal(obs[1], np.stack([want[a] for a in single.agents]))
+    truncations = 0
+    for _ in range(40):
+        obs, rewards, terms, truncs, info = env.step(np.zeros((K, 2, 2)))
+        assert obs.shape == (K, 2, 25)
+        assert rewards.shape == terms.shape == truncs.shape == (K, 2)
+        truncations += truncs.all(axis=1).sum()
+    assert truncations == K  # one episode each ended within 40 steps of 34
+
+
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        (0, "num_envs"),
+        (10**9, "num_envs"),
+        (2.5, "num_envs"),
+    ],
+)
+def test_bad_num_envs(bad, match):
+    with pytest.raises(ValueError, match=match):
+        VehicleVectorEnv(DOC, num_envs=bad)
+
+
+def test_bad_actions_and_stepping_before_reset():
+    env = VehicleVectorEnv(DOC, num_envs=2)
+    with pytest.raises(RuntimeError, match="before reset"):
+        env.step(np.zeros((2, 2)))
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"shape \(2, 2\)"):
+        env.step(np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.array([[np.nan, 0.0], [0.0, 0.0]]))
+    with pytest.raises(ValueError, match="finite"):
+        env.step(np.array([["a", "b"], ["c", "d"]]))
