@@ -37,8 +37,8 @@ def parsed(doc: dict, overrides: list[str]):
 
 def scenarios(doc: dict, runs: list[list[str]]) -> tuple[list, engine.Parses]:
     parses = engine.Parses()
-    sims = [parses.simulation(doc, "base.yaml", o) for o in runs]
-    return [s.scenario for s in sims], parses
+    sims = [parses.scenario(doc, "base.yaml", o) for o in runs]
+    return sims, parses
 
 
 def test_runs_differing_in_their_seed_share_one_parse():
@@ -77,11 +77,11 @@ def test_each_grid_point_is_parsed_apart():
 def test_runs_the_seed_may_change_are_each_parsed(doc, runs):
     parses = engine.Parses()
     for overrides in runs:
-        sim = parses.simulation(doc, "base.yaml", overrides)
+        sim = parses.scenario(doc, "base.yaml", overrides)
         if isinstance(sim, dict):  # "-1": invalid, as sandbox run says
             assert sim == engine.run_task(doc, "base.yaml", overrides)
             continue
-        assert sim.scenario == parsed(doc, overrides)
+        assert sim == parsed(doc, overrides)
     assert parses.shared == 0
 
 

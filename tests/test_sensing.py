@@ -73,7 +73,7 @@ def test_the_delay_shifts_the_seen_leader_pose_by_whole_periods() -> None:
     original = sim.law.targets
 
     def spy(inputs):
-        law_pos.append(np.array(inputs.leader_pos))
+        law_pos.append(np.array(inputs.leader_pos).reshape(2))  # (K, 1, 2), K = 1
         return original(inputs)
 
     sim.law.targets = spy

@@ -250,17 +250,19 @@ def test_stepping_past_the_end_raises_and_an_early_result_is_interrupted() -> No
 def test_divergence_ends_a_stepped_run(monkeypatch: pytest.MonkeyPatch) -> None:
     from sandbox.physics.world import World
 
-    read = World.read_state
+    from sandbox.loop.stepping import WorldsPhysics
+
+    read = WorldsPhysics.read
     calls = {"n": 0}
 
-    def poisoned(self: World) -> PhysicalState:
-        state = read(self)
+    def poisoned(self: WorldsPhysics):
+        pos, theta, vel = read(self)
         calls["n"] += 1
         if calls["n"] > 20:
-            state.pos[1, 0] = np.nan
-        return state
+            pos[1, 0] = np.nan
+        return pos, theta, vel
 
-    monkeypatch.setattr(World, "read_state", poisoned)
+    monkeypatch.setattr(WorldsPhysics, "read", poisoned)
     sim = Simulation(load_scenario(DUEL))
     while not sim.done:
         obs = sim.step()

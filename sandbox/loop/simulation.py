@@ -276,6 +276,9 @@ class Simulation:
         self.leader = first.leader_index
         if spec is None or per_world:
             self.law = None if spec is None else self.states[0].law
+            if self.K == 1:  # the world's own law: its memory and parameters
+                self.law_memory = self.states[0].law_memory
+                self.law_params = self.states[0].law_params
             return
         offset = self.fleet.offset.reshape(self.K, self.n, 2)
         self.law = make_law(spec.law, spec.params, offset, self.h)
