@@ -10,11 +10,13 @@ steps of 4 substeps), ``--runs`` times (default 256).
   could reach.
 - ``single runs``: ``Simulation(scenario).run()`` and ``compute_metrics``, one run
   after the other (``--single`` runs of them, default 16: they are slow).
-- ``batch of K``: the runs as batches of K worlds (:class:`sandbox.study.batch.Batch`;
-  building the simulations, stepping, metrics).
+- ``batch of K``: the runs as K worlds of the one loop
+  (``Simulation.stacked(scenarios).run_all()``; building, stepping, metrics).
 - ``sweep --jobs 1`` and ``--jobs 2``: the whole ``sandbox sweep`` command, in-process
   (``sandbox.cli.main``; scenario loading, batches of up to 128 worlds, metrics, the
-  results store).
+  results store); and ``--jobs 1`` again with ``safety: {filter: cbf}``,
+  ``detection: {method: residual}`` and ``sensing: {position_noise: 0.01}``, each
+  against the bare physics of the same bodies.
 
 Every row is timed once per repetition, in one process, with the bare physics timed
 just before and just after it (``--bare`` runs each time, default 64): the ratio is
@@ -47,7 +49,6 @@ from sandbox.loop.simulation import Simulation  # noqa: E402
 from sandbox.physics.world import World  # noqa: E402
 from sandbox.run.metrics import compute_metrics  # noqa: E402
 from sandbox.scenario import load_scenario  # noqa: E402
-from sandbox.study.batch import Batch  # noqa: E402
 from sandbox.study.engine import usable_cores  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper" / "fig15_continuous_beta1.yaml"
@@ -92,14 +93,24 @@ def batched(runs: int, size: int) -> float:
     t0 = time.perf_counter()
     for start in range(0, runs, size):
         k = min(size, runs - start)
-        for run in Batch([Simulation(sc) for _ in range(k)]).run():
+        for run in Simulation.stacked([sc] * k).run_all():
             compute_metrics(run)
     return time.perf_counter() - t0
 
 
-def sweep(runs: int, jobs: int, out: Path) -> float:
+#: The features measured in a sweep of their own: (row name, --set assignment).
+FEATURES = (
+    ("safety: {filter: cbf}", "safety.filter=cbf"),
+    ("detection: {method: residual}", "detection.method=residual"),
+    ("sensing: {position_noise: 0.01}", "sensing.position_noise=0.01"),
+)
+
+
+def sweep(runs: int, jobs: int, out: Path, extra: tuple[str, ...] = ()) -> float:
     """Seconds of ``sandbox sweep`` over ``runs`` seeds into a fresh directory."""
     argv = ["sweep", str(SCENARIO), "--set", f"duration={DURATION}"]
+    for assignment in extra:
+        argv += ["--set", assignment]
     argv += ["--seeds", f"0:{runs}", "--jobs", str(jobs), "--out", str(out)]
     t0 = time.perf_counter()
     code = sandbox_main(argv)
@@ -147,6 +158,12 @@ def main(argv: list[str] | None = None) -> int:
             measure(
                 "sandbox sweep --jobs 1", runs, lambda o=out: sweep(runs, 1, o / "j1")
             )
+            for name, assignment in FEATURES:
+                measure(
+                    f"sandbox sweep --jobs 1, {name}",
+                    runs,
+                    lambda o=out, a=assignment: sweep(runs, 1, o / a, (a,)),
+                )
             if cores > 1:
                 measure(
                     "sandbox sweep --jobs 2",

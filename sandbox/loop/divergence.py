@@ -2,8 +2,8 @@
 
 A run whose state turns non-finite, or runs beyond :data:`DIVERGED_POSITION` or
 :data:`DIVERGED_SPEED`, ends with status ``diverged`` (see
-:meth:`sandbox.loop.simulation.Simulation._sense`); the batched runner of
-:mod:`sandbox.study.batch` applies the same check to each of its worlds.
+:meth:`sandbox.loop.simulation.Simulation._sense`, which checks all worlds at once
+and then each world alone).
 """
 
 from __future__ import annotations

@@ -975,9 +975,6 @@ class Simulation:
             Whether to return the observation (False: None, the arrays untouched
             in :attr:`fleet` and :attr:`plan`).
 
-        With K worlds (:meth:`stacked`) each argument is an array ``(K, n, 2)`` or
-        a sequence of K of the above (None for none).
-
         Returns
         -------
         Observation, or list of Observation (one per world)
@@ -989,6 +986,12 @@ class Simulation:
             When the run is :attr:`done`.
         ValueError
             An unknown vehicle name or a malformed value.
+
+        Notes
+        -----
+        With K worlds (:meth:`stacked`) each override is an array ``(K, n, 2)`` or a
+        sequence of K of the above (None for none), and a list of K observations is
+        returned.
         """
         if self.done:
             raise RuntimeError(

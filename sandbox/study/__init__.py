@@ -2,7 +2,6 @@
 
 - :mod:`sandbox.study.spec`: what a sweep runs (grid, zip, seeds, run ids);
 - :mod:`sandbox.study.engine`: running the runs (in-process, process pool, Dask);
-- :mod:`sandbox.study.batch`: many runs of one structure stepped together;
 - :mod:`sandbox.study.store`: the results directory (``results.csv``, one file per run);
 - :mod:`sandbox.study.sweep`: computing what is missing into the store;
 - :mod:`sandbox.study.summary`: grouped rates with Wilson intervals;

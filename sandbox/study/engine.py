@@ -5,7 +5,7 @@ loader, loop and metrics) and returns each run's row and metrics. On every engin
 the runs go in groups (:class:`Groups`) to :func:`run_tasks`, which parses a grid
 point's base once for its seeds where that gives the same scenario (:class:`Parses`)
 and steps the runs of one structure together as a batch of independent worlds
-(:mod:`sandbox.study.batch`, bit-identical to single runs); on Dask a task is one
+(the one loop, each run the bytes of the run alone); on Dask a task is one
 such group. Results come back to the calling process, which alone writes the store
 (:mod:`sandbox.study.store`): a worker that dies, or a task that some scheduler runs
 twice, can never leave a run twice or half-written in it.
