@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from sandbox.behaviour.detection import Detection
+from sandbox.behaviour.ranges import RangeSensor, context_fields, observation_fields
 from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.behaviour.sensing import make_broadcast
 from sandbox.errors import PluginRunError
@@ -205,6 +206,12 @@ class Simulation:
         self._control_time = 0.0
         # Slot reassignment and leader handover on events (None: keep every slot).
         self.reconfiguration = Reconfiguration.build(self)
+        # Range sensors (sensors.range; None without) and where recovery and the
+        # safety filter find the static obstacles (recovery.obstacles).
+        self.range_sensor = RangeSensor.make(scenario, self.world, self.obstacles)
+        self._avoid_field = self.obstacles
+        if self.rec.obstacles == "sensed" and self.range_sensor is not None:
+            self._avoid_field = self.range_sensor.field
         if self._sense():
             self._guarded(self._plan)
 
@@ -258,6 +265,7 @@ class Simulation:
             reference=ref,
             params=self.law_params,
             memory=self.law_memory if memory is None else memory,
+            **context_fields(self.range_sensor),
         )
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
@@ -294,6 +302,8 @@ class Simulation:
         if bad is None:
             if self.broadcast is not None:
                 self.seen = self.broadcast.update(fleet.pos, fleet.theta)
+            if self.range_sensor is not None:
+                self.range_sensor.update(t, fleet.pos, fleet.theta)
             return True
         n = fleet.n
         self.status = STATUS_DIVERGED
@@ -348,9 +358,10 @@ class Simulation:
                 failed=known,
                 params=self.strategy_params,
                 R=rec.R,
-                obstacle_field=self.obstacles,
+                obstacle_field=self._avoid_field,
                 neighbours=self._neighbours,
                 seen_pos=None if self.seen is None else self.seen[:, :2],
+                **context_fields(self.range_sensor),
             )
         )
         # a strategy never moves a vehicle that may not avoid
@@ -483,11 +494,12 @@ class Simulation:
                 accel_max=self._accel_max,
                 known_failed=self.known_failed,
                 commanded=fleet.commanded,
-                obstacle_field=self.obstacles,
+                obstacle_field=self._avoid_field,
                 seen=self.seen,
                 sensing=None if self.broadcast is None else self._sensing,
                 memory=self._filter_memory,
                 stats=self._filter_stats,
+                **context_fields(self.range_sensor),
             )
         )
         n = fleet.n
@@ -530,6 +542,8 @@ class Simulation:
             failed,
             plan.point,
         )
+        if self.range_sensor is not None:
+            self.range_sensor.record()
 
     def _advance(self, chi_next: np.ndarray) -> None:
         """Write the commands to the physics and step it to ``t_k+1``."""
@@ -607,7 +621,7 @@ class Simulation:
 
     def observe(self) -> Observation:
         """The fleet now, and what the built-in stack plans for this period (copies)."""
-        fleet, plan = self.fleet, self.plan
+        fleet, plan, sc = self.fleet, self.plan, self.scenario
         return Observation(
             t=self.k * self.h,
             names=tuple(self.names),
@@ -618,6 +632,7 @@ class Simulation:
             target=np.array(plan.target, dtype=float),
             mode=plan.mode(fleet.n) if not self._closed else fleet.mode.copy(),
             failed=plan.failing.copy(),
+            **observation_fields(self.range_sensor, self.obstacles, sc, fleet.pos),
         )
 
     def step(
@@ -712,6 +727,7 @@ class Simulation:
             info=info,
             scenario=sc,
             **self.recorder.arrays(),
+            **({} if self.range_sensor is None else self.range_sensor.arrays()),
         )
         return self._run
 

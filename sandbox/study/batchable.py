@@ -86,6 +86,8 @@ def batch_reason(sim: Simulation) -> str | None:
             return f"the {f.name!r} section"
     if sim.broadcast is not None:
         return "sensing"
+    if getattr(sim, "range_sensor", None) is not None:
+        return "range sensors"
     if getattr(sim, "_filter", None) is not None:
         return "the safety filter"
     if getattr(sim, "detection", None) is not None:
