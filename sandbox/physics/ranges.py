@@ -100,6 +100,9 @@ class RangeCaster:
         for k, shape in enumerate(world.obstacle_shapes):
             self._what[_address(shape)] = (HIT_OBSTACLE, k)
         self._c = _c_functions()
+        #: The vehicles' discs, then the obstacles' shapes, and their C handles.
+        self._shapes = [*self._discs, *world.obstacle_shapes]
+        self._handles = [shape._shape for shape in self._shapes]
         if method == "space":
             # A group of its own per vehicle: a query in that group skips its disc
             # (shapes of one non-zero group never collide; different groups do, so
@@ -179,21 +182,36 @@ class RangeCaster:
     ) -> tuple[np.ndarray, ...]:
         """``cpSpaceSegmentQueryFirst`` per beam: ``(row, beam, alpha, what)``."""
         m_out, b_out, a_out, w_out = [], [], [], []
-        starts = pos[rows].tolist()
-        end_rows = ends.tolist()
-        counts = valid.sum(axis=1).tolist()
-        what = self._what
-        first_hit = self._first_hit
-        for m, (i, start) in enumerate(zip(rows.tolist(), starts, strict=True)):
-            group = i + 1
-            beams = end_rows[m]
-            for b in range(counts[m]):
-                hit = first_hit(start, beams[b], group)
+        m, b = np.nonzero(valid)
+        what, c = self._what, self._c
+        if c is None:  # pragma: no cover - the public path
+            starts, end_rows = pos[rows].tolist(), ends.tolist()
+            for mm, bb in zip(m.tolist(), b.tolist(), strict=True):
+                hit = self._first_hit(starts[mm], end_rows[mm][bb], int(rows[mm]) + 1)
                 if hit is not None:
-                    m_out.append(m)
-                    b_out.append(b)
+                    m_out.append(mm)
+                    b_out.append(bb)
                     a_out.append(hit[0])
                     w_out.append(what[hit[1]])
+            return _arrays(m_out, b_out, a_out, w_out)
+        ffi, lib, info = c
+        query, null, handle = lib.cpSpaceSegmentQueryFirst, ffi.NULL, self.space._space
+        start = ffi.from_buffer(
+            "cpVect[]", np.ascontiguousarray(pos[rows], dtype=float)
+        )
+        end = ffi.from_buffer("cpVect[]", np.ascontiguousarray(ends, dtype=float))
+        everything = 0xFFFFFFFF
+        filters = [(int(i) + 1, everything, everything) for i in rows.tolist()]
+        width = ends.shape[1]
+        for mm, bb in zip(m.tolist(), b.tolist(), strict=True):
+            shape = query(
+                handle, start[mm], end[mm * width + bb], 0.0, filters[mm], info
+            )
+            if shape != null:
+                m_out.append(mm)
+                b_out.append(bb)
+                a_out.append(info.alpha)
+                w_out.append(what[int(ffi.cast("uintptr_t", shape))])
         return _arrays(m_out, b_out, a_out, w_out)
 
     def _first_hit(
@@ -286,7 +304,35 @@ class RangeCaster:
             beam.append(lo[p] + offset)
         p, beam = np.concatenate(pair), np.concatenate(beam)
         m = s[p]
-        alpha = self._shape_alpha(pos[rows[m]], ends[m, beam], target[p], what[p])
+        # Nearest circles first: each beam's candidates in order of the near edge of
+        # their bounding circle, queried round by round while that edge is nearer
+        # than the beam's nearest hit so far (a disc's circle is the disc: the first
+        # candidate a beam meets usually ends it).
+        near = np.maximum(d - rho, 0.0)[p]
+        width = int(count.max()) + 1
+        key = m * width + beam
+        order = np.lexsort((near, key))
+        key, near, p, beam, m = key[order], near[order], p[order], beam[order], m[order]
+        first = np.ones(len(key), dtype=bool)
+        first[1:] = key[1:] != key[:-1]
+        where = np.arange(len(key))
+        rank = where - np.maximum.accumulate(np.where(first, where, 0))
+        beam_of = np.cumsum(first) - 1
+        best = np.full(int(first.sum()), np.inf)
+        alpha = np.full(len(key), np.nan)
+        by_rank = np.argsort(rank, kind="stable")
+        edges = np.searchsorted(rank[by_rank], np.arange(int(rank.max(initial=-1)) + 2))
+        for r in range(len(edges) - 1):
+            sel = by_rank[edges[r] : edges[r + 1]]
+            sel = sel[near[sel] < best[beam_of[sel]]]
+            if not len(sel):
+                break
+            got = self._shape_alpha(
+                pos[rows[m[sel]]], ends[m[sel], beam[sel]], target[p[sel]], what[p[sel]]
+            )
+            alpha[sel] = got
+            reach_hit = np.where(np.isfinite(got), got * max_range[m[sel]], np.inf)
+            best[beam_of[sel]] = np.minimum(best[beam_of[sel]], reach_hit)
         hit = np.isfinite(alpha)
         what_hit = np.column_stack((what[p], target[p]))[hit]
         return m[hit], beam[hit], alpha[hit], what_hit
@@ -295,25 +341,27 @@ class RangeCaster:
         self, start: np.ndarray, end: np.ndarray, target: np.ndarray, what: np.ndarray
     ) -> np.ndarray:
         """``cpShapeSegmentQuery`` per (beam, shape): the hit's fraction, NaN: none."""
-        shapes = [
-            self._discs[t] if w == HIT_VEHICLE else self.world.obstacle_shapes[t]
-            for t, w in zip(target.tolist(), what.tolist(), strict=True)
-        ]
-        out = np.full(len(shapes), np.nan)
+        shapes = self._shapes
+        which = np.where(what == HIT_VEHICLE, target, len(self._discs) + target)
         c = self._c
-        starts, ends = start.tolist(), end.tolist()
         if c is not None:
-            _, lib, info = c
-            query = lib.cpShapeSegmentQuery
-            for k, shape in enumerate(shapes):
-                if query(shape._shape, starts[k], ends[k], 0.0, info):
-                    out[k] = info.alpha
-            return out
-        for k, shape in enumerate(shapes):  # pragma: no cover - the public path
-            hit = shape.segment_query(tuple(starts[k]), tuple(ends[k]), 0.0)
+            ffi, lib, info = c
+            query, nan = lib.cpShapeSegmentQuery, math.nan
+            handles = self._handles
+            # The segments' ends as C arrays of cpVect over the numpy buffers.
+            a = ffi.from_buffer("cpVect[]", np.ascontiguousarray(start, dtype=float))
+            b = ffi.from_buffer("cpVect[]", np.ascontiguousarray(end, dtype=float))
+            got = [
+                info.alpha if query(handles[j], a[k], b[k], 0.0, info) else nan
+                for k, j in enumerate(which.tolist())
+            ]
+            return np.array(got, dtype=float)
+        out = np.full(len(which), np.nan)  # pragma: no cover - the public path
+        for k, j in enumerate(which.tolist()):  # pragma: no cover
+            hit = shapes[j].segment_query(tuple(start[k]), tuple(end[k]), 0.0)
             if hit is not None and hit.shape is not None:
                 out[k] = hit.alpha
-        return out
+        return out  # pragma: no cover
 
 
 def _address(shape: pymunk.Shape) -> int:
