@@ -298,3 +298,37 @@ def test_without_sensors_the_outputs_keep_their_members(tmp_path: Path) -> None:
     a, b = load_run(out), load_run(sensed)
     np.testing.assert_array_equal(a.pose, b.pose)
     assert b.ranges.shape == (len(b.t), 4, 8) and a.ranges is None
+
+
+def test_the_environments_observe_the_ranges() -> None:
+    pytest.importorskip("gymnasium")
+    from sandbox.envs import VehicleEnv
+
+    doc = {
+        "duration": 0.5,
+        "vehicle": {"v1_max": 1.0, "v2_max": 2.0},
+        "formation": {"law": "fixed"},
+        "reference": {"type": "point", "position": [0, 0]},
+        "vehicles": [
+            {"name": "lead", "pose": [0, 0, 0], "leader": True},
+            {"name": "eye", "pose": [-1, 1, 0], "offset": [-1, 1]},
+        ],
+        "obstacles": [WALL],
+        "sensors": {"range": {"beams": 8, "max_range": 5.0}},
+    }
+    env = VehicleEnv(doc, "eye", observe=("neighbours", "ranges"), neighbours=1)
+    box = env.observation_space
+    assert box.shape == (7 + 6 + 8,)
+    np.testing.assert_array_equal(box.low[-8:], 0.0)
+    np.testing.assert_array_equal(box.high[-8:], 5.0)
+    obs, _ = env.reset(seed=0)
+    assert box.contains(obs)
+    # beam 4 of 8 points ahead (-pi + 4 pi/4 = 0): the wall's face 2.9 m + 1 m away
+    assert obs[7 + 6 + 4] == pytest.approx(3.9, abs=1e-5)
+    alone = VehicleEnv(doc, "eye", observe=("ranges",))
+    assert alone.observation_space.shape == (7 + 8,)
+    del doc["sensors"]
+    with pytest.raises(ValueError, match="no range sensor"):
+        VehicleEnv(doc, "eye", observe=("neighbours", "ranges"))
+    with pytest.raises(ValueError, match="observe: expected some of"):
+        VehicleEnv(doc, "eye", observe=("lidar",))
