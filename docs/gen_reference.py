@@ -43,6 +43,11 @@ SECTION_TITLES = {
     "detection": ("`detection:`", "how the platoon learns of a failure"),
     "safety": ("`safety:`", "a safety filter on the commands"),
     "reconfigure": ("`reconfigure:`", "slot reassignment after a failure"),
+    "sensors": (
+        "`sensors:`",
+        "the fleet's sensors (also `vehicles[i].sensors:`, merged over them)",
+    ),
+    "range": ("`sensors.range:`", "a planar range sensor (LiDAR)"),
 }
 
 

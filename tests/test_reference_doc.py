@@ -30,11 +30,13 @@ from sandbox.scenario import (
     MAX_VEHICLES,
     METRICS,
     PLATOON,
+    RANGE,
     RECONFIGURE,
     RECOVERY,
     REPORT_DT_BOUND,
     SAFETY,
     SENSING,
+    SENSORS,
     TOP,
     VEHICLE,
     VEHICLE_PARAMS,
@@ -84,7 +86,10 @@ def declaration(path: str, doc: dict[str, Any]) -> Param | None:
         "metrics": METRICS,
         "sensing": SENSING,
         "reconfigure": RECONFIGURE,
+        "sensors": SENSORS,
     }.get(head)
+    if parts[-2] == "range":
+        return RANGE.get(key)
     if parts[-2] == "gains":
         return GAINS.get(key)
     if parts[-2] == "drive":
@@ -127,6 +132,8 @@ def test_every_declared_key_is_documented() -> None:
     tables = [TOP, VEHICLE_PARAMS, GAINS, VEHICLE, DRIVE, PLATOON, METRICS, RECOVERY]
     tables.append(SENSING)
     tables.append(RECONFIGURE)
+    tables.append(SENSORS)
+    tables.append(RANGE)
     tables.append(FAILURE)
     tables.append(SAFETY)
     kinds = ("law", "strategy", "failure", "reference", "obstacle", "filter")

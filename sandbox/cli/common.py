@@ -240,6 +240,8 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
         "zones": args.zones,
         "follow": follow,
     }
+    if getattr(args, "show_beams", False):
+        options["show_beams"] = True
     outputs = [("gif", args.gif, write_gif)]
     if getattr(args, "mp4", None):
         from sandbox.render.video import write_mp4
@@ -429,6 +431,12 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
         f"{GIF_SPEED[0]:g} to {GIF_SPEED[1]:g} (default 1)",
     )
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
+    p.add_argument(
+        "--show-beams",
+        action="store_true",
+        help="draw the range sensors' beams and hits (runs with sensors.range; also "
+        "in the --html replay)",
+    )
     p.add_argument(
         "--force",
         action="store_true",

@@ -76,10 +76,29 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
     run = load_run_dir(Path(args.run_dir))
     out = Path(args.out) if args.out else Path(args.run_dir) / "figures"
+    if args.scan is not None:
+        return _plot_scan(run, out, args)
     with progress(4, "plotting", unit="figure") as bar:
         paths = plot_run(run, out, dpi=args.dpi, fmt=args.format, progress=bar)
     for path in paths:
         print(path)
+    return EXIT_OK
+
+
+def _plot_scan(run: object, out: Path, args: argparse.Namespace) -> int:
+    """``sandbox plot RUN_DIR --scan T``: the figure of one scan, ``scan_T.FMT``."""
+    from sandbox.render.figure_parts import save_figure
+    from sandbox.render.scan_figure import scan_figure
+
+    try:
+        fig = scan_figure(run, args.scan, args.vehicle)
+    except ValueError as exc:
+        print(f"error: sandbox plot --scan: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"scan_{args.scan:g}.{args.format}"
+    save_figure(fig, path, args.dpi, args.format)
+    print(path)
     return EXIT_OK
 
 
@@ -148,6 +167,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "sandbox plot runs/rotating_circle            # PNGs in RUN_DIR/figures/",
             "sandbox plot runs/rotating_circle --format pdf --out paper/figures/",
             "sandbox plot runs/rotating_circle --format png --dpi 300",
+            "sandbox plot runs/obstacle_field --scan 12   # one range-sensor scan",
         ],
     )
     p.add_argument("run_dir", help="a run directory written by sandbox run")
@@ -166,6 +186,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=120,
         help=f"resolution of PNG figures, {DPI_RANGE[0]} to {DPI_RANGE[1]} dots per "
         "inch (default 120)",
+    )
+    p.add_argument(
+        "--scan",
+        type=float,
+        metavar="T",
+        help="instead, the figure of the range-sensor scan nearest T [s] "
+        "(scan_T.png; a run with sensors.range)",
+    )
+    p.add_argument(
+        "--vehicle",
+        help="with --scan: whose readings to plot (default the first with a sensor)",
     )
     add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_plot)

@@ -90,7 +90,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.html and run.status != STATUS_INTERRUPTED:
         from sandbox.cli.view import print_written, write_run_html
 
-        print_written(write_run_html(run, out_dir / "replay.html", metrics))
+        beams = bool(getattr(args, "show_beams", False))
+        page = write_run_html(run, out_dir / "replay.html", metrics, show_beams=beams)
+        print_written(page)
     elif args.html:
         print(f"html: skipped, the run was interrupted (sandbox view {out_dir})")
     if run.status == STATUS_DIVERGED:

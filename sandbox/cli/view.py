@@ -59,10 +59,20 @@ def print_written(path: Path) -> None:
     print(f"replay: {path} ({_size(path)}); open it in a browser")
 
 
-def write_run_html(run: Any, out: Path, metrics: dict[str, Any] | None = None) -> Path:
-    """Write the replay page of ``run`` to ``out`` (``view``, ``run --html``)."""
+def write_run_html(
+    run: Any,
+    out: Path,
+    metrics: dict[str, Any] | None = None,
+    show_beams: bool = False,
+) -> Path:
+    """Write the replay page of ``run`` to ``out`` (``view``, ``run --html``).
+
+    ``show_beams`` embeds the range sensors' scans (``run --html --show-beams``).
+    """
     from sandbox.render.replay import write_html
 
+    if show_beams:
+        return write_html(run, out, metrics=metrics, show_beams=True)
     return write_html(run, out, metrics=metrics)
 
 

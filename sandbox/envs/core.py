@@ -13,7 +13,12 @@ in the world frame:
 - ``[6]`` its failed flag (1 while a failure is active);
 - then for each of the ``k`` nearest other vehicles, nearest first: relative position
   ``pos_j - pos_i`` [m] (2), relative velocity ``vel_j - vel_i`` [m/s] (2), failed flag
-  (1), present flag (1; zeros pad the list when there are fewer than ``k`` others).
+  (1), present flag (1; zeros pad the list when there are fewer than ``k`` others);
+- with ``observe=("neighbours", "ranges")``, then the agent's range-sensor readings
+  ``Observation.ranges[i]`` [m] (``B`` entries, beams from ``-fov/2`` (right) to
+  ``+fov/2`` (left) about the heading; ``max_range`` where nothing is hit), in
+  ``[0, max_range]``; every agent needs a ``sensors.range``. ``observe=("ranges",)``
+  leaves the neighbours out (``7 + B`` entries).
 
 Positions are clipped to ``[-max_distance, max_distance]`` and velocities to
 ``[-max_speed, max_speed]``, the bounds of the observation space.
@@ -56,6 +61,8 @@ from sandbox.scenario import Scenario, load_scenario
 
 #: Action kinds, the ``action`` argument of both environments.
 ACTIONS = ("commands", "shift")
+#: What an observation may hold beyond the agent's own state (``observe``).
+OBSERVE = ("neighbours", "ranges")
 #: Entries of an agent's own part of the observation, and per neighbour.
 OWN_FEATURES = 7
 NEIGHBOUR_FEATURES = 6
@@ -201,6 +208,10 @@ class Task:
         default each vehicle's ``v1_max`` and ``v2_max``.
     render_size : int [px]
         Width and height of ``rgb_array`` frames.
+    observe : sequence of str
+        What follows the agent's own state: ``neighbours`` (the ``k`` nearest other
+        vehicles) and/or ``ranges`` (its range-sensor readings); default
+        ``("neighbours",)``.
 
     Raises
     ------
@@ -222,6 +233,7 @@ class Task:
         max_shift: float | None = None,
         max_command: tuple[float, float] | None = None,
         render_size: int = 400,
+        observe: Sequence[str] = ("neighbours",),
     ) -> None:
         self.source = (
             scenario
@@ -268,12 +280,40 @@ class Task:
         )
         self.scale = self._command_scale(sc, max_command)
         self.render_size = int(render_size)
+        observe = (observe,) if isinstance(observe, str) else tuple(observe)
+        unknown = [o for o in observe if o not in OBSERVE]
+        if unknown:
+            raise ValueError(f"observe: expected some of {OBSERVE}, got {unknown[0]!r}")
+        self.observe = observe
+        if "neighbours" not in observe:
+            self.k = 0
         self.size = OWN_FEATURES + NEIGHBOUR_FEATURES * self.k
+        #: The range readings' bound per entry (max_range), shape (B,); None: none.
+        self.reach: np.ndarray | None = None
+        if "ranges" in observe:
+            self.reach = self._reach(sc)
+            self.size += len(self.reach)
         self.diameter = np.array([v.diameter for v in sc.vehicles], dtype=float)
         self.sim: Simulation | None = None
         self.obs: Observation | None = None
         self.history: list[tuple[Observation, np.ndarray]] = []
         self.terms = np.zeros((len(self.agents), 3))
+
+    def _reach(self, sc: Scenario) -> np.ndarray:
+        """The bound of each range entry: the agents' largest ``max_range`` [m]."""
+        specs = sc.range_specs()
+        blind = [a for a in self.agents if specs[self.names.index(a)] is None]
+        if blind:
+            raise ValueError(
+                f"observe='ranges': vehicle {blind[0]!r} has no range sensor; give "
+                "the scenario a sensors: {range: {...}} section"
+            )
+        mine = [specs[self.names.index(a)] for a in self.agents]
+        width = max(s.beams for s in mine)
+        reach = np.zeros(width)
+        for spec in mine:
+            reach[: spec.beams] = np.maximum(reach[: spec.beams], spec.max_range)
+        return np.where(reach > 0, reach, max(s.max_range for s in mine))
 
     def _command_scale(
         self, sc: Scenario, max_command: tuple[float, float] | None
@@ -378,23 +418,34 @@ class Task:
 
     # ------------------------------------------------------------------ features
     def features(self) -> np.ndarray:
-        """Observations of every agent, shape (m, 7 + 6 k), float32."""
-        obs = self.obs
+        """Observations of every agent, shape (m, 7 + 6 k + B), float32 (B: ranges)."""
+        obs, m, i = self.obs, len(self.agents), self.rows
         low, high = self.bounds()
-        return features_of(
+        base = OWN_FEATURES + NEIGHBOUR_FEATURES * self.k
+        out = features_of(
             obs.pose[None, :, :2],
             obs.pose[None, :, 2],
             obs.vel[None],
             obs.slot[None],
             obs.failed[None],
-            self.rows,
+            i,
             self.k,
-            low,
-            high,
+            low[:base],
+            high[:base],
         )[0]
+        if self.reach is None:
+            return out
+        width = len(self.reach)  # a beam a vehicle lacks reads its bound
+        got = obs.ranges[i][:, :width]
+        block = np.broadcast_to(self.reach, (m, width)).copy()
+        block[:, : got.shape[1]] = np.where(
+            np.isfinite(got), got, block[:, : got.shape[1]]
+        )
+        block = np.clip(block, low[base:], high[base:]).astype(np.float32)
+        return np.concatenate((out, block), axis=1)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of an observation, shape (7 + 6 k,) each."""
+        """Lower and upper bounds of an observation, shape (7 + 6 k + B,) each."""
         d, v = self.max_distance, self.max_speed
         own = [d, d, 1, 1, v, v, 1]
         per = [d, d, 2 * v, 2 * v, 1, 1]
@@ -404,6 +455,9 @@ class Task:
         for j in range(self.k):
             base = OWN_FEATURES + NEIGHBOUR_FEATURES * j
             low[base + 4 : base + 6] = 0.0
+        if self.reach is not None:
+            high = np.concatenate((high, self.reach))
+            low = np.concatenate((low, np.zeros(len(self.reach))))
         return low, high
 
     # ------------------------------------------------------------------ frames

@@ -44,7 +44,8 @@ class FormationEnv(ParallelEnv):
         The vehicles to drive; default every follower.
     **bounds
         ``max_distance``, ``max_speed``, ``max_shift``, ``max_command``,
-        ``render_size`` of :class:`~sandbox.envs.core.Task`.
+        ``render_size`` and ``observe`` (``("neighbours", "ranges")`` adds the range
+        sensor's readings) of :class:`~sandbox.envs.core.Task`.
 
     Notes
     -----

@@ -52,7 +52,8 @@ class VehicleEnv(gym.Env):
         ``"rgb_array"``: :meth:`render` returns the current frame of the renderer.
     **bounds
         ``max_distance``, ``max_speed``, ``max_shift``, ``max_command``,
-        ``render_size`` of :class:`~sandbox.envs.core.Task`.
+        ``render_size`` and ``observe`` (``("neighbours", "ranges")`` adds the range
+        sensor's readings) of :class:`~sandbox.envs.core.Task`.
 
     Notes
     -----

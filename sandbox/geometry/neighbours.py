@@ -119,8 +119,11 @@ class NeighbourList:
         ----------
         pos : ndarray, shape (n, 2) [m]
         field : ObstacleField
-            The same field at every call.
+            The same field at every call; a field whose obstacles change between
+            calls (``field.dynamic``, e.g. sensed points) is searched afresh.
         """
+        if getattr(field, "dynamic", False):
+            return field.candidates(pos, self.radius)
         anchor = self._obstacle_anchor
         rebuild = anchor is None or len(anchor) != len(pos)
         if not rebuild:

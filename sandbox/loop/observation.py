@@ -12,9 +12,13 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
 
 import numpy as np
+
+from sandbox.behaviour.ranges import NearObstacles, near_obstacles
 
 #: An override as the user gives it: ``{name: (a, b)}`` or an (n, 2) array (NaN: none).
 Overrides = Mapping[str, Sequence[float]] | np.ndarray | None
@@ -50,6 +54,13 @@ class Observation:
         a vehicle was overridden.
     failed : ndarray, shape (n,), bool
         Whether a failure is active on the vehicle.
+    ranges : ndarray, shape (n, B) [m], or None
+        The range sensor's readings (``sensors.range``): from each vehicle's centre
+        along each beam, ``max_range`` where nothing is hit, NaN for a vehicle (or a
+        beam) without a sensor; None when no vehicle has one.
+    beam_angles : ndarray, shape (n, B) [rad], or None
+        Each beam's angle about the vehicle's heading, from ``-fov/2`` (right) to
+        ``+fov/2`` (left).
     """
 
     t: float
@@ -61,6 +72,22 @@ class Observation:
     target: np.ndarray
     mode: np.ndarray
     failed: np.ndarray
+    ranges: np.ndarray | None = None
+    beam_angles: np.ndarray | None = None
+    near: Any = field(default=None, repr=False, compare=False)
+
+    @cached_property
+    def obstacles(self) -> NearObstacles | None:
+        """The obstacles within each vehicle's ``max_range``, from the map.
+
+        One row per (vehicle, obstacle): the obstacle's kind, its nearest surface
+        point and the distance to it (:class:`~sandbox.behaviour.ranges.
+        NearObstacles`); vehicles without a range sensor use ``recovery.R``. None for
+        an observation made without the simulation's obstacles.
+        """
+        if self.near is None:
+            return None
+        return near_obstacles(*self.near)
 
     @property
     def n(self) -> int:

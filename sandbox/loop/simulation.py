@@ -38,6 +38,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from sandbox.behaviour.detection import Detection
+from sandbox.behaviour.ranges import RangeSensor, context_fields, observation_fields
 from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.errors import PluginRunError
 from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList
@@ -257,6 +258,14 @@ class Simulation:
         for state in self.states:  # slot reassignment and leader handover on events
             state.reconfiguration = Reconfiguration.build(state)
         self._reconfiguring = any(s.reconfiguration is not None for s in self.states)
+        # Range sensors (sensors.range; None without; one world, structure_key) and
+        # where recovery and the safety filter find the static obstacles.
+        self.range_sensor = RangeSensor.make(first, self.world, self.obstacles)
+        self._avoid_field = self.obstacles
+        if self.rec.obstacles == "sensed" and self.range_sensor is not None:
+            self._avoid_field = self.range_sensor.field
+        for state in self.states:
+            state.range_sensor = self.range_sensor
         if self._sense():
             self._guarded(self._plan)
 
@@ -375,6 +384,8 @@ class Simulation:
                 rows = self._rows(w)
                 seen[rows] = self.states[w].broadcast.update(pos[rows], theta[rows])
             self.seen = seen
+        if self.range_sensor is not None:
+            self.range_sensor.update(t, fleet.pos, fleet.theta)
         return True
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
@@ -430,6 +441,7 @@ class Simulation:
             reference=ref,
             params=self.law_params,
             memory=self.law_memory,
+            **context_fields(self.range_sensor),
         )
 
     def _world_law_targets(self, t: float, ref: tuple | None) -> list[np.ndarray]:
@@ -511,9 +523,10 @@ class Simulation:
             failed=known,
             params=self.strategy_params,
             R=self.rec.R,
-            obstacle_field=self.obstacles,
+            obstacle_field=self._avoid_field,
             neighbours=self.neighbours,
             seen_pos=None if self.seen is None else self.seen[:, :2],
+            **context_fields(self.range_sensor),
         )
 
     def _world_strategy(self, t, slot, may_avoid, known) -> tuple[np.ndarray, ...]:
@@ -535,9 +548,10 @@ class Simulation:
                 failed=known[rows],
                 params=s.strategy_params,
                 R=s.rec.R,
-                obstacle_field=s.obstacles,
+                obstacle_field=self._avoid_field if self.K == 1 else s.obstacles,
                 neighbours=s.neighbours,
                 seen_pos=None if s.seen is None else s.seen[:, :2],
+                **context_fields(self.range_sensor),
             )
             try:
                 out = s.strategy(ctx)
@@ -704,11 +718,12 @@ class Simulation:
                 accel_max=s.accel_max,
                 known_failed=self.known_failed[rows],
                 commanded=fl.commanded[rows],
-                obstacle_field=s.obstacles,
+                obstacle_field=self._avoid_field if self.K == 1 else s.obstacles,
                 seen=None if self.seen is None else self.seen[rows],
                 sensing=None if s.broadcast is None else s.sensing,
                 memory=s.filter_memory,
                 stats=s.filter_stats,
+                **context_fields(self.range_sensor),
             )
             try:
                 out = self._filter(ctx)
@@ -769,6 +784,8 @@ class Simulation:
             plan.point,
             self._live_worlds(),
         )
+        if self.range_sensor is not None:
+            self.range_sensor.record()
 
     def _advance(self, chi_next: np.ndarray) -> None:
         """Write the commands to the physics and step it to ``t_k+1``."""
@@ -945,6 +962,9 @@ class Simulation:
             target=np.array(plan.target[rows], dtype=float),
             mode=fleet.mode[rows].copy() if ended else plan.mode(self.N)[rows],
             failed=plan.failing[rows].copy(),
+            **observation_fields(
+                self.range_sensor, self.obstacles, self.scenario, fleet.pos[rows]
+            ),
         )
 
     def step(
@@ -1095,6 +1115,7 @@ class Simulation:
             info=info,
             scenario=sc,
             **arrays,
+            **({} if self.range_sensor is None else self.range_sensor.arrays()),
         )
 
     def run(

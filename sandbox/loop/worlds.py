@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.behaviour.ranges import context_fields
 from sandbox.behaviour.sensing import make_broadcast
 from sandbox.geometry.neighbours import NeighbourList
 from sandbox.errors import PluginRunError
@@ -106,6 +107,8 @@ class WorldState:
         self.shift_motion: Any = None
         self.detection: Any = None
         self.reconfiguration: Any = None
+        #: The range sensor of a one-world loop (None: none).
+        self.range_sensor: Any = None
         self.schedules = {
             i: np.array(v.drive.schedule, dtype=float)
             for i, v in enumerate(sc.vehicles)
@@ -145,6 +148,7 @@ class WorldState:
             reference=ref,
             params=self.law_params,
             memory=self.law_memory if memory is None else memory,
+            **context_fields(self.range_sensor),
         )
 
 

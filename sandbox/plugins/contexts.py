@@ -45,6 +45,13 @@ class StrategyContext:
         The broadcast positions each vehicle receives of the others (``sensing:``,
         see :mod:`sandbox.behaviour.sensing`); None: every vehicle sees the others' true
         ``pos``. A vehicle's own position is always ``pos``.
+    ranges : ndarray (n, B) [m] or None
+        The range sensor's last readings (``sensors.range``, see
+        :mod:`sandbox.behaviour.ranges`), NaN for a vehicle or beam without one; None:
+        no sensor. With ``recovery.obstacles: sensed``, ``obstacle_field`` holds the
+        sensed points instead of the map.
+    beam_angles : ndarray (n, B) [rad] or None
+        Each beam's angle about the heading, from ``-fov/2`` (right) to ``+fov/2``.
     """
 
     t: float
@@ -61,6 +68,8 @@ class StrategyContext:
     obstacle_field: Any
     neighbours: Any = None
     seen_pos: np.ndarray | None = None
+    ranges: np.ndarray | None = None
+    beam_angles: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -144,6 +153,9 @@ class LawContext:
         The law's YAML values.
     memory : dict
         Kept from one step to the next (for a law's own estimates).
+    ranges, beam_angles : ndarray (n, B) or None
+        The range sensor's readings [m] and beam angles [rad], as for
+        :class:`StrategyContext`; None: no sensor.
     """
 
     t: float
@@ -158,6 +170,8 @@ class LawContext:
     reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None
     params: dict[str, Any]
     memory: dict[str, Any]
+    ranges: np.ndarray | None = None
+    beam_angles: np.ndarray | None = None
 
 
 @dataclass
@@ -232,7 +246,8 @@ class FilterContext:
     commanded : ndarray (n,) bool or None
         Vehicles driven open loop (``drive: commands``).
     obstacle_field : ObstacleField or None
-        The static obstacles.
+        The static obstacles (with ``recovery.obstacles: sensed``, the points each
+        vehicle's range sensor sees, :class:`~sandbox.model.sensed_field.SensedField`).
     seen : ndarray (n, 3) or None
         The broadcast poses ``(x1, x2, x3)`` each vehicle receives of the others
         (``sensing:``); None: the truth.
@@ -244,6 +259,9 @@ class FilterContext:
         Kept from one step to the next (the filter's own state).
     stats : dict
         Counters the filter keeps; written to ``metrics.json`` under ``safety``.
+    ranges, beam_angles : ndarray (n, B) or None
+        The range sensor's readings [m] and beam angles [rad], as for
+        :class:`StrategyContext`; None: no sensor.
     """
 
     t: float
@@ -267,6 +285,8 @@ class FilterContext:
     sensing: dict[str, float] | None = None
     memory: dict[str, Any] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
+    ranges: np.ndarray | None = None
+    beam_angles: np.ndarray | None = None
 
 
 @dataclass

@@ -166,6 +166,7 @@ def _indexed_frames(
     speed: float,
     fps: float,
     legend: bool = True,
+    show_beams: bool = False,
 ) -> tuple[Scene, Iterator[np.ndarray]]:
     _check_follow(follow)
     scene = Scene(
@@ -176,6 +177,7 @@ def _indexed_frames(
         trail_seconds=trail_seconds,
         step=speed / fps,
         legend=legend,
+        beams=show_beams,
     )
     return scene, (scene.draw(int(k)) for k in plan.index)
 
@@ -191,6 +193,7 @@ def render_frames(
     follow: str | None = None,
     trail_seconds: float = 3.0,
     legend: bool = True,
+    show_beams: bool = False,
 ) -> Iterator[np.ndarray]:
     """Frames of an animation of ``run``, drawn lazily.
 
@@ -215,6 +218,11 @@ def render_frames(
         Draw the legend strip at the bottom: each vehicle's name by its colour (or the
         fleet's size above :data:`~sandbox.render.overlay.LEGEND_NAMES_MAX` vehicles)
         and what the marks the run shows mean.
+    show_beams : bool
+        Draw the range sensors' beams of a run recorded with ``sensors.range``: a
+        thin grey line from each vehicle's centre to each reading, a red dot where
+        the beam hit (not drawn above :data:`~sandbox.render.camera.LARGE_FLEET`
+        vehicles, nor for runs without scans).
 
     Yields
     ------
@@ -232,6 +240,7 @@ def render_frames(
         speed=speed,
         fps=fps,
         legend=legend,
+        show_beams=show_beams,
     )
     for canvas in frames:
         yield scene.to_rgb(canvas)
@@ -246,6 +255,7 @@ def render_frame(
     follow: str | None = None,
     trail_seconds: float = 3.0,
     legend: bool = True,
+    show_beams: bool = False,
 ) -> np.ndarray:
     """One RGB frame of recorded sample ``k`` (default the last), as drawn in a GIF.
 
@@ -266,6 +276,7 @@ def render_frame(
         trail_seconds=trail_seconds,
         step=1.0 / 25.0,
         legend=legend,
+        beams=show_beams,
     )
     return scene.to_rgb(scene.draw(int(k) % len(run.t)))
 
@@ -282,6 +293,7 @@ def write_gif(
     trail_seconds: float = 3.0,
     legend: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    show_beams: bool = False,
 ) -> dict[str, Any]:
     """Write an animated GIF of ``run``, atomically.
 
@@ -297,7 +309,7 @@ def write_gif(
         Output file; its directory is created if needed.
     fps : float [1/s]
         ``0 < fps <= 50``; see the module docstring for delays.
-    size, speed, zones, follow, trail_seconds, legend
+    size, speed, zones, follow, trail_seconds, legend, show_beams
         As in :func:`render_frames`.
     progress : callable, optional
         Called as ``progress(done, total)`` about a hundred times, in planned frames.
@@ -324,6 +336,7 @@ def write_gif(
         speed=speed,
         fps=fps,
         legend=legend,
+        show_beams=show_beams,
     )
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")

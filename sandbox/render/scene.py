@@ -66,6 +66,7 @@ class Scene:
         trail_seconds: float,
         step: float,
         legend: bool = True,
+        beams: bool = False,
     ) -> None:
         if int(size) < 64:
             raise ValueError(f"size: expected at least 64 px, got {size!r}")
@@ -105,6 +106,17 @@ class Scene:
             float(v) for v in (rec.get("R"), rec.get("r")) if v is not None and v > 0
         ]
         self.zones = bool(zones) and not self.large and bool(self.zone_radii)
+        # Range-sensor beams (a run recorded with sensors.range).
+        self.beams = (
+            bool(beams)
+            and not self.large
+            and run.ranges is not None
+            and run.beam_angles is not None
+        )
+        if self.beams:
+            self.ranges = np.asarray(run.ranges, dtype=float)
+            self.beam_angles = np.asarray(run.beam_angles, dtype=float)
+            self.reach = _beam_reach(run, self.ranges)
         # Static geometry.
         self.obstacles = _obstacles(run)
         path = _reference_path(run)
@@ -207,6 +219,8 @@ class Scene:
             draw.line([u, v - 4, u, v + 4], fill=PATH, width=1)
         if self.zones:
             self._draw_zones(draw, cam, k, avoid, failed)
+        if self.beams:
+            self._draw_beams(draw, cam, k)
         centers = cam.world_to_pixel(self.pos[k])
         radius = np.maximum(self.radius_px, 0.75)  # [px] every body shows
         halo = max(2.0, min(4.0, 0.25 * float(np.median(radius))))  # [px]
@@ -322,6 +336,23 @@ class Scene:
                 rp = rz * cam.scale
                 draw.ellipse([u - rp, v - rp, u + rp, v + rp], outline=color, width=1)
 
+    def _draw_beams(self, draw: ImageDraw.ImageDraw, cam: Camera, k: int) -> None:
+        """Each beam from the centre to its reading; a red dot where it hit."""
+        r = self.ranges[k]  # (n, B) [m]
+        angle = self.theta[k][:, None] + self.beam_angles
+        ray = np.stack((np.cos(angle), np.sin(angle)), -1)
+        ends = cam.world_to_pixel(self.pos[k][:, None, :] + r[..., None] * ray) - 0.5
+        centers = cam.world_to_pixel(self.pos[k]) - 0.5
+        hit = r < self.reach[:, None] - 1e-6
+        dot = 1.5 if self.size < 400 else 2.0  # [px]
+        for i, b in zip(*np.nonzero(np.isfinite(r)), strict=True):
+            if not (np.isfinite(centers[i]).all() and np.isfinite(ends[i, b]).all()):
+                continue
+            draw.line([*centers[i], *ends[i, b]], fill=ZONE, width=1)
+        for i, b in zip(*np.nonzero(hit), strict=True):
+            u, v = ends[i, b]
+            draw.ellipse([u - dot, v - dot, u + dot, v + dot], fill=RED)
+
     def _draw_failures(
         self, draw: ImageDraw.ImageDraw, centers: np.ndarray, radius: np.ndarray
     ) -> None:
@@ -387,3 +418,15 @@ class Scene:
         img = Image.fromarray(canvas)
         img.putpalette(self.rgb.tobytes())
         return np.asarray(img.convert("RGB"))
+
+
+def _beam_reach(run: Run, ranges: np.ndarray) -> np.ndarray:
+    """Each vehicle's ``max_range`` [m] (a reading there hit nothing), shape (n,)."""
+    specs = None
+    if run.scenario is not None and hasattr(run.scenario, "range_specs"):
+        specs = run.scenario.range_specs()
+    if specs is not None and len(specs) == run.n_vehicles:
+        return np.array([np.inf if s is None else s.max_range for s in specs])
+    with np.errstate(all="ignore"):  # no scenario: the longest reading seen
+        reach = np.nanmax(ranges, axis=(0, 2)) if ranges.size else np.zeros(0)
+    return np.where(np.isfinite(reach), reach, np.inf)

@@ -88,6 +88,7 @@ def write_mp4(
     trail_seconds: float = 3.0,
     legend: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    show_beams: bool = False,
 ) -> dict[str, Any]:
     """Write an MP4 video of ``run``, atomically (temporary file, then rename).
 
@@ -98,7 +99,7 @@ def write_mp4(
         Output file; its directory is created if needed.
     fps : float [1/s]
         ``0 < fps <=`` :data:`MAX_MP4_FPS`.
-    size, speed, zones, follow, trail_seconds, legend
+    size, speed, zones, follow, trail_seconds, legend, show_beams
         As in :func:`sandbox.render.animation.render_frames`.
     progress : callable, optional
         Called as ``progress(done, total)`` about a hundred times, in frames.
@@ -136,6 +137,7 @@ def write_mp4(
         speed=speed,
         fps=fps,
         legend=legend,
+        show_beams=show_beams,
     )
     side = scene.size + scene.size % 2  # [px] yuv420p needs even sides
     path.parent.mkdir(parents=True, exist_ok=True)

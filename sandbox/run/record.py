@@ -120,6 +120,11 @@ class Run:
         ...).
     scenario : Any
         The resolved :class:`sandbox.scenario.Scenario` the run came from.
+    ranges : ndarray, shape (T, n, B) [m], float32, or None
+        The range sensors' readings at each sample (``sensors.range``; NaN for a
+        vehicle or beam without one); None: the run had no range sensor.
+    beam_angles : ndarray, shape (n, B) [rad], or None
+        Each beam's angle about the vehicle's heading.
     """
 
     t: np.ndarray
@@ -139,6 +144,8 @@ class Run:
     status: str = STATUS_OK
     info: dict[str, Any] = field(default_factory=dict)
     scenario: Any = None
+    ranges: np.ndarray | None = None
+    beam_angles: np.ndarray | None = None
 
     @property
     def n_vehicles(self) -> int:
@@ -249,6 +256,10 @@ class Run:
                 for e in self.events
             ],
         }
+        # The scans only of a run that had range sensors (others keep their bytes).
+        scans = {}
+        if self.ranges is not None and self.beam_angles is not None:
+            scans = {"ranges": self.ranges, "beam_angles": self.beam_angles}
         with open(path, "wb") as fh:
             np.savez_compressed(
                 fh,
@@ -263,6 +274,7 @@ class Run:
                 reference=self.reference,
                 diameter=self.diameter,
                 meta=np.array(json.dumps(meta)),
+                **scans,
             )
 
     @classmethod
@@ -307,6 +319,11 @@ _MEMBERS: dict[str, tuple[str, tuple[str | int, ...]]] = {
     "reference": ("f", ("T", 2)),
     "diameter": ("f", ("n",)),
 }
+#: Members of a run with range sensors (``B``: the most beams of a vehicle).
+_OPTIONAL: dict[str, tuple[str, tuple[str | int, ...]]] = {
+    "ranges": ("f", ("T", "n", "B")),
+    "beam_angles": ("f", ("n", "B")),
+}
 #: Largest metadata string of a run.npz [bytes] (names, colours, events, info).
 _META_MAX_BYTES = 256 * 2**20
 #: DEFLATE inflates at most about 1032 times; a member claiming more is a bomb.
@@ -321,6 +338,10 @@ def _read_checked(path: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         infos = {i.filename: i for i in zf.infolist()}
         names = {k[: -len(".npy")] for k in infos if k.endswith(".npy")}
         expected = {*_MEMBERS, "meta"}
+        members = dict(_MEMBERS)
+        if names & set(_OPTIONAL):  # both or neither
+            expected |= set(_OPTIONAL)
+            members.update(_OPTIONAL)
         missing = sorted(expected - names)
         extra = sorted(set(infos) - {f"{k}.npy" for k in expected})
         if missing or extra:
@@ -365,11 +386,14 @@ def _read_checked(path: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         if len(t_shape) != 1 or len(d_shape) != 1:
             raise RunFileError("t and diameter: not one-dimensional")
         dims = {"T": t_shape[0], "n": d_shape[0]}
+        if "beam_angles" in headers:
+            b_shape = headers["beam_angles"][0]
+            dims["B"] = b_shape[-1] if len(b_shape) == 2 else -1
         if dims["T"] < 1:
             raise RunFileError("no recorded samples")
         if dims["n"] < 1:
             raise RunFileError("no vehicles")
-        for key, (kind, form) in _MEMBERS.items():
+        for key, (kind, form) in members.items():
             shape, dtype = headers[key]
             want = tuple(dims[d] if isinstance(d, str) else d for d in form)
             if tuple(shape) != want:
@@ -379,7 +403,7 @@ def _read_checked(path: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         with zf.open("meta.npy") as fh:
             text = str(np.lib.format.read_array(fh, allow_pickle=False))
         arrays = {}
-        for key in _MEMBERS:
+        for key in members:
             with zf.open(f"{key}.npy") as fh:
                 arrays[key] = np.lib.format.read_array(fh, allow_pickle=False)
     try:

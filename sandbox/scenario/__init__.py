@@ -62,6 +62,7 @@ from sandbox.scenario.sections import (
     read_params,
     read_plugin_section,
 )
+from sandbox.scenario.sensors import MAX_BEAMS, RANGE, SENSORS
 from sandbox.scenario.specs import (
     DRIVE_TYPES,
     PALETTE,
@@ -73,12 +74,14 @@ from sandbox.scenario.specs import (
     FunctionReference,
     MetricsSpec,
     PlatoonSpec,
+    RangeSpec,
     ReconfigureSpec,
     RecoverySpec,
     ReferenceSpec,
     SafetySpec,
     Scenario,
     SensingSpec,
+    SensorsSpec,
     VehicleSpec,
 )
 from sandbox.scenario.vehicles import (
@@ -133,6 +136,11 @@ __all__ = [
     "FunctionReference",
     "MetricsSpec",
     "SensingSpec",
+    "SensorsSpec",
+    "RangeSpec",
+    "SENSORS",
+    "RANGE",
+    "MAX_BEAMS",
     "DetectionSpec",
     "SENSING",
     "SafetySpec",

@@ -64,11 +64,13 @@ from sandbox.scenario.sections import (
     read_param,
     read_params,
 )
+from sandbox.scenario.sensors import read_sensors
 from sandbox.scenario.specs import (
     MetricsSpec,
     ReconfigureSpec,
     Scenario,
     SensingSpec,
+    SensorsSpec,
     VehicleSpec,
     _from_loader,
 )
@@ -269,7 +271,8 @@ def parse_scenario(
     if doc.get("formation") is not None:
         formation = _formation(rd, doc["formation"], "formation")
 
-    listed = _vehicles(rd, doc.get("vehicles"), "vehicles", params)
+    sensors = read_sensors(rd, doc.get("sensors"), "sensors") or SensorsSpec()
+    listed = _vehicles(rd, doc.get("vehicles"), "vehicles", params, sensors)
     platoon = None
     generated: list[tuple[str, VehicleSpec]] = []
     if doc.get("platoon") is not None:
@@ -300,6 +303,7 @@ def parse_scenario(
     detection = _detection(rd, doc.get("detection"), "detection")
     _detection_window(rd, detection, dt)
     safety = _safety(rd, doc.get("safety"), "safety")
+    _sensed_obstacles(rd, recovery, sensors, listed)
     reconfigure = _reconfigure(rd, doc.get("reconfigure"))
     on_leader_failure = read_param(
         rd, doc, "on_leader_failure", "", TOP["on_leader_failure"]
@@ -383,6 +387,7 @@ def parse_scenario(
             safety=safety,
             reconfigure=reconfigure,
             on_leader_failure=on_leader_failure or "keep",
+            sensors=sensors,
             diameter=rd.diameter,
             source=source,
             plugins=tuple(loaded),
@@ -558,6 +563,22 @@ def _sensing(rd: _Reader, doc: Any, dt: Any) -> SensingSpec:
     if values["delay"] > 0:
         _whole_periods(rd, "sensing.delay", values["delay"], dt, minimum=0)
     return SensingSpec(**values)
+
+
+def _sensed_obstacles(
+    rd: _Reader, recovery: Any, sensors: SensorsSpec, listed: list[tuple[str, Any]]
+) -> None:
+    """``recovery.obstacles: sensed`` needs a range sensor on some vehicle."""
+    if recovery.obstacles != "sensed" or sensors.range is not None:
+        return
+    if any(v.sensors is not None and v.sensors.range is not None for _, v in listed):
+        return
+    rd.fail(
+        "recovery.obstacles",
+        "sensed obstacles need a range sensor",
+        "no sensors.range",
+        "sensors: {range: {...}} (fleet-wide or on a vehicle), or obstacles: map",
+    )
 
 
 def _section_values(

@@ -30,8 +30,10 @@ from sandbox.scenario import (
     METRICS,
     PLATOON,
     PLUGIN_SECTIONS,
+    RANGE,
     RECONFIGURE,
     SENSING,
+    SENSORS,
     TOP,
     VEHICLE,
     VEHICLE_PARAMS,
@@ -66,6 +68,8 @@ def sections() -> dict[str, dict[str, Param]]:
         "metrics": METRICS,
         "sensing": SENSING,
         "reconfigure": RECONFIGURE,
+        "sensors": SENSORS,
+        "range": RANGE,
     }
     for kind, own in PLUGIN_SECTIONS.items():
         section = KINDS[kind].section
@@ -308,6 +312,8 @@ def build_schema() -> dict[str, Any]:
             "detection": _plugin_section("detector"),
             "safety": _plugin_section("filter"),
             "reconfigure": _object(RECONFIGURE),
+            "sensors": _object(SENSORS),
+            "range": _object(RANGE),
         },
     }
 

@@ -211,6 +211,11 @@ TOP: dict[str, Param] = {
         doc="A safety filter on the commands, after the controller and before the "
         "failures (see sandbox/safety/; filter none: no filter)",
     ),
+    "sensors": Param(
+        **_section("sensors"),
+        doc="The sensors of every vehicle (a vehicle's own 'sensors' is merged over "
+        "them): range, a planar LiDAR (see sandbox/behaviour/ranges.py)",
+    ),
     "reconfigure": Param(
         **_section("reconfigure"),
         doc="Who tracks which slot once a vehicle is believed failed (see "
@@ -388,6 +393,14 @@ RECOVERY: dict[str, Param] = {
         doc="hold: the shifted target keeps the law's derivatives; estimate: the "
         "shift's derivatives are estimated and added",
         choices=("hold", "estimate"),
+    ),
+    "obstacles": Param(
+        "choice",
+        "map",
+        doc="Where the strategy and the safety filter find the static obstacles: map "
+        "(the scenario's obstacles) or sensed (each vehicle's range-sensor hits, the "
+        "nearest of each obstacle it sees; needs sensors.range)",
+        choices=("map", "sensed"),
     ),
 }
 
@@ -650,6 +663,7 @@ def _recovery(rd: _Reader, doc: Any, path: str) -> RecoverySpec:
         leader_avoids=bool(own.get("leader_avoids")),
         target_derivatives=own.get("target_derivatives") or "hold",
         params=values,
+        obstacles=own.get("obstacles") or "map",
     )
 
 

@@ -9,6 +9,7 @@ document that parses back to the same scenario.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -63,6 +64,31 @@ class DriveSpec:
 
 
 @dataclass(frozen=True)
+class RangeSpec:
+    """A planar range sensor (``sensors.range``): a LiDAR of ``beams`` beams.
+
+    ``beams`` beams spread over the field of view ``fov`` [rad] about the heading,
+    from ``-fov/2`` (right) to ``+fov/2`` (left) (a full turn: ``2 pi / beams``
+    apart, from ``-pi``); each reaches ``max_range`` [m] from the vehicle's centre;
+    ``noise`` [m] is the standard deviation of the Gaussian noise on each range;
+    ``rate`` [Hz] the scan rate (None: a scan every control period).
+    """
+
+    beams: int = 32
+    fov: float = 2.0 * math.pi
+    max_range: float = 5.0
+    noise: float = 0.0
+    rate: float | None = None
+
+
+@dataclass(frozen=True)
+class SensorsSpec:
+    """The sensors of a vehicle (``sensors:``): ``range``, or None for none."""
+
+    range: RangeSpec | None = None
+
+
+@dataclass(frozen=True)
 class VehicleSpec:
     """One vehicle: identity, initial pose, slot offset, physical limits."""
 
@@ -79,6 +105,9 @@ class VehicleSpec:
     max_accel: float | None = None
     motor_accel: float | None = None
     drive: DriveSpec = field(default_factory=DriveSpec)
+    #: Its own ``sensors:`` (the fleet's, ``Scenario.sensors``, merged in); None:
+    #: the fleet's.
+    sensors: SensorsSpec | None = None
 
 
 @dataclass(frozen=True)
@@ -145,6 +174,9 @@ class RecoverySpec:
     leader_avoids: bool = False
     target_derivatives: str = "hold"
     params: dict[str, Any] = field(default_factory=dict)
+    #: Where the static obstacles come from: ``map`` (the scenario's) or ``sensed``
+    #: (the range sensor's hits, :mod:`sandbox.behaviour.ranges`).
+    obstacles: str = "map"
 
     @property
     def beta(self) -> float | None:
@@ -326,6 +358,15 @@ class Scenario:
     reconfigure: ReconfigureSpec = ReconfigureSpec()
     #: The ``on_leader_failure:`` key: keep, virtual or elect.
     on_leader_failure: str = "keep"
+    #: The fleet's ``sensors:`` (default: none).
+    sensors: SensorsSpec = SensorsSpec()
+
+    def range_specs(self) -> list[RangeSpec | None]:
+        """Each vehicle's range sensor (its own, else the fleet's), None: none."""
+        return [
+            (v.sensors if v.sensors is not None else self.sensors).range
+            for v in self.vehicles
+        ]
 
     def __post_init__(self) -> None:
         """Validate a scenario not made by the loader (the constructor, ``replace``).
@@ -440,6 +481,8 @@ class Scenario:
             doc["vehicles"].append(item)
         doc["recovery"] = _plain(self.recovery, skip_none=True)
         doc["recovery"].update(doc["recovery"].pop("params"))
+        if self.recovery.obstacles == "map":  # the default, left out
+            del doc["recovery"]["obstacles"]
         # A failure that never starts (a run shortened by --duration) is left out.
         failures = [f for f in self.failures if f.at < self.duration]
         if failures:
@@ -463,6 +506,8 @@ class Scenario:
             doc["reconfigure"] = _plain(self.reconfigure)
         if self.on_leader_failure != "keep":
             doc["on_leader_failure"] = self.on_leader_failure
+        if self.sensors != SensorsSpec():
+            doc["sensors"] = _plain(self.sensors, skip_none=True)
         if self.expect is not None:
             doc["expect"] = self.expect.to_dict()
         return doc

@@ -30,6 +30,7 @@ from sandbox.scenario.reader import (
     _Reader,
 )
 from sandbox.scenario.sections import _section, read_param, read_params
+from sandbox.scenario.sensors import read_sensors
 from sandbox.scenario.specs import (
     DRIVE_TYPES,
     PALETTE,
@@ -38,6 +39,7 @@ from sandbox.scenario.specs import (
     FormationSpec,
     PlatoonSpec,
     ReferenceSpec,
+    SensorsSpec,
     VehicleSpec,
 )
 
@@ -134,6 +136,11 @@ VEHICLE: dict[str, Param] = {
     ),
     "drive": Param(
         **_section("drive"), doc="How the vehicle is driven (default: by its law)"
+    ),
+    "sensors": Param(
+        **_section("sensors"),
+        doc="This vehicle's sensors, merged key by key over the fleet's top-level "
+        "'sensors' (default: the fleet's)",
     ),
 }
 
@@ -296,9 +303,15 @@ def _read_drive(rd: _Reader, doc: Any, path: str) -> DriveSpec:
 
 
 def _vehicles(
-    rd: _Reader, doc: Any, path: str, params: dict[str, Any]
+    rd: _Reader,
+    doc: Any,
+    path: str,
+    params: dict[str, Any],
+    fleet_sensors: SensorsSpec | None = None,
 ) -> list[tuple[str, VehicleSpec]]:
     """The listed vehicles as ``(path, spec)``; every name also goes to ``rd.declared``.
+
+    A vehicle's own ``sensors`` are merged over ``fleet_sensors`` (the top level's).
 
     A vehicle with an invalid field is left out of the list, but its name and leader
     flag are still declared so that checks across sections (failures naming it, the
@@ -356,13 +369,21 @@ def _vehicles(
         if m.get("drive") is not None:
             drive = _drive(rd, m["drive"], f"{sub}.drive")
         p = _vehicle_params(rd, m, sub, params)
+        sensors = None
+        if m.get("sensors") is not None:
+            sensors = read_sensors(rd, m["sensors"], f"{sub}.sensors", fleet_sensors)
+            if sensors is None:
+                continue
         if pose is None or offset is None or None in pose or drive is None:
             continue
         if None in (p["diameter"], p["mass"]):
             continue
         if any(v is None for v in p["gains"].values()):
             continue
-        out.append((sub, _make_vehicle(name, pose, offset, leader, color, drive, p)))
+        made = _make_vehicle(name, pose, offset, leader, color, drive, p)
+        if sensors is not None:
+            made = dataclasses.replace(made, sensors=sensors)
+        out.append((sub, made))
     return out
 
 

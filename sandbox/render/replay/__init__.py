@@ -39,6 +39,7 @@ def replay_html(
     *,
     title: str | None = None,
     max_vehicle_samples: int | None = None,
+    show_beams: bool = False,
 ) -> str:
     """The HTML text of the replay page of ``run`` (see :func:`write_html`)."""
     from sandbox.render.replay.encode import replay_data
@@ -46,6 +47,12 @@ def replay_html(
     data = replay_data(
         run, metrics, title=title, max_vehicle_samples=max_vehicle_samples
     )
+    if show_beams:
+        from sandbox.render.replay.encode import beam_data
+
+        beams = beam_data(run, data)
+        if beams is not None:
+            data["beams"] = beams
     return build_page("replay.html", data["scenario"], data, ["replay.js"])
 
 
@@ -56,6 +63,7 @@ def write_html(
     metrics: dict[str, Any] | None = None,
     title: str | None = None,
     max_vehicle_samples: int | None = None,
+    show_beams: bool = False,
 ) -> Path:
     """Write the interactive replay page of ``run`` to ``path``.
 
@@ -73,6 +81,9 @@ def write_html(
     max_vehicle_samples : int, optional
         Most vehicle-samples embedded before the record is decimated in time
         (default :data:`sandbox.render.replay.encode.MAX_VEHICLE_SAMPLES`).
+    show_beams : bool
+        Embed the range sensors' scans of a run recorded with ``sensors.range`` and
+        draw them (a "beams" toggle on the page); without scans, nothing changes.
 
     Returns
     -------
@@ -87,6 +98,10 @@ def write_html(
     path = Path(path)
     check_output(path)  # before the work, not after it
     text = replay_html(
-        run, metrics, title=title, max_vehicle_samples=max_vehicle_samples
+        run,
+        metrics,
+        title=title,
+        max_vehicle_samples=max_vehicle_samples,
+        show_beams=show_beams,
     )
     return _write_page(path, text)

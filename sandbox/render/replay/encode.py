@@ -42,6 +42,7 @@ __all__ = [
     "LARGE_FLEET",
     "MAX_VEHICLE_SAMPLES",
     "STEPS",
+    "beam_data",
     "pack",
     "replay_data",
     "unpack",
@@ -492,4 +493,35 @@ def replay_data(
         "modes": list(MODE_NAMES),
         "large": n > LARGE_FLEET,
         "notes": notes,
+    }
+
+
+def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
+    """The range sensors' scans for the page, on its samples; None without scans.
+
+    ``ranges`` packed like the other arrays (0.1 mm steps, differenced once; NaN for
+    a vehicle or beam without a sensor), ``angles`` each beam's angle about the
+    heading (n, B) [rad], ``reach`` each vehicle's ``max_range`` [m] (a reading
+    there hit nothing; None without a sensor).
+    """
+    if run.ranges is None or run.beam_angles is None:
+        return None
+    T = len(run.t)
+    keep = np.arange(0, T, int(data["stride"]))
+    if keep[-1] != T - 1:
+        keep = np.append(keep, T - 1)
+    ranges = np.asarray(run.ranges, dtype=float)[keep]
+    specs = None
+    if run.scenario is not None and hasattr(run.scenario, "range_specs"):
+        specs = run.scenario.range_specs()
+    if specs is None or len(specs) != run.n_vehicles:
+        with np.errstate(all="ignore"):
+            reach = [_rounded(v) for v in np.nanmax(ranges, axis=(0, 2))]
+    else:
+        reach = [None if s is None else _rounded(s.max_range) for s in specs]
+    return {
+        "ranges": pack(ranges, STEPS["pose"], order=1),
+        "angles": [[_rounded(a) for a in row] for row in run.beam_angles.tolist()],
+        "reach": reach,
+        "width": int(run.beam_angles.shape[1]),
     }

@@ -1,0 +1,304 @@
+"""The range sensor (``sensors.range``): what each vehicle's LiDAR reads, every scan.
+
+Each sensing vehicle has ``beams`` beams from its centre over its field of view ``fov``
+about the heading, ordered from ``-fov/2`` (right) to ``+fov/2`` (left): ``fov /
+(beams - 1)`` apart with a beam on each edge, or ``2 pi / beams`` apart from ``-pi``
+for a full turn (one beam: straight ahead). A beam reads the distance [m] from the
+centre to the first surface it meets (a static obstacle, a wall, another vehicle),
+``max_range`` where it meets none; the casting is :mod:`sandbox.physics.ranges`.
+
+``noise`` adds white Gaussian noise of that standard deviation to every beam that hits
+something (a miss reads ``max_range``), the reading clipped to ``[0, max_range]``. The
+draws come from a generator of their own, ``numpy.random.default_rng([seed,
+crc32("ranges")])``: adding a sensor changes no other draw of a scenario.
+
+``rate`` [Hz] sets a scan every ``1 / rate`` s: the scan of ``t_k`` is taken at the
+first control period at or after each multiple of ``1 / rate`` and held until the
+next (without ``rate``, every period).
+
+With ``recovery.obstacles: sensed`` the recovery strategy and the safety filter see
+the static obstacles as each vehicle's hits (:class:`~sandbox.model.sensed_field.
+SensedField`): the nearest hit point of each obstacle the vehicle's beams touched, in
+world coordinates (held with the scan). Beams that hit vehicles are left out there:
+the other vehicles reach the strategy as before (true or broadcast positions).
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from sandbox.model.obstacle_field import ObstacleField
+from sandbox.model.sensed_field import SensedField, nearest_hits
+from sandbox.physics.ranges import HIT_OBSTACLE, RangeCaster
+
+#: The stream of the range noise, mixed with the scenario's seed.
+RANGES_STREAM = zlib.crc32(b"ranges")
+
+
+def beam_layout(beams: int, fov: float) -> tuple[float, float]:
+    """The first beam's angle about the heading and the spacing [rad].
+
+    Examples
+    --------
+    >>> beam_layout(4, 2 * math.pi)  # a full turn: -pi, -pi/2, 0, pi/2
+    (-3.141592653589793, 1.5707963267948966)
+    >>> beam_layout(3, 1.0)  # -0.5 (right), 0, 0.5 (left)
+    (-0.5, 0.5)
+    >>> beam_layout(1, 1.0)
+    (0.0, 0.0)
+    """
+    if beams == 1:
+        return 0.0, 0.0
+    if fov >= 2.0 * math.pi - 1e-12:
+        return -math.pi, 2.0 * math.pi / beams
+    return -0.5 * fov, fov / (beams - 1)
+
+
+@dataclass(frozen=True)
+class NearObstacles:
+    """The obstacles within a radius of each vehicle, from the map: one row per pair.
+
+    Attributes
+    ----------
+    vehicle : ndarray (m,) int
+        The vehicle's row.
+    obstacle : ndarray (m,) int
+        The obstacle's index in the scenario's ``obstacles``.
+    name : tuple of str (m,)
+        Its name.
+    kind : tuple of str (m,)
+        Its type: ``circle``, ``wall``, ``box`` or ``polygon``.
+    point : ndarray (m, 2) [m]
+        The nearest point of its surface to the vehicle's centre.
+    distance : ndarray (m,) [m]
+        From the centre to that point (negative inside the obstacle).
+    """
+
+    vehicle: np.ndarray
+    obstacle: np.ndarray
+    name: tuple[str, ...]
+    kind: tuple[str, ...]
+    point: np.ndarray
+    distance: np.ndarray
+
+    def of(self, row: int) -> NearObstacles:
+        """The rows of one vehicle."""
+        sel = np.flatnonzero(self.vehicle == row)
+        return NearObstacles(
+            self.vehicle[sel],
+            self.obstacle[sel],
+            tuple(self.name[k] for k in sel),
+            tuple(self.kind[k] for k in sel),
+            self.point[sel],
+            self.distance[sel],
+        )
+
+
+def near_obstacles(
+    field: ObstacleField, specs: Any, pos: np.ndarray, radius: np.ndarray
+) -> NearObstacles:
+    """The obstacles whose surface is within ``radius[i]`` of vehicle ``i``'s centre.
+
+    Parameters
+    ----------
+    field : ObstacleField
+    specs : sequence of ObstacleSpec
+        The scenario's obstacles (names and types).
+    pos : ndarray (n, 2) [m]
+    radius : ndarray (n,) [m]
+    """
+    if field.empty or not len(pos):
+        none = np.zeros(0, dtype=np.intp)
+        return NearObstacles(none, none, (), (), np.zeros((0, 2)), np.zeros(0))
+    rows, cols = field.candidates(pos, float(np.max(radius)))
+    signed, point = field.pair_distance(pos, rows, cols)
+    keep = np.flatnonzero(signed <= radius[rows])
+    rows, cols = rows[keep], cols[keep]
+    index = field.order[cols]
+    return NearObstacles(
+        rows,
+        index,
+        tuple(specs[k].name for k in index.tolist()),
+        tuple(specs[k].type for k in index.tolist()),
+        point[keep],
+        signed[keep],
+    )
+
+
+class RangeSensor:
+    """The range sensors of a fleet, scanned by the loop at every control period.
+
+    Parameters
+    ----------
+    specs : sequence of RangeSpec or None
+        Each vehicle's sensor (None: it has none; :meth:`Scenario.range_specs`).
+    world : World
+        The pymunk world the beams are cast in.
+    field : ObstacleField
+        The scenario's obstacles as geometry.
+    seed : int
+        The scenario's seed (the noise stream is its own).
+    method : str
+        The casting method of :class:`~sandbox.physics.ranges.RangeCaster`.
+
+    Attributes
+    ----------
+    ranges : ndarray (n, B) [m]
+        The last scan's readings, NaN for vehicles (or beams) without a sensor.
+    beam_angles : ndarray (n, B) [rad]
+        Each beam's angle about the heading (NaN likewise).
+    points : ndarray (n, B, 2) [m]
+        The hit points in world coordinates (NaN where nothing was hit).
+    field : SensedField
+        The nearest hit of each obstacle each vehicle sees.
+    """
+
+    def __init__(
+        self,
+        specs: Any,
+        world: Any,
+        field: ObstacleField,
+        seed: int,
+        method: str = "prefilter",
+    ) -> None:
+        rows = [i for i, s in enumerate(specs) if s is not None]
+        self.rows = np.array(rows, dtype=np.intp)
+        chosen = [specs[i] for i in rows]
+        n = len(specs)
+        self.count = np.array([s.beams for s in chosen], dtype=np.intp)
+        layout = [beam_layout(s.beams, s.fov) for s in chosen]
+        self.first = np.array([a for a, _ in layout], dtype=float)
+        self.step = np.array([b for _, b in layout], dtype=float)
+        self.max_range = np.array([s.max_range for s in chosen], dtype=float)
+        self.noise = np.array([s.noise for s in chosen], dtype=float)
+        self.rate = np.array([s.rate or np.inf for s in chosen], dtype=float)
+        width = int(self.count.max()) if rows else 0
+        k = np.arange(width)
+        angles = np.full((n, width), np.nan)
+        angles[self.rows] = np.where(
+            k[None] < self.count[:, None],
+            self.first[:, None] + k[None] * self.step[:, None],
+            np.nan,
+        )
+        self.beam_angles = angles
+        self.ranges = np.full((n, width), np.nan)
+        self.points = np.full((n, width, 2), np.nan)
+        self._kind = np.zeros((n, width), dtype=np.int8)
+        self._index = np.full((n, width), -1, dtype=np.intp)
+        self._last = np.full(len(rows), -np.inf)  # the last scan's number
+        self.caster = RangeCaster(world, field, method)
+        self.rng = np.random.default_rng([seed, RANGES_STREAM])
+        self.field = SensedField()
+        # The shape code (ObstacleField.kind) of each obstacle, by scenario index.
+        self._obstacle_kind = np.zeros(len(field.order), dtype=np.intp)
+        self._obstacle_kind[field.order] = field.kind
+        self.scans = 0
+        self._recorded: list[np.ndarray] = []
+
+    @classmethod
+    def make(
+        cls, scenario: Any, world: Any, field: ObstacleField
+    ) -> RangeSensor | None:
+        """The scenario's sensors, or None when no vehicle has one."""
+        specs = scenario.range_specs()
+        if all(s is None for s in specs):
+            return None
+        return cls(specs, world, field, scenario.seed)
+
+    def update(self, t: float, pos: np.ndarray, theta: np.ndarray) -> None:
+        """Scan the vehicles whose scan is due at ``t`` [s]; hold the others' last."""
+        finite = np.isfinite(self.rate)
+        number = np.floor(t * np.where(finite, self.rate, 0.0) + 1e-9)
+        due = np.flatnonzero(~finite | (number > self._last))
+        if not len(due):
+            return
+        self._last[due] = number[due]
+        rows = self.rows[due]
+        scan = self.caster.cast(
+            pos,
+            theta,
+            rows,
+            self.first[due],
+            self.step[due],
+            self.count[due],
+            self.max_range[due],
+        )
+        dist, kind = scan.dist[rows], scan.kind[rows]
+        hit = kind != 0
+        noise = self.noise[due]
+        if np.any(noise > 0):
+            draw = self.rng.standard_normal(dist.shape)
+            noisy = dist + noise[:, None] * draw
+            cap = self.max_range[due][:, None]
+            dist = np.where(hit, np.clip(noisy, 0.0, cap), dist)
+        width = dist.shape[1]
+        self.ranges[rows, :width] = dist
+        self._kind[rows, :width] = kind
+        self._index[rows, :width] = scan.index[rows]
+        angle = theta[rows, None] + self.beam_angles[rows, :width]
+        ray = np.stack((np.cos(angle), np.sin(angle)), -1)
+        points = pos[rows, None, :] + dist[..., None] * ray
+        self.points[rows, :width] = np.where(hit[..., None], points, np.nan)
+        self.scans += 1
+        self._sense_obstacles()
+
+    def _sense_obstacles(self) -> None:
+        """Rebuild :attr:`field` from every vehicle's current scan."""
+        v, b = np.nonzero(self._kind == HIT_OBSTACLE)
+        obstacle = self._index[v, b]
+        owner, obstacle, point = nearest_hits(
+            v.astype(np.intp), obstacle, self.ranges[v, b], self.points[v, b]
+        )
+        self.field.set(owner, point, obstacle, self._obstacle_kind[obstacle])
+
+    # ------------------------------------------------------------------ views
+    def radius(self, n: int, default: float) -> np.ndarray:
+        """Each vehicle's ``max_range`` [m], ``default`` for those without a sensor."""
+        out = np.full(n, float(default))
+        out[self.rows] = self.max_range
+        return out
+
+    def record(self) -> None:
+        """Keep the current readings as a sample of the record (float32)."""
+        self._recorded.append(self.ranges.astype(np.float32))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The recorded readings ``ranges`` (T, n, B) and the ``beam_angles``."""
+        n, width = self.ranges.shape
+        ranges = (
+            np.stack(self._recorded)
+            if self._recorded
+            else np.zeros((0, n, width), dtype=np.float32)
+        )
+        return {"ranges": ranges, "beam_angles": self.beam_angles.copy()}
+
+
+def context_fields(sensor: RangeSensor | None) -> dict[str, np.ndarray]:
+    """The ``ranges`` and ``beam_angles`` of a plug-in context (none: no sensor)."""
+    if sensor is None:
+        return {}
+    return {"ranges": sensor.ranges, "beam_angles": sensor.beam_angles}
+
+
+def observation_fields(
+    sensor: RangeSensor | None, field: ObstacleField, scenario: Any, pos: np.ndarray
+) -> dict[str, Any]:
+    """What an :class:`~sandbox.loop.observation.Observation` shows of obstacles.
+
+    The readings and beam angles (copies; none without a sensor), and what
+    ``Observation.obstacles`` is computed from when read: the obstacles within each
+    vehicle's ``max_range`` (``recovery.R`` for a vehicle without a sensor).
+    """
+    out: dict[str, Any] = {}
+    if sensor is not None:
+        out = {"ranges": sensor.ranges.copy(), "beam_angles": sensor.beam_angles.copy()}
+        radius = sensor.radius(len(pos), scenario.recovery.R)
+    else:
+        radius = np.full(len(pos), scenario.recovery.R)
+    out["near"] = (field, scenario.obstacles, pos.copy(), radius)
+    return out
