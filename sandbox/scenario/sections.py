@@ -224,6 +224,13 @@ TOP: dict[str, Param] = {
         "elect (the healthy vehicle nearest the leader's slot leads)",
         choices=("keep", "virtual", "elect"),
     ),
+    # Several platoons in one world (the keys of an entry: scenario/platoons.py).
+    "platoons": Param(
+        **_list_of("platoonEntry"),
+        doc="Several platoons in one world, each with its own name, vehicles, "
+        "reference, formation and recovery; the top-level sections are their "
+        "defaults (see scenarios/traffic/)",
+    ),
     "randomize": Param(
         "custom",
         None,

@@ -196,6 +196,34 @@ class PlatoonSpec:
 
 
 @dataclass(frozen=True)
+class PlatoonGroup:
+    """One platoon of a world of several (an entry of ``platoons:``).
+
+    Attributes
+    ----------
+    name, color : str
+        The platoon's name (in ``metrics.json`` and the legends) and colour.
+    rows : tuple of int
+        The indices of its vehicles in the scenario's vehicle order.
+    scenario : Scenario
+        The platoon alone: its vehicles, reference, formation, recovery, safety,
+        reconfiguration and leader-failure rule, the top-level sections filling in
+        what the entry does not give.
+    """
+
+    name: str
+    color: str
+    rows: tuple[int, ...]
+    scenario: Scenario
+
+    @property
+    def leader(self) -> int:
+        """The fleet index of the platoon's leader, or -1."""
+        lead = self.scenario.leader_index
+        return self.rows[lead] if lead >= 0 else -1
+
+
+@dataclass(frozen=True)
 class MetricsSpec:
     """Parameters of the metrics (``metrics.json``).
 
@@ -326,6 +354,8 @@ class Scenario:
     reconfigure: ReconfigureSpec = ReconfigureSpec()
     #: The ``on_leader_failure:`` key: keep, virtual or elect.
     on_leader_failure: str = "keep"
+    #: The ``platoons:`` section (empty: the file is one platoon).
+    platoons: tuple[PlatoonGroup, ...] = ()
 
     def __post_init__(self) -> None:
         """Validate a scenario not made by the loader (the constructor, ``replace``).
@@ -402,8 +432,13 @@ class Scenario:
         Lengths are resolved to metres. A platoon is written as its ``platoon`` section
         (with the vehicle parameters it uses under ``vehicle``), not as a list of its
         vehicles: parsing regenerates exactly the same vehicles (same seed), and the
-        document of a 10,000-vehicle scenario stays a few lines long.
+        document of a 10,000-vehicle scenario stays a few lines long. Several
+        platoons are written as ``platoons:``, each entry its platoon's own sections.
         """
+        if self.platoons:
+            from sandbox.scenario.platoons import platoons_document
+
+            return platoons_document(self)
         doc: dict[str, Any] = {
             "name": self.name,
             "description": self.description,
