@@ -50,6 +50,8 @@ class Observation:
         a vehicle was overridden.
     failed : ndarray, shape (n,), bool
         Whether a failure is active on the vehicle.
+    platoon : tuple of str or None
+        With ``platoons:``, the name of each vehicle's platoon; None: one platoon.
     """
 
     t: float
@@ -61,6 +63,7 @@ class Observation:
     target: np.ndarray
     mode: np.ndarray
     failed: np.ndarray
+    platoon: tuple[str, ...] | None = None
 
     @property
     def n(self) -> int:

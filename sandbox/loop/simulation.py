@@ -35,6 +35,7 @@ from sandbox.errors import PluginRunError
 from sandbox.geometry.neighbours import NeighbourList
 from sandbox.loop.divergence import diverged
 from sandbox.loop.observation import Observation, Overrides, override_rows
+from sandbox.loop.platoons import Platoons
 from sandbox.loop.run_info import run_description
 from sandbox.loop.state import Fleet
 from sandbox.model.failures import FailureSchedule
@@ -203,6 +204,14 @@ class Simulation:
         self._wall = time.perf_counter()
         #: Wall time spent planning and acting (law, recovery, controller, filters).
         self._control_time = 0.0
+        # --- platoons hook (loop/platoons.py): with platoons:, each platoon's law,
+        # recovery and safety filter on its rows; None with one platoon.
+        self.platoons = Platoons.build(self)
+        if self.platoons is not None:
+            self.strategy = self.platoons.strategy
+            self._filter = self.platoons.filter if self.platoons.filtered else None
+            self._avoid_candidates = self.platoons.avoid_candidates
+        # --- end of the platoons hook
         # Slot reassignment and leader handover on events (None: keep every slot).
         self.reconfiguration = Reconfiguration.build(self)
         if self._sense():
@@ -262,6 +271,9 @@ class Simulation:
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
         """Slots, reference point, and the law's ``x_ref'``, ``x_ref''`` at ``t``."""
+        if self.platoons is not None:  # platoons hook: each platoon's own law
+            fl = self.fleet
+            return self.platoons.targets(t, fl.pos, fl.theta, fl.vel, self.seen)
         n = self.fleet.n
         ref = self.reference.evaluate(t) if self.reference is not None else None
         if self.law is not None:
@@ -618,6 +630,7 @@ class Simulation:
             target=np.array(plan.target, dtype=float),
             mode=plan.mode(fleet.n) if not self._closed else fleet.mode.copy(),
             failed=plan.failing.copy(),
+            platoon=None if self.platoons is None else self.platoons.of_vehicles(),
         )
 
     def step(

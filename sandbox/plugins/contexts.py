@@ -45,6 +45,8 @@ class StrategyContext:
         The broadcast positions each vehicle receives of the others (``sensing:``,
         see :mod:`sandbox.behaviour.sensing`); None: every vehicle sees the others' true
         ``pos``. A vehicle's own position is always ``pos``.
+    platoon : ndarray (n,) int or None
+        The index of each vehicle's platoon in ``platoons:`` (None: one platoon).
     """
 
     t: float
@@ -61,6 +63,7 @@ class StrategyContext:
     obstacle_field: Any
     neighbours: Any = None
     seen_pos: np.ndarray | None = None
+    platoon: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -144,6 +147,9 @@ class LawContext:
         The law's YAML values.
     memory : dict
         Kept from one step to the next (for a law's own estimates).
+    platoon : ndarray (n,) int or None
+        With ``platoons:``, the rows are the law's platoon only; this is the index
+        of that platoon for each (None: one platoon).
     """
 
     t: float
@@ -158,6 +164,7 @@ class LawContext:
     reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None
     params: dict[str, Any]
     memory: dict[str, Any]
+    platoon: np.ndarray | None = None
 
 
 @dataclass
@@ -244,6 +251,8 @@ class FilterContext:
         Kept from one step to the next (the filter's own state).
     stats : dict
         Counters the filter keeps; written to ``metrics.json`` under ``safety``.
+    platoon : ndarray (n,) int or None
+        The index of each vehicle's platoon in ``platoons:`` (None: one platoon).
     """
 
     t: float
@@ -267,6 +276,7 @@ class FilterContext:
     sensing: dict[str, float] | None = None
     memory: dict[str, Any] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
+    platoon: np.ndarray | None = None
 
 
 @dataclass
