@@ -186,10 +186,11 @@ class Platoons:
                     memory=g.memory,
                     platoon=np.full(len(rows), k, dtype=np.intp),
                 )
-                s, v, a = g.law.targets(ctx)
-                slot[rows] = np.broadcast_to(np.asarray(s, dtype=float), (len(rows), 2))
-                v_ref[rows] = np.broadcast_to(np.asarray(v, dtype=float), (len(rows), 2))
-                a_ref[rows] = np.broadcast_to(np.asarray(a, dtype=float), (len(rows), 2))
+                shape = (len(rows), 2)
+                s, v, a = (np.asarray(x, dtype=float) for x in g.law.targets(ctx))
+                slot[rows] = np.broadcast_to(s, shape)
+                v_ref[rows] = np.broadcast_to(v, shape)
+                a_ref[rows] = np.broadcast_to(a, shape)
             if ref is not None and len(g.track):
                 slot[g.track], v_ref[g.track], a_ref[g.track] = ref[0], ref[1], ref[2]
             slot[g.commanded] = np.nan
