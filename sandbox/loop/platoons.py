@@ -102,9 +102,9 @@ class Platoons:
         self._filters = _sections(
             scenario.platoons,
             lambda sc: sc.safety,
-            lambda spec: None
-            if spec.filter == "none"
-            else runnable(get("filter", spec.filter)),
+            lambda spec: (
+                None if spec.filter == "none" else runnable(get("filter", spec.filter))
+            ),
             self.n,
         )
         self._filter_memory: list[dict] = [{} for _ in self._filters]
