@@ -176,3 +176,66 @@ def test_collision_counts_of_platoons_need_platoons(tmp_path):
     )
     with pytest.raises(ScenarioError, match=re.escape("counted only in a world of")):
         load_scenario(_write(tmp_path, text))
+
+
+EVENTS = TWO.replace("duration: 4", "duration: 6") + (
+    "events:\n"
+    "  - when: {platoon: north, within: 12.0, of: east}\n"
+    "    merge: {into: east, from: north}\n"
+    "  - at: 3\n"
+    "    split: {platoon: east, vehicles: [n0, e1], new: third,\n"
+    "            reference: {type: line, start: [-8, -3], heading: 0, speed: 1}}\n"
+)
+
+
+def test_a_merge_and_a_split_fire_and_are_recorded(tmp_path):
+    sc = load_scenario(_write(tmp_path, EVENTS))
+    assert [e.kind for e in sc.events] == ["merge", "split"]
+    assert load_scenario(sc.to_dict()).events == sc.events
+    sim = Simulation(sc)
+    run = sim.run()
+    fired = compute_metrics(run)["platoon_events"]
+    # the leaders start 11.3 m apart: the merge fires at once; the split at 3 s
+    assert [e["t"] for e in fired] == [0.0, 3.0]
+    assert fired[0]["platoons"] == {"east": ["e0", "e1", "n0", "north-v0"]}
+    # north's slots go behind east's last one (1.6 m spacing), assigned by distance
+    assert sorted(map(tuple, fired[0]["offsets"].values())) == sorted(
+        [(0.0, 0.0), (-1.6, 0.0), (-3.2, 0.0), (-4.8, 0.0)]
+    )
+    assert fired[1]["platoons"] == {"east": ["e0", "north-v0"], "third": ["n0", "e1"]}
+    assert sim.platoons.of_vehicles() == ("east", "third", "third", "east")
+
+
+BAD_EVENTS = [
+    (
+        "events:\n  - at: 1\n    merge: {into: west, from: north}\n",
+        "s.yaml:20: events[0].merge.into: no such platoon",
+    ),
+    (
+        "events:\n  - at: 9\n    merge: {into: east, from: north}\n",
+        "s.yaml:19: events[0].at: the event can never fire (got at = 9 s, the run "
+        "lasts 4 s",
+    ),
+    (
+        "events:\n  - when: {platoon: east, within: 1, of: east}\n"
+        "    merge: {into: east, from: north}\n",
+        "s.yaml:19: events[0].when.of: the event can never fire",
+    ),
+    (
+        "events:\n  - at: 1\n    split: {platoon: east, vehicles: [e0], new: x,\n"
+        "            reference: {type: point, position: [0, 0]}}\n",
+        "events[0].split.vehicles[0]: e0 leads platoon east",
+    ),
+    (
+        "events:\n  - at: 1\n",
+        "s.yaml:19: events[0]: needs exactly one of merge and split",
+    ),
+]
+
+
+@pytest.mark.parametrize(("events", "message"), BAD_EVENTS)
+def test_bad_events_are_one_line_errors(tmp_path, events, message):
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_write(tmp_path, TWO + events))
+    lines = str(info.value).splitlines()
+    assert any(message in line for line in lines), lines

@@ -32,31 +32,80 @@ from typing import Any
 import numpy as np
 
 from sandbox.geometry.neighbours import NeighbourList
+from sandbox.loop import platoon_events
 from sandbox.plugins.registration import LawContext, get, make_law, runnable
 
 
 class _One:
-    """One platoon's reference, law and the rows they drive."""
+    """One platoon's reference, law and the rows they drive.
 
-    def __init__(self, group: Any, offset: np.ndarray, commanded: np.ndarray, h: float):
-        sc = group.scenario
-        self.name = group.name
-        self.rows = np.asarray(group.rows, dtype=np.intp)
-        self.reference = sc.reference.build() if sc.reference else None
-        spec = sc.formation
-        self.params = dict(spec.params) if spec else {}
-        self.offset = offset[self.rows]
-        self.law = make_law(spec.law, self.params, self.offset, h) if spec else None
+    Parameters
+    ----------
+    name : str
+    rows : ndarray (m,) int
+        The platoon's vehicles, its leader among them at ``leader``.
+    offset : ndarray (m, 2) [m]
+        Their offsets in the platoon's formation.
+    law : str or None
+        The registered law (None: every vehicle tracks the reference).
+    params : dict
+        The law's values.
+    reference : object or None
+        The built reference (``evaluate(t)``).
+    leader : int
+        The leader's position in ``rows`` (-1: none).
+    commanded : ndarray (n,) bool
+        The fleet's open-loop vehicles.
+    h : float [s]
+    """
+
+    def __init__(
+        self,
+        name: str,
+        rows: np.ndarray,
+        offset: np.ndarray,
+        law: str | None,
+        params: dict,
+        reference: Any,
+        leader: int,
+        commanded: np.ndarray,
+        h: float,
+    ) -> None:
+        self.name = name
+        self.rows = np.asarray(rows, dtype=np.intp)
+        self.reference = reference
+        self.law_name = law
+        self.params = dict(params)
+        self.offset = np.asarray(offset, dtype=float)
+        self.law = make_law(law, self.params, self.offset, h) if law else None
         self.memory: dict = {}
-        self.leader = sc.leader_index  # local row
+        self.leader = leader
         tracks = np.zeros(len(self.rows), dtype=bool)
         if self.law is None:
             tracks[:] = True
-        elif get("law", spec.law).options["needs_leader"] and self.leader >= 0:
+        elif get("law", law).options["needs_leader"] and self.leader >= 0:
             tracks[self.leader] = True
         tracks &= ~commanded[self.rows]
         self.track = self.rows[tracks]
         self.commanded = self.rows[commanded[self.rows]]
+
+    @classmethod
+    def of(cls, group: Any, offset: np.ndarray, commanded: np.ndarray, h: float):
+        """The platoon of a ``platoons:`` entry (a :class:`PlatoonGroup`)."""
+        sc = group.scenario
+        spec = sc.formation
+        rows = np.asarray(group.rows, dtype=np.intp)
+        return cls(
+            group.name,
+            rows,
+            offset[rows],
+            spec.law if spec else None,
+            dict(spec.params) if spec else {},
+            sc.reference.build() if sc.reference else None,
+            sc.leader_index,
+            commanded,
+            h,
+        )
 
 
 class Platoons:
@@ -79,12 +128,17 @@ class Platoons:
     ) -> None:
         self.h = h
         self.n = len(offset)
-        self.groups = [_One(g, offset, commanded, h) for g in scenario.platoons]
+        self.groups = [_One.of(g, offset, commanded, h) for g in scenario.platoons]
+        self.commanded = commanded
+        #: The events still to fire (``events:``), and the record of those fired.
+        self.events = list(scenario.events)
+        self.fired: list[dict[str, Any]] = []
         #: Each vehicle's platoon, shape (n,), int.
         self.index = np.zeros(self.n, dtype=np.intp)
         for k, g in enumerate(self.groups):
             self.index[g.rows] = k
         self.names = [g.name for g in self.groups]
+        self.vehicle_names = [v.name for v in scenario.vehicles]
         #: Vehicles that may avoid: not open loop, no leader that does not avoid.
         self.avoid_candidates = ~commanded
         for g, spec in zip(self.groups, scenario.platoons, strict=True):
@@ -112,11 +166,19 @@ class Platoons:
 
     @classmethod
     def build(cls, sim: Any) -> Platoons | None:
-        """The platoons of a simulation's scenario, or None with one platoon."""
+        """The platoons of a simulation's scenario, or None with one platoon.
+
+        With ``events:``, the record of the events fired is ``sim.info
+        ["platoon_events"]`` (a list filled as they fire).
+        """
         sc = sim.scenario
         if not sc.platoons:
             return None
-        return cls(sc, sim.fleet.offset, sim.fleet.commanded, sim.h)
+        made = cls(sc, sim.fleet.offset, sim.fleet.commanded, sim.h)
+        made.vehicle_names = list(sim.names)
+        if sc.events:
+            sim.info["platoon_events"] = made.fired
+        return made
 
     def of_vehicles(self) -> tuple[str, ...]:
         """The name of each vehicle's platoon, in vehicle order."""
@@ -153,6 +215,8 @@ class Platoons:
             The first platoon's reference point (NaN without one); each platoon's
             reference is drawn from its own section.
         """
+        if self.events:  # merges and splits due now (loop/platoon_events.py)
+            self._fire(t, (pos, theta, vel))
         n = self.n
         slot = np.full((n, 2), np.nan)
         v_ref = np.zeros((n, 2))
@@ -195,6 +259,50 @@ class Platoons:
                 slot[g.track], v_ref[g.track], a_ref[g.track] = ref[0], ref[1], ref[2]
             slot[g.commanded] = np.nan
         return slot, v_ref, a_ref, point
+
+    def _make(self, name, rows, offset, law, params, reference, leader) -> _One:
+        return _One(
+            name, rows, offset, law, params, reference, leader, self.commanded, self.h
+        )
+
+    def _fire(self, t: float, state: tuple[np.ndarray, ...]) -> None:
+        """Apply the events due at ``t`` in their order; record them."""
+        by_name = {g.name: g for g in self.groups}
+        for event in list(self.events):
+            if not platoon_events.due(event, t, by_name, state[0]):
+                continue
+            if event.kind == "split" and not set(
+                self.vehicle_names.index(v) for v in event.vehicles
+            ) <= set(by_name[event.platoon].rows.tolist()):
+                continue  # its vehicles are not (yet) all in the platoon
+            self.events.remove(event)
+            if event.kind == "merge":
+                into, source = by_name[event.into], by_name[event.source]
+                merged, record = platoon_events.merge(
+                    into, source, t, self.h, state, self._make
+                )
+                self.groups = [
+                    merged if g is into else g for g in self.groups if g is not source
+                ]
+                record["offsets"] = {
+                    self.vehicle_names[int(i)]: o for i, o in record["offsets"].items()
+                }
+            else:
+                group = by_name[event.platoon]
+                rest, made, record = platoon_events.split(
+                    group, event, self.vehicle_names, self._make, t
+                )
+                at = self.groups.index(group)
+                self.groups[at : at + 1] = [rest, made]
+            by_name = {g.name: g for g in self.groups}
+            record["platoons"] = {
+                g.name: [self.vehicle_names[i] for i in g.rows] for g in self.groups
+            }
+            self.fired.append(record)
+            for g in self.groups:
+                if g.name not in self.names:
+                    self.names.append(g.name)
+                self.index[g.rows] = self.names.index(g.name)
 
     def strategy(self, ctx: Any) -> tuple[np.ndarray, np.ndarray]:
         """The recovery shift of every vehicle: each platoon's section on its rows.

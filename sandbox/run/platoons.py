@@ -10,7 +10,11 @@
   vehicles and the RMS over its vehicles of their ``rms_last_quarter`` [m]; the
   latest settling time of its healthy vehicles [s] (null if one never settles);
   whether every healthy vehicle of it settles; and the contacts involving it
-  (``intra_platoon``, ``inter_platoon``, ``vehicle_obstacle``).
+  (``intra_platoon``, ``inter_platoon``, ``vehicle_obstacle``);
+- ``platoon_events`` (with ``events:``): each merge or split that fired, ``{t, merge
+  | split, platoons}`` with the platoons' vehicles after it (a merge also gives each
+  vehicle's new offset). The per-platoon entries and the intra/inter split of the
+  contacts keep the platoons of the file (the membership at the start).
 
 :func:`platoon_view` is :meth:`sandbox.run.record.Run.platoon`: the run of one
 platoon's vehicles only.
@@ -95,6 +99,8 @@ def platoon_metrics(run: Any, out: dict[str, Any]) -> None:
             },
         }
     out["platoons"] = per
+    if "platoon_events" in run.info:
+        out["platoon_events"] = run.info["platoon_events"]
 
 
 def platoon_view(run: Any, name: str) -> Any:

@@ -29,6 +29,7 @@ import numpy as np
 from sandbox.errors import Problem, ScenarioError
 from sandbox.plugins.registration import Param
 from sandbox.scenario.checks import _overlapping_pairs
+from sandbox.scenario.events import read_events
 from sandbox.scenario.expectations import read_expectations
 from sandbox.scenario.reader import _describe, _Reader
 from sandbox.scenario.sections import _failures, _list_of, _section
@@ -92,7 +93,7 @@ PLATOONS_KEYS = tuple(PLATOONS)
 #: The sections an entry replaces whole (``vehicle`` is merged key by key).
 _OWN = tuple(k for k in PLATOONS_KEYS if k not in ("name", "color", "vehicle"))
 #: The top-level keys read once for the whole world, never in an entry's document.
-_WORLD = ("platoons", "expect", "failures", "randomize", "plugins")
+_WORLD = ("platoons", "events", "expect", "failures", "randomize", "plugins")
 
 
 def parse_platoons(
@@ -239,6 +240,7 @@ def parse_platoons(
                 "reconfigure or on_leader_failure set",
                 "assign: none and on_leader_failure: keep",
             )
+    events = read_events(rd, doc.get("events"), specs, first.duration)
     expect = read_expectations(
         rd, doc.get("expect"), "expect", names, platoons=list(seen_names)
     )
@@ -252,6 +254,7 @@ def parse_platoons(
             platoon=None,
             expect=expect,
             platoons=tuple(specs),
+            events=tuple(events),
             plugins=tuple(doc.get("plugins") or ()),
             warnings=tuple(messages + [w.format(source) for w in rd.warnings]),
         )
@@ -359,6 +362,8 @@ def platoons_document(sc: Scenario) -> dict[str, Any]:
             item = {k: v for k, v in dataclasses.asdict(f).items() if v is not None}
             item.update(item.pop("params"))
             doc["failures"].append(item)
+    if sc.events:
+        doc["events"] = [e.document() for e in sc.events]
     if sc.expect is not None:
         doc["expect"] = sc.expect.to_dict()
     return doc

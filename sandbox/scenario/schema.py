@@ -37,6 +37,7 @@ from sandbox.scenario import (
     VEHICLE,
     VEHICLE_PARAMS,
 )
+from sandbox.scenario.events import EVENT
 
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
 SCHEMA_ID = "https://sandbox.example/schemas/scenario.schema.json"
@@ -65,6 +66,7 @@ def sections() -> dict[str, dict[str, Param]]:
         "drive": DRIVE,
         "platoon": PLATOON,
         "platoons": PLATOONS,
+        "events": EVENT,
         "metrics": METRICS,
         "sensing": SENSING,
         "reconfigure": RECONFIGURE,
@@ -303,6 +305,7 @@ def build_schema() -> dict[str, Any]:
             "formation": _plugin_section("law"),
             "platoon": _object(PLATOON),
             "platoonEntry": _object(PLATOONS),
+            "event": _object(EVENT),
             "recovery": _plugin_section("strategy"),
             "failure": _plugin_section("failure"),
             "obstacle": _plugin_section("obstacle"),

@@ -231,6 +231,11 @@ TOP: dict[str, Param] = {
         "reference, formation and recovery; the top-level sections are their "
         "defaults (see scenarios/traffic/)",
     ),
+    "events": Param(
+        **_list_of("event"),
+        doc="Merges and splits of platoons, at a time or when one platoon comes "
+        "within a distance of another (with platoons:; see sandbox/scenario/events.py)",
+    ),
     "randomize": Param(
         "custom",
         None,

@@ -356,6 +356,8 @@ class Scenario:
     on_leader_failure: str = "keep"
     #: The ``platoons:`` section (empty: the file is one platoon).
     platoons: tuple[PlatoonGroup, ...] = ()
+    #: The ``events:`` section: merges and splits of platoons (scenario/events.py).
+    events: tuple[Any, ...] = ()
 
     def __post_init__(self) -> None:
         """Validate a scenario not made by the loader (the constructor, ``replace``).
