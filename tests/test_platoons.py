@@ -239,3 +239,17 @@ def test_bad_events_are_one_line_errors(tmp_path, events, message):
         load_scenario(_write(tmp_path, TWO + events))
     lines = str(info.value).splitlines()
     assert any(message in line for line in lines), lines
+
+
+def test_an_agent_sees_which_neighbours_share_its_platoon(tmp_path):
+    pytest.importorskip("gymnasium")
+    from sandbox.envs import VehicleEnv
+
+    env = VehicleEnv(_write(tmp_path, TWO), agent="e1", neighbours=2)
+    obs, _ = env.reset(seed=0)
+    # 7 own entries, 2 x 6 per neighbour, then a same-platoon flag per neighbour:
+    # e1's two nearest are e0 (1.6 m, its platoon) and north's leader n0 (8.1 m)
+    assert obs.shape == (7 + 12 + 2,) == env.observation_space.shape
+    assert obs[-2:].tolist() == [1.0, 0.0]
+    _, _, _, _, info = env.step(np.zeros(2, dtype=np.float32))
+    assert info["platoon"] == "east"

@@ -13,7 +13,10 @@ in the world frame:
 - ``[6]`` its failed flag (1 while a failure is active);
 - then for each of the ``k`` nearest other vehicles, nearest first: relative position
   ``pos_j - pos_i`` [m] (2), relative velocity ``vel_j - vel_i`` [m/s] (2), failed flag
-  (1), present flag (1; zeros pad the list when there are fewer than ``k`` others).
+  (1), present flag (1; zeros pad the list when there are fewer than ``k`` others);
+- with ``platoons:`` only, ``k`` more entries at the end: for each of those neighbours,
+  1 if it belongs to the agent's platoon (0 otherwise, or absent). The agent's
+  platoon's name is ``info["platoon"]``.
 
 Positions are clipped to ``[-max_distance, max_distance]`` and velocities to
 ``[-max_speed, max_speed]``, the bounds of the observation space.
@@ -269,6 +272,9 @@ class Task:
         self.scale = self._command_scale(sc, max_command)
         self.render_size = int(render_size)
         self.size = OWN_FEATURES + NEIGHBOUR_FEATURES * self.k
+        # With platoons: k "same platoon" flags at the end (after the neighbours).
+        self.platooned = bool(sc.platoons)
+        self.size += self.k if self.platooned else 0
         self.diameter = np.array([v.diameter for v in sc.vehicles], dtype=float)
         self.sim: Simulation | None = None
         self.obs: Observation | None = None
@@ -359,12 +365,15 @@ class Task:
         contact onsets; ``effort`` [m/s]: total variation of the commands.
         """
         error, hits, effort = self.terms[j]
-        return {
+        out = {
             "t": self.obs.t,
             "error": float(error),
             "collisions": int(hits),
             "effort": float(effort),
         }
+        if self.obs.platoon is not None:  # with platoons: the agent's own
+            out["platoon"] = self.obs.platoon[self.rows[j]]
+        return out
 
     @property
     def over(self) -> bool:
@@ -378,7 +387,7 @@ class Task:
 
     # ------------------------------------------------------------------ features
     def features(self) -> np.ndarray:
-        """Observations of every agent, shape (m, 7 + 6 k), float32."""
+        """Observations of every agent, shape (m, 7 + 6 k [+ k]), float32."""
         obs, m, k = self.obs, len(self.agents), self.k
         pos, vel = obs.pose[:, :2], obs.vel
         out = np.zeros((m, self.size))
@@ -405,21 +414,29 @@ class Task:
             out[:, OWN_FEATURES : OWN_FEATURES + NEIGHBOUR_FEATURES * take] = (
                 block.reshape(m, -1)
             )
+            if self.platooned:  # 1: the neighbour is in the agent's platoon
+                of = np.array(obs.platoon, dtype=object)
+                same = of[near] == of[i][:, None]
+                start = OWN_FEATURES + NEIGHBOUR_FEATURES * self.k
+                out[:, start : start + take] = same
         low, high = self.bounds()
         out = np.where(np.isfinite(out), out, 0.0)
         return np.clip(out, low, high).astype(np.float32)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of an observation, shape (7 + 6 k,) each."""
+        """Lower and upper bounds of an observation, shape (7 + 6 k [+ k],) each."""
         d, v = self.max_distance, self.max_speed
         own = [d, d, 1, 1, v, v, 1]
         per = [d, d, 2 * v, 2 * v, 1, 1]
-        high = np.array(own + per * self.k, dtype=float)
+        high = np.array(
+            own + per * self.k + [1] * (self.size - 7 - 6 * self.k), dtype=float
+        )
         low = -high
         low[6] = 0.0
         for j in range(self.k):
             base = OWN_FEATURES + NEIGHBOUR_FEATURES * j
             low[base + 4 : base + 6] = 0.0
+        low[OWN_FEATURES + NEIGHBOUR_FEATURES * self.k :] = 0.0
         return low, high
 
     # ------------------------------------------------------------------ frames
