@@ -43,6 +43,12 @@ SECTION_TITLES = {
     "detection": ("`detection:`", "how the platoon learns of a failure"),
     "safety": ("`safety:`", "a safety filter on the commands"),
     "reconfigure": ("`reconfigure:`", "slot reassignment after a failure"),
+    "platoons": (
+        "`platoons: [...]`",
+        "several platoons in one world, one item each (the top-level sections are "
+        "their defaults)",
+    ),
+    "events": ("`events: [...]`", "merges and splits of platoons, one item each"),
 }
 
 
