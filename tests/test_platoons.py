@@ -253,3 +253,10 @@ def test_an_agent_sees_which_neighbours_share_its_platoon(tmp_path):
     assert obs[-2:].tolist() == [1.0, 0.0]
     _, _, _, _, info = env.step(np.zeros(2, dtype=np.float32))
     assert info["platoon"] == "east"
+
+
+def test_sweeps_run_platoons_on_the_single_run_path(tmp_path):
+    from sandbox.study.batchable import batch_reason
+
+    sim = Simulation(load_scenario(_write(tmp_path, TWO)))
+    assert batch_reason(sim) == "the 'platoons' section"
