@@ -28,6 +28,7 @@ def test_the_traffic_folder_holds_the_scenes_of_issue_25() -> None:
         "intersection_four",
         "intersection_two",
         "merge_one_lane",
+        "merge_split",
         "overtaking",
         "roundabout",
     ]

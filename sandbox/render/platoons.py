@@ -66,7 +66,9 @@ def platoon_error_figure(run: Run) -> Figure | None:
         One row per platoon, ``t [s]`` against ``formation error [m]`` of its
         vehicles (in their colours, a legend per panel; a failed vehicle's error is
         not drawn while it is failed), collisions as red stars (on every panel of a
-        platoon involved); None for a run of one platoon.
+        platoon involved), merges and splits (``events:``) as grey dash-dotted lines
+        on every panel; None for a run of one platoon. The panels are the platoons
+        of the file (a platoon formed by a split is drawn with the one it left).
     """
     groups = platoon_groups(run)
     if groups is None:
@@ -88,11 +90,27 @@ def platoon_error_figure(run: Run) -> Figure | None:
         if hits:
             h = np.array(hits)
             ax.plot(h[:, 0], h[:, 1], "r*", ms=10, ls="none", label="collision")
+        for e in run.info.get("platoon_events", []):  # merges and splits
+            what = (
+                f"{e['merge']['from']} merges into {e['merge']['into']}"
+                if "merge" in e
+                else f"{e['split']['new']} splits from {e['split']['platoon']}"
+            )
+            ax.axvline(e["t"], color="0.4", ls="-.", lw=1.0)
+            ax.annotate(
+                what,
+                (e["t"], 1.0),
+                xycoords=("data", "axes fraction"),
+                xytext=(3, -3),
+                textcoords="offset points",
+                va="top",
+                fontsize=7,
+            )
         ax.set_ylim(bottom=0.0)
         ax.set_ylabel("error [m]")
         ax.set_title(f"platoon {name}", fontsize="medium", loc="left")
         ax.grid(True, lw=0.4, alpha=0.5)
-        ax.legend(fontsize="small", loc="upper right", ncols=min(len(rows) + 1, 4))
+        ax.legend(fontsize="small", loc="best", ncols=min(len(rows) + 1, 4))
     axes[-1].set_xlabel("t [s]")
     axes[-1].set_xlim(t[0], t[-1] if len(t) and t[-1] > t[0] else t[0] + 1.0)
     label = run.scenario.name if run.scenario is not None else "run"
