@@ -48,6 +48,12 @@ SECTION_TITLES = {
         "the fleet's sensors (also `vehicles[i].sensors:`, merged over them)",
     ),
     "range": ("`sensors.range:`", "a planar range sensor (LiDAR)"),
+    "platoons": (
+        "`platoons: [...]`",
+        "several platoons in one world, one item each (the top-level sections are "
+        "their defaults)",
+    ),
+    "events": ("`events: [...]`", "merges and splits of platoons, one item each"),
 }
 
 

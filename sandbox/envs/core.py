@@ -19,6 +19,9 @@ in the world frame:
   ``+fov/2`` (left) about the heading; ``max_range`` where nothing is hit), in
   ``[0, max_range]``; every agent needs a ``sensors.range``. ``observe=("ranges",)``
   leaves the neighbours out (``7 + B`` entries).
+- with ``platoons:`` only, ``k`` more entries at the end: for each of those neighbours,
+  1 if it belongs to the agent's platoon (0 otherwise, or absent). The agent's
+  platoon's name is ``info["platoon"]``.
 
 Positions are clipped to ``[-max_distance, max_distance]`` and velocities to
 ``[-max_speed, max_speed]``, the bounds of the observation space.
@@ -293,6 +296,9 @@ class Task:
         if "ranges" in observe:
             self.reach = self._reach(sc)
             self.size += len(self.reach)
+        # With platoons: k "same platoon" flags at the end (after the neighbours).
+        self.platooned = bool(sc.platoons)
+        self.size += self.k if self.platooned else 0
         self.diameter = np.array([v.diameter for v in sc.vehicles], dtype=float)
         self.sim: Simulation | None = None
         self.obs: Observation | None = None
@@ -399,12 +405,15 @@ class Task:
         contact onsets; ``effort`` [m/s]: total variation of the commands.
         """
         error, hits, effort = self.terms[j]
-        return {
+        out = {
             "t": self.obs.t,
             "error": float(error),
             "collisions": int(hits),
             "effort": float(effort),
         }
+        if self.obs.platoon is not None:  # with platoons: the agent's own
+            out["platoon"] = self.obs.platoon[self.rows[j]]
+        return out
 
     @property
     def over(self) -> bool:
@@ -418,38 +427,62 @@ class Task:
 
     # ------------------------------------------------------------------ features
     def features(self) -> np.ndarray:
-        """Observations of every agent, shape (m, 7 + 6 k + B), float32 (B: ranges)."""
+        """Observations of every agent, shape (m, 7 + 6 k [+ k] [+ B]), float32.
+
+        The ``k`` same-platoon flags with ``platoons:``, the ``B`` range readings
+        with ``observe`` ranges.
+        """
         obs, m, i = self.obs, len(self.agents), self.rows
         low, high = self.bounds()
         base = OWN_FEATURES + NEIGHBOUR_FEATURES * self.k
-        out = features_of(
-            obs.pose[None, :, :2],
-            obs.pose[None, :, 2],
-            obs.vel[None],
-            obs.slot[None],
-            obs.failed[None],
-            i,
-            self.k,
-            low[:base],
-            high[:base],
-        )[0]
-        if self.reach is None:
-            return out
-        width = len(self.reach)  # a beam a vehicle lacks reads its bound
-        got = obs.ranges[i][:, :width]
-        block = np.broadcast_to(self.reach, (m, width)).copy()
-        block[:, : got.shape[1]] = np.where(
-            np.isfinite(got), got, block[:, : got.shape[1]]
-        )
-        block = np.clip(block, low[base:], high[base:]).astype(np.float32)
-        return np.concatenate((out, block), axis=1)
+        parts = [
+            features_of(
+                obs.pose[None, :, :2],
+                obs.pose[None, :, 2],
+                obs.vel[None],
+                obs.slot[None],
+                obs.failed[None],
+                i,
+                self.k,
+                low[:base],
+                high[:base],
+            )[0]
+        ]
+        if self.platooned:  # 1: the neighbour is in the agent's platoon
+            parts.append(self._same_platoon(obs).astype(np.float32))
+        if self.reach is not None:
+            width = len(self.reach)  # a beam a vehicle lacks reads its bound
+            got = obs.ranges[i][:, :width]
+            block = np.broadcast_to(self.reach, (m, width)).copy()
+            block[:, : got.shape[1]] = np.where(
+                np.isfinite(got), got, block[:, : got.shape[1]]
+            )
+            lo, hi = low[-width:], high[-width:]
+            parts.append(np.clip(block, lo, hi).astype(np.float32))
+        return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+
+    def _same_platoon(self, obs: Observation) -> np.ndarray:
+        """For each agent's ``k`` nearest others: 1 when in its platoon, (m, k)."""
+        m, i, n, k = len(self.agents), self.rows, obs.n, self.k
+        out = np.zeros((m, k))
+        if k and n > 1:
+            pos = obs.pose[:, :2]
+            rel = pos[None, :, :] - pos[i, None, :]
+            dist = np.hypot(rel[..., 0], rel[..., 1])
+            dist[np.arange(m), i] = np.inf
+            take = min(k, n - 1)
+            near = np.argsort(dist, axis=1, kind="stable")[:, :take]
+            of = np.array(obs.platoon, dtype=object)
+            out[:, :take] = of[near] == of[i][:, None]
+        return out
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of an observation, shape (7 + 6 k + B,) each."""
+        """Lower and upper bounds of an observation, shape (7 + 6 k [+ k] [+ B],)."""
         d, v = self.max_distance, self.max_speed
         own = [d, d, 1, 1, v, v, 1]
         per = [d, d, 2 * v, 2 * v, 1, 1]
-        high = np.array(own + per * self.k, dtype=float)
+        flags = [1] * (self.k if self.platooned else 0)
+        high = np.array(own + per * self.k + flags, dtype=float)
         low = -high
         low[6] = 0.0
         for j in range(self.k):
@@ -458,6 +491,7 @@ class Task:
         if self.reach is not None:
             high = np.concatenate((high, self.reach))
             low = np.concatenate((low, np.zeros(len(self.reach))))
+        low[OWN_FEATURES + NEIGHBOUR_FEATURES * self.k :] = 0.0
         return low, high
 
     # ------------------------------------------------------------------ frames

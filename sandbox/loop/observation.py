@@ -61,6 +61,8 @@ class Observation:
     beam_angles : ndarray, shape (n, B) [rad], or None
         Each beam's angle about the vehicle's heading, from ``-fov/2`` (right) to
         ``+fov/2`` (left).
+    platoon : tuple of str or None
+        With ``platoons:``, the name of each vehicle's platoon; None: one platoon.
     """
 
     t: float
@@ -88,6 +90,7 @@ class Observation:
         if self.near is None:
             return None
         return near_obstacles(*self.near)
+    platoon: tuple[str, ...] | None = None
 
     @property
     def n(self) -> int:

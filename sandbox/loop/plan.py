@@ -10,7 +10,8 @@ world by world: poses, offsets, sizes, masses, motors, ``beta``, failures, seeds
 the sensing, filter and detector values, the metrics settings. A fleet above
 :data:`~sandbox.geometry.neighbours.BRUTE_FORCE_MAX` vehicles is a structure of its
 own (its neighbours come from a Verlet list), and so is a scenario with range
-sensors (``sensors:``, cast world by world: not batched yet).
+sensors (``sensors:``, cast world by world) or several platoons (``platoons:``): not
+batched yet.
 """
 
 from __future__ import annotations
@@ -53,6 +54,8 @@ def structure_key(sc: Scenario) -> str:
     n = len(vs)
     if n > BRUTE_FORCE_MAX:
         return f"large fleet {id(sc)}"
+    if sc.platoons:  # not yet batched: each platoon's law on its own rows
+        return f"platoons {id(sc)}"
     if any(spec is not None for spec in sc.range_specs()):
         # not yet batched: the range sensor casts one world's beams
         return f"range sensors {id(sc)}"

@@ -45,6 +45,7 @@ from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList
 from sandbox.loop.divergence import diverged
 from sandbox.loop.observation import Observation, Overrides, override_rows
 from sandbox.loop.plan import Plan, structure_key
+from sandbox.loop.platoons import Platoons
 from sandbox.loop.recording import WorldsRecorder
 from sandbox.loop.state import Fleet, uniform
 from sandbox.loop.stepping import WorldsPhysics
@@ -255,6 +256,16 @@ class Simulation:
         self._control_time = 0.0
         self._views_at = -1
         self._view_worlds()
+        # --- platoons hook (loop/platoons.py): with platoons: (one world, see
+        # structure_key), each platoon's law, recovery and safety filter on its rows.
+        self.platoons = Platoons.build(self)
+        if self.platoons is not None:
+            self.strategy = self.platoons.strategy
+            self._strategy_per_world = False
+            self._filter = self.platoons.filter if self.platoons.filtered else None
+            self._avoid_candidates = self.platoons.avoid_candidates
+            self.states[0]._avoid_candidates = self._avoid_candidates
+        # --- end of the platoons hook
         for state in self.states:  # slot reassignment and leader handover on events
             state.reconfiguration = Reconfiguration.build(state)
         self._reconfiguring = any(s.reconfiguration is not None for s in self.states)
@@ -390,6 +401,9 @@ class Simulation:
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
         """Slots, reference point, and the law's ``x_ref'``, ``x_ref''`` at ``t``."""
+        if self.platoons is not None:  # platoons hook: each platoon's own law
+            fl = self.fleet
+            return self.platoons.targets(t, fl.pos, fl.theta, fl.vel, self.seen)
         K, n, N = self.K, self.n, self.N
         if self._ref_table is not None:
             ref = tuple(a[self.k] for a in self._ref_table)
@@ -965,6 +979,7 @@ class Simulation:
             **observation_fields(
                 self.range_sensor, self.obstacles, self.scenario, fleet.pos[rows]
             ),
+            platoon=None if self.platoons is None else self.platoons.of_vehicles(),
         )
 
     def step(

@@ -52,6 +52,8 @@ class StrategyContext:
         sensed points instead of the map.
     beam_angles : ndarray (n, B) [rad] or None
         Each beam's angle about the heading, from ``-fov/2`` (right) to ``+fov/2``.
+    platoon : ndarray (n,) int or None
+        The index of each vehicle's platoon in ``platoons:`` (None: one platoon).
     """
 
     t: float
@@ -70,6 +72,7 @@ class StrategyContext:
     seen_pos: np.ndarray | None = None
     ranges: np.ndarray | None = None
     beam_angles: np.ndarray | None = None
+    platoon: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -156,6 +159,9 @@ class LawContext:
     ranges, beam_angles : ndarray (n, B) or None
         The range sensor's readings [m] and beam angles [rad], as for
         :class:`StrategyContext`; None: no sensor.
+    platoon : ndarray (n,) int or None
+        With ``platoons:``, the rows are the law's platoon only; this is the index
+        of that platoon for each (None: one platoon).
     """
 
     t: float
@@ -172,6 +178,7 @@ class LawContext:
     memory: dict[str, Any]
     ranges: np.ndarray | None = None
     beam_angles: np.ndarray | None = None
+    platoon: np.ndarray | None = None
 
 
 @dataclass
@@ -262,6 +269,8 @@ class FilterContext:
     ranges, beam_angles : ndarray (n, B) or None
         The range sensor's readings [m] and beam angles [rad], as for
         :class:`StrategyContext`; None: no sensor.
+    platoon : ndarray (n,) int or None
+        The index of each vehicle's platoon in ``platoons:`` (None: one platoon).
     """
 
     t: float
@@ -287,6 +296,7 @@ class FilterContext:
     stats: dict[str, Any] = field(default_factory=dict)
     ranges: np.ndarray | None = None
     beam_angles: np.ndarray | None = None
+    platoon: np.ndarray | None = None
 
 
 @dataclass

@@ -233,8 +233,18 @@ def _viewport(
 
 
 def _legend_items(run: Run, body: np.ndarray, large: bool) -> list[LegendItem]:
-    """The legend strip of ``run``: its vehicles, then the marks its frames show."""
-    if run.n_vehicles <= LEGEND_NAMES_MAX:
+    """The legend strip of ``run``: its vehicles, then the marks its frames show.
+
+    With ``platoons:``, one entry per platoon, in the colour of its first vehicle.
+    """
+    from sandbox.render.platoons import platoon_groups
+
+    groups = platoon_groups(run)
+    if groups is not None:
+        items = [
+            LegendItem("vehicle", name, int(body[rows[0]])) for name, rows in groups
+        ]
+    elif run.n_vehicles <= LEGEND_NAMES_MAX:
         items = [
             LegendItem("vehicle", name, int(body[i]))
             for i, name in enumerate(run.names)

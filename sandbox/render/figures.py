@@ -57,6 +57,11 @@ from sandbox.render.figure_parts import (
     place_time_labels,
     save_figure,
 )
+from sandbox.render.platoons import (
+    platoon_error_figure,
+    platoon_groups,
+    platoon_paths,
+)
 from sandbox.run.record import Run
 
 __all__ = [
@@ -326,12 +331,20 @@ def trajectories_figure(run: Run) -> Figure:
     )
     ax = fig.add_subplot()
     _draw_obstacles(ax, run)
-    if path is not None:
+    groups = platoon_groups(run)  # with platoons: a legend entry per platoon
+    if groups is not None:
+        lead = {name: rows[0] for name, rows in groups}
+        for name, ref in platoon_paths(run) or []:
+            ax.plot(ref[:, 0], ref[:, 1], "--", color=colors[lead[name]], lw=1.0)
+        first = {rows[0]: name for name, rows in groups}
+    elif path is not None:
         ax.plot(
             path[:, 0], path[:, 1], "--", color=_REFERENCE, lw=1.2, label="reference"
         )
-    if run.n_vehicles <= LEGEND_MAX:
+    if run.n_vehicles <= LEGEND_MAX or groups is not None:
         for i, name in enumerate(run.names):
+            if groups is not None:
+                name = first.get(i, "_nolegend_")
             ax.plot(pos[:, i, 0], pos[:, i, 1], color=colors[i], lw=1.2, label=name)
     else:
         ax.add_collection(
@@ -538,6 +551,9 @@ def formation_error_figure(run: Run) -> Figure:
         reassignments grey down-triangles on the top edge (labelled with the slots
         that changed) and leader changes diamonds there in the new leader's colour.
     """
+    per_platoon = platoon_error_figure(run)  # with platoons: one panel each
+    if per_platoon is not None:
+        return per_platoon
     colors = _colors(run)
     idx = _thin(run)
     t = np.asarray(run.t, dtype=float)

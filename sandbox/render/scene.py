@@ -44,6 +44,7 @@ from sandbox.render.palette import (
     _nice_length,
     _stamp_discs,
 )
+from sandbox.render.platoons import platoon_paths, platoon_references
 from sandbox.run.record import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, Run
 
 #: How long a collision flash stays visible [s] (simulated; at least 1.5 frames).
@@ -122,6 +123,12 @@ class Scene:
         path = _reference_path(run)
         on, off = (v / self.camera.scale for v in _DASH_PX)
         self.dashes = np.zeros((0, 2, 2)) if path is None else _dashes(path, on, off)
+        paths = platoon_paths(run)  # with platoons: every platoon's reference
+        if paths is not None:
+            self.reference = platoon_references(run)
+            self.dashes = np.concatenate(
+                [np.zeros((0, 2, 2))] + [_dashes(p, on, off) for _, p in paths]
+            )
         self.bar = _nice_length(0.22 * self.size / self.camera.scale)
         self.bottom_band = draw_bottom_band(
             self.bands,
@@ -213,10 +220,11 @@ class Scene:
         if self.trails:
             self._draw_trails(draw, cam, k)
         ref = self.reference[k] if k < len(self.reference) else np.full(2, np.nan)
-        if np.isfinite(ref).all():
-            u, v = cam.world_to_pixel(ref) - 0.5
-            draw.line([u - 4, v, u + 4, v], fill=PATH, width=1)
-            draw.line([u, v - 4, u, v + 4], fill=PATH, width=1)
+        for point in np.reshape(ref, (-1, 2)):  # one per platoon with platoons:
+            if np.isfinite(point).all():
+                u, v = cam.world_to_pixel(point) - 0.5
+                draw.line([u - 4, v, u + 4, v], fill=PATH, width=1)
+                draw.line([u, v - 4, u, v + 4], fill=PATH, width=1)
         if self.zones:
             self._draw_zones(draw, cam, k, avoid, failed)
         if self.beams:

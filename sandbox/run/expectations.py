@@ -145,9 +145,11 @@ def evaluate(
             chosen = [e for e in events if e["healthy"]]
         elif kind == "total":
             chosen = list(events)
+        elif kind in ("intra_platoon", "inter_platoon"):
+            chosen = _platoon_events(metrics, events, kind)
         else:
             chosen = [e for e in events if e["kind"] == kind]
-        count = metrics["collisions"][kind]
+        count = metrics["collisions"].get(kind, 0)
         got = f"{count}" + (f" ({events_text(chosen)})" if chosen else "")
         out.append(Outcome(f"collisions.{kind}", bound.text(), got, bound.holds(count)))
     if expect.converged is not None:
@@ -220,6 +222,62 @@ def evaluate(
                 bound.holds(value),
             )
         )
+    out += _platoon_outcomes(expect, metrics, events)
+    return out
+
+
+def _platoon_events(
+    metrics: dict[str, Any], events: list[dict[str, Any]], kind: str
+) -> list[dict[str, Any]]:
+    """The vehicle-vehicle events within one platoon, or between two."""
+    of = {v: k for k, p in metrics.get("platoons", {}).items() for v in p["vehicles"]}
+    same = kind == "intra_platoon"
+    return [
+        e
+        for e in events
+        if e["kind"] == "vehicle_vehicle" and (of.get(e["a"]) == of.get(e["b"])) == same
+    ]
+
+
+def _platoon_outcomes(
+    expect: Expectations, metrics: dict[str, Any], events: list[dict[str, Any]]
+) -> list[Outcome]:
+    """The outcomes of ``expect: platoons:`` (per platoon, in the order given)."""
+    out = []
+    for name, key, value in expect.platoons:
+        entry = metrics["platoons"][name]
+        path = f"platoons.{name}.{key}"
+        if key == "converged":
+            got = bool(entry["converged"])
+            out.append(
+                Outcome(path, str(value).lower(), str(got).lower(), got is value)
+            )
+            continue
+        if key == "settling_time":
+            st = entry["settling_time"]
+            got = f"{st:.2f} s" if st is not None else "never"
+            out.append(Outcome(path, value.text("s"), got, value.holds(st)))
+            continue
+        head, stat = key.split(".")
+        measured = entry[head][stat]
+        if head == "collisions":
+            mine = set(entry["vehicles"])
+            shown = [
+                e
+                for e in _platoon_events(metrics, events, stat)
+                if e["a"] in mine or e["b"] in mine
+            ]
+            if stat == "vehicle_obstacle":
+                shown = [
+                    e
+                    for e in events
+                    if e["kind"] == stat and (e["a"] in mine or e["b"] in mine)
+                ]
+            got = f"{measured}" + (f" ({events_text(shown)})" if shown else "")
+            out.append(Outcome(path, value.text(), got, value.holds(measured)))
+        else:
+            got = f"{measured:.4g} m" if measured is not None else "none (no slot)"
+            out.append(Outcome(path, value.text("m"), got, value.holds(measured)))
     return out
 
 

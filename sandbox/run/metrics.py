@@ -47,6 +47,10 @@ Definitions (the keys of ``metrics.json``):
   mode}`` (``to`` null: the virtual leader); ``slots``, each vehicle's slots over time
   (``{vehicle: [[t, slot], ...]}``, held from ``t``; see
   :attr:`sandbox.run.record.Run.slot_index`).
+- ``platoons``, ``collisions.intra_platoon`` and ``collisions.inter_platoon`` (only
+  with ``platoons:``, see :mod:`sandbox.run.platoons`): per platoon its formation
+  error, settling time, convergence and contacts; the vehicle-vehicle contacts within
+  one platoon and between two.
 
 Formation errors, settling and mode switches read the recorded samples (at the
 resolution of ``record_every``); the rest comes from the loop (``Run.info
@@ -63,6 +67,7 @@ import numpy as np
 from sandbox.model.tunnelling import SUBSTEP_FRACTION
 from sandbox.plugins.registration import metric_contributions
 from sandbox.run.deadlock import find_deadlocks
+from sandbox.run.platoons import platoon_metrics
 from sandbox.run.record import MODE_AVOID, MODE_FORMATION, Run
 
 #: Above this many vehicles the minimum distance uses a KD-tree per sample.
@@ -333,6 +338,7 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     for key in (*keys, "slots"):
         if key in run.info:
             out[key] = run.info[key]
+    platoon_metrics(run, out)  # with platoons: only (run/platoons.py)
     for contribute in metric_contributions().values():  # e.g. the detector's blocks
         out.update(contribute(run))
     out["warnings"] = run_warnings(out)

@@ -227,6 +227,16 @@ class Run:
 
         return vehicle_track(self, name)
 
+    def platoon(self, name: str) -> Run:
+        """The run of one platoon's vehicles (with ``platoons:``), by its name.
+
+        See :func:`sandbox.run.platoons.platoon_view`: the platoon's rows, its own
+        reference and scenario, the events involving its vehicles.
+        """
+        from sandbox.run.platoons import platoon_view
+
+        return platoon_view(self, name)
+
     def to_dataframe(self) -> pandas.DataFrame:
         """The run as a long pandas DataFrame: t, vehicle, x1, ..., mode, failed.
 

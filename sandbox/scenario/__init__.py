@@ -26,6 +26,7 @@ written in metres (``0.75``) or as multiples of the default vehicle diameter (``
 from sandbox.model.obstacles import ObstacleSpec
 from sandbox.scenario.checks import _overlapping_pairs
 from sandbox.scenario.parse import load_scenario, parse_scenario
+from sandbox.scenario.platoons import PLATOONS, PLATOONS_KEYS
 from sandbox.scenario.reader import (
     _BAD_NAME,
     _LENGTH,
@@ -119,6 +120,8 @@ __all__ = [
     "OBSTACLE",
     "PALETTE",
     "PLATOON",
+    "PLATOONS",
+    "PLATOONS_KEYS",
     "PLATOON_PATTERNS",
     "PLUGIN_SECTIONS",
     "RECOVERY",

@@ -47,9 +47,21 @@ EXPECT_KEYS = (
     "min_distance",
     "settling_time",
     "formation_error",
+    "platoons",
 )
 #: Collision counts that can be expected (keys of ``metrics.json``'s ``collisions``).
-COLLISION_KINDS = ("healthy", "total", "vehicle_vehicle", "vehicle_obstacle")
+COLLISION_KINDS = (
+    "healthy",
+    "total",
+    "vehicle_vehicle",
+    "vehicle_obstacle",
+    "intra_platoon",
+    "inter_platoon",
+)
+#: The collision counts of a world of several platoons only.
+PLATOON_KINDS = ("intra_platoon", "inter_platoon")
+#: Keys of a platoon's entry under ``expect: platoons:``.
+PLATOON_EXPECT_KEYS = ("converged", "settling_time", "formation_error", "collisions")
 #: Statistics of a vehicle's formation error (``metrics.json``).
 FORMATION_STATS = ("rms_last_quarter", "final", "max")
 #: Keys of a bound.
@@ -118,6 +130,8 @@ _COLLISION_DOCS = {
     "total": "Every contact episode",
     "vehicle_vehicle": "Contacts between two vehicles",
     "vehicle_obstacle": "Contacts of a vehicle with an obstacle",
+    "intra_platoon": "Contacts between two vehicles of one platoon (with platoons:)",
+    "inter_platoon": "Contacts between vehicles of two platoons (with platoons:)",
 }
 _STAT_DOCS = {
     "rms_last_quarter": "RMS over the last quarter of the run [m]",
@@ -190,6 +204,45 @@ EXPECT_SCHEMA: dict[str, Any] = {
                         "properties": {
                             k: _nullable({**_LENGTH_BOUND, "description": doc})
                             for k, doc in _STAT_DOCS.items()
+                        },
+                        "additionalProperties": False,
+                    }
+                ),
+            }
+        ),
+        "platoons": _nullable(
+            {
+                "type": "object",
+                "description": "Per platoon name (with platoons:): converged, "
+                "settling_time (a bound [s]), formation_error (bounds on the worst "
+                "vehicle's statistics [m]) and collisions (intra_platoon, "
+                "inter_platoon, vehicle_obstacle counts involving the platoon)",
+                "additionalProperties": _nullable(
+                    {
+                        "type": "object",
+                        "properties": {
+                            "converged": _nullable({"type": "boolean"}),
+                            "settling_time": _nullable(_TIME_BOUND),
+                            "formation_error": _nullable(
+                                {
+                                    "type": "object",
+                                    "properties": {
+                                        k: _nullable({**_LENGTH_BOUND})
+                                        for k in _STAT_DOCS
+                                    },
+                                    "additionalProperties": False,
+                                }
+                            ),
+                            "collisions": _nullable(
+                                {
+                                    "type": "object",
+                                    "properties": {
+                                        k: _nullable({**_COUNT_BOUND})
+                                        for k in (*PLATOON_KINDS, "vehicle_obstacle")
+                                    },
+                                    "additionalProperties": False,
+                                }
+                            ),
                         },
                         "additionalProperties": False,
                     }
@@ -273,6 +326,9 @@ class Expectations:
     settling_time: Bound | None = None
     settling_times: tuple[tuple[str, Bound], ...] = ()
     formation_error: tuple[tuple[str, str, Bound], ...] = ()
+    #: Per platoon: ``(platoon, key, value)``, ``key`` ``converged`` (a bool),
+    #: ``settling_time``, ``formation_error.STAT`` or ``collisions.KIND`` (a Bound).
+    platoons: tuple[tuple[str, str, Any], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """A plain ``expect:`` document that :func:`read_expectations` reads back."""
@@ -296,12 +352,29 @@ class Expectations:
             for name, stat, b in self.formation_error:
                 fe.setdefault(name, {})[stat] = b.to_doc()
             doc["formation_error"] = fe
+        if self.platoons:
+            pl: dict[str, dict[str, Any]] = {}
+            for name, key, value in self.platoons:
+                entry = pl.setdefault(name, {})
+                if key == "converged":
+                    entry[key] = value
+                elif key == "settling_time":
+                    entry[key] = value.to_doc()
+                else:
+                    head, stat = key.split(".")
+                    exact = head == "collisions"
+                    entry.setdefault(head, {})[stat] = value.to_doc(exact=exact)
+            doc["platoons"] = pl
         return doc
 
 
 # ------------------------------------------------------------------------------ reading
 def read_expectations(
-    rd: _Reader, doc: Any, path: str, names: Sequence[str] | None
+    rd: _Reader,
+    doc: Any,
+    path: str,
+    names: Sequence[str] | None,
+    platoons: Sequence[str] | None = None,
 ) -> Expectations | None:
     """Read an ``expect:`` section; problems go to the reader ``rd``.
 
@@ -316,6 +389,9 @@ def read_expectations(
     names : sequence of str or None
         The scenario's vehicle names (None when the vehicles are invalid: names are
         then not checked).
+    platoons : sequence of str, optional
+        The names of the platoons of a world of several (``platoons:``); without,
+        the per-platoon expectations are errors.
 
     Returns
     -------
@@ -335,6 +411,14 @@ def read_expectations(
         cm = rd.mapping(m["collisions"], f"{path}.collisions") or {}
         rd.keys(cm, COLLISION_KINDS, f"{path}.collisions")
         for kind in COLLISION_KINDS:
+            if kind in PLATOON_KINDS and cm.get(kind) is not None and not platoons:
+                rd.fail(
+                    f"{path}.collisions.{kind}",
+                    "counted only in a world of several platoons",
+                    f"{kind} without platoons:",
+                    "a platoons: section, or another count",
+                )
+                continue
             if cm.get(kind) is not None:
                 b = _bound(rd, cm[kind], f"{path}.collisions.{kind}", "count")
                 if b is not None:
@@ -380,9 +464,11 @@ def read_expectations(
                     b = _bound(rd, vm[stat], f"{sub}.{name}.{stat}", "length")
                     if b is not None:
                         formation_error.append((name, stat, b))
+    per_platoon = _read_platoons(rd, m.get("platoons"), f"{path}.platoons", platoons)
     if len(rd.problems) > before:
         return None
     return Expectations(
+        platoons=per_platoon,
         status=status,
         collisions=tuple(collisions),
         converged=converged,
@@ -392,6 +478,52 @@ def read_expectations(
         settling_times=tuple(settling_times),
         formation_error=tuple(formation_error),
     )
+
+
+def _read_platoons(
+    rd: _Reader, doc: Any, path: str, platoons: Sequence[str] | None
+) -> tuple[tuple[str, str, Any], ...]:
+    """The ``expect: platoons:`` entries, ``(platoon, key, value)``."""
+    from sandbox.scenario.reader import _describe, _hint
+
+    if doc is None:
+        return ()
+    if not platoons:
+        rd.fail(path, "only with platoons:", _describe(doc), "a platoons: section")
+        return ()
+    out: list[tuple[str, str, Any]] = []
+    for name, value in (rd.mapping(doc, path) or {}).items():
+        sub = f"{path}.{name}"
+        if name not in platoons:
+            rd.fail(
+                sub,
+                f"no such platoon{_hint(name, tuple(platoons))}",
+                _describe(name),
+                f"one of: {', '.join(platoons)}",
+            )
+            continue
+        pm = rd.mapping(value, sub) or {}
+        rd.keys(pm, PLATOON_EXPECT_KEYS, sub)
+        if pm.get("converged") is not None:
+            out.append((name, "converged", rd.boolean(pm, "converged", sub, False)))
+        if pm.get("settling_time") is not None:
+            b = _bound(rd, pm["settling_time"], f"{sub}.settling_time", "time")
+            if b is not None:
+                out.append((name, "settling_time", b))
+        for head, keys, kind in (
+            ("formation_error", FORMATION_STATS, "length"),
+            ("collisions", (*PLATOON_KINDS, "vehicle_obstacle"), "count"),
+        ):
+            if pm.get(head) is None:
+                continue
+            hm = rd.mapping(pm[head], f"{sub}.{head}") or {}
+            rd.keys(hm, keys, f"{sub}.{head}")
+            for key in keys:
+                if hm.get(key) is not None:
+                    b = _bound(rd, hm[key], f"{sub}.{head}.{key}", kind)
+                    if b is not None:
+                        out.append((name, f"{head}.{key}", b))
+    return tuple(out)
 
 
 def _settle_kind() -> str:

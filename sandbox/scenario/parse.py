@@ -38,6 +38,7 @@ from sandbox.scenario import bundled, randomize
 from sandbox.scenario.checks import _check_consistency
 from sandbox.scenario.expectations import read_expectations
 from sandbox.scenario.overrides import _apply_override, _mark_overrides
+from sandbox.scenario.platoons import parse_platoons
 from sandbox.scenario.reader import (
     _BAD_TEXT,
     MAX_VEHICLES,
@@ -223,6 +224,11 @@ def parse_scenario(
         )
         rd.problems.extend(found)
     rd.keys(doc, TOP_KEYS, "")
+    if doc.get("platoons") is not None:  # several platoons: scenario/platoons.py
+        scenario = parse_platoons(rd, doc, source, parse_scenario)
+        for line in scenario.warnings:
+            warnings.warn(line, SandboxWarning, stacklevel=_caller_level())
+        return scenario
 
     default_name = Path(source).stem if source else "scenario"
     if doc.get("name") is None and name_problem(default_name, run=True):

@@ -29,6 +29,7 @@ from sandbox.scenario import (
     GAINS,
     METRICS,
     PLATOON,
+    PLATOONS,
     PLUGIN_SECTIONS,
     RANGE,
     RECONFIGURE,
@@ -38,6 +39,7 @@ from sandbox.scenario import (
     VEHICLE,
     VEHICLE_PARAMS,
 )
+from sandbox.scenario.events import EVENT
 
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
 SCHEMA_ID = "https://sandbox.example/schemas/scenario.schema.json"
@@ -65,6 +67,8 @@ def sections() -> dict[str, dict[str, Param]]:
         "vehicles": VEHICLE,
         "drive": DRIVE,
         "platoon": PLATOON,
+        "platoons": PLATOONS,
+        "events": EVENT,
         "metrics": METRICS,
         "sensing": SENSING,
         "reconfigure": RECONFIGURE,
@@ -304,6 +308,8 @@ def build_schema() -> dict[str, Any]:
             "reference": _plugin_section("reference"),
             "formation": _plugin_section("law"),
             "platoon": _object(PLATOON),
+            "platoonEntry": _object(PLATOONS),
+            "event": _object(EVENT),
             "recovery": _plugin_section("strategy"),
             "failure": _plugin_section("failure"),
             "obstacle": _plugin_section("obstacle"),

@@ -229,6 +229,18 @@ TOP: dict[str, Param] = {
         "elect (the healthy vehicle nearest the leader's slot leads)",
         choices=("keep", "virtual", "elect"),
     ),
+    # Several platoons in one world (the keys of an entry: scenario/platoons.py).
+    "platoons": Param(
+        **_list_of("platoonEntry"),
+        doc="Several platoons in one world, each with its own name, vehicles, "
+        "reference, formation and recovery; the top-level sections are their "
+        "defaults (see scenarios/traffic/)",
+    ),
+    "events": Param(
+        **_list_of("event"),
+        doc="Merges and splits of platoons, at a time or when one platoon comes "
+        "within a distance of another (with platoons:; see sandbox/scenario/events.py)",
+    ),
     "randomize": Param(
         "custom",
         None,

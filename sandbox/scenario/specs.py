@@ -228,6 +228,34 @@ class PlatoonSpec:
 
 
 @dataclass(frozen=True)
+class PlatoonGroup:
+    """One platoon of a world of several (an entry of ``platoons:``).
+
+    Attributes
+    ----------
+    name, color : str
+        The platoon's name (in ``metrics.json`` and the legends) and colour.
+    rows : tuple of int
+        The indices of its vehicles in the scenario's vehicle order.
+    scenario : Scenario
+        The platoon alone: its vehicles, reference, formation, recovery, safety,
+        reconfiguration and leader-failure rule, the top-level sections filling in
+        what the entry does not give.
+    """
+
+    name: str
+    color: str
+    rows: tuple[int, ...]
+    scenario: Scenario
+
+    @property
+    def leader(self) -> int:
+        """The fleet index of the platoon's leader, or -1."""
+        lead = self.scenario.leader_index
+        return self.rows[lead] if lead >= 0 else -1
+
+
+@dataclass(frozen=True)
 class MetricsSpec:
     """Parameters of the metrics (``metrics.json``).
 
@@ -360,6 +388,10 @@ class Scenario:
     on_leader_failure: str = "keep"
     #: The fleet's ``sensors:`` (default: none).
     sensors: SensorsSpec = SensorsSpec()
+    #: The ``platoons:`` section (empty: the file is one platoon).
+    platoons: tuple[PlatoonGroup, ...] = ()
+    #: The ``events:`` section: merges and splits of platoons (scenario/events.py).
+    events: tuple[Any, ...] = ()
 
     def range_specs(self) -> list[RangeSpec | None]:
         """Each vehicle's range sensor (its own, else the fleet's), None: none."""
@@ -443,8 +475,13 @@ class Scenario:
         Lengths are resolved to metres. A platoon is written as its ``platoon`` section
         (with the vehicle parameters it uses under ``vehicle``), not as a list of its
         vehicles: parsing regenerates exactly the same vehicles (same seed), and the
-        document of a 10,000-vehicle scenario stays a few lines long.
+        document of a 10,000-vehicle scenario stays a few lines long. Several
+        platoons are written as ``platoons:``, each entry its platoon's own sections.
         """
+        if self.platoons:
+            from sandbox.scenario.platoons import platoons_document
+
+            return platoons_document(self)
         doc: dict[str, Any] = {
             "name": self.name,
             "description": self.description,

@@ -22,6 +22,7 @@ from sandbox.testing.assertions import (
     assert_formation_error,
     assert_min_distance,
     assert_no_collisions,
+    assert_platoon,
     check_scenario,
     load_checked,
 )
@@ -33,6 +34,7 @@ __all__ = [
     "assert_formation_error",
     "assert_min_distance",
     "assert_no_collisions",
+    "assert_platoon",
     "check_scenario",
     "load_checked",
 ]

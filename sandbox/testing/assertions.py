@@ -29,6 +29,7 @@ __all__ = [
     "assert_formation_error",
     "assert_min_distance",
     "assert_no_collisions",
+    "assert_platoon",
     "check_scenario",
 ]
 
@@ -93,6 +94,63 @@ def assert_no_collisions(
         f"{_label(run)}: {len(found)} collision{s} among {who} "
         f"({', '.join(chosen)}): {first}{more}"
     )
+
+
+def assert_platoon(
+    run: Run,
+    name: str,
+    *,
+    converged: bool | None = None,
+    within: float | None = None,
+    inter_platoon: int | None = None,
+    intra_platoon: int | None = None,
+) -> None:
+    """Assert what ``metrics.json`` says of one platoon (a run with ``platoons:``).
+
+    Parameters
+    ----------
+    run : Run
+    name : str
+        The platoon's name.
+    converged : bool, optional
+        Whether every healthy vehicle of the platoon must settle (or not).
+    within : float, optional [s]
+        Latest settling time allowed for the platoon's healthy vehicles.
+    inter_platoon, intra_platoon : int, optional
+        Largest number of contacts of the platoon's vehicles with another platoon's,
+        and among themselves.
+
+    Raises
+    ------
+    AssertionError
+        Naming the platoon, the quantity, what was expected and what was measured.
+    KeyError
+        An unknown platoon (or a run without ``platoons:``).
+    """
+    __tracebackhide__ = True
+    entry = compute_metrics(run).get("platoons", {})
+    if name not in entry:
+        raise KeyError(f"no platoon {name!r} in {_label(run)}: {', '.join(entry)}")
+    got = entry[name]
+    problems = []
+    if converged is not None and got["converged"] is not converged:
+        problems.append(f"converged {got['converged']}, expected {converged}")
+    st = got["settling_time"]
+    if within is not None and (st is None or st > within):
+        problems.append(
+            f"settling time {'never' if st is None else f'{st:.2f} s'}, expected at "
+            f"most {within:g} s"
+        )
+    for key, bound in (
+        ("inter_platoon", inter_platoon),
+        ("intra_platoon", intra_platoon),
+    ):
+        if bound is not None and got["collisions"][key] > bound:
+            problems.append(
+                f"{got['collisions'][key]} {key} contacts, expected at most {bound}"
+            )
+    if problems:
+        raise AssertionError(f"{_label(run)}: platoon {name}: {'; '.join(problems)}")
 
 
 def assert_converged(run: Run, within: float | None = None) -> None:

@@ -1,0 +1,377 @@
+"""Several platoons in one world: each platoon's law on its rows, stitched together.
+
+With ``platoons:`` (:mod:`sandbox.scenario.platoons`) the loop keeps one fleet, one
+physics and one record; what differs by platoon is planned here, on plain arrays:
+
+- **targets** (:meth:`Platoons.targets`): each platoon's reference is evaluated and
+  its law sees only its own rows (positions, headings, velocities, offsets), its own
+  leader and its own reference; the slots, ``x_ref'`` and ``x_ref''`` of all platoons
+  are stitched into the fleet-wide arrays the controller reads;
+- **recovery** (:meth:`Platoons.strategy`): the platoons that share a recovery
+  section are shifted by one call of its strategy, with the whole fleet as
+  neighbours and only their own rows allowed to avoid;
+- **safety** (:meth:`Platoons.filter`): likewise, each safety section filters the
+  commands of its platoons against every vehicle of the world.
+
+What a vehicle knows of another platoon's vehicles is what it knows of its own
+platoon's: their broadcast positions and velocities (the truth without ``sensing:``,
+the noisy, delayed broadcast with it). It does not know their slots, references or
+plans. Every vehicle is a neighbour of every other for recovery and the filters,
+whatever their platoons; only the formation law is per platoon.
+
+The contexts passed to plug-ins carry ``platoon``, the index of each vehicle's
+platoon (for a law: of its rows). Everything here takes and returns arrays, so that
+it can serve any loop that holds the fleet as arrays.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from sandbox.geometry.neighbours import NeighbourList
+from sandbox.loop import platoon_events
+from sandbox.plugins.registration import LawContext, get, make_law, runnable
+
+
+class _One:
+    """One platoon's reference, law and the rows they drive.
+
+    Parameters
+    ----------
+    name : str
+    rows : ndarray (m,) int
+        The platoon's vehicles, its leader among them at ``leader``.
+    offset : ndarray (m, 2) [m]
+        Their offsets in the platoon's formation.
+    law : str or None
+        The registered law (None: every vehicle tracks the reference).
+    params : dict
+        The law's values.
+    reference : object or None
+        The built reference (``evaluate(t)``).
+    leader : int
+        The leader's position in ``rows`` (-1: none).
+    commanded : ndarray (n,) bool
+        The fleet's open-loop vehicles.
+    h : float [s]
+    """
+
+    def __init__(
+        self,
+        name: str,
+        rows: np.ndarray,
+        offset: np.ndarray,
+        law: str | None,
+        params: dict,
+        reference: Any,
+        leader: int,
+        commanded: np.ndarray,
+        h: float,
+    ) -> None:
+        self.name = name
+        self.rows = np.asarray(rows, dtype=np.intp)
+        self.reference = reference
+        self.law_name = law
+        self.params = dict(params)
+        self.offset = np.asarray(offset, dtype=float)
+        self.law = make_law(law, self.params, self.offset, h) if law else None
+        self.memory: dict = {}
+        self.leader = leader
+        tracks = np.zeros(len(self.rows), dtype=bool)
+        if self.law is None:
+            tracks[:] = True
+        elif get("law", law).options["needs_leader"] and self.leader >= 0:
+            tracks[self.leader] = True
+        tracks &= ~commanded[self.rows]
+        self.track = self.rows[tracks]
+        self.commanded = self.rows[commanded[self.rows]]
+
+    @classmethod
+    def of(cls, group: Any, offset: np.ndarray, commanded: np.ndarray, h: float):
+        """The platoon of a ``platoons:`` entry (a :class:`PlatoonGroup`)."""
+        sc = group.scenario
+        spec = sc.formation
+        rows = np.asarray(group.rows, dtype=np.intp)
+        return cls(
+            group.name,
+            rows,
+            offset[rows],
+            spec.law if spec else None,
+            dict(spec.params) if spec else {},
+            sc.reference.build() if sc.reference else None,
+            sc.leader_index,
+            commanded,
+            h,
+        )
+
+
+class Platoons:
+    """The platoons of one world (``platoons:``); see the module docstring.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        A scenario with ``platoons:``.
+    offset : ndarray, shape (n, 2) [m]
+        The fleet's offsets (each vehicle's within its platoon's formation).
+    commanded : ndarray, shape (n,), bool
+        Vehicles driven open loop.
+    h : float [s]
+        The control period.
+    """
+
+    def __init__(
+        self, scenario: Any, offset: np.ndarray, commanded: np.ndarray, h: float
+    ) -> None:
+        self.h = h
+        self.n = len(offset)
+        self.groups = [_One.of(g, offset, commanded, h) for g in scenario.platoons]
+        self.commanded = commanded
+        #: The events still to fire (``events:``), and the record of those fired.
+        self.events = list(scenario.events)
+        self.fired: list[dict[str, Any]] = []
+        #: Each vehicle's platoon, shape (n,), int.
+        self.index = np.zeros(self.n, dtype=np.intp)
+        for k, g in enumerate(self.groups):
+            self.index[g.rows] = k
+        self.names = [g.name for g in self.groups]
+        self.vehicle_names = [v.name for v in scenario.vehicles]
+        #: Vehicles that may avoid: not open loop, no leader that does not avoid.
+        self.avoid_candidates = ~commanded
+        for g, spec in zip(self.groups, scenario.platoons, strict=True):
+            if not spec.scenario.recovery.leader_avoids and g.leader >= 0:
+                self.avoid_candidates[g.rows[g.leader]] = False
+        self._recoveries = _sections(
+            scenario.platoons,
+            lambda sc: sc.recovery,
+            lambda spec: (
+                runnable(get("strategy", spec.strategy)),
+                NeighbourList(spec.R),
+            ),
+            self.n,
+        )
+        self._filters = _sections(
+            scenario.platoons,
+            lambda sc: sc.safety,
+            lambda spec: (
+                None if spec.filter == "none" else runnable(get("filter", spec.filter))
+            ),
+            self.n,
+        )
+        self._filter_memory: list[dict] = [{} for _ in self._filters]
+        self._filter_stats: list[dict] = [{} for _ in self._filters]
+
+    @classmethod
+    def build(cls, sim: Any) -> Platoons | None:
+        """The platoons of a simulation's scenario, or None with one platoon.
+
+        With ``events:``, the record of the events fired is ``sim.info
+        ["platoon_events"]`` (a list filled as they fire).
+        """
+        sc = sim.scenario
+        if not sc.platoons:
+            return None
+        made = cls(sc, sim.fleet.offset, sim.fleet.commanded, sim.h)
+        made.vehicle_names = list(sim.names)
+        if sc.events:
+            sim.info["platoon_events"] = made.fired
+        return made
+
+    def of_vehicles(self) -> tuple[str, ...]:
+        """The name of each vehicle's platoon, in vehicle order."""
+        return tuple(self.names[k] for k in self.index)
+
+    @property
+    def filtered(self) -> bool:
+        """Whether some platoon has a safety filter."""
+        return any(f is not None for _, f, _ in self._filters)
+
+    def targets(
+        self,
+        t: float,
+        pos: np.ndarray,
+        theta: np.ndarray,
+        vel: np.ndarray,
+        seen: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Slots, ``x_ref'``, ``x_ref''`` of every vehicle and the reference point.
+
+        Parameters
+        ----------
+        t : float [s]
+        pos, theta, vel : ndarray, shapes (n, 2), (n,), (n, 2)
+            The fleet's positions [m], headings [rad] and velocities [m/s].
+        seen : ndarray, shape (n, 3), or None
+            The broadcast poses (None: the truth); a follower reads its leader's.
+
+        Returns
+        -------
+        slot, v_ref, a_ref : ndarray, shape (n, 2)
+            [m], [m/s], [m/s^2]; NaN slots for open-loop vehicles.
+        point : ndarray, shape (2,) [m]
+            The first platoon's reference point (NaN without one); each platoon's
+            reference is drawn from its own section.
+        """
+        if self.events:  # merges and splits due now (loop/platoon_events.py)
+            self._fire(t, (pos, theta, vel))
+        n = self.n
+        slot = np.full((n, 2), np.nan)
+        v_ref = np.zeros((n, 2))
+        a_ref = np.zeros((n, 2))
+        point = np.full(2, np.nan)
+        for k, g in enumerate(self.groups):
+            ref = g.reference.evaluate(t) if g.reference is not None else None
+            if k == 0 and ref is not None:
+                point = np.asarray(ref[0], dtype=float)
+            rows = g.rows
+            if g.law is not None:
+                lead = g.leader
+                if lead < 0:
+                    lpos, ltheta = None, None
+                elif seen is None:
+                    lpos, ltheta = pos[rows[lead]], float(theta[rows[lead]])
+                else:
+                    lpos, ltheta = seen[rows[lead], :2], float(seen[rows[lead], 2])
+                ctx = LawContext(
+                    t=t,
+                    dt=self.h,
+                    pos=pos[rows],
+                    theta=theta[rows],
+                    vel=vel[rows],
+                    offset=g.offset,
+                    leader=lead,
+                    leader_pos=lpos,
+                    leader_theta=ltheta,
+                    reference=ref,
+                    params=g.params,
+                    memory=g.memory,
+                    platoon=np.full(len(rows), k, dtype=np.intp),
+                )
+                shape = (len(rows), 2)
+                s, v, a = (np.asarray(x, dtype=float) for x in g.law.targets(ctx))
+                slot[rows] = np.broadcast_to(s, shape)
+                v_ref[rows] = np.broadcast_to(v, shape)
+                a_ref[rows] = np.broadcast_to(a, shape)
+            if ref is not None and len(g.track):
+                slot[g.track], v_ref[g.track], a_ref[g.track] = ref[0], ref[1], ref[2]
+            slot[g.commanded] = np.nan
+        return slot, v_ref, a_ref, point
+
+    def _make(self, name, rows, offset, law, params, reference, leader) -> _One:
+        return _One(
+            name, rows, offset, law, params, reference, leader, self.commanded, self.h
+        )
+
+    def _fire(self, t: float, state: tuple[np.ndarray, ...]) -> None:
+        """Apply the events due at ``t`` in their order; record them."""
+        by_name = {g.name: g for g in self.groups}
+        for event in list(self.events):
+            if not platoon_events.due(event, t, by_name, state[0]):
+                continue
+            if event.kind == "split" and not set(
+                self.vehicle_names.index(v) for v in event.vehicles
+            ) <= set(by_name[event.platoon].rows.tolist()):
+                continue  # its vehicles are not (yet) all in the platoon
+            self.events.remove(event)
+            if event.kind == "merge":
+                into, source = by_name[event.into], by_name[event.source]
+                merged, record = platoon_events.merge(
+                    into, source, t, self.h, state, self._make
+                )
+                self.groups = [
+                    merged if g is into else g for g in self.groups if g is not source
+                ]
+                record["offsets"] = {
+                    self.vehicle_names[int(i)]: o for i, o in record["offsets"].items()
+                }
+            else:
+                group = by_name[event.platoon]
+                rest, made, record = platoon_events.split(
+                    group, event, self.vehicle_names, self._make, t
+                )
+                at = self.groups.index(group)
+                self.groups[at : at + 1] = [rest, made]
+            by_name = {g.name: g for g in self.groups}
+            record["platoons"] = {
+                g.name: [self.vehicle_names[i] for i in g.rows] for g in self.groups
+            }
+            self.fired.append(record)
+            for g in self.groups:
+                if g.name not in self.names:
+                    self.names.append(g.name)
+                self.index[g.rows] = self.names.index(g.name)
+
+    def strategy(self, ctx: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The recovery shift of every vehicle: each platoon's section on its rows.
+
+        ``ctx`` is the loop's :class:`~sandbox.plugins.StrategyContext` of the whole
+        fleet; each recovery section is called with its own parameters, ``R`` and
+        neighbour index, and ``may_avoid`` narrowed to its platoons' rows.
+        """
+        shift = np.zeros((self.n, 2))
+        active = np.zeros(self.n, dtype=bool)
+        for spec, (strategy, neighbours), mask in self._recoveries:
+            sub = dataclasses.replace(
+                ctx,
+                may_avoid=ctx.may_avoid & mask,
+                params=dict(spec.params),
+                R=spec.R,
+                neighbours=neighbours,
+                platoon=self.index,
+            )
+            s, a = strategy(sub)
+            shift[mask] = np.asarray(s, dtype=float)[mask]
+            active[mask] = np.asarray(a, dtype=bool)[mask]
+        return shift, active
+
+    def filter(self, ctx: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The filtered commands: each platoon's safety section on its rows.
+
+        ``ctx`` is the loop's :class:`~sandbox.plugins.FilterContext` of the whole
+        fleet; a platoon without a filter keeps its commands. Each section has its
+        own memory; their counters are summed into ``ctx.stats``.
+        """
+        v1 = np.array(ctx.v1, dtype=float)
+        v2 = np.array(ctx.v2, dtype=float)
+        totals: dict[str, Any] = {}
+        for k, (spec, flt, mask) in enumerate(self._filters):
+            if flt is None:
+                continue
+            sub = dataclasses.replace(
+                ctx,
+                params=dict(spec.params),
+                memory=self._filter_memory[k],
+                stats=self._filter_stats[k],
+                platoon=self.index,
+            )
+            out = flt(sub)
+            v1[mask] = np.broadcast_to(np.asarray(out[0], dtype=float), (self.n,))[mask]
+            v2[mask] = np.broadcast_to(np.asarray(out[1], dtype=float), (self.n,))[mask]
+            for key, value in self._filter_stats[k].items():
+                if isinstance(value, int | float) and not isinstance(value, bool):
+                    totals[key] = totals.get(key, 0) + value
+                else:
+                    totals.setdefault(key, value)
+        ctx.stats.update(totals)
+        return v1, v2
+
+
+def _sections(
+    platoons: Any, section: Any, make: Any, n: int
+) -> list[tuple[Any, Any, np.ndarray]]:
+    """The distinct sections of the platoons: ``(spec, built, rows mask)`` each."""
+    out: list[tuple[Any, Any, np.ndarray]] = []
+    for p in platoons:
+        spec = section(p.scenario)
+        for known, _, mask in out:
+            if known == spec:
+                mask[list(p.rows)] = True
+                break
+        else:
+            mask = np.zeros(n, dtype=bool)
+            mask[list(p.rows)] = True
+            out.append((spec, make(spec), mask))
+    return out

@@ -1,0 +1,262 @@
+"""Several platoons in one world (``platoons:``): loading, errors, the loop, metrics."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sandbox import Simulation, compute_metrics, load_scenario
+from sandbox.errors import ScenarioError
+from sandbox.run.expectations import evaluate
+from sandbox.testing import assert_platoon
+
+NORTH = math.pi / 2
+
+TWO = """\
+name: two
+duration: 4
+vehicle: {diameter: 0.5, mass: 10.0, v1_max: 2.0, v2_max: 4.0, max_accel: 5.0}
+formation: {law: leader_ref, rotate: true}
+recovery: {strategy: continuous, beta: 1.0, R: 3d, r: 1.5d}
+platoons:
+  - name: east
+    reference: {type: line, start: [-8, 0], heading: 0, speed: 1.0}
+    vehicles:
+      - {name: e0, pose: [-8, 0, 0], leader: true}
+      - {name: e1, pose: [-9.6, 0, 0], offset: [-1.6, 0]}
+  - name: north
+    color: red
+    reference: {type: line, start: [0, -8], heading: 1.5707963267948966, speed: 1}
+    platoon: {count: 1, pattern: line, spacing: 1.6}
+    vehicles:
+      - {name: n0, pose: [0, -8, 1.5707963267948966], leader: true}
+"""
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "s.yaml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_two_platoons_load_with_their_own_references_and_colours(tmp_path):
+    sc = load_scenario(_write(tmp_path, TWO))
+    assert [p.name for p in sc.platoons] == ["east", "north"]
+    assert [v.name for v in sc.vehicles] == ["e0", "e1", "n0", "north-v0"]
+    assert [v.color for v in sc.vehicles] == ["blue", "blue", "red", "red"]
+    assert sc.platoons[1].rows == (2, 3) and sc.platoons[1].leader == 2
+    assert sc.platoons[1].scenario.reference.params["heading"] == pytest.approx(NORTH)
+    # the document parses back to the same scenario, and --set reaches every platoon
+    again = load_scenario(sc.to_dict())
+    assert again == dataclasses.replace(sc, source=None)
+    changed = sc.with_overrides("recovery.beta=2")
+    assert {p.scenario.recovery.params["beta"] for p in changed.platoons} == {2.0}
+
+
+def test_each_platoon_follows_its_own_leader_and_metrics_say_so(tmp_path):
+    sc = load_scenario(_write(tmp_path, TWO))
+    sim = Simulation(sc)
+    assert sim.observe().platoon == ("east", "east", "north", "north")
+    run = sim.run()
+    # e1's slot is 1.6 m behind e0 along +x1; north-v0's 1.6 m behind n0 along +x2
+    np.testing.assert_allclose(
+        run.slot[-1, 1], run.pose[-1, 0, :2] + [-1.6, 0], atol=1e-9
+    )
+    np.testing.assert_allclose(
+        run.slot[-1, 3], run.pose[-1, 2, :2] + [0, -1.6], atol=1e-9
+    )
+    m = compute_metrics(run)
+    assert set(m["platoons"]) == {"east", "north"}
+    assert m["platoons"]["north"]["vehicles"] == ["n0", "north-v0"]
+    assert (
+        m["collisions"]["inter_platoon"] + m["collisions"]["intra_platoon"]
+        == (m["collisions"]["vehicle_vehicle"])
+    )
+    sub = run.platoon("north")
+    assert sub.names == ["n0", "north-v0"] and sub.pose.shape[1] == 2
+    np.testing.assert_allclose(sub.reference[-1], [0, -8 + 4.0], atol=1e-9)
+    with pytest.raises(KeyError, match="east, north"):
+        run.platoon("west")
+    json.dumps(m)  # plain JSON
+
+
+def test_a_crossing_without_recovery_has_inter_platoon_contacts(tmp_path):
+    # both leaders reach the origin at t = 8 s and nobody avoids: a contact between
+    # the platoons, counted as inter-platoon, and asserted by sandbox.testing
+    text = TWO.replace("duration: 4", "duration: 10").replace(
+        "recovery: {strategy: continuous, beta: 1.0, R: 3d, r: 1.5d}",
+        "recovery: {strategy: none}",
+    )
+    run = Simulation(load_scenario(_write(tmp_path, text))).run()
+    m = compute_metrics(run)
+    assert m["collisions"]["inter_platoon"] >= 1
+    assert m["platoons"]["east"]["collisions"]["inter_platoon"] >= 1
+    with pytest.raises(AssertionError, match="platoon east: .* inter_platoon"):
+        assert_platoon(run, "east", inter_platoon=0)
+
+
+def test_expectations_of_platoons_are_read_and_evaluated(tmp_path):
+    text = TWO + (
+        "expect:\n  collisions: {inter_platoon: 0}\n"
+        "  platoons:\n    east: {collisions: {intra_platoon: 0}, converged: false}\n"
+    )
+    sc = load_scenario(_write(tmp_path, text))
+    outcomes = evaluate(sc.expect, Simulation(sc).run())
+    keys = [o.key for o in outcomes]
+    assert keys == [
+        "status",
+        "collisions.inter_platoon",
+        "platoons.east.converged",
+        "platoons.east.collisions.intra_platoon",
+    ]
+    assert load_scenario(sc.to_dict()).expect == sc.expect
+
+
+LEADERLESS = TWO.replace("      - {name: e0, pose: [-8, 0, 0], leader: true}", "")
+BAD = [
+    (
+        LEADERLESS.replace("leader_ref, rotate: true", "virtual"),
+        "s.yaml:9: platoons[0].vehicles: platoon east has no leader (got no vehicle "
+        "with leader: true; expected exactly one leader per platoon)",
+    ),
+    (
+        TWO.replace("name: n0", "name: e1"),
+        "s.yaml:17: platoons[1].vehicles[0].name: vehicle e1 is in two platoons (got "
+        "east and north; expected each vehicle in one platoon",
+    ),
+    (
+        TWO.replace("name: north", "name: east"),
+        "s.yaml:12: platoons[1].name: duplicate platoon name (got 'east', also "
+        "platoons[0]",
+    ),
+    (
+        TWO + "vehicles:\n  - {name: x, pose: [5, 5, 0]}\n",
+        "s.yaml:18: vehicles: top-level vehicles: beside platoons:",
+    ),
+    (
+        TWO.replace("law: leader_ref, rotate: true", "law: leader_rf"),
+        "s.yaml:4: formation.law: unknown formation law",
+    ),
+    (
+        TWO.replace("speed: 1}", "speed: -1}"),
+        "s.yaml:14: platoons[1].reference.speed: must be at least 0",
+    ),
+    (
+        TWO + "expect:\n  platoons:\n    west: {converged: true}\n",
+        "s.yaml:20: expect.platoons.west: no such platoon",
+    ),
+    (
+        TWO.replace("pose: [-9.6, 0, 0]", "pose: [0.1, -8, 0]"),
+        "platoons[1]: n0 starts overlapping e1 of platoon east",
+    ),
+]
+
+
+@pytest.mark.parametrize(("text", "message"), BAD)
+def test_bad_platoons_are_one_line_errors_with_file_line_and_field(
+    tmp_path, text, message
+):
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_write(tmp_path, text))
+    lines = str(info.value).splitlines()
+    assert any(message in line for line in lines), lines
+
+
+def test_collision_counts_of_platoons_need_platoons(tmp_path):
+    text = (
+        "reference: {type: point, position: [1, 0]}\n"
+        "vehicles: [{name: a, pose: [0, 0, 0]}]\n"
+        "expect: {collisions: {inter_platoon: 0}}\n"
+    )
+    with pytest.raises(ScenarioError, match=re.escape("counted only in a world of")):
+        load_scenario(_write(tmp_path, text))
+
+
+EVENTS = TWO.replace("duration: 4", "duration: 6") + (
+    "events:\n"
+    "  - when: {platoon: north, within: 12.0, of: east}\n"
+    "    merge: {into: east, from: north}\n"
+    "  - at: 3\n"
+    "    split: {platoon: east, vehicles: [n0, e1], new: third,\n"
+    "            reference: {type: line, start: [-8, -3], heading: 0, speed: 1}}\n"
+)
+
+
+def test_a_merge_and_a_split_fire_and_are_recorded(tmp_path):
+    sc = load_scenario(_write(tmp_path, EVENTS))
+    assert [e.kind for e in sc.events] == ["merge", "split"]
+    assert load_scenario(sc.to_dict()).events == sc.events
+    sim = Simulation(sc)
+    run = sim.run()
+    fired = compute_metrics(run)["platoon_events"]
+    # the leaders start 11.3 m apart: the merge fires at once; the split at 3 s
+    assert [e["t"] for e in fired] == [0.0, 3.0]
+    assert fired[0]["platoons"] == {"east": ["e0", "e1", "n0", "north-v0"]}
+    # north's slots go behind east's last one (1.6 m spacing), assigned by distance
+    assert sorted(map(tuple, fired[0]["offsets"].values())) == sorted(
+        [(0.0, 0.0), (-1.6, 0.0), (-3.2, 0.0), (-4.8, 0.0)]
+    )
+    assert fired[1]["platoons"] == {"east": ["e0", "north-v0"], "third": ["n0", "e1"]}
+    assert sim.platoons.of_vehicles() == ("east", "third", "third", "east")
+
+
+BAD_EVENTS = [
+    (
+        "events:\n  - at: 1\n    merge: {into: west, from: north}\n",
+        "s.yaml:20: events[0].merge.into: no such platoon",
+    ),
+    (
+        "events:\n  - at: 9\n    merge: {into: east, from: north}\n",
+        "s.yaml:19: events[0].at: the event can never fire (got at = 9 s, the run "
+        "lasts 4 s",
+    ),
+    (
+        "events:\n  - when: {platoon: east, within: 1, of: east}\n"
+        "    merge: {into: east, from: north}\n",
+        "s.yaml:19: events[0].when.of: the event can never fire",
+    ),
+    (
+        "events:\n  - at: 1\n    split: {platoon: east, vehicles: [e0], new: x,\n"
+        "            reference: {type: point, position: [0, 0]}}\n",
+        "events[0].split.vehicles[0]: e0 leads platoon east",
+    ),
+    (
+        "events:\n  - at: 1\n",
+        "s.yaml:19: events[0]: needs exactly one of merge and split",
+    ),
+]
+
+
+@pytest.mark.parametrize(("events", "message"), BAD_EVENTS)
+def test_bad_events_are_one_line_errors(tmp_path, events, message):
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_write(tmp_path, TWO + events))
+    lines = str(info.value).splitlines()
+    assert any(message in line for line in lines), lines
+
+
+def test_an_agent_sees_which_neighbours_share_its_platoon(tmp_path):
+    pytest.importorskip("gymnasium")
+    from sandbox.envs import VehicleEnv
+
+    env = VehicleEnv(_write(tmp_path, TWO), agent="e1", neighbours=2)
+    obs, _ = env.reset(seed=0)
+    # 7 own entries, 2 x 6 per neighbour, then a same-platoon flag per neighbour:
+    # e1's two nearest are e0 (1.6 m, its platoon) and north's leader n0 (8.1 m)
+    assert obs.shape == (7 + 12 + 2,) == env.observation_space.shape
+    assert obs[-2:].tolist() == [1.0, 0.0]
+    _, _, _, _, info = env.step(np.zeros(2, dtype=np.float32))
+    assert info["platoon"] == "east"
+
+
+def test_sweeps_run_platoons_on_the_single_run_path(tmp_path):
+    from sandbox.loop.plan import structure_key
+
+    sim = Simulation(load_scenario(_write(tmp_path, TWO)))
+    assert structure_key(sim.scenario).startswith("platoons")
