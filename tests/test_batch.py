@@ -1,4 +1,4 @@
-"""K worlds in the one loop (Simulation.stacked, Simulation.batch): the bytes of each alone."""
+"""K worlds in the one loop (Simulation.stacked, .batch): each the bytes alone."""
 
 from __future__ import annotations
 

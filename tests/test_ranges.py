@@ -20,10 +20,10 @@ from helpers import SCENARIOS, write_yaml
 from sandbox import Simulation, load_scenario
 from sandbox.behaviour.ranges import beam_layout
 from sandbox.errors import ScenarioError
+from sandbox.loop.plan import structure_key
 from sandbox.model.obstacle_field import ObstacleField
 from sandbox.physics.ranges import HIT_OBSTACLE, HIT_VEHICLE, RangeCaster
 from sandbox.physics.world import World
-from sandbox.loop.plan import structure_key
 
 
 def scene(

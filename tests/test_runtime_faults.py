@@ -25,9 +25,8 @@ import yaml
 from sandbox import SandboxWarning
 from sandbox.cli import main
 from sandbox.loop.simulation import Simulation
-from sandbox.model.dynamics import wrap_angle
 from sandbox.loop.stepping import WorldsPhysics
-from sandbox.physics.world import PhysicalState, World
+from sandbox.model.dynamics import wrap_angle
 from sandbox.run.metrics import compute_metrics
 from sandbox.run.output import CSV_HEADER, load_run_dir, write_run_dir
 from sandbox.scenario import load_scenario

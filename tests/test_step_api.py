@@ -248,7 +248,6 @@ def test_stepping_past_the_end_raises_and_an_early_result_is_interrupted() -> No
 
 
 def test_divergence_ends_a_stepped_run(monkeypatch: pytest.MonkeyPatch) -> None:
-    from sandbox.physics.world import World
 
     from sandbox.loop.stepping import WorldsPhysics
 

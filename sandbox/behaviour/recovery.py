@@ -202,9 +202,7 @@ def no_recovery(ctx: StrategyContext) -> tuple[np.ndarray, np.ndarray]:
 WEIGHTS["none"] = no_avoidance
 register_strategy(
     "discontinuous", {"beta": BETA, "tangential": TANGENTIAL}, batched=True
-)(
-    _weighted("discontinuous", discontinuous)
-)
+)(_weighted("discontinuous", discontinuous))
 register_strategy(
     "continuous",
     {"beta": BETA, "r": SMALL_R, "tangential": TANGENTIAL},

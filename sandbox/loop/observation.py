@@ -90,6 +90,7 @@ class Observation:
         if self.near is None:
             return None
         return near_obstacles(*self.near)
+
     platoon: tuple[str, ...] | None = None
 
     @property

@@ -77,7 +77,9 @@ def structure_key(sc: Scenario) -> str:
         rec.target_derivatives,
         sorted((k, v) for k, v in rec.params.items() if k != "beta"),
         bool(
-            sensing.position_noise or sensing.heading_noise or sensing.delay
+            sensing.position_noise
+            or sensing.heading_noise
+            or sensing.delay
             or sensing.loss
         ),
         sc.safety.filter,

@@ -1,4 +1,4 @@
-"""The record of K worlds as the loop writes it: stacked in memory, or one file set each.
+"""The record of K worlds as the loop writes it: stacked in memory, or on disk each.
 
 A sample of every world is written at once into arrays of shape ``(T, K, n, ...)``;
 a world that ends early (diverged, a plug-in failed, a reconfiguration of the batch)
@@ -84,8 +84,9 @@ class WorldsRecorder:
         if self.on_disk:
             point = np.broadcast_to(point, (K, 2))
             for w in worlds:
-                self._append_world(w, t, pos, theta, v1, v2, chi, slot, target, mode,
-                                   failed, point[w])
+                self._append_world(
+                    w, t, pos, theta, v1, v2, chi, slot, target, mode, failed, point[w]
+                )
             self.count = c + 1
             return
         b = self._buf
@@ -122,13 +123,14 @@ class WorldsRecorder:
         if self.on_disk:
             rec = self._worlds[w]
             if rec.count < self.capacity:
-                self._append_world(w, t, pos, theta, v1, v2, chi, slot, target,
-                                   mode, failed, point)
+                self._append_world(
+                    w, t, pos, theta, v1, v2, chi, slot, target, mode, failed, point
+                )
             return rec.arrays()
         c = self.count
         if c >= self.capacity:
             return self.arrays(w)
-        K, n = self.K, self.n
+        n = self.n
         rows = slice(w * n, (w + 1) * n)
         b = self._buf
         self._t[c] = t
@@ -144,8 +146,9 @@ class WorldsRecorder:
         self._reference[c, w] = point
         return self.arrays(w, c + 1)
 
-    def _append_world(self, w, t, pos, theta, v1, v2, chi, slot, target, mode,
-                      failed, point) -> None:
+    def _append_world(
+        self, w, t, pos, theta, v1, v2, chi, slot, target, mode, failed, point
+    ) -> None:
         n = self.n
         rows = slice(w * n, (w + 1) * n)
         self._worlds[w].append(

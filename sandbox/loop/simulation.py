@@ -183,14 +183,17 @@ class Simulation:
         self.steps = int(round(first.duration / first.dt))
         self.substeps, self.record_every = first.substeps, first.record_every
         physics = [
-            w if w is not None else World(
+            w
+            if w is not None
+            else World(
                 sc.vehicles, sc.obstacles, sc.metrics.contact_release, sc.substeps
             )
             for sc, w in zip(scenarios, worlds, strict=True)
         ]
         fleets = [Fleet.from_scenario(sc) for sc in scenarios]
         self.states = [
-            WorldState(sc, w, f) for sc, w, f in zip(scenarios, physics, fleets, strict=True)
+            WorldState(sc, w, f)
+            for sc, w, f in zip(scenarios, physics, fleets, strict=True)
         ]
         if K > 1:
             keys = {structure_key(sc) for sc in scenarios}
@@ -219,8 +222,12 @@ class Simulation:
         for w, state in enumerate(self.states):
             state.shift_motion = WorldDifference(self.shift_motion, w)
         # Stacked flags of which each world's are views (a reconfiguration edits them).
-        self.tracks_reference = np.concatenate([s.tracks_reference for s in self.states])
-        self._avoid_candidates = np.concatenate([s._avoid_candidates for s in self.states])
+        self.tracks_reference = np.concatenate(
+            [s.tracks_reference for s in self.states]
+        )
+        self._avoid_candidates = np.concatenate(
+            [s._avoid_candidates for s in self.states]
+        )
         for w, state in enumerate(self.states):
             rows = slice(w * n, (w + 1) * n)
             state.tracks_reference = self.tracks_reference[rows]
@@ -230,7 +237,9 @@ class Simulation:
         self._sensing = s0.broadcast is not None
         self.seen: np.ndarray | None = None
         safety = first.safety
-        self._filter = None if safety.filter == "none" else runnable(get("filter", safety.filter))
+        self._filter = (
+            None if safety.filter == "none" else runnable(get("filter", safety.filter))
+        )
         self._filter_started = False
         self._failing = np.zeros(N, dtype=bool)
         self.known_failed = np.zeros(N, dtype=bool)
@@ -312,7 +321,9 @@ class Simulation:
         if "beta" in params:
             betas = [s.strategy_params["beta"] for s in self.states]
             if any(b != betas[0] for b in betas):
-                params["beta"] = np.repeat(np.array(betas, dtype=float), self.n)[:, None]
+                params["beta"] = np.repeat(np.array(betas, dtype=float), self.n)[
+                    :, None
+                ]
         self.strategy_params = params
         self.obstacles = s0.obstacles
         if self.n <= BRUTE_FORCE_MAX:
@@ -349,8 +360,18 @@ class Simulation:
         for w, s in enumerate(self.states):
             rows = slice(w * n, (w + 1) * n)
             f = s.fleet
-            f.pos, f.theta, f.vel, f.chi = fl.pos[rows], fl.theta[rows], fl.vel[rows], fl.chi[rows]
-            f.v1, f.v2, f.mode, f.failed = fl.v1[rows], fl.v2[rows], fl.mode[rows], fl.failed[rows]
+            f.pos, f.theta, f.vel, f.chi = (
+                fl.pos[rows],
+                fl.theta[rows],
+                fl.vel[rows],
+                fl.chi[rows],
+            )
+            f.v1, f.v2, f.mode, f.failed = (
+                fl.v1[rows],
+                fl.v2[rows],
+                fl.mode[rows],
+                fl.failed[rows],
+            )
             s.seen = None if self.seen is None else self.seen[rows]
             s.known_failed = self.known_failed[rows]
 
@@ -441,7 +462,9 @@ class Simulation:
             src = fl.pos if self.seen is None else self.seen[:, :2]
             heading = fl.theta if self.seen is None else self.seen[:, 2]
             leader_pos = np.ascontiguousarray(src.reshape(K, n, 2)[:, lead : lead + 1])
-            leader_theta = np.ascontiguousarray(heading.reshape(K, n)[:, lead : lead + 1])
+            leader_theta = np.ascontiguousarray(
+                heading.reshape(K, n)[:, lead : lead + 1]
+            )
         return LawContext(
             t=t,
             dt=self.h,
@@ -674,7 +697,9 @@ class Simulation:
         if self._detecting:  # what the controllers ask for, broadcast
             for w in self._live_worlds():
                 rows = self._rows(w)
-                self.states[w].detection.intended = np.column_stack((v1[rows], v2[rows]))
+                self.states[w].detection.intended = np.column_stack(
+                    (v1[rows], v2[rows])
+                )
         # The drive executes a failure within its acceleration limit (a crash aside).
         v1, v2, failed, frozen, errors = self.failures.apply(
             t, self.live, v1, v2, fleet.v1, self._accel_max * h
@@ -1064,8 +1089,10 @@ class Simulation:
         return (rows, mask) if mask.any() else None
 
     def _finish_all(self) -> None:
-        """End the live worlds at ``t_k``: the last sample, with the controller's own
-        commands (``interrupted`` before the duration)."""
+        """End the live worlds at ``t_k``: the last sample, the controller's commands.
+
+        Before the duration the worlds end ``interrupted``.
+        """
         live = self._live_worlds()
         if not live:
             self._closed = True
@@ -1153,7 +1180,9 @@ class Simulation:
         self._loop(progress, should_stop)
         return self.result()
 
-    def run_all(self, should_stop: Callable[[], bool] | None = None) -> list[Run] | None:
+    def run_all(
+        self, should_stop: Callable[[], bool] | None = None
+    ) -> list[Run] | None:
         """Simulate every world to its end; the runs in order (None if stopped)."""
         stopped = self._loop(None, should_stop)
         return None if stopped else self.results()

@@ -44,7 +44,9 @@ class LoopTally:
     def __init__(self, K: int, n: int, h: float) -> None:
         self.K, self.n, self.h = K, n, h
         #: Per world, above ALL_PAIRS_MAX vehicles: the closest approach's Verlet list.
-        self._closest = [ClosestApproach() for _ in range(K)] if n > ALL_PAIRS_MAX else None
+        self._closest = (
+            [ClosestApproach() for _ in range(K)] if n > ALL_PAIRS_MAX else None
+        )
         N = K * n
         pairs = 0 if self._closest else n * (n - 1) // 2
         self._m = 0  # periods buffered

@@ -27,8 +27,8 @@ import numpy as np
 
 from sandbox.behaviour.ranges import context_fields
 from sandbox.behaviour.sensing import make_broadcast
-from sandbox.geometry.neighbours import NeighbourList
 from sandbox.errors import PluginRunError
+from sandbox.geometry.neighbours import NeighbourList
 from sandbox.loop.run_info import run_description
 from sandbox.loop.state import Fleet, uniform
 from sandbox.model.failures import FailureSchedule, within_drive
@@ -68,7 +68,9 @@ class WorldState:
         self.leader = sc.leader_index
         self.reference = sc.reference.build() if sc.reference else None
         spec = sc.formation
-        self.law = make_law(spec.law, spec.params, fleet.offset, self.h) if spec else None
+        self.law = (
+            make_law(spec.law, spec.params, fleet.offset, self.h) if spec else None
+        )
         self.law_params = dict(spec.params) if spec else {}
         self.law_memory: dict = {}
         self.strategy = runnable(get("strategy", sc.recovery.strategy))

@@ -207,9 +207,7 @@ class VirtualLeaderFormation(FormationLaw):
         return slot, np.broadcast_to(dp, slot.shape), np.broadcast_to(ddp, slot.shape)
 
 
-@register_law(
-    "leader_ref", {"rotate": ROTATE}, frame="leader_reference", batched=True
-)
+@register_law("leader_ref", {"rotate": ROTATE}, frame="leader_reference", batched=True)
 class LeaderReferenceFormation(FormationLaw):
     """Section 3.4, eq. (16): around the real leader, reference derivatives."""
 

@@ -1,7 +1,7 @@
 """The physics of a batch of worlds stepped with a few Python calls per substep.
 
-:class:`~sandbox.loop.stepping.WorldsPhysics` steps K independent pymunk worlds each control
-period: write every world's commands to its control bodies, call Chipmunk's
+:class:`~sandbox.loop.stepping.WorldsPhysics` steps K independent pymunk worlds each
+control period: write every world's commands to its control bodies, call Chipmunk's
 ``cpSpaceStep`` ``substeps`` times per world, update the open contact episodes, read
 every world's bodies back. Done world by world in Python this costs about as much as
 the physics itself (a dozen calls and attribute look-ups per world and period).
