@@ -427,10 +427,10 @@ class Task:
 
     # ------------------------------------------------------------------ features
     def features(self) -> np.ndarray:
-        """Observations of every agent, shape (m, 7 + 6 k [+ k] [+ B]), float32.
+        """Observations of every agent, shape (m, size), float32.
 
-        The ``k`` same-platoon flags with ``platoons:``, the ``B`` range readings
-        with ``observe`` ranges.
+        ``size`` is ``7 + 6 k``, plus ``k`` same-platoon flags with ``platoons:``,
+        plus ``B`` range readings with ``observe`` ranges.
         """
         obs, m, i = self.obs, len(self.agents), self.rows
         low, high = self.bounds()
@@ -477,7 +477,7 @@ class Task:
         return out
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of an observation, shape (7 + 6 k [+ k] [+ B],)."""
+        """Lower and upper bounds of an observation, shape (size,) each (features)."""
         d, v = self.max_distance, self.max_speed
         own = [d, d, 1, 1, v, v, 1]
         per = [d, d, 2 * v, 2 * v, 1, 1]

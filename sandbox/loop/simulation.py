@@ -38,18 +38,20 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from sandbox.behaviour.detection import Detection
-from sandbox.behaviour.ranges import RangeSensor, context_fields, observation_fields
+from sandbox.behaviour.ranges import RangeSensor, context_fields
 from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.errors import PluginRunError
 from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList
 from sandbox.loop.divergence import diverged
-from sandbox.loop.observation import Observation, Overrides, override_rows
+from sandbox.loop.ending import Ending
 from sandbox.loop.plan import Plan, structure_key
 from sandbox.loop.platoons import Platoons
 from sandbox.loop.recording import WorldsRecorder
 from sandbox.loop.state import Fleet, uniform
+from sandbox.loop.step_api import StepAPI
 from sandbox.loop.stepping import WorldsPhysics
 from sandbox.loop.tally import LoopTally
+from sandbox.loop.world_stages import WorldStages
 from sandbox.loop.worlds import (
     StackedDifference,
     StackedFailures,
@@ -62,7 +64,6 @@ from sandbox.model.references import TABULATED_REFERENCES
 from sandbox.physics.interface import Physics
 from sandbox.physics.world import World
 from sandbox.plugins.registration import (
-    FilterContext,
     LawContext,
     StrategyContext,
     get,
@@ -75,14 +76,13 @@ from sandbox.run.record import (
     MODE_FAILED,
     MODE_FORMATION,
     STATUS_DIVERGED,
-    STATUS_ERROR,
     STATUS_INTERRUPTED,
     Run,
 )
 from sandbox.scenario import Scenario
 
 
-class Simulation:
+class Simulation(StepAPI, Ending, WorldStages):
     """One run of a scenario; or, built with :meth:`stacked`, K runs stepped together.
 
     Parameters
@@ -342,45 +342,6 @@ class Simulation:
         # The turn-rate limit of the anti-windup: None when no vehicle has one.
         self._turn_max = None if np.all(np.isinf(fl.v2_max)) else self._v2_max
 
-    # ------------------------------------------------------------------ views
-    def _view_worlds(self) -> None:
-        """Point each world's fleet (and seen poses) at its rows of the stacked arrays.
-
-        Done once per period before the first world-by-world stage; a stage may
-        replace a world's arrays (a reconfiguration sets new offsets).
-        """
-        if self._views_at == self.k and self.K > 1:
-            return
-        self._views_at = self.k
-        fl, n = self.fleet, self.n
-        if self.K == 1:
-            s = self.states[0]
-            s.fleet, s.seen, s.known_failed = fl, self.seen, self.known_failed
-            return
-        for w, s in enumerate(self.states):
-            rows = slice(w * n, (w + 1) * n)
-            f = s.fleet
-            f.pos, f.theta, f.vel, f.chi = (
-                fl.pos[rows],
-                fl.theta[rows],
-                fl.vel[rows],
-                fl.chi[rows],
-            )
-            f.v1, f.v2, f.mode, f.failed = (
-                fl.v1[rows],
-                fl.v2[rows],
-                fl.mode[rows],
-                fl.failed[rows],
-            )
-            s.seen = None if self.seen is None else self.seen[rows]
-            s.known_failed = self.known_failed[rows]
-
-    def _rows(self, w: int) -> slice:
-        return slice(w * self.n, (w + 1) * self.n)
-
-    def _live_worlds(self) -> list[int]:
-        return [int(w) for w in np.flatnonzero(self.live)]
-
     # ------------------------------------------------------------------ stages
     def _sense(self) -> bool:
         """Read every live world's state at ``t_k``; False when none is left.
@@ -481,21 +442,6 @@ class Simulation:
             **context_fields(self.range_sensor),
         )
 
-    def _world_law_targets(self, t: float, ref: tuple | None) -> list[np.ndarray]:
-        """Each world's own law on its rows (reconfiguring worlds, plug-in laws)."""
-        self._view_worlds()
-        out = [np.zeros((self.N, 2)) for _ in range(3)]
-        for w in self._live_worlds():
-            s, rows = self.states[w], self._rows(w)
-            try:
-                parts = s.law.targets(s.law_context(t, ref))
-            except PluginRunError as exc:
-                self._plugin_failed(w, exc)
-                continue
-            for a, part in zip(out, parts, strict=True):
-                a[rows] = part
-        return out
-
     def _plan(self) -> None:
         """What the built-in stack does at ``t_k``: slots, failures, recovery.
 
@@ -565,68 +511,6 @@ class Simulation:
             seen_pos=None if self.seen is None else self.seen[:, :2],
             **context_fields(self.range_sensor),
         )
-
-    def _world_strategy(self, t, slot, may_avoid, known) -> tuple[np.ndarray, ...]:
-        """A strategy without ``batched=True``, called world by world."""
-        self._view_worlds()
-        shift, active = np.zeros((self.N, 2)), np.zeros(self.N, dtype=bool)
-        for w in self._live_worlds():
-            s, rows = self.states[w], self._rows(w)
-            f = s.fleet
-            ctx = StrategyContext(
-                t=t,
-                dt=self.h,
-                pos=f.pos,
-                theta=f.theta,
-                vel=f.vel,
-                slot=slot[rows],
-                diameter=self.fleet.diameter[rows],
-                may_avoid=may_avoid[rows],
-                failed=known[rows],
-                params=s.strategy_params,
-                R=s.rec.R,
-                obstacle_field=self._avoid_field if self.K == 1 else s.obstacles,
-                neighbours=s.neighbours,
-                seen_pos=None if s.seen is None else s.seen[:, :2],
-                **context_fields(self.range_sensor),
-            )
-            try:
-                out = s.strategy(ctx)
-            except PluginRunError as exc:
-                self._plugin_failed(w, exc)
-                continue
-            shift[rows], active[rows] = out[0], out[1]
-        return shift, active
-
-    def _detect(self, t: float, failing: np.ndarray) -> np.ndarray:
-        """Each world's detector: what its platoon believes has failed."""
-        self._view_worlds()
-        known = np.zeros(self.N, dtype=bool)
-        for w in self._live_worlds():
-            s, rows = self.states[w], self._rows(w)
-            try:
-                known[rows] = s.detection.update(s, t, failing[rows])
-            except PluginRunError as exc:
-                self._plugin_failed(w, exc)
-        return known
-
-    def _reconfigure(self, t: float, known: np.ndarray) -> None:
-        """Each world's reconfiguration reacts to what its platoon believes."""
-        self._view_worlds()
-        for w in self._live_worlds():
-            s = self.states[w]
-            if s.reconfiguration is None:
-                continue
-            s.known_failed = known[self._rows(w)]
-            try:
-                s.reconfiguration.react(s, t, known[self._rows(w)])
-            except PluginRunError as exc:
-                self._plugin_failed(w, exc)
-            self.fleet.offset[self._rows(w)] = s.fleet.offset
-        self._track_rows = np.flatnonzero(self.tracks_reference)
-        if self.K == 1:
-            self.leader = self.states[0].leader
-            self.law, self.law_params = self.states[0].law, self.states[0].law_params
 
     def _act(
         self,
@@ -728,72 +612,6 @@ class Simulation:
             self._recorded_target = target
         return chi_next
 
-    def _safety(
-        self, t: float, v1: np.ndarray, v2: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The safety filter's commands for the period (``safety:``), world by world."""
-        started = self._filter_started
-        self._filter_started = True
-        self._view_worlds()
-        fl = self.fleet
-        v1_out, v2_out = v1.copy(), v2.copy()
-        for w in self._live_worlds():
-            s, rows = self.states[w], self._rows(w)
-            f = s.fleet
-            ctx = FilterContext(
-                t=t,
-                dt=self.h,
-                pos=f.pos,
-                theta=f.theta,
-                vel=f.vel,
-                v1=v1[rows],
-                v2=v2[rows],
-                diameter=fl.diameter[rows],
-                params=dict(s.scenario.safety.params),
-                v1_prev=fl.v1[rows] if started else None,
-                v2_prev=fl.v2[rows] if started else None,
-                v1_max=s.v1_max,
-                v2_max=s.v2_max,
-                accel_max=s.accel_max,
-                known_failed=self.known_failed[rows],
-                commanded=fl.commanded[rows],
-                obstacle_field=self._avoid_field if self.K == 1 else s.obstacles,
-                seen=None if self.seen is None else self.seen[rows],
-                sensing=None if s.broadcast is None else s.sensing,
-                memory=s.filter_memory,
-                stats=s.filter_stats,
-                **context_fields(self.range_sensor),
-            )
-            try:
-                out = self._filter(ctx)
-            except PluginRunError as exc:
-                self._plugin_failed(w, exc)
-                continue
-            n = self.n
-            v1_out[rows] = np.broadcast_to(np.asarray(out[0], dtype=float), (n,))
-            v2_out[rows] = np.broadcast_to(np.asarray(out[1], dtype=float), (n,))
-        return v1_out, v2_out
-
-    def _scheduled_commands(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
-        """Overwrite the open-loop vehicles' commands with their schedules at ``t``.
-
-        A row ``(t_k, v1, v2)`` holds from ``t_k`` until the next row (zero before the
-        first). The rows in force are looked up only when ``t`` passes a row time of
-        some schedule of the world.
-        """
-        now = t + 1e-12
-        for w in self._schedules:
-            s = self.states[w]
-            changes = s.changes
-            if s.next_change < len(changes) and changes[s.next_change] <= now:
-                s.next_change = int(np.searchsorted(changes, now, side="right"))
-                for k, table in enumerate(s.schedules.values()):
-                    row = np.searchsorted(table[:, 0], now, side="right") - 1
-                    s.scheduled[k] = (table[row, 1], table[row, 2]) if row >= 0 else 0.0
-            rows = w * self.n + s.schedule_rows
-            v1[rows] = s.scheduled[:, 0]
-            v2[rows] = s.scheduled[:, 1]
-
     def _command_limits(self, v1: np.ndarray) -> np.ndarray:
         """User speeds within ``v1_max`` and, from the last speed, ``max_accel``."""
         v1 = np.clip(v1, -self._v1_max, self._v1_max)
@@ -882,283 +700,6 @@ class Simulation:
         except PluginRunError as exc:
             for w in self._live_worlds():
                 self._plugin_failed(w, exc)
-
-    def _plugin_failed(self, w: int, exc: PluginRunError) -> None:
-        """End world ``w`` with status ``error``: a plug-in raised or returned NaN.
-
-        The sample of the time it happened is recorded as a diverged state's is (the
-        plan undefined, the last commands), and ``info["error"]`` names the plug-in.
-        """
-        self.states[w].info["error"] = {
-            "t": self.k * self.h,
-            "plugin": exc.plugin,
-            "message": exc.message,
-        }
-        self._end_world(w, STATUS_ERROR)
-
-    def _end_world(self, w: int, status: str, last: bool = True) -> None:
-        """World ``w`` ends now with ``status``; its run is made at once.
-
-        ``last``: record its sample of now first, with the plan undefined.
-        """
-        if not self.live[w]:
-            return
-        state, fleet = self.states[w], self.fleet
-        state.status = status
-        if last:
-            nan = np.full((self.N, 2), np.nan)
-            arrays = self.recorder.append_last(
-                w,
-                self.k * self.h,
-                fleet.pos,
-                fleet.theta,
-                fleet.v1,
-                fleet.v2,
-                fleet.chi,
-                nan,
-                nan,
-                fleet.mode,
-                fleet.failed,
-                np.full(2, np.nan),
-            )
-            self.tally.update(self, self.physics.in_contact(), np.array([w]))
-        else:
-            arrays = self.recorder.arrays(w)
-        self.live[w] = False
-        self.physics.stop(w)
-        self._runs[w] = self._make_run(w, arrays)
-        if self.K == 1:
-            self.plan = Plan.undefined(self.n, fleet.failed) if last else self.plan
-            self._closed = True
-
-    # ------------------------------------------------------------------ the API
-    @property
-    def t(self) -> float:
-        """Current simulated time ``t_k = k h`` [s]."""
-        return self.k * self.h
-
-    @property
-    def done(self) -> bool:
-        """Whether the run has reached its duration, diverged or been stopped."""
-        return self._closed or self.k >= self.steps or not self.live.any()
-
-    @property
-    def names(self) -> list[str]:
-        """Vehicle names, in row order (of each world)."""
-        return self.states[0].names
-
-    @property
-    def world(self) -> Physics:
-        """The physics of the (first) world."""
-        return self.physics.worlds[0]
-
-    @property
-    def status(self) -> str:
-        """The (first) world's status: ``ok``, ``diverged``, ``error``, ..."""
-        return self.states[0].status
-
-    @property
-    def info(self) -> dict:
-        """The (first) world's description (``Run.info`` in the making)."""
-        return self.states[0].info
-
-    @property
-    def detection(self) -> Detection | None:
-        """The (first) world's detector (None: the oracle)."""
-        return self.states[0].detection
-
-    @property
-    def reconfiguration(self) -> Reconfiguration | None:
-        """The (first) world's reconfiguration (None: slots kept)."""
-        return self.states[0].reconfiguration
-
-    @property
-    def broadcast(self):
-        """The (first) world's broadcast (None without sensing)."""
-        return self.states[0].broadcast
-
-    @property
-    def failed_at(self) -> dict[str, float]:
-        """When each failed vehicle of the (first) world failed [s]."""
-        return self.states[0].failed_at
-
-    def law_context(self, t: float, ref, offset=None, memory=None) -> LawContext:
-        """What the (first) world's law sees at ``t`` (see ``WorldState``)."""
-        self._view_worlds()
-        return self.states[0].law_context(t, ref, offset, memory)
-
-    def observe(self, world: int = 0) -> Observation:
-        """World ``world`` now, and what the built-in stack plans for this period."""
-        fleet, plan, rows = self.fleet, self.plan, self._rows(world)
-        ended = not self.live[world] or self._closed
-        return Observation(
-            t=self.k * self.h,
-            names=tuple(self.names),
-            pose=np.concatenate((fleet.pos[rows], fleet.theta[rows, None]), axis=1),
-            vel=fleet.vel[rows].copy(),
-            chi=fleet.chi[rows].copy(),
-            slot=np.array(plan.slot[rows], dtype=float),
-            target=np.array(plan.target[rows], dtype=float),
-            mode=fleet.mode[rows].copy() if ended else plan.mode(self.N)[rows],
-            failed=plan.failing[rows].copy(),
-            **observation_fields(
-                self.range_sensor, self.obstacles, self.scenario, fleet.pos[rows]
-            ),
-            platoon=None if self.platoons is None else self.platoons.of_vehicles(),
-        )
-
-    def step(
-        self,
-        commands: Overrides | Sequence[Overrides] = None,
-        targets: Overrides | Sequence[Overrides] = None,
-        shifts: Overrides | Sequence[Overrides] = None,
-        observe: bool = True,
-    ) -> Observation | list[Observation] | None:
-        """Advance one control period ``h = dt``, with optional overrides.
-
-        Parameters
-        ----------
-        commands : mapping of str to (v1, v2), or ndarray (n, 2), optional
-            Commands [m/s, rad/s] replacing the controller's for the named vehicles
-            this period, within the vehicle's ``v1_max``, ``v2_max`` and (on v1)
-            ``max_accel``. Failures still act on top of them.
-        targets : mapping of str to (x1, x2), or ndarray (n, 2), optional
-            Points [m] the controller tracks this period instead of the planned
-            target, as set-points (no feed-forward velocity); recovery does not shift
-            them. An array takes NaN rows for "no override".
-        shifts : mapping of str to (dx1, dx2), or ndarray (n, 2), optional
-            Displacements [m] added to the planned target (slot plus recovery) this
-            period, the law's feed-forward motion kept: a zero shift drives as the
-            built-in stack does. ``targets`` win where both are given.
-
-        observe : bool
-            Whether to return the observation (False: None, the arrays untouched
-            in :attr:`fleet` and :attr:`plan`).
-
-        Returns
-        -------
-        Observation, or list of Observation (one per world)
-            At the next step ``t_k+1``.
-
-        Raises
-        ------
-        RuntimeError
-            When the run is :attr:`done`.
-        ValueError
-            An unknown vehicle name or a malformed value.
-
-        Notes
-        -----
-        With K worlds (:meth:`stacked`) each override is an array ``(K, n, 2)`` or a
-        sequence of K of the above (None for none), and a list of K observations is
-        returned.
-        """
-        if self.done:
-            raise RuntimeError(
-                f"the run is over (status {self.status!r} at t = {self.t:g} s); "
-                "call result()"
-            )
-        cmd = self._override_rows(commands, "commands")
-        tgt = self._override_rows(targets, "targets")
-        shf = self._override_rows(shifts, "shifts")
-        self._step(cmd, tgt, shifts=shf)
-        if not observe:
-            return None
-        if self.K == 1:
-            return self.observe()
-        return [self.observe(w) for w in range(self.K)]
-
-    def _override_rows(self, values, what: str) -> tuple[np.ndarray, np.ndarray] | None:
-        """The stacked ``(N, 2)`` rows and ``(N,)`` mask of one kind of override."""
-        if self.K == 1 or values is None:
-            return override_rows(values, self.names, what)
-        if isinstance(values, np.ndarray):
-            if values.shape != (self.K, self.n, 2):
-                raise ValueError(
-                    f"{what}: expected an array of shape ({self.K}, {self.n}, 2) or "
-                    f"a sequence of {self.K} overrides, got shape {values.shape}"
-                )
-            values = list(values)
-        if len(values) != self.K:
-            raise ValueError(f"{what}: expected {self.K} overrides, got {len(values)}")
-        rows, mask = np.full((self.N, 2), np.nan), np.zeros(self.N, dtype=bool)
-        for w, part in enumerate(values):
-            got = override_rows(part, self.names, what)
-            if got is not None:
-                rows[self._rows(w)], mask[self._rows(w)] = got
-        return (rows, mask) if mask.any() else None
-
-    def _finish_all(self) -> None:
-        """End the live worlds at ``t_k``: the last sample, the controller's commands.
-
-        Before the duration the worlds end ``interrupted``.
-        """
-        live = self._live_worlds()
-        if not live:
-            self._closed = True
-            return
-        for w in live:
-            if self.k < self.steps:
-                self.states[w].status = STATUS_INTERRUPTED
-                self.states[w].info["interrupted"] = {"t": self.k * self.h}
-        self._recorded_target = None
-        try:
-            self._act(None, None)
-        except PluginRunError as exc:
-            for w in self._live_worlds():
-                self._plugin_failed(w, exc)
-        else:
-            self._record(self.plan)
-        for w in self._live_worlds():
-            status = self.states[w].status
-            self.live[w] = False
-            self._runs[w] = self._make_run(w, self.recorder.arrays(w), status)
-        self._closed = True
-
-    def result(self, world: int = 0) -> Run:
-        """The recorded run so far (the whole run once :attr:`done`).
-
-        The sample of the last time is recorded with the controller's own commands.
-        Called before the run is done, the run ends here with status ``interrupted``.
-        Further calls return the same :class:`~sandbox.run.record.Run`.
-        """
-        if world not in self._runs:
-            self._finish_all()
-        return self._runs[world]
-
-    def results(self) -> list[Run]:
-        """One :class:`~sandbox.run.record.Run` per world (see :meth:`result`)."""
-        return [self.result(w) for w in range(self.K)]
-
-    def _make_run(self, w: int, arrays: dict, status: str | None = None) -> Run:
-        s, rows = self.states[w], self._rows(w)
-        sc, info = s.scenario, s.info
-        info["failed_at"] = s.failed_at
-        if s.detection is not None:
-            info["detection"] = s.detection.summary()
-        info["loop_metrics"] = self.tally.result(w)
-        info["wall_time"] = (time.perf_counter() - self._wall) / self.K
-        info["control_time"] = self._control_time / self.K
-        if self._filter is not None:
-            info["safety"] = {
-                "filter": sc.safety.filter,
-                "infeasible_steps": 0,
-                "active_steps": 0,
-                **s.filter_stats,
-            }
-        info["steps"] = self.k
-        return Run(
-            names=list(s.names),
-            colors=[v.color for v in sc.vehicles],
-            diameter=self.fleet.diameter[rows].copy(),
-            leader=s.leader,
-            events=list(s.world.events),
-            status=status or s.status,
-            info=info,
-            scenario=sc,
-            **arrays,
-            **({} if self.range_sensor is None else self.range_sensor.arrays()),
-        )
 
     def run(
         self,

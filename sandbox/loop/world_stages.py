@@ -1,0 +1,205 @@
+"""The stages the loop runs world by world, each on its world's rows.
+
+What is not a function of the stacked rows of all worlds: a formation law or a
+strategy registered without ``batched=True`` (and each world's own law while it can
+re-form), the detector, the reconfiguration, the safety filter and the open-loop
+command schedules. Each is called with the world's
+:class:`~sandbox.loop.worlds.WorldState` (its fleet viewing the world's rows) or a
+context of those rows, inside the one pass of the loop; a plug-in that fails there
+ends its world alone. :class:`WorldStages` is a part of
+:class:`~sandbox.loop.simulation.Simulation`, kept apart for its length.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sandbox.behaviour.ranges import context_fields
+from sandbox.errors import PluginRunError
+from sandbox.plugins.registration import FilterContext, StrategyContext
+
+
+class WorldStages:
+    """The world-by-world stages of :class:`~sandbox.loop.simulation.Simulation`."""
+
+    # ------------------------------------------------------------------ views
+    def _view_worlds(self) -> None:
+        """Point each world's fleet (and seen poses) at its rows of the stacked arrays.
+
+        Done once per period before the first world-by-world stage; a stage may
+        replace a world's arrays (a reconfiguration sets new offsets).
+        """
+        if self._views_at == self.k and self.K > 1:
+            return
+        self._views_at = self.k
+        fl, n = self.fleet, self.n
+        if self.K == 1:
+            s = self.states[0]
+            s.fleet, s.seen, s.known_failed = fl, self.seen, self.known_failed
+            return
+        for w, s in enumerate(self.states):
+            rows = slice(w * n, (w + 1) * n)
+            f = s.fleet
+            f.pos, f.theta, f.vel, f.chi = (
+                fl.pos[rows],
+                fl.theta[rows],
+                fl.vel[rows],
+                fl.chi[rows],
+            )
+            f.v1, f.v2, f.mode, f.failed = (
+                fl.v1[rows],
+                fl.v2[rows],
+                fl.mode[rows],
+                fl.failed[rows],
+            )
+            s.seen = None if self.seen is None else self.seen[rows]
+            s.known_failed = self.known_failed[rows]
+
+    def _rows(self, w: int) -> slice:
+        return slice(w * self.n, (w + 1) * self.n)
+
+    def _live_worlds(self) -> list[int]:
+        return [int(w) for w in np.flatnonzero(self.live)]
+
+    def _world_law_targets(self, t: float, ref: tuple | None) -> list[np.ndarray]:
+        """Each world's own law on its rows (reconfiguring worlds, plug-in laws)."""
+        self._view_worlds()
+        out = [np.zeros((self.N, 2)) for _ in range(3)]
+        for w in self._live_worlds():
+            s, rows = self.states[w], self._rows(w)
+            try:
+                parts = s.law.targets(s.law_context(t, ref))
+            except PluginRunError as exc:
+                self._plugin_failed(w, exc)
+                continue
+            for a, part in zip(out, parts, strict=True):
+                a[rows] = part
+        return out
+
+    def _world_strategy(self, t, slot, may_avoid, known) -> tuple[np.ndarray, ...]:
+        """A strategy without ``batched=True``, called world by world."""
+        self._view_worlds()
+        shift, active = np.zeros((self.N, 2)), np.zeros(self.N, dtype=bool)
+        for w in self._live_worlds():
+            s, rows = self.states[w], self._rows(w)
+            f = s.fleet
+            ctx = StrategyContext(
+                t=t,
+                dt=self.h,
+                pos=f.pos,
+                theta=f.theta,
+                vel=f.vel,
+                slot=slot[rows],
+                diameter=self.fleet.diameter[rows],
+                may_avoid=may_avoid[rows],
+                failed=known[rows],
+                params=s.strategy_params,
+                R=s.rec.R,
+                obstacle_field=self._avoid_field if self.K == 1 else s.obstacles,
+                neighbours=s.neighbours,
+                seen_pos=None if s.seen is None else s.seen[:, :2],
+                **context_fields(self.range_sensor),
+            )
+            try:
+                out = s.strategy(ctx)
+            except PluginRunError as exc:
+                self._plugin_failed(w, exc)
+                continue
+            shift[rows], active[rows] = out[0], out[1]
+        return shift, active
+
+    def _detect(self, t: float, failing: np.ndarray) -> np.ndarray:
+        """Each world's detector: what its platoon believes has failed."""
+        self._view_worlds()
+        known = np.zeros(self.N, dtype=bool)
+        for w in self._live_worlds():
+            s, rows = self.states[w], self._rows(w)
+            try:
+                known[rows] = s.detection.update(s, t, failing[rows])
+            except PluginRunError as exc:
+                self._plugin_failed(w, exc)
+        return known
+
+    def _reconfigure(self, t: float, known: np.ndarray) -> None:
+        """Each world's reconfiguration reacts to what its platoon believes."""
+        self._view_worlds()
+        for w in self._live_worlds():
+            s = self.states[w]
+            if s.reconfiguration is None:
+                continue
+            s.known_failed = known[self._rows(w)]
+            try:
+                s.reconfiguration.react(s, t, known[self._rows(w)])
+            except PluginRunError as exc:
+                self._plugin_failed(w, exc)
+            self.fleet.offset[self._rows(w)] = s.fleet.offset
+        self._track_rows = np.flatnonzero(self.tracks_reference)
+        if self.K == 1:
+            self.leader = self.states[0].leader
+            self.law, self.law_params = self.states[0].law, self.states[0].law_params
+
+    def _safety(
+        self, t: float, v1: np.ndarray, v2: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The safety filter's commands for the period (``safety:``), world by world."""
+        started = self._filter_started
+        self._filter_started = True
+        self._view_worlds()
+        fl = self.fleet
+        v1_out, v2_out = v1.copy(), v2.copy()
+        for w in self._live_worlds():
+            s, rows = self.states[w], self._rows(w)
+            f = s.fleet
+            ctx = FilterContext(
+                t=t,
+                dt=self.h,
+                pos=f.pos,
+                theta=f.theta,
+                vel=f.vel,
+                v1=v1[rows],
+                v2=v2[rows],
+                diameter=fl.diameter[rows],
+                params=dict(s.scenario.safety.params),
+                v1_prev=fl.v1[rows] if started else None,
+                v2_prev=fl.v2[rows] if started else None,
+                v1_max=s.v1_max,
+                v2_max=s.v2_max,
+                accel_max=s.accel_max,
+                known_failed=self.known_failed[rows],
+                commanded=fl.commanded[rows],
+                obstacle_field=self._avoid_field if self.K == 1 else s.obstacles,
+                seen=None if self.seen is None else self.seen[rows],
+                sensing=None if s.broadcast is None else s.sensing,
+                memory=s.filter_memory,
+                stats=s.filter_stats,
+                **context_fields(self.range_sensor),
+            )
+            try:
+                out = self._filter(ctx)
+            except PluginRunError as exc:
+                self._plugin_failed(w, exc)
+                continue
+            n = self.n
+            v1_out[rows] = np.broadcast_to(np.asarray(out[0], dtype=float), (n,))
+            v2_out[rows] = np.broadcast_to(np.asarray(out[1], dtype=float), (n,))
+        return v1_out, v2_out
+
+    def _scheduled_commands(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
+        """Overwrite the open-loop vehicles' commands with their schedules at ``t``.
+
+        A row ``(t_k, v1, v2)`` holds from ``t_k`` until the next row (zero before the
+        first). The rows in force are looked up only when ``t`` passes a row time of
+        some schedule of the world.
+        """
+        now = t + 1e-12
+        for w in self._schedules:
+            s = self.states[w]
+            changes = s.changes
+            if s.next_change < len(changes) and changes[s.next_change] <= now:
+                s.next_change = int(np.searchsorted(changes, now, side="right"))
+                for k, table in enumerate(s.schedules.values()):
+                    row = np.searchsorted(table[:, 0], now, side="right") - 1
+                    s.scheduled[k] = (table[row, 1], table[row, 2]) if row >= 0 else 0.0
+            rows = w * self.n + s.schedule_rows
+            v1[rows] = s.scheduled[:, 0]
+            v2[rows] = s.scheduled[:, 1]
