@@ -65,6 +65,15 @@ CASES = {
         "safety/circle_swap_3_jittered",
         ["duration=4", "sensing.position_noise=0.01"],
     ),
+    "cbf_door": ("safety/door", ["duration=4"]),
+    "cbf_eight_braking": (
+        "safety/circle_swap_8",
+        ["duration=3", "safety.barrier=braking"],
+    ),
+    "cbf_residual_crash": (
+        "failures/detect_follower_crash",
+        ["duration=4", "safety.filter=cbf"],
+    ),
     "residual_detector": ("failures/detect_follower_stop", ["duration=4"]),
     "reconfigure_handover": ("failures/leader_crash_elect", ["duration=5"]),
     "reconfigure_hungarian": ("failures/column_close", ["duration=5"]),

@@ -85,6 +85,8 @@ def structure_key(sc: Scenario) -> str:
         sc.safety.filter,
         sc.detection.method,
     ]
+    if sc.safety.filter != "none":  # one filter call: the fleet-wide values shared
+        parts += [sc.safety, tuple(v.diameter for v in vs), sc.sensing]
     for key in ("k1", "k2", "k3", "k4", "kp"):
         parts.append(_same(getattr(v.gains, key) for v in vs))
     for key in ("v1_max", "v2_max", "max_accel"):

@@ -41,7 +41,7 @@ from sandbox.behaviour.detection import Detection
 from sandbox.behaviour.ranges import RangeSensor, context_fields
 from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.errors import PluginRunError
-from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList
+from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList, WorldPairs
 from sandbox.loop.divergence import diverged
 from sandbox.loop.ending import Ending
 from sandbox.loop.plan import Plan, structure_key
@@ -56,7 +56,6 @@ from sandbox.loop.worlds import (
     StackedDifference,
     StackedFailures,
     WorldDifference,
-    WorldPairs,
     WorldState,
 )
 from sandbox.model.flatness import Gains, advance_extension, extension_rate, flat_inputs
@@ -241,6 +240,10 @@ class Simulation(StepAPI, Ending, WorldStages):
             None if safety.filter == "none" else runnable(get("filter", safety.filter))
         )
         self._filter_started = False
+        self._filter_batched = safety.filter != "none" and bool(
+            get("filter", safety.filter).options.get("batched", False)
+        )
+        self._filter_memory: dict = {}
         self._failing = np.zeros(N, dtype=bool)
         self.known_failed = np.zeros(N, dtype=bool)
         for state in self.states:
@@ -673,7 +676,13 @@ class Simulation(StepAPI, Ending, WorldStages):
         """One control period: act, record, advance, sense and plan the next."""
         self._recorded_target = None
         start = time.perf_counter()
-        chi_next = self._act(commands, targets, shifts)
+        try:
+            chi_next = self._act(commands, targets, shifts)
+        except PluginRunError as exc:  # a batched plug-in: every world ends
+            for w in self._live_worlds():
+                self._plugin_failed(w, exc)
+            self._closed = True
+            return
         self._control_time += time.perf_counter() - start
         self._record(self.plan)
         if not self.live.any():

@@ -141,9 +141,15 @@ class WorldStages:
     def _safety(
         self, t: float, v1: np.ndarray, v2: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The safety filter's commands for the period (``safety:``), world by world."""
+        """The safety filter's commands for the period (``safety:``), world by world.
+
+        A filter registered with ``batched=True`` is called once for a loop of K > 1
+        worlds instead (:meth:`_safety_batched`).
+        """
         started = self._filter_started
         self._filter_started = True
+        if self.K > 1 and self._filter_batched:
+            return self._safety_batched(t, v1, v2, started)
         self._view_worlds()
         fl = self.fleet
         v1_out, v2_out = v1.copy(), v2.copy()
@@ -183,6 +189,42 @@ class WorldStages:
             v1_out[rows] = np.broadcast_to(np.asarray(out[0], dtype=float), (n,))
             v2_out[rows] = np.broadcast_to(np.asarray(out[1], dtype=float), (n,))
         return v1_out, v2_out
+
+    def _safety_batched(
+        self, t: float, v1: np.ndarray, v2: np.ndarray, started: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One call of a batched filter on the rows of all worlds."""
+        fl, s0 = self.fleet, self.states[0]
+        ctx = FilterContext(
+            t=t,
+            dt=self.h,
+            pos=fl.pos,
+            theta=fl.theta,
+            vel=fl.vel,
+            v1=v1,
+            v2=v2,
+            diameter=fl.diameter,
+            params=dict(s0.scenario.safety.params),
+            v1_prev=fl.v1 if started else None,
+            v2_prev=fl.v2 if started else None,
+            v1_max=self._v1_max,
+            v2_max=self._v2_max,
+            accel_max=self._accel_max,
+            known_failed=self.known_failed,
+            commanded=fl.commanded,
+            obstacle_field=s0.obstacles,
+            seen=self.seen,
+            sensing=None if s0.broadcast is None else s0.sensing,
+            memory=self._filter_memory,
+            worlds=self.K,
+            world_stats=[s.filter_stats for s in self.states],
+        )
+        out = self._filter(ctx)  # a PluginRunError ends every world (_guarded)
+        N = self.N
+        return (
+            np.broadcast_to(np.asarray(out[0], dtype=float), (N,)).copy(),
+            np.broadcast_to(np.asarray(out[1], dtype=float), (N,)).copy(),
+        )
 
     def _scheduled_commands(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
         """Overwrite the open-loop vehicles' commands with their schedules at ``t``.

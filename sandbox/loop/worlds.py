@@ -11,10 +11,10 @@ the safety filter) is given the world's :class:`WorldState`, which carries the n
 single run's loop had (``fleet``, ``leader``, ``law``, ``seen``, ``world``, ...), with
 ``fleet`` viewing the world's rows of the stacked arrays.
 
-:class:`WorldPairs` are the neighbour pairs of K worlds (never across worlds),
-:class:`StackedFailures` the failure schedules of K worlds as one, and
+:class:`StackedFailures` are the failure schedules of K worlds as one, and
 :class:`StackedDifference` the backward differences of the recovery shift with a
-history per world.
+history per world; the neighbour pairs of K worlds (never across worlds) are
+:class:`~sandbox.geometry.neighbours.WorldPairs`.
 """
 
 from __future__ import annotations
@@ -152,53 +152,6 @@ class WorldState:
             memory=self.law_memory if memory is None else memory,
             **context_fields(self.range_sensor),
         )
-
-
-class WorldPairs:
-    """Neighbour pairs of K worlds of ``n`` vehicles: never across worlds.
-
-    Every pair of a world is a candidate (as alone, up to
-    :data:`~sandbox.geometry.neighbours.BRUTE_FORCE_MAX` vehicles), in the single
-    run's ``(i, j)`` order, world after world; so the sums over pairs add each
-    vehicle's terms in the order it adds them alone. Obstacle candidates come from a
-    :class:`~sandbox.geometry.neighbours.NeighbourList` over all vehicles (a superset
-    of the pairs in range; the others weigh exactly 0).
-    """
-
-    def __init__(self, worlds: int, n: int, radius: float) -> None:
-        self.radius = float(radius)
-        i, j = np.triu_indices(n, 1)
-        base = (np.arange(worlds) * n)[:, None]
-        self._i = (base + i).ravel().astype(np.intp)
-        self._j = (base + j).ravel().astype(np.intp)
-        self._obstacles = NeighbourList(radius)
-        self._last: tuple[np.ndarray, np.ndarray] | None = None
-
-    def near(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Pairs closer than ``radius``, with ``pos[i] - pos[j]`` (as alone)."""
-        rel = np.take(pos, self._i, axis=0)
-        rel -= np.take(pos, self._j, axis=0)
-        d2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
-        self._last = (pos, d2)
-        keep = np.flatnonzero(d2 < self.radius * self.radius)
-        return self._i.take(keep), self._j.take(keep), np.take(rel, keep, axis=0)
-
-    def distances(self, pos: np.ndarray) -> np.ndarray | None:
-        """Squared distances of every pair, world after world (else None).
-
-        Those of the last :meth:`near`, if it ran on this very array.
-        """
-        last = self._last
-        return last[1] if last is not None and last[0] is pos else None
-
-    def pairs(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pairs closer than ``radius``."""
-        i, j, _ = self.near(pos)
-        return i, j
-
-    def obstacle_pairs(self, pos: np.ndarray, field: Any) -> tuple[np.ndarray, ...]:
-        """Candidate ``(vehicle, obstacle)`` pairs (see ``NeighbourList``)."""
-        return self._obstacles.obstacle_pairs(pos, field)
 
 
 class StackedFailures:

@@ -271,6 +271,12 @@ class FilterContext:
         :class:`StrategyContext`; None: no sensor.
     platoon : ndarray (n,) int or None
         The index of each vehicle's platoon in ``platoons:`` (None: one platoon).
+    worlds : int
+        How many worlds the rows hold (1, or K for a filter registered with
+        ``batched=True`` called once for a loop of K worlds: ``n`` rows each, world
+        after world).
+    world_stats : list of dict or None
+        With ``worlds > 1``, each world's counters (``stats`` is then unused).
     """
 
     t: float
@@ -297,6 +303,8 @@ class FilterContext:
     ranges: np.ndarray | None = None
     beam_angles: np.ndarray | None = None
     platoon: np.ndarray | None = None
+    worlds: int = 1
+    world_stats: list[dict[str, Any]] | None = None
 
 
 @dataclass

@@ -543,6 +543,7 @@ def register_filter(
     name: str,
     params: Mapping[str, Any] | None = None,
     *,
+    batched: bool = False,
     doc: str | None = None,
     check: Callable | None = None,
 ) -> Callable[[Any], Any]:
@@ -552,8 +553,14 @@ def register_filter(
     [rad/s]: it sees the commands about to be applied and returns the ones to apply,
     once per control period, after the controller and before the failures. Built in:
     ``none`` (never called) and ``cbf`` (:mod:`sandbox.behaviour.safety.cbf`).
+
+    With ``batched=True`` a loop of K worlds calls the filter once, on the rows of
+    all worlds (``ctx.worlds`` is K, each world's counters in ``ctx.world_stats``);
+    each world's rows must be the commands it gets alone, its pairs never across
+    worlds (:class:`~sandbox.geometry.neighbours.WorldPairs`). Without it (the
+    default) the filter is called world by world. ``cbf`` is batched.
     """
-    return register("filter", name, params, doc=doc, check=check)
+    return register("filter", name, params, doc=doc, check=check, batched=batched)
 
 
 def register_detector(

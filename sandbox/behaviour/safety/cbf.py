@@ -155,7 +155,7 @@ from sandbox.behaviour.safety.braking import (
     obstacle_normals,
 )
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
-from sandbox.geometry.neighbours import NeighbourList
+from sandbox.geometry.neighbours import NeighbourList, WorldPairs
 from sandbox.model.barriers import MIN_DIST, MIN_SPEED, sensing_margin
 from sandbox.plugins.contexts import FilterContext
 from sandbox.plugins.registration import Param, register_filter
@@ -276,6 +276,8 @@ class FilterStep:
         ``braking``, at the last period's velocities; [m^2] for ``velocity``.
     fallback : ndarray, shape (n,), bool
         Vehicles in an unsafe state (a braking barrier below 0), which brake.
+    by_vehicle : ndarray, shape (n,), or None
+        Each vehicle's least barrier value (a batched call of several worlds only).
     """
 
     active: np.ndarray
@@ -283,6 +285,7 @@ class FilterStep:
     rows: int
     min_barrier: float = np.inf
     fallback: np.ndarray | None = None
+    by_vehicle: np.ndarray | None = None
 
 
 def _per_vehicle(value: float | np.ndarray, n: int) -> np.ndarray:
@@ -372,7 +375,10 @@ class CBFState:
                 ctx.dt,
             )
         self.range = float(radius)
-        self.neighbours = NeighbourList(self.range)
+        if ctx.worlds > 1:  # a batched call: pairs within each world only
+            self.neighbours = WorldPairs(ctx.worlds, n // ctx.worlds, self.range)
+        else:
+            self.neighbours = NeighbourList(self.range)
 
 
 def _box(
@@ -442,6 +448,8 @@ def barrier_rows(
         reach = np.full(len(pos), np.inf)
     out_v, out_a, out_b = [], [], []
     least = np.inf
+    # Each vehicle's least barrier value, for the worlds of a batched call.
+    by = None if found is None else found.get("by_vehicle")
 
     if ctx.v1_prev is not None:
         w_hat = heading * ctx.v1_prev[:, None]
@@ -461,6 +469,8 @@ def barrier_rows(
         pair = cooperative[i] | cooperative[j]
         if pair.any():
             least = min(least, float(h[pair].min()))
+            if by is not None:
+                np.minimum.at(by, i[pair], h[pair])
         base = 0.25 * gamma * h / dist
         if w_hat is None:
             slack_i = slack_j = base
@@ -490,6 +500,8 @@ def barrier_rows(
         h = dist * dist - big_d * big_d
         if len(h):
             least = min(least, float(h.min()))
+            if by is not None:
+                np.minimum.at(by, me, h)
         if w_hat is not None and state.broadcast:
             shared = w_hat[me] + w_hat[other]
             share = np.einsum("kd,kd->k", rel, shared)
@@ -507,6 +519,8 @@ def barrier_rows(
         rows, signed, away = near
         clearance = 0.5 * d[rows] + look + margin
         least = min(least, float(np.min(signed - clearance)))
+        if by is not None:
+            np.minimum.at(by, rows, signed - clearance)
         out_v.append(rows)
         out_a.append(-away)
         out_b.append(gamma * (signed - clearance))
@@ -623,11 +637,16 @@ def filter_commands(
     )
     reach = reach * (1.0 + 1e-9) + 1e-9 if prune else None
     fallback = np.zeros(n, dtype=bool)
+    by_vehicle = np.full(n, np.inf) if ctx.worlds > 1 else None
     if state.braking:
         veh, a_w, b, h = braking_rows(state, ctx, filtered)
         least = float(h.min()) if len(h) else np.inf
+        if by_vehicle is not None:
+            np.minimum.at(by_vehicle, veh, h)
     else:
-        found: dict[str, float] = {}
+        found: dict[str, object] = {}
+        if by_vehicle is not None:
+            found["by_vehicle"] = by_vehicle
         veh, a_w, b = barrier_rows(state, ctx, filtered, reach, found)
         least = found.get("min_barrier", np.inf)
     # In z = (v1, l v2): w = R(x3) z, so a . w = (R^T a) . z and |w - w0| = |z - z0|.
@@ -688,7 +707,7 @@ def filter_commands(
     if len(braking):  # v2 of the braking command, whatever the projection
         v2[braking] = z[braking, 1] / look
     active[rows] = True
-    return v1, v2, FilterStep(active, slack, len(veh), least, fallback)
+    return v1, v2, FilterStep(active, slack, len(veh), least, fallback, by_vehicle)
 
 
 def _check(values: dict, section: dict) -> list[tuple]:
@@ -718,7 +737,7 @@ def _check(values: dict, section: dict) -> list[tuple]:
     return out
 
 
-@register_filter("cbf", params=PARAMS, check=_check)
+@register_filter("cbf", params=PARAMS, check=_check, batched=True)
 def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     """Control-barrier-function filter through the look-ahead point (sandbox/safety)."""
     state = ctx.memory.get("cbf")
@@ -726,26 +745,38 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
         state = ctx.memory["cbf"] = CBFState(ctx)
     v1, v2, step = filter_commands(state, ctx)
     ctx.memory["last"] = step
-    stats = ctx.stats
-    stats["active_steps"] = stats.get("active_steps", 0) + int(step.active.sum())
-    bad = step.slack > TOLERANCE
-    stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + int(bad.sum())
-    worst = float(step.slack.max()) if len(step.slack) else 0.0
-    stats["max_slack"] = max(stats.get("max_slack", 0.0), worst)
-    if np.isfinite(step.min_barrier):
-        least = stats.get("min_barrier")
-        stats["min_barrier"] = (
-            step.min_barrier if least is None else min(least, step.min_barrier)
+    if ctx.worlds == 1:
+        _account(ctx.stats, ctx.t, state.braking, step, slice(None), step.min_barrier)
+        return v1, v2
+    n = len(ctx.pos) // ctx.worlds
+    for w, stats in enumerate(ctx.world_stats):  # each world's own counters
+        rows = slice(w * n, (w + 1) * n)
+        least = (
+            np.inf if step.by_vehicle is None else float(step.by_vehicle[rows].min())
         )
-    if state.braking:
-        braking = int(step.fallback.sum())
-        stats["fallback_steps"] = stats.get("fallback_steps", 0) + braking
+        _account(stats, ctx.t, state.braking, step, rows, least)
+    return v1, v2
+
+
+def _account(
+    stats: dict, t: float, braking: bool, step: FilterStep, rows: slice, least: float
+) -> None:
+    """Add one step of the filter's rows ``rows`` to a world's counters ``stats``."""
+    active, slack = step.active[rows], step.slack[rows]
+    stats["active_steps"] = stats.get("active_steps", 0) + int(active.sum())
+    bad = slack > TOLERANCE
+    stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + int(bad.sum())
+    worst = float(slack.max()) if len(slack) else 0.0
+    stats["max_slack"] = max(stats.get("max_slack", 0.0), worst)
+    if np.isfinite(least):
+        known = stats.get("min_barrier")
+        stats["min_barrier"] = least if known is None else min(known, least)
+    if braking:
+        braking_steps = int(step.fallback[rows].sum())
+        stats["fallback_steps"] = stats.get("fallback_steps", 0) + braking_steps
     if "unsafe_start" not in stats:  # the first step: reported, never silently
         stats["unsafe_start"] = {
-            "t": float(ctx.t),
-            "min_barrier": (
-                step.min_barrier if np.isfinite(step.min_barrier) else None
-            ),
-            "unsafe": bool(step.min_barrier < -TOLERANCE),
+            "t": float(t),
+            "min_barrier": least if np.isfinite(least) else None,
+            "unsafe": bool(least < -TOLERANCE),
         }
-    return v1, v2
