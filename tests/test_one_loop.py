@@ -75,6 +75,10 @@ CASES = {
         ["duration=4", "safety.filter=cbf"],
     ),
     "residual_detector": ("failures/detect_follower_stop", ["duration=4"]),
+    "glr_detector_sensed": (
+        "failures/detect_follower_stuck_steering",
+        ["duration=4", "detection.method=glr", "sensing.position_noise=0.02"],
+    ),
     "reconfigure_handover": ("failures/leader_crash_elect", ["duration=5"]),
     "reconfigure_hungarian": ("failures/column_close", ["duration=5"]),
     "command_schedules": ("paper/stabilization", ["duration=3"]),

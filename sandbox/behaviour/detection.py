@@ -79,6 +79,8 @@ Latching
 
 from __future__ import annotations
 
+import copy
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -412,7 +414,7 @@ def oracle(ctx: DetectorContext) -> np.ndarray:
     return ctx.failing.copy()
 
 
-@register_detector("residual", params=RESIDUAL_PARAMS)
+@register_detector("residual", params=RESIDUAL_PARAMS, batched=True)
 def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     """Residuals of the observed motion against the commands, and a CUSUM."""
     st: DetectorState | None = ctx.memory.get("state")
@@ -565,6 +567,10 @@ class Detection:
         self._known = np.zeros(n, dtype=bool)
         self._open: dict[int, dict] = {}
         self.events: list[dict] = []
+        # Where detections are written: each world's names and events (one world).
+        self._world_size = n
+        self._world_names = [self.names]
+        self._world_events = [self.events]
 
     @classmethod
     def make(cls, scenario, names: list[str]) -> Detection | None:
@@ -573,31 +579,75 @@ class Detection:
             return None
         return cls(scenario, names)
 
+    @classmethod
+    def stack(cls, detections: list[Detection]) -> Detection:
+        """One detector for the rows of K worlds (a batched detector's one call).
+
+        The worlds share the method, its values and the declared noise (their
+        structure); the drives' accelerations are stacked, and each detection is
+        written to its world's own :class:`Detection` (its ``events`` and
+        :meth:`summary`).
+        """
+        first = detections[0]
+        out = copy.copy(first)
+        for name in ("motor_accel", "brake_accel", "turn_accel"):
+            setattr(out, name, np.concatenate([getattr(d, name) for d in detections]))
+        out.memory = {}
+        out.intended = None
+        out._sent = deque(maxlen=first._sent.maxlen)
+        out._known = np.zeros(len(out.motor_accel), dtype=bool)
+        out._open = {}
+        out._world_size = len(first.names)
+        out._world_names = [d.names for d in detections]
+        out._world_events = [d.events for d in detections]
+        return out
+
     def update(self, sim, t: float, failing: np.ndarray) -> np.ndarray:
         """What the platoon believes has failed at ``t`` (n,) bool; records events."""
         fleet = sim.fleet
-        if self.intended is not None:
-            self._sent.append(self.intended)
-            self.intended = None
-        full = len(self._sent) == self._sent.maxlen
         if sim.seen is not None:
             seen = sim.seen
             fresh = getattr(sim.broadcast, "fresh", None)
         else:
             seen = np.column_stack((fleet.pos, fleet.theta))
             fresh = None
-        n = fleet.n
         contact = getattr(sim.world, "in_contact", None)
+        return self.update_rows(
+            t,
+            sim.h,
+            fleet,
+            seen,
+            fresh,
+            None if contact is None else contact(),
+            failing,
+        )
+
+    def update_rows(
+        self,
+        t: float,
+        dt: float,
+        fleet,
+        seen: np.ndarray,
+        fresh: np.ndarray | None,
+        contact: np.ndarray | None,
+        failing: np.ndarray,
+    ) -> np.ndarray:
+        """:meth:`update` from the rows themselves (of one world or K stacked)."""
+        if self.intended is not None:
+            self._sent.append(self.intended)
+            self.intended = None
+        full = len(self._sent) == self._sent.maxlen
+        n = len(fleet.theta)
         ctx = DetectorContext(
             t=t,
-            dt=sim.h,
+            dt=dt,
             pos=fleet.pos,
             theta=fleet.theta,
             vel=fleet.vel,
             seen=seen,
             fresh=np.ones(n, dtype=bool) if fresh is None else fresh,
             commands=self._sent[0] if full else None,
-            in_contact=np.zeros(n, dtype=bool) if contact is None else contact(),
+            in_contact=np.zeros(n, dtype=bool) if contact is None else contact,
             failing=failing,
             position_noise=self.position_noise,
             heading_noise=self.heading_noise,
@@ -615,9 +665,10 @@ class Detection:
         known = np.asarray(out, dtype=bool).copy()
         for i in np.flatnonzero(known & ~self._known):
             kind = kinds[i] if kinds is not None and kinds[i] else "unknown"
-            event = {"vehicle": self.names[i], "t": round(t, 9), "kind": kind}
+            w, j = divmod(int(i), self._world_size)
+            event = {"vehicle": self._world_names[w][j], "t": round(t, 9), "kind": kind}
             event["cleared"] = None
-            self.events.append(event)
+            self._world_events[w].append(event)
             self._open[int(i)] = event
         if kinds is not None:  # a kind still being read is updated in its event
             for i, event in self._open.items():

@@ -388,7 +388,7 @@ def _kind(st: GlrState, i: int, t: float, ctx: DetectorContext, fit: tuple) -> s
     return "uncontrolled"
 
 
-@register_detector("glr", params=GLR_PARAMS)
+@register_detector("glr", params=GLR_PARAMS, batched=True)
 def glr(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     """A windowed GLR on the summed innovations, with the noise estimated."""
     st: GlrState | None = ctx.memory.get("glr")

@@ -249,6 +249,11 @@ class Simulation(StepAPI, Ending, WorldStages):
         for state in self.states:
             state.detection = Detection.make(state.scenario, state.names)
         self._detecting = s0.detection is not None
+        # A batched detector: one for the rows of all worlds (K > 1).
+        self._detection: Detection | None = None
+        if self._detecting and K > 1:
+            if get("detector", first.detection.method).options.get("batched"):
+                self._detection = Detection.stack([s.detection for s in self.states])
         self._schedules = [w for w, s in enumerate(self.states) if s.schedules]
         for state in self.states:
             state.next_change, state.scheduled = 0, np.zeros((len(state.schedules), 2))
@@ -581,7 +586,9 @@ class Simulation(StepAPI, Ending, WorldStages):
             v2 = np.where(mask, np.clip(rows[:, 1], -self._v2_max, self._v2_max), v2)
             passive = passive | mask
             external = mask if external is None else external | mask
-        if self._detecting:  # what the controllers ask for, broadcast
+        if self._detection is not None:  # what the controllers ask for, broadcast
+            self._detection.intended = np.column_stack((v1, v2))
+        elif self._detecting:
             for w in self._live_worlds():
                 rows = self._rows(w)
                 self.states[w].detection.intended = np.column_stack(

@@ -108,8 +108,24 @@ class WorldStages:
             shift[rows], active[rows] = out[0], out[1]
         return shift, active
 
+    def _detect_batched(self, t: float, failing: np.ndarray) -> np.ndarray:
+        """One call of a batched detector on the rows of all worlds."""
+        fl, n = self.fleet, self.n
+        if self.seen is None:
+            seen, fresh = np.column_stack((fl.pos, fl.theta)), None
+        else:
+            seen = self.seen
+            parts = [getattr(s.broadcast, "fresh", None) for s in self.states]
+            fresh = np.concatenate(
+                [np.ones(n, dtype=bool) if f is None else f for f in parts]
+            )
+        contact = self.physics.in_contact()
+        return self._detection.update_rows(t, self.h, fl, seen, fresh, contact, failing)
+
     def _detect(self, t: float, failing: np.ndarray) -> np.ndarray:
         """Each world's detector: what its platoon believes has failed."""
+        if self._detection is not None:
+            return self._detect_batched(t, failing)
         self._view_worlds()
         known = np.zeros(self.N, dtype=bool)
         for w in self._live_worlds():

@@ -567,6 +567,7 @@ def register_detector(
     name: str,
     params: Mapping[str, Any] | None = None,
     *,
+    batched: bool = False,
     doc: str | None = None,
     check: Callable | None = None,
 ) -> Callable[[Any], Any]:
@@ -577,8 +578,14 @@ def register_detector(
     or ``(suspected, kinds)`` with ``kinds`` a list of n strings naming the kind of
     each suspicion. Built in: ``oracle`` (the truth, at once), ``residual``
     (:mod:`sandbox.behaviour.detection`) and ``none`` (nothing is ever detected).
+
+    With ``batched=True`` a loop of K worlds calls the detector once, on the rows of
+    all worlds (``K n`` rows, world after world; the declared noise and the
+    detector's values are the same in every world of one loop): each vehicle's
+    decision must depend on its own rows only. Without it (the default) the
+    detector is called world by world. ``residual`` and ``glr`` are batched.
     """
-    return register("detector", name, params, doc=doc, check=check)
+    return register("detector", name, params, doc=doc, check=check, batched=batched)
 
 
 @register_filter("none")
