@@ -102,6 +102,47 @@ class Broadcast:
         return self.seen
 
 
+class StackedBroadcast:
+    """The broadcasts of K worlds of ``n`` vehicles as one (their rows stacked).
+
+    Each world draws from its own generator, in the order it draws alone (the
+    noise, then the losses), so that every world receives the copies it receives
+    alone; the rest is elementwise over the stacked rows. The worlds share the
+    delay (their structure). After each update every world's own
+    :class:`Broadcast` shows its rows (``seen``, ``fresh``).
+    """
+
+    def __init__(self, broadcasts: list[Broadcast], n: int) -> None:
+        self.parts, self.n = broadcasts, n
+        self.sigma = np.repeat(np.array([b.sigma for b in broadcasts]), n, axis=0)
+        self.loss = np.repeat(np.array([b.loss for b in broadcasts]), n)
+        self._sent: deque[np.ndarray] = deque(maxlen=broadcasts[0]._sent.maxlen)
+        self.seen: np.ndarray | None = None
+        self.fresh: np.ndarray | None = None
+
+    def update(self, pos: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """:meth:`Broadcast.update` of every world, shape (K n, 3)."""
+        n = self.n
+        noise, draws = [], []
+        for b in self.parts:
+            noise.append(b.rng.standard_normal((n, 3)))
+            draws.append(b.rng.random(n))
+        lost = np.concatenate(draws) < self.loss
+        pose = np.column_stack((pos, theta)) + np.concatenate(noise) * self.sigma
+        self._sent.append(pose)
+        arrived = self._sent[0]
+        if self.seen is None:
+            self.seen = arrived.copy()
+            self.fresh = np.ones(len(pos), dtype=bool)
+        else:
+            self.seen = np.where(lost[:, None], self.seen, arrived)
+            self.fresh = ~lost
+        for w, b in enumerate(self.parts):
+            b.seen = self.seen[w * n : (w + 1) * n]
+            b.fresh = self.fresh[w * n : (w + 1) * n]
+        return self.seen
+
+
 def make_broadcast(spec, dt: float, seed: int) -> Broadcast | None:
     """The broadcast of a scenario's ``sensing`` section, or None when it is all 0.
 

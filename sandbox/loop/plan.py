@@ -82,6 +82,7 @@ def structure_key(sc: Scenario) -> str:
             or sensing.delay
             or sensing.loss
         ),
+        sc.sensing.delay,
         sc.safety.filter,
         sc.detection.method,
     ]

@@ -40,6 +40,7 @@ import numpy as np
 from sandbox.behaviour.detection import Detection
 from sandbox.behaviour.ranges import RangeSensor, context_fields
 from sandbox.behaviour.reconfigure import Reconfiguration
+from sandbox.behaviour.sensing import StackedBroadcast
 from sandbox.errors import PluginRunError
 from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList, WorldPairs
 from sandbox.loop.divergence import diverged
@@ -234,6 +235,11 @@ class Simulation(StepAPI, Ending, WorldStages):
         self._track_rows = np.flatnonzero(self.tracks_reference)
         self._commanded_rows = np.flatnonzero(self.fleet.commanded)
         self._sensing = s0.broadcast is not None
+        self._broadcast = (
+            StackedBroadcast([s.broadcast for s in self.states], n)
+            if self._sensing and K > 1
+            else None
+        )
         self.seen: np.ndarray | None = None
         safety = first.safety
         self._filter = (
@@ -379,7 +385,9 @@ class Simulation(StepAPI, Ending, WorldStages):
             self.finite = self.live.all() and diverged(fleet) is None
         if not self.live.any():
             return False
-        if self._sensing:
+        if self._broadcast is not None:  # every world's copies, each its own draws
+            self.seen = self._broadcast.update(pos, theta).copy()
+        elif self._sensing:
             seen = np.zeros((self.N, 3)) if self.seen is None else self.seen.copy()
             for w in self._live_worlds():
                 rows = self._rows(w)
