@@ -319,6 +319,19 @@ class RangeSensor:
         return {"ranges": ranges, "beam_angles": self.beam_angles.copy()}
 
 
+def avoid_field(
+    sensor: RangeSensor | None, field: ObstacleField, recovery: Any
+) -> ObstacleField | SensedField:
+    """The obstacles recovery and the safety filter avoid (``recovery.obstacles``).
+
+    The map's ``field``, or with ``sensed`` the sensor's points (updated in place at
+    every scan).
+    """
+    if recovery.obstacles == "sensed" and sensor is not None:
+        return sensor.field
+    return field
+
+
 def context_fields(sensor: RangeSensor | None) -> dict[str, np.ndarray]:
     """The ``ranges`` and ``beam_angles`` of a plug-in context (none: no sensor)."""
     if sensor is None:

@@ -29,7 +29,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from sandbox.behaviour.detection import Detection
-from sandbox.behaviour.ranges import RangeSensor, context_fields, observation_fields
+from sandbox.behaviour.ranges import (
+    RangeSensor,
+    avoid_field,
+    context_fields,
+    observation_fields,
+)
 from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.behaviour.sensing import make_broadcast
 from sandbox.errors import PluginRunError
@@ -206,12 +211,10 @@ class Simulation:
         self._control_time = 0.0
         # Slot reassignment and leader handover on events (None: keep every slot).
         self.reconfiguration = Reconfiguration.build(self)
-        # Range sensors (sensors.range; None without) and where recovery and the
-        # safety filter find the static obstacles (recovery.obstacles).
+        # Range sensors (sensors.range; None without), and the obstacles recovery and
+        # the safety filter avoid (recovery.obstacles: the map or the sensed points).
         self.range_sensor = RangeSensor.make(scenario, self.world, self.obstacles)
-        self._avoid_field = self.obstacles
-        if self.rec.obstacles == "sensed" and self.range_sensor is not None:
-            self._avoid_field = self.range_sensor.field
+        self._avoid_field = avoid_field(self.range_sensor, self.obstacles, self.rec)
         if self._sense():
             self._guarded(self._plan)
 
