@@ -61,6 +61,9 @@ class Observation:
     beam_angles : ndarray, shape (n, B) [rad], or None
         Each beam's angle about the vehicle's heading, from ``-fov/2`` (right) to
         ``+fov/2`` (left).
+    near : tuple or None
+        What :attr:`obstacles` is computed from when first read (the obstacle field,
+        the obstacles, the positions and each vehicle's radius); set by the loop.
     """
 
     t: float
