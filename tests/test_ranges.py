@@ -332,3 +332,28 @@ def test_the_environments_observe_the_ranges() -> None:
         VehicleEnv(doc, "eye", observe=("neighbours", "ranges"))
     with pytest.raises(ValueError, match="observe: expected some of"):
         VehicleEnv(doc, "eye", observe=("lidar",))
+
+
+def test_the_sensed_point_of_a_wall_is_its_foot_and_memory_holds_it() -> None:
+    from sandbox.behaviour.ranges import RangeSensor
+    from sandbox.scenario import RangeSpec
+
+    sc = load_scenario(scene([WALL], beams=7, fov=1.0))
+    field = ObstacleField(sc.obstacles)
+    sensor = RangeSensor(
+        [RangeSpec(beams=7, fov=1.0, max_range=5.0, memory=1.0)],
+        World(sc.vehicles, sc.obstacles),
+        field,
+        seed=0,
+    )
+    # beams at -0.5 ... 0.5 rad: hits on the face x1 = 2.9 m at 2.9 tan(a) sideways;
+    # the outline's nearest point to the origin is the foot (2.9, 0), not a hit
+    sensor.update(0.0, np.array([[0.0, 0.3]]), np.array([0.1]))
+    np.testing.assert_allclose(sensor.field.point, [[2.9, 0.3]], atol=1e-9)
+    assert sensor.field.order.tolist() == [0]
+    # turned away (nothing in view): the point is kept for memory = 1 s, then dropped
+    away = np.array([math.pi])
+    sensor.update(0.5, np.array([[0.0, 0.3]]), away)
+    np.testing.assert_allclose(sensor.field.point, [[2.9, 0.3]], atol=1e-9)
+    sensor.update(1.5, np.array([[0.0, 0.3]]), away)
+    assert sensor.field.empty

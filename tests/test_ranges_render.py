@@ -101,3 +101,14 @@ def test_the_example_controller_never_reads_the_obstacles() -> None:
     for looked_up in (".obstacles", "ObstacleField", "obstacle_field", "import yaml"):
         assert looked_up not in source, looked_up
     assert "obs.ranges" in source
+
+
+def test_a_replay_without_scans_keeps_its_script() -> None:
+    from sandbox.render.replay import with_beams
+    from sandbox.render.replay.page import asset
+
+    script = asset("replay.js")
+    assert "drawBeams" not in script  # the page of every other run is unchanged
+    patched = with_beams(script)
+    assert patched.count("function drawBeams") == 1
+    assert patched.count("if (M.beams && !large) drawBeams(s, xy, th);") == 1

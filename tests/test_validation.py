@@ -245,7 +245,7 @@ def test_exponential_aliases_stay_cheap(tmp_path: Path) -> None:
             "recovery.bta=2",
             "--set recovery.bta=2: names no field; did you mean 'beta'? "
             "(got 'bta'; expected one of: strategy, R, leader_avoids, "
-            "target_derivatives, beta, tangential, r, steepness)",
+            "target_derivatives, obstacles, beta, tangential, r, steepness)",
         ),
         (
             "vehicles[7].pose=[0, 0, 0]",

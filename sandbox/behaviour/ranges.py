@@ -12,13 +12,18 @@ something (a miss reads ``max_range``), the reading clipped to ``[0, max_range]`
 draws come from a generator of their own, ``numpy.random.default_rng([seed,
 crc32("ranges")])``: adding a sensor changes no other draw of a scenario.
 
+``memory`` [s] keeps, for recovery from sensed obstacles, an obstacle a vehicle no
+longer sees (hidden behind another, or between two beams) at the point it was last
+seen, for that long after its last hit (0: the current scan only).
+
 ``rate`` [Hz] sets a scan every ``1 / rate`` s: the scan of ``t_k`` is taken at the
 first control period at or after each multiple of ``1 / rate`` and held until the
 next (without ``rate``, every period).
 
 With ``recovery.obstacles: sensed`` the recovery strategy and the safety filter see
 the static obstacles as each vehicle's hits (:class:`~sandbox.model.sensed_field.
-SensedField`): the nearest hit point of each obstacle the vehicle's beams touched, in
+SensedField`): for each obstacle the vehicle's beams touched, the nearest point of the
+outline its hits draw (:func:`~sandbox.model.sensed_field.nearest_surface_points`), in
 world coordinates (held with the scan). Beams that hit vehicles are left out there:
 the other vehicles reach the strategy as before (true or broadcast positions).
 """
@@ -33,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from sandbox.model.obstacle_field import ObstacleField
-from sandbox.model.sensed_field import SensedField, nearest_hits
+from sandbox.model.sensed_field import SensedField, nearest_surface_points
 from sandbox.physics.ranges import HIT_OBSTACLE, RangeCaster
 
 #: The stream of the range noise, mixed with the scenario's seed.
@@ -191,6 +196,22 @@ class RangeSensor:
         self._kind = np.zeros((n, width), dtype=np.int8)
         self._index = np.full((n, width), -1, dtype=np.intp)
         self._last = np.full(len(rows), -np.inf)  # the last scan's number
+        # Per vehicle: where its last scan was taken, its beams, whether they close
+        # a full turn (for the outline of the sensed surfaces).
+        self._origin = np.full((n, 2), np.nan)
+        self._count = np.zeros(n, dtype=np.intp)
+        self._count[self.rows] = self.count
+        self._wrap = np.zeros(n, dtype=bool)
+        # How long each vehicle keeps an obstacle it no longer sees [s], and the
+        # points kept: (owner, obstacle, point, time last seen).
+        self._hold = np.zeros(n)
+        self._hold[self.rows] = [s.memory for s in chosen]
+        self._remember = bool(np.any(self._hold > 0))
+        none = np.zeros(0, dtype=np.intp)
+        self._memory = (none, none, np.zeros((0, 2)), np.zeros(0))
+        self._wrap[self.rows] = [
+            s.beams > 1 and s.fov >= 2.0 * math.pi - 1e-12 for s in chosen
+        ]
         self.caster = RangeCaster(world, field, method)
         self.rng = np.random.default_rng([seed, RANGES_STREAM])
         self.field = SensedField()
@@ -244,16 +265,36 @@ class RangeSensor:
         ray = np.stack((np.cos(angle), np.sin(angle)), -1)
         points = pos[rows, None, :] + dist[..., None] * ray
         self.points[rows, :width] = np.where(hit[..., None], points, np.nan)
+        self._origin[rows] = pos[rows]
         self.scans += 1
-        self._sense_obstacles()
+        self._sense_obstacles(t)
 
-    def _sense_obstacles(self) -> None:
-        """Rebuild :attr:`field` from every vehicle's current scan."""
-        v, b = np.nonzero(self._kind == HIT_OBSTACLE)
-        obstacle = self._index[v, b]
-        owner, obstacle, point = nearest_hits(
-            v.astype(np.intp), obstacle, self.ranges[v, b], self.points[v, b]
+    def _sense_obstacles(self, t: float) -> None:
+        """Rebuild :attr:`field` from every vehicle's current scan (and memory).
+
+        An obstacle a vehicle saw within its ``memory`` [s] but not in its current
+        scan (hidden behind another, between two beams) keeps the point last seen.
+        """
+        obstacle = np.where(self._kind == HIT_OBSTACLE, self._index, -1)
+        owner, obstacle, point = nearest_surface_points(
+            self._origin, self.points, obstacle, self._count, self._wrap
         )
+        seen = np.full(len(owner), t)
+        if self._remember:
+            wide = len(self._obstacle_kind) + 1
+            key = owner * wide + obstacle
+            old = self._memory
+            old_key = old[0] * wide + old[1]
+            keep = ~np.isin(old_key, key) & (t - old[3] <= self._hold[old[0]] + 1e-9)
+            owner = np.concatenate((owner, old[0][keep]))
+            obstacle = np.concatenate((obstacle, old[1][keep]))
+            point = np.concatenate((point, old[2][keep]))
+            seen = np.concatenate((seen, old[3][keep]))
+            order = np.lexsort((obstacle, owner))
+            owner, obstacle, point, seen = (
+                x[order] for x in (owner, obstacle, point, seen)
+            )
+            self._memory = (owner, obstacle, point, seen)
         self.field.set(owner, point, obstacle, self._obstacle_kind[obstacle])
 
     # ------------------------------------------------------------------ views
@@ -276,6 +317,19 @@ class RangeSensor:
             else np.zeros((0, n, width), dtype=np.float32)
         )
         return {"ranges": ranges, "beam_angles": self.beam_angles.copy()}
+
+
+def avoid_field(
+    sensor: RangeSensor | None, field: ObstacleField, recovery: Any
+) -> ObstacleField | SensedField:
+    """The obstacles recovery and the safety filter avoid (``recovery.obstacles``).
+
+    The map's ``field``, or with ``sensed`` the sensor's points (updated in place at
+    every scan).
+    """
+    if recovery.obstacles == "sensed" and sensor is not None:
+        return sensor.field
+    return field
 
 
 def context_fields(sensor: RangeSensor | None) -> dict[str, np.ndarray]:

@@ -63,6 +63,9 @@ class Observation:
         ``+fov/2`` (left).
     platoon : tuple of str or None
         With ``platoons:``, the name of each vehicle's platoon; None: one platoon.
+    near : tuple or None
+        What :attr:`obstacles` is computed from when first read (the obstacle field,
+        the obstacles, the positions and each vehicle's radius); set by the loop.
     """
 
     t: float
@@ -76,6 +79,7 @@ class Observation:
     failed: np.ndarray
     ranges: np.ndarray | None = None
     beam_angles: np.ndarray | None = None
+    platoon: tuple[str, ...] | None = None
     near: Any = field(default=None, repr=False, compare=False)
 
     @cached_property
@@ -90,8 +94,6 @@ class Observation:
         if self.near is None:
             return None
         return near_obstacles(*self.near)
-
-    platoon: tuple[str, ...] | None = None
 
     @property
     def n(self) -> int:

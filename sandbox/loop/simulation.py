@@ -38,7 +38,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from sandbox.behaviour.detection import Detection
-from sandbox.behaviour.ranges import RangeSensor, context_fields
+from sandbox.behaviour.ranges import RangeSensor, avoid_field, context_fields
 from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.behaviour.sensing import StackedBroadcast
 from sandbox.errors import PluginRunError
@@ -295,9 +295,7 @@ class Simulation(StepAPI, Ending, WorldStages):
         # Range sensors (sensors.range; None without; one world, structure_key) and
         # where recovery and the safety filter find the static obstacles.
         self.range_sensor = RangeSensor.make(first, self.world, self.obstacles)
-        self._avoid_field = self.obstacles
-        if self.rec.obstacles == "sensed" and self.range_sensor is not None:
-            self._avoid_field = self.range_sensor.field
+        self._avoid_field = avoid_field(self.range_sensor, self.obstacles, self.rec)
         for state in self.states:
             state.range_sensor = self.range_sensor
         if self._sense():

@@ -4,9 +4,10 @@
 ObstacleField` (candidate pairs, distances and nearest points) for obstacles that are
 points, each owned by the vehicle that sensed it: the recovery strategies and the
 safety filter then work on what each vehicle measured (``recovery.obstacles:
-sensed``) with the same code as on the map. A vehicle's points are the nearest hit of
-each obstacle its beams touched (the beams grouped by the obstacle they hit, a
-perfect segmentation of the scan), in world coordinates, so a held scan keeps them
+sensed``) with the same code as on the map. A vehicle's points are, for each obstacle
+its beams touched (the beams grouped by the obstacle they hit, a perfect segmentation
+of the scan), the nearest point of the outline its hits draw
+(:func:`nearest_surface_points`), in world coordinates, so a held scan keeps them
 where they were measured. Pure numpy.
 """
 
@@ -97,19 +98,33 @@ class SensedField:
         return np.where(mine, dist, np.inf), point.copy()
 
 
-def nearest_hits(
-    vehicle: np.ndarray, obstacle: np.ndarray, dist: np.ndarray, point: np.ndarray
+def nearest_surface_points(
+    origin: np.ndarray,
+    points: np.ndarray,
+    obstacle: np.ndarray,
+    count: np.ndarray,
+    wrap: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The nearest hit of each (vehicle, obstacle): ``(vehicle, obstacle, point)``.
+    """Each vehicle's nearest point of each obstacle its scan shows.
+
+    The hits of one obstacle on adjacent beams are joined into a polyline (the scan's
+    outline of its surface); the point is the nearest to the scan's origin on the two
+    segments either side of the nearest hit (the hit itself when its neighbours missed
+    that obstacle). On a flat face this is the face's own nearest point, so it moves
+    smoothly as the vehicle does, where the nearest hit alone jumps from beam to beam.
 
     Parameters
     ----------
-    vehicle, obstacle : ndarray (h,) int
-        Who saw each hit and what it hit.
-    dist : ndarray (h,) [m]
-        The hit's range.
-    point : ndarray (h, 2) [m]
-        The hit point.
+    origin : ndarray (n, 2) [m]
+        Each vehicle's position when its scan was taken.
+    points : ndarray (n, B, 2) [m]
+        The hit points (world coordinates).
+    obstacle : ndarray (n, B) int
+        The obstacle each beam hit (its index in the scenario), -1 for none.
+    count : ndarray (n,) int
+        Each vehicle's number of beams.
+    wrap : ndarray (n,) bool
+        Whether its beams close a full turn (the last is adjacent to the first).
 
     Returns
     -------
@@ -117,9 +132,34 @@ def nearest_hits(
         Sorted by vehicle, then obstacle.
     point : ndarray (k, 2) [m]
     """
-    order = np.lexsort((dist, obstacle, vehicle))
-    v, o = vehicle[order], obstacle[order]
+    v, b = np.nonzero(obstacle >= 0)
+    o = obstacle[v, b]
+    rel = points[v, b] - origin[v]
+    dist = np.hypot(rel[:, 0], rel[:, 1])
+    order = np.lexsort((dist, o, v))
+    vs, os_ = v[order], o[order]
     first = np.ones(len(order), dtype=bool)
-    first[1:] = (v[1:] != v[:-1]) | (o[1:] != o[:-1])
+    first[1:] = (vs[1:] != vs[:-1]) | (os_[1:] != os_[:-1])
     pick = order[first]
-    return vehicle[pick], obstacle[pick], point[pick]
+    v, b, o = v[pick], b[pick], o[pick]
+    best, best_d = points[v, b], dist[pick]
+    for step in (-1, 1):
+        nb = b + step
+        nb = np.where(wrap[v], np.mod(nb, np.maximum(count[v], 1)), nb)
+        inside = (nb >= 0) & (nb < count[v])
+        nb = np.clip(nb, 0, points.shape[1] - 1)
+        same = inside & (obstacle[v, nb] == o)
+        q = _closest_on_segment(origin[v], points[v, b], points[v, nb])
+        d = np.hypot(*(q - origin[v]).T)
+        better = same & (d < best_d)
+        best = np.where(better[:, None], q, best)
+        best_d = np.where(better, d, best_d)
+    return v.astype(np.intp), o.astype(np.intp), best
+
+
+def _closest_on_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The point of segment ``a``-``b`` nearest ``p``, row by row (m, 2)."""
+    ab, ap = b - a, p - a
+    den = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
+    t = np.clip(np.sum(ap * ab, axis=1) / den, 0.0, 1.0)
+    return a + t[:, None] * ab

@@ -74,6 +74,15 @@ RANGE: dict[str, Param] = {
         minimum=0.0,
         exclusive=True,
     ),
+    "memory": Param(
+        "number",
+        0.0,
+        "s",
+        "With recovery.obstacles: sensed, how long an obstacle no longer seen (hidden "
+        "behind another, between two beams) is kept at the point last seen (0: the "
+        "current scan only)",
+        minimum=0.0,
+    ),
 }
 
 SENSORS_KEYS = tuple(SENSORS)

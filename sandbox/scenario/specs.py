@@ -71,7 +71,8 @@ class RangeSpec:
     from ``-fov/2`` (right) to ``+fov/2`` (left) (a full turn: ``2 pi / beams``
     apart, from ``-pi``); each reaches ``max_range`` [m] from the vehicle's centre;
     ``noise`` [m] is the standard deviation of the Gaussian noise on each range;
-    ``rate`` [Hz] the scan rate (None: a scan every control period).
+    ``rate`` [Hz] the scan rate (None: a scan every control period); ``memory``
+    [s] how long recovery from sensed obstacles keeps one no longer seen.
     """
 
     beams: int = 32
@@ -79,6 +80,7 @@ class RangeSpec:
     max_range: float = 5.0
     noise: float = 0.0
     rate: float | None = None
+    memory: float = 0.0
 
 
 @dataclass(frozen=True)

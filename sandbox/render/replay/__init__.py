@@ -21,7 +21,13 @@ import os
 from pathlib import Path
 from typing import Any
 
-from sandbox.render.replay.page import GENERATOR, ReplayError, build_page, check_output
+from sandbox.render.replay.page import (
+    GENERATOR,
+    ReplayError,
+    asset,
+    build_page,
+    check_output,
+)
 from sandbox.render.replay.page import write_page as _write_page
 
 __all__ = [
@@ -47,13 +53,41 @@ def replay_html(
     data = replay_data(
         run, metrics, title=title, max_vehicle_samples=max_vehicle_samples
     )
+    transform = None
     if show_beams:
         from sandbox.render.replay.encode import beam_data
 
         beams = beam_data(run, data)
         if beams is not None:
             data["beams"] = beams
-    return build_page("replay.html", data["scenario"], data, ["replay.js"])
+            transform = with_beams
+    return build_page(
+        "replay.html", data["scenario"], data, ["replay.js"], transform=transform
+    )
+
+
+def with_beams(script: str) -> str:
+    """``replay.js`` with the pieces of ``replay_beams.js`` that draw the beams.
+
+    Each piece follows a line ``// @@ after: ANCHOR`` or ``// @@ before: ANCHOR`` and
+    goes right after or before the line ``ANCHOR`` of the script (a page without
+    scans keeps the script as it is, so its bytes do not change).
+
+    Raises
+    ------
+    ValueError
+        An anchor is not exactly once in the script.
+    """
+    pieces = asset("replay_beams.js").split("// @@ ")[1:]
+    for piece in pieces:
+        head, _, body = piece.partition("\n")
+        where, _, anchor = head.partition(": ")
+        line = anchor + "\n"
+        if script.count(line) != 1:
+            raise ValueError(f"replay_beams.js: anchor {anchor!r} not once in the page")
+        new = line + body if where == "after" else body + line
+        script = script.replace(line, new)
+    return script
 
 
 def write_html(

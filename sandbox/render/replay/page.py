@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -53,7 +54,13 @@ def _escape(text: str) -> str:
     )
 
 
-def build_page(template: str, title: str, data: Any, scripts: list[str]) -> str:
+def build_page(
+    template: str,
+    title: str,
+    data: Any,
+    scripts: list[str],
+    transform: Callable[[str], str] | None = None,
+) -> str:
     """The HTML of a page: ``template`` with title, style, data and scripts inlined.
 
     Parameters
@@ -66,9 +73,15 @@ def build_page(template: str, title: str, data: Any, scripts: list[str]) -> str:
         Embedded as ``<script id="replay-data" type="application/json">``.
     scripts : list of str
         Names of the script assets, inlined in this order.
+    transform : callable, optional
+        Applied to the joined scripts before they are inlined (an optional feature's
+        pieces, see :func:`sandbox.render.replay.with_beams`).
     """
     page = asset(template)
-    script = "\n".join(asset(s) for s in scripts).replace("</script", "<\\/script")
+    script = "\n".join(asset(s) for s in scripts)
+    if transform is not None:
+        script = transform(script)
+    script = script.replace("</script", "<\\/script")
     parts = {
         "{{TITLE}}": _escape(title),
         "{{STYLE}}": asset("replay.css"),

@@ -98,8 +98,6 @@
       M.err[j] = Math.hypot(dx, dy);
     }
     M.hasSlots = M.err.some((e) => Number.isFinite(e));
-    // range-sensor scans (sandbox run --html --show-beams), shape (T, n, B) [m]
-    if (DATA.beams) M.beams = await unpack(DATA.beams.ranges, Float32Array);
     M.hasPlatoon = M.slotIndex.some((s) => s >= 0);
   }
 
@@ -293,28 +291,6 @@
     }
   }
 
-  function drawBeams(s, xy, th) {
-    const B = DATA.beams, k = nearest(s), w = B.width;
-    const dot = Math.max(1.5, Math.min(3, 0.15 * radius[0] * cam.scale));
-    ctx.lineWidth = 1;
-    for (let i = 0; i < n; i++) {
-      const reach = B.reach[i];
-      if (reach === null || !Number.isFinite(xy[2 * i])) continue;
-      const [u0, v0] = w2p(xy[2 * i], xy[2 * i + 1]);
-      for (let b = 0; b < w; b++) {
-        const r = M.beams[(k * n + i) * w + b], a = B.angles[i][b];
-        if (!Number.isFinite(r) || a === null) continue;
-        const [u, v] = w2p(xy[2 * i] + r * Math.cos(th[i] + a), xy[2 * i + 1] + r * Math.sin(th[i] + a));
-        ctx.strokeStyle = "rgba(150,150,150,0.55)";
-        ctx.beginPath(); ctx.moveTo(u0, v0); ctx.lineTo(u, v); ctx.stroke();
-        if (r < reach - 1e-6) {
-          ctx.fillStyle = "#d62728";
-          ctx.beginPath(); ctx.arc(u, v, dot, 0, 2 * Math.PI); ctx.fill();
-        }
-      }
-    }
-  }
-
   function drawBodies(s, xy, th) {
     const k = nearest(s);
     const byColor = new Map();
@@ -457,7 +433,6 @@
     drawTrails(s, xy);
     drawReference(s);
     drawSlots(s);
-    if (M.beams && !large) drawBeams(s, xy, th);
     drawContacts(xy); // under the bodies: the vehicles in contact stay visible
     drawBodies(s, xy, th);
     drawLabels(xy);
