@@ -171,7 +171,11 @@ class StepAPI:
                     f"{what}: expected an array of shape ({self.K}, {self.n}, 2) or "
                     f"a sequence of {self.K} overrides, got shape {values.shape}"
                 )
-            values = list(values)
+            names = getattr(self, "_row_names", None)
+            if names is None:  # every row named by its world, for the errors
+                names = [f"world {w} {v}" for w in range(self.K) for v in self.names]
+                self._row_names = names
+            return override_rows(values.reshape(self.N, 2), names, what)
         if len(values) != self.K:
             raise ValueError(f"{what}: expected {self.K} overrides, got {len(values)}")
         rows, mask = np.full((self.N, 2), np.nan), np.zeros(self.N, dtype=bool)
