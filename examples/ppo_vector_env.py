@@ -45,14 +45,17 @@ class SameStepReset(VecEnv):
         self._seed: int | None = None
 
     def reset(self) -> np.ndarray:
+        """Start every world's episode (seeded once by :meth:`seed`)."""
         obs, _ = self.env.reset(seed=self._seed)
         self._seed = None
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
+        """Keep the actions for :meth:`step_wait`."""
         self._actions = np.asarray(actions, dtype=np.float32)
 
     def step_wait(self):
+        """Step every world; at the episodes' end, reset them in the same step."""
         obs, reward, terminated, truncated, info = self.env.step(self._actions)
         done = terminated | truncated
         infos = [
@@ -70,22 +73,29 @@ class SameStepReset(VecEnv):
         return obs, reward.astype(np.float32), done, infos
 
     def close(self) -> None:
+        """Nothing to close."""
         pass
 
     def seed(self, seed: int | None = None) -> list:
+        """The seed of the next reset (world k: seed + k)."""
         self._seed = seed
         return [None] * self.num_envs
 
     def get_attr(self, name, indices=None):
+        """An attribute of the vector environment, once per world asked."""
         return [getattr(self.env, name)] * len(self._indices(indices))
 
     def set_attr(self, name, value, indices=None) -> None:
+        """Set an attribute of the vector environment."""
         setattr(self.env, name, value)
 
     def env_method(self, name, *args, indices=None, **kwargs):
-        return [getattr(self.env, name)(*args, **kwargs)] * len(self._indices(indices))
+        """Call a method of the vector environment, once."""
+        result = getattr(self.env, name)(*args, **kwargs)
+        return [result] * len(self._indices(indices))
 
     def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+        """No world is wrapped."""
         return [False] * len(self._indices(indices))
 
     def _indices(self, indices) -> list[int]:
