@@ -117,6 +117,7 @@ def mean_return(env: VehicleVectorEnv, act, seed: int) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Train, and print the returns before and after."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--steps", type=int, default=200_000, help="training env steps")
     p.add_argument("--envs", type=int, default=64, help="worlds in the vector env")
