@@ -82,6 +82,18 @@ CASES = {
     "reconfigure_handover": ("failures/leader_crash_elect", ["duration=5"]),
     "reconfigure_hungarian": ("failures/column_close", ["duration=5"]),
     "command_schedules": ("paper/stabilization", ["duration=3"]),
+    "range_sensors_sensed_obstacles": (
+        "failures/obstacle_field",
+        [
+            "duration=4",
+            "sensors={range: {beams: 24, max_range: 3, noise: 0.01, rate: 20}}",
+            "recovery.obstacles=sensed",
+        ],
+    ),
+    "range_sensors_cbf": (
+        "safety/door",
+        ["duration=3", "sensors={range: {beams: 16, max_range: 2}}"],
+    ),
 }
 
 

@@ -319,6 +319,51 @@ class RangeSensor:
         return {"ranges": ranges, "beam_angles": self.beam_angles.copy()}
 
 
+class StackedRanges:
+    """The range sensors of K worlds of ``n`` vehicles, as one for the loop's rows.
+
+    Each world's :class:`RangeSensor` casts in its own world, with its own noise
+    stream, as alone; the readings, the beam angles and the sensed points are its
+    rows of the stacked views (:attr:`ranges`, :attr:`beam_angles`, :attr:`field`,
+    the points' owners offset by ``w n``), so that a batched strategy or filter sees
+    each world's obstacles only through its own vehicles.
+    """
+
+    def __init__(self, sensors: list[RangeSensor], n: int) -> None:
+        self.parts, self.n = sensors, n
+        self.beam_angles = np.concatenate([s.beam_angles for s in sensors])
+        self.ranges = np.concatenate([s.ranges for s in sensors])
+        self.field = SensedField()
+
+    def update(self, t: float, pos: np.ndarray, theta: np.ndarray) -> None:
+        """Every world's scans due at ``t`` [s] (:meth:`RangeSensor.update`)."""
+        n, owners, points, orders, kinds = self.n, [], [], [], []
+        for w, sensor in enumerate(self.parts):
+            rows = slice(w * n, (w + 1) * n)
+            sensor.update(t, pos[rows], theta[rows])
+            f = sensor.field
+            owners.append(f.owner + w * n)
+            points.append(f.point)
+            orders.append(f.order)
+            kinds.append(f.kind)
+        self.ranges = np.concatenate([s.ranges for s in self.parts])
+        self.field.set(
+            np.concatenate(owners),
+            np.concatenate(points),
+            np.concatenate(orders),
+            np.concatenate(kinds),
+        )
+
+    def record(self) -> None:
+        """Every world keeps its readings as a sample of its record."""
+        for sensor in self.parts:
+            sensor.record()
+
+    def part(self, w: int) -> RangeSensor:
+        """World ``w``'s own sensor."""
+        return self.parts[w]
+
+
 def avoid_field(
     sensor: RangeSensor | None, field: ObstacleField, recovery: Any
 ) -> ObstacleField | SensedField:

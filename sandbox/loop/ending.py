@@ -139,5 +139,5 @@ class Ending:
             info=info,
             scenario=sc,
             **arrays,
-            **({} if self.range_sensor is None else self.range_sensor.arrays()),
+            **({} if s.range_sensor is None else s.range_sensor.arrays()),
         )

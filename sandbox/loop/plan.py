@@ -9,9 +9,9 @@ detector, a reconfiguration) and every scenario section not named free below. Fr
 world by world: poses, offsets, sizes, masses, motors, ``beta``, failures, seeds,
 the sensing, filter and detector values, the metrics settings. A fleet above
 :data:`~sandbox.geometry.neighbours.BRUTE_FORCE_MAX` vehicles is a structure of its
-own (its neighbours come from a Verlet list), and so is a scenario with range
-sensors (``sensors:``, cast world by world) or several platoons (``platoons:``): not
-batched yet.
+own (its neighbours come from a Verlet list), and so is a scenario of several
+platoons (``platoons:``): not batched yet. Range sensors are cast world by world in
+the one loop, each world in its own physics.
 """
 
 from __future__ import annotations
@@ -56,9 +56,6 @@ def structure_key(sc: Scenario) -> str:
         return f"large fleet {id(sc)}"
     if sc.platoons:  # not yet batched: each platoon's law on its own rows
         return f"platoons {id(sc)}"
-    if any(spec is not None for spec in sc.range_specs()):
-        # not yet batched: the range sensor casts one world's beams
-        return f"range sensors {id(sc)}"
     rec = sc.recovery
     sensing = sc.sensing
     parts = [
@@ -75,6 +72,8 @@ def structure_key(sc: Scenario) -> str:
         rec.R,
         rec.leader_avoids,
         rec.target_derivatives,
+        rec.obstacles,
+        tuple(sc.range_specs()),
         sorted((k, v) for k, v in rec.params.items() if k != "beta"),
         bool(
             sensing.position_noise

@@ -38,7 +38,12 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from sandbox.behaviour.detection import Detection
-from sandbox.behaviour.ranges import RangeSensor, avoid_field, context_fields
+from sandbox.behaviour.ranges import (
+    RangeSensor,
+    StackedRanges,
+    avoid_field,
+    context_fields,
+)
 from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.behaviour.sensing import StackedBroadcast
 from sandbox.errors import PluginRunError
@@ -294,10 +299,15 @@ class Simulation(StepAPI, Ending, WorldStages):
         self._reconfiguring = any(s.reconfiguration is not None for s in self.states)
         # Range sensors (sensors.range; None without; one world, structure_key) and
         # where recovery and the safety filter find the static obstacles.
-        self.range_sensor = RangeSensor.make(first, self.world, self.obstacles)
+        sensors = [
+            RangeSensor.make(s.scenario, s.world, self.obstacles) for s in self.states
+        ]
+        self.range_sensor = sensors[0]
+        if K > 1 and sensors[0] is not None:  # each world casts in its own world
+            self.range_sensor = StackedRanges(sensors, n)
         self._avoid_field = avoid_field(self.range_sensor, self.obstacles, self.rec)
-        for state in self.states:
-            state.range_sensor = self.range_sensor
+        for w, state in enumerate(self.states):
+            state.range_sensor = sensors[w]
         if self._sense():
             self._guarded(self._plan)
 

@@ -95,7 +95,10 @@ class StepAPI:
             mode=fleet.mode[rows].copy() if ended else plan.mode(self.N)[rows],
             failed=plan.failing[rows].copy(),
             **observation_fields(
-                self.range_sensor, self.obstacles, self.scenario, fleet.pos[rows]
+                self.states[world].range_sensor,
+                self.obstacles,
+                self.scenario,
+                fleet.pos[rows],
             ),
             platoon=None if self.platoons is None else self.platoons.of_vehicles(),
         )

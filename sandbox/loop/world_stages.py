@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sandbox.behaviour.ranges import context_fields
+from sandbox.behaviour.ranges import avoid_field, context_fields
 from sandbox.errors import PluginRunError
 from sandbox.plugins.registration import FilterContext, StrategyContext
 
@@ -95,10 +95,10 @@ class WorldStages:
                 failed=known[rows],
                 params=s.strategy_params,
                 R=s.rec.R,
-                obstacle_field=self._avoid_field if self.K == 1 else s.obstacles,
+                obstacle_field=avoid_field(s.range_sensor, s.obstacles, s.rec),
                 neighbours=s.neighbours,
                 seen_pos=None if s.seen is None else s.seen[:, :2],
-                **context_fields(self.range_sensor),
+                **context_fields(s.range_sensor),
             )
             try:
                 out = s.strategy(ctx)
@@ -189,12 +189,12 @@ class WorldStages:
                 accel_max=s.accel_max,
                 known_failed=self.known_failed[rows],
                 commanded=fl.commanded[rows],
-                obstacle_field=self._avoid_field if self.K == 1 else s.obstacles,
+                obstacle_field=avoid_field(s.range_sensor, s.obstacles, s.rec),
                 seen=None if self.seen is None else self.seen[rows],
                 sensing=None if s.broadcast is None else s.sensing,
                 memory=s.filter_memory,
                 stats=s.filter_stats,
-                **context_fields(self.range_sensor),
+                **context_fields(s.range_sensor),
             )
             try:
                 out = self._filter(ctx)
@@ -228,12 +228,13 @@ class WorldStages:
             accel_max=self._accel_max,
             known_failed=self.known_failed,
             commanded=fl.commanded,
-            obstacle_field=s0.obstacles,
+            obstacle_field=self._avoid_field,
             seen=self.seen,
             sensing=None if s0.broadcast is None else s0.sensing,
             memory=self._filter_memory,
             worlds=self.K,
             world_stats=[s.filter_stats for s in self.states],
+            **context_fields(self.range_sensor),
         )
         out = self._filter(ctx)  # a PluginRunError ends every world (_guarded)
         N = self.N
