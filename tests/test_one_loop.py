@@ -220,3 +220,21 @@ def test_a_record_spilled_to_disk_is_batched_too(tmp_path, monkeypatch):
     runs = sim.run_all()
     assert isinstance(runs[0].pose, np.memmap) or runs[0].pose.base is not None
     assert_batch_is_alone(scenarios, tmp_path, runs)
+
+
+@pytest.mark.slow
+def test_several_platoons_in_one_loop_give_the_runs_alone(tmp_path):
+    # Each world's platoons are its own (their laws, references, filter and events);
+    # the crash inside one platoon comes at another time in each world.
+    scenarios = [
+        load_scenario(
+            "traffic/failure_crash",
+            overrides=["duration=12", "randomize=null", f"failures[0].at={at}"],
+        )
+        for at in (8.0, 9.0, 10.0)
+    ]
+    assert len({structure_key(sc) for sc in scenarios}) == 1
+    runs = assert_batch_is_alone(scenarios, tmp_path)
+    assert runs[0].pose.tobytes() != runs[2].pose.tobytes()
+    sim = Simulation.stacked(scenarios)
+    assert sim.observe(1).platoon == Simulation(scenarios[1]).observe().platoon

@@ -255,8 +255,12 @@ def test_an_agent_sees_which_neighbours_share_its_platoon(tmp_path):
     assert info["platoon"] == "east"
 
 
-def test_sweeps_run_platoons_on_the_single_run_path(tmp_path):
+def test_sweeps_batch_platoons_of_one_structure(tmp_path):
     from sandbox.loop.plan import structure_key
 
-    sim = Simulation(load_scenario(_write(tmp_path, TWO)))
-    assert structure_key(sim.scenario).startswith("platoons")
+    path = _write(tmp_path, TWO)
+    one, other = load_scenario(path), load_scenario(path, overrides=["seed=7"])
+    assert structure_key(one) == structure_key(other)
+    runs = Simulation.batch([one, other])
+    alone = Simulation(other).run()
+    assert runs[1].pose.tobytes() == alone.pose.tobytes()

@@ -9,9 +9,9 @@ detector, a reconfiguration) and every scenario section not named free below. Fr
 world by world: poses, offsets, sizes, masses, motors, ``beta``, failures, seeds,
 the sensing, filter and detector values, the metrics settings. A fleet above
 :data:`~sandbox.geometry.neighbours.BRUTE_FORCE_MAX` vehicles is a structure of its
-own (its neighbours come from a Verlet list), and so is a scenario of several
-platoons (``platoons:``): not batched yet. Range sensors are cast world by world in
-the one loop, each world in its own physics.
+own (its neighbours come from a Verlet list). Range sensors are cast world by world
+in the one loop, each world in its own physics, and several platoons
+(``platoons:``) are planned world by world, each world's platoons its own.
 """
 
 from __future__ import annotations
@@ -54,15 +54,17 @@ def structure_key(sc: Scenario) -> str:
     n = len(vs)
     if n > BRUTE_FORCE_MAX:
         return f"large fleet {id(sc)}"
-    if sc.platoons:  # not yet batched: each platoon's law on its own rows
-        return f"platoons {id(sc)}"
     rec = sc.recovery
     sensing = sc.sensing
     parts = [
         (f.name, getattr(sc, f.name))
         for f in dataclasses.fields(sc)
-        if f.name not in FREE_FIELDS
+        if f.name not in FREE_FIELDS | {"platoons"}
     ]
+    # Each platoon's structure, as a scenario's (its starts and seed free).
+    parts.append(
+        tuple((g.name, tuple(g.rows), structure_key(g.scenario)) for g in sc.platoons)
+    )
     parts += [
         n,
         sc.leader_index,

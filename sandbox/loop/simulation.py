@@ -284,16 +284,22 @@ class Simulation(StepAPI, Ending, WorldStages):
         self._control_time = 0.0
         self._views_at = -1
         self._view_worlds()
-        # --- platoons hook (loop/platoons.py): with platoons: (one world, see
-        # structure_key), each platoon's law, recovery and safety filter on its rows.
-        self.platoons = Platoons.build(self)
+        # Several platoons (loop/platoons.py): each world's own; each platoon's law,
+        # recovery and safety filter on its rows (world by world when K > 1).
+        for state in self.states:
+            state.platoons = Platoons.build(state)
+        self.platoons = self.states[0].platoons
         if self.platoons is not None:
             self.strategy = self.platoons.strategy
-            self._strategy_per_world = False
+            self._strategy_per_world = self.K > 1
             self._filter = self.platoons.filter if self.platoons.filtered else None
-            self._avoid_candidates = self.platoons.avoid_candidates
-            self.states[0]._avoid_candidates = self._avoid_candidates
-        # --- end of the platoons hook
+            self._filter_batched = False
+            if self.K == 1:
+                self._avoid_candidates = self.platoons.avoid_candidates
+                self.states[0]._avoid_candidates = self._avoid_candidates
+            for state in self.states:
+                state.strategy = state.platoons.strategy
+                state.filter = state.platoons.filter
         for state in self.states:  # slot reassignment and leader handover on events
             state.reconfiguration = Reconfiguration.build(state)
         self._reconfiguring = any(s.reconfiguration is not None for s in self.states)
@@ -407,9 +413,11 @@ class Simulation(StepAPI, Ending, WorldStages):
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
         """Slots, reference point, and the law's ``x_ref'``, ``x_ref''`` at ``t``."""
-        if self.platoons is not None:  # platoons hook: each platoon's own law
+        if self.platoons is not None:  # each platoon's own reference and law
             fl = self.fleet
-            return self.platoons.targets(t, fl.pos, fl.theta, fl.vel, self.seen)
+            if self.K == 1:
+                return self.platoons.targets(t, fl.pos, fl.theta, fl.vel, self.seen)
+            return self._platoon_targets(t)
         K, n, N = self.K, self.n, self.N
         if self._ref_table is not None:
             ref = tuple(a[self.k] for a in self._ref_table)
@@ -494,6 +502,9 @@ class Simulation(StepAPI, Ending, WorldStages):
         self.known_failed = known
         if self._reconfiguring:  # re-forms when `known` changes
             self._reconfigure(t, known)
+        if self.platoons is not None and self.K > 1:  # each world's platoons decide
+            for w, s in enumerate(self.states):
+                self._avoid_candidates[self._rows(w)] = s.platoons.avoid_candidates
         may_avoid = self._avoid_candidates & ~known
         if self._strategy_per_world:
             shift, active = self._world_strategy(t, slot, may_avoid, known)

@@ -100,7 +100,11 @@ class StepAPI:
                 self.scenario,
                 fleet.pos[rows],
             ),
-            platoon=None if self.platoons is None else self.platoons.of_vehicles(),
+            platoon=(
+                None
+                if self.states[world].platoons is None
+                else self.states[world].platoons.of_vehicles()
+            ),
         )
 
     def step(

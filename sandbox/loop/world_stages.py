@@ -61,6 +61,20 @@ class WorldStages:
     def _live_worlds(self) -> list[int]:
         return [int(w) for w in np.flatnonzero(self.live)]
 
+    def _platoon_targets(self, t: float) -> tuple[np.ndarray, ...]:
+        """Each world's platoons' slots, ``x_ref'``, ``x_ref''`` and points."""
+        fl, N = self.fleet, self.N
+        slot, v_ref, a_ref = (np.full((N, 2), np.nan) for _ in range(3))
+        point = np.full((self.K, 2), np.nan)
+        for w in self._live_worlds():
+            s, rows = self.states[w], self._rows(w)
+            seen = None if self.seen is None else self.seen[rows]
+            got = s.platoons.targets(
+                t, fl.pos[rows], fl.theta[rows], fl.vel[rows], seen
+            )
+            slot[rows], v_ref[rows], a_ref[rows], point[w] = got
+        return slot, v_ref, a_ref, point
+
     def _world_law_targets(self, t: float, ref: tuple | None) -> list[np.ndarray]:
         """Each world's own law on its rows (reconfiguring worlds, plug-in laws)."""
         self._view_worlds()
@@ -197,7 +211,7 @@ class WorldStages:
                 **context_fields(s.range_sensor),
             )
             try:
-                out = self._filter(ctx)
+                out = (s.filter or self._filter)(ctx)
             except PluginRunError as exc:
                 self._plugin_failed(w, exc)
                 continue

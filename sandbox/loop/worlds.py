@@ -109,8 +109,10 @@ class WorldState:
         self.shift_motion: Any = None
         self.detection: Any = None
         self.reconfiguration: Any = None
-        #: The range sensor of a one-world loop (None: none).
+        #: The world's range sensor, platoons and their filter (None: none).
         self.range_sensor: Any = None
+        self.platoons: Any = None
+        self.filter: Any = None
         self.schedules = {
             i: np.array(v.drive.schedule, dtype=float)
             for i, v in enumerate(sc.vehicles)
