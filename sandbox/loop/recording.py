@@ -80,7 +80,7 @@ class WorldsRecorder:
         c = self.count
         if c >= self.capacity:
             return
-        K, n = self.K, self.n
+        K = self.K
         if self.on_disk:
             point = np.broadcast_to(point, (K, 2))
             for w in worlds:
@@ -89,18 +89,7 @@ class WorldsRecorder:
                 )
             self.count = c + 1
             return
-        b = self._buf
-        self._t[c] = t
-        pose, cmd = b["pose"][c], b["cmd"][c]
-        pose[..., :2] = pos.reshape(K, n, 2)
-        pose[..., 2] = theta.reshape(K, n)
-        cmd[..., 0] = v1.reshape(K, n)
-        cmd[..., 1] = v2.reshape(K, n)
-        b["chi"][c] = chi.reshape(K, n, 2)
-        b["slot"][c] = slot.reshape(K, n, 2)
-        b["target"][c] = target.reshape(K, n, 2)
-        b["mode"][c] = mode.reshape(K, n)
-        b["failed"][c] = failed.reshape(K, n)
+        self._write(c, None, t, pos, theta, v1, v2, chi, slot, target, mode, failed)
         self._reference[c] = point
         self.count = c + 1
 
@@ -130,21 +119,36 @@ class WorldsRecorder:
         c = self.count
         if c >= self.capacity:
             return self.arrays(w)
-        n = self.n
-        rows = slice(w * n, (w + 1) * n)
-        b = self._buf
-        self._t[c] = t
-        b["pose"][c, w, :, :2] = pos[rows]
-        b["pose"][c, w, :, 2] = theta[rows]
-        b["cmd"][c, w, :, 0] = v1[rows]
-        b["cmd"][c, w, :, 1] = v2[rows]
-        b["chi"][c, w] = chi[rows]
-        b["slot"][c, w] = slot[rows]
-        b["target"][c, w] = target[rows]
-        b["mode"][c, w] = mode[rows]
-        b["failed"][c, w] = failed[rows]
+        self._write(c, w, t, pos, theta, v1, v2, chi, slot, target, mode, failed)
         self._reference[c, w] = point
         return self.arrays(w, c + 1)
+
+    def _write(self, c, w, t, pos, theta, v1, v2, chi, slot, target, mode, failed):
+        """Sample ``c`` of every world (``w`` None), or of world ``w`` alone."""
+        K, n, b = self.K, self.n, self._buf
+        self._t[c] = t
+        if w is None:
+            at: tuple = (c,)
+
+            def part(a: np.ndarray, *shape: int) -> np.ndarray:
+                return a.reshape(K, n, *shape)
+
+        else:
+            at, rows = (c, w), slice(w * n, (w + 1) * n)
+
+            def part(a: np.ndarray, *shape: int) -> np.ndarray:
+                return a[rows]
+
+        pose, cmd = b["pose"][at], b["cmd"][at]
+        pose[..., :2] = part(pos, 2)
+        pose[..., 2] = part(theta)
+        cmd[..., 0] = part(v1)
+        cmd[..., 1] = part(v2)
+        b["chi"][at] = part(chi, 2)
+        b["slot"][at] = part(slot, 2)
+        b["target"][at] = part(target, 2)
+        b["mode"][at] = part(mode)
+        b["failed"][at] = part(failed)
 
     def _append_world(
         self, w, t, pos, theta, v1, v2, chi, slot, target, mode, failed, point

@@ -221,7 +221,7 @@ class StackedFailures:
         last_v1: np.ndarray,
         accel_step: float | np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]:
-        """``FailureSchedule.apply`` of every world: commands, failed, frozen rows.
+        """Every world's active failures applied: commands, failed and frozen rows.
 
         Also the ``(world, PluginRunError)`` of each world whose failure plug-in
         raised (that world's other failures are skipped; the caller ends it).

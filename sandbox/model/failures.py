@@ -96,7 +96,10 @@ def within_drive(v1: float, last_v1: float, step: float) -> float:
 
 
 class FailureSchedule:
-    """The failures of a scenario, resolved to vehicle indices.
+    """The failures of a scenario, resolved to vehicle indices and kinds.
+
+    The loop applies the schedules of all its worlds at once
+    (:class:`~sandbox.loop.worlds.StackedFailures`).
 
     Parameters
     ----------
@@ -117,89 +120,4 @@ class FailureSchedule:
         #: The failure functions as the loop calls them (a user's code guarded).
         self.funcs = [runnable(kind) for kind in self.kinds]
         self.names = list(names)
-        self.v2_onset = np.zeros(len(specs))
-        self.started = np.zeros(len(specs), dtype=bool)
         self.n = len(names)
-
-    def active(self, t: float) -> np.ndarray:
-        """Which failures are active at time ``t`` [s], shape (k,), bool."""
-        return (self.start <= t + 1e-12) & (t + 1e-12 < self.end)
-
-    def active_vehicles(self, t: float) -> np.ndarray:
-        """Which vehicles have an active failure at time ``t`` [s], shape (n,) bool."""
-        out = np.zeros(self.n, dtype=bool)
-        out[self.vehicle[self.active(t)]] = True
-        return out
-
-    def start_new(self, t: float, last_v2: np.ndarray) -> np.ndarray:
-        """Indices of the failures that start at this step (each reported once).
-
-        Records the steering command each had at onset (``last_v2``, shape (n,)).
-        """
-        new = np.flatnonzero(self.active(t) & ~self.started)
-        self.started[new] = True
-        self.v2_onset[new] = last_v2[self.vehicle[new]]
-        return new
-
-    def apply(
-        self,
-        t: float,
-        v1: np.ndarray,
-        v2: np.ndarray,
-        last_v1: np.ndarray | None = None,
-        accel_step: float | np.ndarray = np.inf,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Apply the active failures to the fleet's commands.
-
-        Parameters
-        ----------
-        t : float [s]
-        v1, v2 : ndarray, shape (n,)
-            The controller's commands.
-        last_v1 : ndarray, shape (n,), optional
-            The speeds applied in the last period [m/s] (None: no limit).
-        accel_step : float or ndarray (n,)
-            The most the drive changes v1 in one period [m/s], ``max_accel h``
-            (inf: unlimited). A failure's v1 is held within ``last_v1 +-
-            accel_step``, except for an immovable kind (a crash).
-
-        Returns
-        -------
-        v1, v2 : ndarray, shape (n,)
-            Applied commands.
-        failed : ndarray, shape (n,), bool
-            Vehicles with an active failure.
-        frozen : ndarray, shape (n,), bool
-            Failed vehicles whose speed the controller no longer drives.
-        """
-        failed = np.zeros(self.n, dtype=bool)
-        frozen = np.zeros(self.n, dtype=bool)
-        if not len(self.specs):
-            return v1, v2, failed, frozen
-        v1, v2 = v1.copy(), v2.copy()
-        for k in np.flatnonzero(self.active(t)):
-            i = self.vehicle[k]
-            kind, spec = self.kinds[k], self.specs[k]
-            ctx = FailureContext(
-                t=t,
-                since=t - spec.at,
-                vehicle=spec.vehicle,
-                index=int(i),
-                v1=float(v1[i]),
-                v2=float(v2[i]),
-                v2_onset=float(self.v2_onset[k]),
-                params=dict(spec.params),
-            )
-            v1[i], v2[i] = self.funcs[k](ctx)
-            if last_v1 is not None and not kind.options["immovable"]:
-                step = float(np.broadcast_to(accel_step, (self.n,))[i])
-                v1[i] = within_drive(float(v1[i]), float(last_v1[i]), step)
-            failed[i] = True
-            frozen[i] |= not kind.options["controlled_speed"]
-        return v1, v2, failed, frozen
-
-    def immovable(self, onsets: np.ndarray) -> list[int]:
-        """Vehicles that become immovable among the given failure indices."""
-        return [
-            int(self.vehicle[k]) for k in onsets if self.kinds[k].options["immovable"]
-        ]
