@@ -180,6 +180,21 @@ class Platoons:
             sim.info["platoon_events"] = made.fired
         return made
 
+    @classmethod
+    def attach(cls, sim: Any) -> Platoons | None:
+        """:meth:`build`, and the simulation's strategy, filter and avoiders set.
+
+        The loop then calls :meth:`strategy` and :meth:`filter` where it called its
+        recovery strategy and safety filter (None: no platoon has a filter), and uses
+        :attr:`avoid_candidates` (every platoon's leader excluded unless it avoids).
+        """
+        made = cls.build(sim)
+        if made is not None:
+            sim.strategy = made.strategy
+            sim._filter = made.filter if made.filtered else None
+            sim._avoid_candidates = made.avoid_candidates
+        return made
+
     def of_vehicles(self) -> tuple[str, ...]:
         """The name of each vehicle's platoon, in vehicle order."""
         return tuple(self.names[k] for k in self.index)

@@ -204,14 +204,10 @@ class Simulation:
         self._wall = time.perf_counter()
         #: Wall time spent planning and acting (law, recovery, controller, filters).
         self._control_time = 0.0
-        # --- platoons hook (loop/platoons.py): with platoons:, each platoon's law,
-        # recovery and safety filter on its rows; None with one platoon.
-        self.platoons = Platoons.build(self)
-        if self.platoons is not None:
-            self.strategy = self.platoons.strategy
-            self._filter = self.platoons.filter if self.platoons.filtered else None
-            self._avoid_candidates = self.platoons.avoid_candidates
-        # --- end of the platoons hook
+        # Platoons hook (loop/platoons.py): with platoons:, each platoon's law,
+        # recovery and filter on its rows (it sets strategy, _filter,
+        # _avoid_candidates); None with one platoon.
+        self.platoons = Platoons.attach(self)
         # Slot reassignment and leader handover on events (None: keep every slot).
         self.reconfiguration = Reconfiguration.build(self)
         if self._sense():
