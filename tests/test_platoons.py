@@ -260,3 +260,22 @@ def test_sweeps_run_platoons_on_the_single_run_path(tmp_path):
 
     sim = Simulation(load_scenario(_write(tmp_path, TWO)))
     assert batch_reason(sim) == "the 'platoons' section"
+
+
+@pytest.mark.slow
+def test_each_platoon_keeps_its_own_recovery_and_filter(tmp_path):
+    # east avoids nobody (recovery none) and has the CBF filter; north avoids
+    # (continuous) without a filter: only north's vehicles are ever in avoid mode
+    text = TWO.replace("duration: 4", "duration: 10").replace(
+        "    reference: {type: line, start: [-8, 0], heading: 0, speed: 1.0}\n",
+        "    reference: {type: line, start: [-8, 0], heading: 0, speed: 1.0}\n"
+        "    recovery: {strategy: none}\n"
+        "    safety: {filter: cbf}\n",
+    )
+    sc = load_scenario(_write(tmp_path, text))
+    assert sc.platoons[0].scenario.recovery.strategy == "none"
+    assert sc.platoons[1].scenario.recovery.strategy == "continuous"
+    run = Simulation(sc).run()
+    avoided = (run.mode == 1).any(axis=0)  # MODE_AVOID
+    assert not avoided[:2].any() and avoided[2:].any()
+    assert run.info["safety"]["filter"] == "cbf"
