@@ -279,3 +279,48 @@ def test_each_platoon_keeps_its_own_recovery_and_filter(tmp_path):
     avoided = (run.mode == 1).any(axis=0)  # MODE_AVOID
     assert not avoided[:2].any() and avoided[2:].any()
     assert run.info["safety"]["filter"] == "cbf"
+
+
+RECONFIGURED = """\
+duration: 12
+vehicle: {diameter: 0.5, mass: 10.0, v1_max: 2.0, v2_max: 4.0, max_accel: 5.0}
+formation: {law: leader_ref, rotate: true}
+recovery: {strategy: continuous, beta: 1.0, R: 3d, r: 1.5d, leader_avoids: true}
+platoons:
+  - name: A
+    reference: {type: line, start: [0, 0], heading: 0, speed: 1.0}
+    reconfigure: {assign: hungarian, close_gap: true}
+    on_leader_failure: elect
+    platoon: {count: 3, pattern: line, spacing: 1.6}
+    vehicles:
+      - {name: a0, pose: [0, 0, 0], leader: true}
+  - name: B
+    reference: {type: line, start: [0, 4], heading: 0, speed: 1.0}
+    platoon: {count: 2, pattern: line, spacing: 1.6}
+    vehicles:
+      - {name: b0, pose: [0, 4, 0], leader: true}
+failures:
+  - {vehicle: a0, at: 3, kind: crash}
+"""
+
+
+@pytest.mark.slow
+def test_a_platoon_reconfigures_itself_and_no_other(tmp_path):
+    sc = load_scenario(_write(tmp_path, RECONFIGURED))
+    assert sc.reconfigure.assign == "none"  # the world's: each platoon has its own
+    assert load_scenario(sc.to_dict()) == dataclasses.replace(sc, source=None)
+    run = Simulation(sc).run()
+    m = compute_metrics(run)
+    # A's leader crashes at 3 s: the follower nearest its slot leads from the next
+    # period, A's column closes up; B (no reconfiguration) keeps its slots
+    assert m["leader_changes"] == [
+        {"t": 3.01, "from": "a0", "to": "A-v0", "mode": "elect"}
+    ]
+    assert m["reassignments"][0]["assignment"] == {
+        "a0": None,
+        "A-v0": 0,
+        "A-v1": 1,
+        "A-v2": 2,
+    }
+    assert run.slot_index[-1].tolist() == [-1, 0, 1, 2, 4, 5, 6]
+    assert m["platoons"]["A"]["converged"] and m["platoons"]["B"]["converged"]

@@ -33,6 +33,7 @@ import numpy as np
 
 from sandbox.geometry.neighbours import NeighbourList
 from sandbox.loop import platoon_events
+from sandbox.loop.platoon_reconfigure import PlatoonView, merged_records
 from sandbox.plugins.registration import LawContext, get, make_law, runnable
 
 
@@ -193,7 +194,42 @@ class Platoons:
             sim.strategy = made.strategy
             sim._filter = made.filter if made.filtered else None
             sim._avoid_candidates = made.avoid_candidates
+            made._reconfigure(sim)
         return made
+
+    def _reconfigure(self, sim: Any) -> None:
+        """Each platoon's own slot reassignment and leader handover, if it has any.
+
+        A platoon's reconfiguration (loop/platoon_reconfigure.py) reacts at the start
+        of a period to what was believed failed at the end of the last one (the
+        single-platoon loop reacts after planning the period: either way the new
+        configuration drives from the next period on).
+        """
+        self._sim = sim
+        self.views = []
+        for g, spec in zip(self.groups, sim.scenario.platoons, strict=True):
+            sc = spec.scenario
+            if sc.reconfigure.assign != "none" or sc.on_leader_failure != "keep":
+                view = PlatoonView(sim, g, sc)
+                if view.reconfiguration is not None:
+                    self.views.append(view)
+        self._records = -1
+        self._record_reconfiguration()
+
+    def _record_reconfiguration(self) -> None:
+        """Merge the platoons' records into the run's ``info`` when they changed."""
+        if not self.views:
+            return
+        count = sum(
+            len(v.info.get("reassignments", ()))
+            + len(v.info.get("leader_changes", ()))
+            + sum(len(s) for s in v.info.get("slots", {}).values())
+            for v in self.views
+        )
+        if count != self._records:
+            self._records = count
+            rows = [g.rows for g in self.groups]
+            self._sim.info.update(merged_records(self.views, self.vehicle_names, rows))
 
     def of_vehicles(self) -> tuple[str, ...]:
         """The name of each vehicle's platoon, in vehicle order."""
@@ -232,6 +268,10 @@ class Platoons:
         """
         if self.events:  # merges and splits due now (loop/platoon_events.py)
             self._fire(t, (pos, theta, vel))
+        if getattr(self, "views", None):  # each platoon's own reconfiguration
+            for view in self.views:
+                view.react(t, self._sim.known_failed)
+            self._record_reconfiguration()
         n = self.n
         slot = np.full((n, 2), np.nan)
         v_ref = np.zeros((n, 2))
