@@ -164,6 +164,9 @@ class Platoons:
         )
         self._filter_memory: list[dict] = [{} for _ in self._filters]
         self._filter_stats: list[dict] = [{} for _ in self._filters]
+        #: The platoons' own reconfigurations (:meth:`attach`), and the simulation.
+        self.views: list[PlatoonView] = []
+        self._sim: Any = None
 
     @classmethod
     def build(cls, sim: Any) -> Platoons | None:
@@ -268,7 +271,7 @@ class Platoons:
         """
         if self.events:  # merges and splits due now (loop/platoon_events.py)
             self._fire(t, (pos, theta, vel))
-        if getattr(self, "views", None):  # each platoon's own reconfiguration
+        if self.views:  # each platoon's own reconfiguration
             for view in self.views:
                 view.react(t, self._sim.known_failed)
             self._record_reconfiguration()
@@ -349,6 +352,7 @@ class Platoons:
                 )
                 at = self.groups.index(group)
                 self.groups[at : at + 1] = [rest, made]
+            self._leaders_avoid()
             by_name = {g.name: g for g in self.groups}
             record["platoons"] = {
                 g.name: [self.vehicle_names[i] for i in g.rows] for g in self.groups
@@ -358,6 +362,15 @@ class Platoons:
                 if g.name not in self.names:
                     self.names.append(g.name)
                 self.index[g.rows] = self.names.index(g.name)
+
+    def _leaders_avoid(self) -> None:
+        """Who may avoid after a merge or split: a leader as its section says."""
+        cand = self.avoid_candidates
+        cand[:] = ~self.commanded
+        for spec, _, mask in self._recoveries:
+            for g in self.groups:
+                if g.leader >= 0 and mask[g.rows[g.leader]] and not spec.leader_avoids:
+                    cand[g.rows[g.leader]] = False
 
     def strategy(self, ctx: Any) -> tuple[np.ndarray, np.ndarray]:
         """The recovery shift of every vehicle: each platoon's section on its rows.
