@@ -57,6 +57,16 @@ def test_two_platoons_load_with_their_own_references_and_colours(tmp_path):
     assert again == dataclasses.replace(sc, source=None)
     changed = sc.with_overrides("recovery.beta=2")
     assert {p.scenario.recovery.params["beta"] for p in changed.platoons} == {2.0}
+    # --set reaches into an entry too, with a hint for a misspelt key
+    own = load_scenario(
+        _write(tmp_path, TWO), ["platoons[0].recovery={strategy: none}"]
+    )
+    assert [p.scenario.recovery.strategy for p in own.platoons] == [
+        "none",
+        "continuous",
+    ]
+    with pytest.raises(ScenarioError, match="did you mean 'color'"):
+        load_scenario(_write(tmp_path, TWO), ["platoons[0].colr=red"])
 
 
 def test_each_platoon_follows_its_own_leader_and_metrics_say_so(tmp_path):
