@@ -334,3 +334,21 @@ def test_a_platoon_reconfigures_itself_and_no_other(tmp_path):
     }
     assert run.slot_index[-1].tolist() == [-1, 0, 1, 2, 4, 5, 6]
     assert m["platoons"]["A"]["converged"] and m["platoons"]["B"]["converged"]
+
+
+def test_pictures_label_by_platoon(tmp_path):
+    from sandbox.render.camera import _legend_items
+    from sandbox.render.figures import formation_error_figure, trajectories_figure
+    from sandbox.render.palette import _build_palette
+
+    run = Simulation(load_scenario(_write(tmp_path, TWO))).run()
+    fig = formation_error_figure(run)
+    assert [ax.get_title(loc="left") for ax in fig.axes] == [
+        "platoon east",
+        "platoon north",
+    ]
+    labels = [t.get_text() for t in trajectories_figure(run).legends[0].get_texts()]
+    assert labels == ["east", "north"]
+    _, body, _ = _build_palette(run.colors)
+    items = _legend_items(run, body, False)
+    assert [i.label for i in items[:2]] == ["east", "north"]
