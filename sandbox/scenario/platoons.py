@@ -131,7 +131,12 @@ def parse_platoons(
             )
     entries = doc.get("platoons")
     if not isinstance(entries, list) or not entries:
-        rd.fail("platoons", "not a list of platoons", _describe(entries), "a list")
+        rd.fail(
+            "platoons",
+            "no platoons" if isinstance(entries, list) else "not a list of platoons",
+            _describe(entries),
+            "a list of at least one platoon",
+        )
         raise ScenarioError(_sorted(rd.problems), source)
     base = {
         k: v
