@@ -112,7 +112,7 @@ def _figure(stores: list[Path], path: Path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(10, 4.2), layout="constrained")
+    fig = Figure(figsize=(10, 4.6), layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     width = 0.8 / len(SETTINGS)
@@ -128,11 +128,16 @@ def _figure(stores: list[Path], path: Path) -> None:
             his.append(100 * (hi - rate))
         x = np.arange(len(stores)) + (j - (len(SETTINGS) - 1) / 2) * width
         ax.bar(x, rates, width, yerr=[los, his], capsize=3, label=label)
+        for xi, r, up in zip(x, rates, his, strict=True):
+            if np.isfinite(r):
+                ax.text(
+                    xi, r + up + 1, f"{r:.0f}", ha="center", va="bottom", fontsize=7
+                )
     ax.set_xticks(np.arange(len(stores)), [s.name for s in stores], rotation=15)
     ax.set_ylabel("runs with an inter-platoon contact [%]")
-    ax.set_ylim(0, 100)
+    ax.set_ylim(0, 110)
     ax.grid(True, axis="y", lw=0.4, alpha=0.5)
-    ax.legend(fontsize="small", ncols=2)
+    fig.legend(loc="outside lower center", fontsize="small", ncols=len(SETTINGS))
     ax.set_title("Traffic scenes: inter-platoon contacts (Wilson 95 % intervals)")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

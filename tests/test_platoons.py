@@ -57,6 +57,16 @@ def test_two_platoons_load_with_their_own_references_and_colours(tmp_path):
     assert again == dataclasses.replace(sc, source=None)
     changed = sc.with_overrides("recovery.beta=2")
     assert {p.scenario.recovery.params["beta"] for p in changed.platoons} == {2.0}
+    # --set reaches into an entry too, with a hint for a misspelt key
+    own = load_scenario(
+        _write(tmp_path, TWO), ["platoons[0].recovery={strategy: none}"]
+    )
+    assert [p.scenario.recovery.strategy for p in own.platoons] == [
+        "none",
+        "continuous",
+    ]
+    with pytest.raises(ScenarioError, match="did you mean 'color'"):
+        load_scenario(_write(tmp_path, TWO), ["platoons[0].colr=red"])
 
 
 def test_each_platoon_follows_its_own_leader_and_metrics_say_so(tmp_path):
@@ -264,3 +274,85 @@ def test_sweeps_batch_platoons_of_one_structure(tmp_path):
     runs = Simulation.batch([one, other])
     alone = Simulation(other).run()
     assert runs[1].pose.tobytes() == alone.pose.tobytes()
+
+
+@pytest.mark.slow
+def test_each_platoon_keeps_its_own_recovery_and_filter(tmp_path):
+    # east avoids nobody (recovery none) and has the CBF filter; north avoids
+    # (continuous) without a filter: only north's vehicles are ever in avoid mode
+    text = TWO.replace("duration: 4", "duration: 10").replace(
+        "    reference: {type: line, start: [-8, 0], heading: 0, speed: 1.0}\n",
+        "    reference: {type: line, start: [-8, 0], heading: 0, speed: 1.0}\n"
+        "    recovery: {strategy: none}\n"
+        "    safety: {filter: cbf}\n",
+    )
+    sc = load_scenario(_write(tmp_path, text))
+    assert sc.platoons[0].scenario.recovery.strategy == "none"
+    assert sc.platoons[1].scenario.recovery.strategy == "continuous"
+    run = Simulation(sc).run()
+    avoided = (run.mode == 1).any(axis=0)  # MODE_AVOID
+    assert not avoided[:2].any() and avoided[2:].any()
+    assert run.info["safety"]["filter"] == "cbf"
+
+
+RECONFIGURED = """\
+duration: 12
+vehicle: {diameter: 0.5, mass: 10.0, v1_max: 2.0, v2_max: 4.0, max_accel: 5.0}
+formation: {law: leader_ref, rotate: true}
+recovery: {strategy: continuous, beta: 1.0, R: 3d, r: 1.5d, leader_avoids: true}
+platoons:
+  - name: A
+    reference: {type: line, start: [0, 0], heading: 0, speed: 1.0}
+    reconfigure: {assign: hungarian, close_gap: true}
+    on_leader_failure: elect
+    platoon: {count: 3, pattern: line, spacing: 1.6}
+    vehicles:
+      - {name: a0, pose: [0, 0, 0], leader: true}
+  - name: B
+    reference: {type: line, start: [0, 4], heading: 0, speed: 1.0}
+    platoon: {count: 2, pattern: line, spacing: 1.6}
+    vehicles:
+      - {name: b0, pose: [0, 4, 0], leader: true}
+failures:
+  - {vehicle: a0, at: 3, kind: crash}
+"""
+
+
+@pytest.mark.slow
+def test_a_platoon_reconfigures_itself_and_no_other(tmp_path):
+    sc = load_scenario(_write(tmp_path, RECONFIGURED))
+    assert sc.reconfigure.assign == "none"  # the world's: each platoon has its own
+    assert load_scenario(sc.to_dict()) == dataclasses.replace(sc, source=None)
+    run = Simulation(sc).run()
+    m = compute_metrics(run)
+    # A's leader crashes at 3 s: the follower nearest its slot leads from the next
+    # period, A's column closes up; B (no reconfiguration) keeps its slots
+    assert m["leader_changes"] == [
+        {"t": 3.01, "from": "a0", "to": "A-v0", "mode": "elect"}
+    ]
+    assert m["reassignments"][0]["assignment"] == {
+        "a0": None,
+        "A-v0": 0,
+        "A-v1": 1,
+        "A-v2": 2,
+    }
+    assert run.slot_index[-1].tolist() == [-1, 0, 1, 2, 4, 5, 6]
+    assert m["platoons"]["A"]["converged"] and m["platoons"]["B"]["converged"]
+
+
+def test_pictures_label_by_platoon(tmp_path):
+    from sandbox.render.camera import _legend_items
+    from sandbox.render.figures import formation_error_figure, trajectories_figure
+    from sandbox.render.palette import _build_palette
+
+    run = Simulation(load_scenario(_write(tmp_path, TWO))).run()
+    fig = formation_error_figure(run)
+    assert [ax.get_title(loc="left") for ax in fig.axes] == [
+        "platoon east",
+        "platoon north",
+    ]
+    labels = [t.get_text() for t in trajectories_figure(run).legends[0].get_texts()]
+    assert labels == ["east", "north"]
+    _, body, _ = _build_palette(run.colors)
+    items = _legend_items(run, body, False)
+    assert [i.label for i in items[:2]] == ["east", "north"]

@@ -149,6 +149,14 @@ def _print_summary(name: str, metrics: dict, out_dir: Path, fmt: str) -> None:
         f"vehicle-obstacle {col['vehicle_obstacle']}); min distance: "
         f"{'-' if md is None else f'{md:.3f} m'}"
     )
+    for pname, p in metrics.get("platoons", {}).items():  # with platoons: only
+        st = p["settling_time"]
+        print(
+            f"platoon {pname}: converged {'yes' if p['converged'] else 'no'}, "
+            f"settle {'-' if st is None else f'{st:.2f} s'}, contacts within "
+            f"{p['collisions']['intra_platoon']}, with other platoons "
+            f"{p['collisions']['inter_platoon']}"
+        )
     header = (
         "vehicle",
         "final err [m]",

@@ -33,6 +33,7 @@ import numpy as np
 
 from sandbox.geometry.neighbours import NeighbourList
 from sandbox.loop import platoon_events
+from sandbox.loop.platoon_reconfigure import PlatoonView, merged_records
 from sandbox.plugins.registration import LawContext, get, make_law, runnable
 
 
@@ -163,6 +164,9 @@ class Platoons:
         )
         self._filter_memory: list[dict] = [{} for _ in self._filters]
         self._filter_stats: list[dict] = [{} for _ in self._filters]
+        #: The platoons' own reconfigurations (:meth:`attach`), and the simulation.
+        self.views: list[PlatoonView] = []
+        self._sim: Any = None
 
     @classmethod
     def build(cls, sim: Any) -> Platoons | None:
@@ -179,6 +183,56 @@ class Platoons:
         if sc.events:
             sim.info["platoon_events"] = made.fired
         return made
+
+    @classmethod
+    def attach(cls, sim: Any) -> Platoons | None:
+        """:meth:`build`, and the simulation's strategy, filter and avoiders set.
+
+        The loop then calls :meth:`strategy` and :meth:`filter` where it called its
+        recovery strategy and safety filter (None: no platoon has a filter), and uses
+        :attr:`avoid_candidates` (every platoon's leader excluded unless it avoids).
+        """
+        made = cls.build(sim)
+        if made is not None:
+            sim.strategy = made.strategy
+            sim._filter = made.filter if made.filtered else None
+            sim._avoid_candidates = made.avoid_candidates
+            made._reconfigure(sim)
+        return made
+
+    def _reconfigure(self, sim: Any) -> None:
+        """Each platoon's own slot reassignment and leader handover, if it has any.
+
+        A platoon's reconfiguration (loop/platoon_reconfigure.py) reacts at the start
+        of a period to what was believed failed at the end of the last one (the
+        single-platoon loop reacts after planning the period: either way the new
+        configuration drives from the next period on).
+        """
+        self._sim = sim
+        self.views = []
+        for g, spec in zip(self.groups, sim.scenario.platoons, strict=True):
+            sc = spec.scenario
+            if sc.reconfigure.assign != "none" or sc.on_leader_failure != "keep":
+                view = PlatoonView(sim, g, sc)
+                if view.reconfiguration is not None:
+                    self.views.append(view)
+        self._records = -1
+        self._record_reconfiguration()
+
+    def _record_reconfiguration(self) -> None:
+        """Merge the platoons' records into the run's ``info`` when they changed."""
+        if not self.views:
+            return
+        count = sum(
+            len(v.info.get("reassignments", ()))
+            + len(v.info.get("leader_changes", ()))
+            + sum(len(s) for s in v.info.get("slots", {}).values())
+            for v in self.views
+        )
+        if count != self._records:
+            self._records = count
+            rows = [g.rows for g in self.groups]
+            self._sim.info.update(merged_records(self.views, self.vehicle_names, rows))
 
     def of_vehicles(self) -> tuple[str, ...]:
         """The name of each vehicle's platoon, in vehicle order."""
@@ -217,6 +271,10 @@ class Platoons:
         """
         if self.events:  # merges and splits due now (loop/platoon_events.py)
             self._fire(t, (pos, theta, vel))
+        if self.views:  # each platoon's own reconfiguration
+            for view in self.views:
+                view.react(t, self._sim.known_failed)
+            self._record_reconfiguration()
         n = self.n
         slot = np.full((n, 2), np.nan)
         v_ref = np.zeros((n, 2))
@@ -294,6 +352,7 @@ class Platoons:
                 )
                 at = self.groups.index(group)
                 self.groups[at : at + 1] = [rest, made]
+            self._leaders_avoid()
             by_name = {g.name: g for g in self.groups}
             record["platoons"] = {
                 g.name: [self.vehicle_names[i] for i in g.rows] for g in self.groups
@@ -303,6 +362,15 @@ class Platoons:
                 if g.name not in self.names:
                     self.names.append(g.name)
                 self.index[g.rows] = self.names.index(g.name)
+
+    def _leaders_avoid(self) -> None:
+        """Who may avoid after a merge or split: a leader as its section says."""
+        cand = self.avoid_candidates
+        cand[:] = ~self.commanded
+        for spec, _, mask in self._recoveries:
+            for g in self.groups:
+                if g.leader >= 0 and mask[g.rows[g.leader]] and not spec.leader_avoids:
+                    cand[g.rows[g.leader]] = False
 
     def strategy(self, ctx: Any) -> tuple[np.ndarray, np.ndarray]:
         """The recovery shift of every vehicle: each platoon's section on its rows.

@@ -286,20 +286,19 @@ class Simulation(StepAPI, Ending, WorldStages):
         self._view_worlds()
         # Several platoons (loop/platoons.py): each world's own; each platoon's law,
         # recovery and safety filter on its rows (world by world when K > 1).
+        # Platoons.attach sets each world's strategy, filter and avoiders.
         for state in self.states:
-            state.platoons = Platoons.build(state)
+            state.platoons = Platoons.attach(state)
         self.platoons = self.states[0].platoons
         if self.platoons is not None:
-            self.strategy = self.platoons.strategy
+            s0 = self.states[0]
+            self.strategy, self._filter = s0.strategy, s0._filter
             self._strategy_per_world = self.K > 1
-            self._filter = self.platoons.filter if self.platoons.filtered else None
             self._filter_batched = False
             if self.K == 1:
-                self._avoid_candidates = self.platoons.avoid_candidates
-                self.states[0]._avoid_candidates = self._avoid_candidates
+                self._avoid_candidates = s0._avoid_candidates
             for state in self.states:
-                state.strategy = state.platoons.strategy
-                state.filter = state.platoons.filter
+                state.filter = state._filter
         for state in self.states:  # slot reassignment and leader handover on events
             state.reconfiguration = Reconfiguration.build(state)
         self._reconfiguring = any(s.reconfiguration is not None for s in self.states)
@@ -415,6 +414,7 @@ class Simulation(StepAPI, Ending, WorldStages):
         """Slots, reference point, and the law's ``x_ref'``, ``x_ref''`` at ``t``."""
         if self.platoons is not None:  # each platoon's own reference and law
             fl = self.fleet
+            self._view_worlds()  # a platoon's reconfiguration reads its world's rows
             if self.K == 1:
                 return self.platoons.targets(t, fl.pos, fl.theta, fl.vel, self.seen)
             return self._platoon_targets(t)

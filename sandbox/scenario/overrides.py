@@ -17,7 +17,9 @@ from sandbox.errors import Problem
 from sandbox.plugins.registration import (
     KINDS,
 )
+from sandbox.scenario.events import EVENT_KEYS
 from sandbox.scenario.expectations import allowed_keys as expect_keys
+from sandbox.scenario.platoons import PLATOONS_KEYS
 from sandbox.scenario.reader import (
     _describe,
     _hint,
@@ -161,6 +163,8 @@ def _allowed_keys(parents: list[str], node: dict[Any, Any]) -> tuple[str, ...]:
         "sensing": SENSING_KEYS,
         "reconfigure": RECONFIGURE_KEYS,
         "drive": DRIVE_KEYS,
+        "platoons": PLATOONS_KEYS,  # an entry of platoons: (scenario/platoons.py)
+        "events": EVENT_KEYS,
     }
     if head in table:
         return table[head]

@@ -36,6 +36,7 @@ from sandbox.scenario.sections import _failures, _list_of, _section
 from sandbox.scenario.specs import (
     PALETTE,
     PlatoonGroup,
+    ReconfigureSpec,
     Scenario,
     _from_loader,
 )
@@ -130,7 +131,12 @@ def parse_platoons(
             )
     entries = doc.get("platoons")
     if not isinstance(entries, list) or not entries:
-        rd.fail("platoons", "not a list of platoons", _describe(entries), "a list")
+        rd.fail(
+            "platoons",
+            "no platoons" if isinstance(entries, list) else "not a list of platoons",
+            _describe(entries),
+            "a list of at least one platoon",
+        )
         raise ScenarioError(_sorted(rd.problems), source)
     base = {
         k: v
@@ -231,15 +237,18 @@ def parse_platoons(
             )
         elif f.at >= first.duration:
             rd.warn(f"{path}.at", f"at = {f.at:g} s: the failure never starts")
-    for name, _, one in groups:
-        i = seen_names[name]
-        if one.reconfigure.assign != "none" or one.on_leader_failure != "keep":
-            rd.fail(
-                f"platoons[{i}].reconfigure",
-                "reconfiguration in a world of several platoons is not supported yet",
-                "reconfigure or on_leader_failure set",
-                "assign: none and on_leader_failure: keep",
-            )
+    reconfigured = [
+        seen_names[name]
+        for name, _, one in groups
+        if one.reconfigure.assign != "none" or one.on_leader_failure != "keep"
+    ]
+    if reconfigured and doc.get("events"):
+        rd.fail(
+            "events",
+            "merges and splits beside a platoon's reconfiguration are not supported",
+            f"events and platoons[{reconfigured[0]}] reconfiguring",
+            "events, or reconfigure/on_leader_failure, not both",
+        )
     events = read_events(rd, doc.get("events"), specs, first.duration)
     expect = read_expectations(
         rd, doc.get("expect"), "expect", names, platoons=list(seen_names)
@@ -252,6 +261,8 @@ def parse_platoons(
             vehicles=tuple(vehicles),
             failures=tuple(f for _, f in failures),
             platoon=None,
+            reconfigure=ReconfigureSpec(),  # each platoon's own (loop/platoons.py)
+            on_leader_failure="keep",
             expect=expect,
             platoons=tuple(specs),
             events=tuple(events),
@@ -340,10 +351,12 @@ def platoons_document(sc: Scenario) -> dict[str, Any]:
             expect=None,
         )
     doc = alone.to_dict()
-    for key in ("vehicles", "platoon"):
+    for key in ("vehicles", "platoon", *_OWN):
         doc.pop(key, None)
     doc["vehicle"] = {"diameter": sc.diameter}
     shared = first.to_dict()
+    sections = [k for k in _OWN if k not in ("vehicles", "platoon")]
+    doc.update({k: shared[k] for k in sections if k in shared})
     doc["platoons"] = []
     for p in sc.platoons:
         own = p.scenario.to_dict()

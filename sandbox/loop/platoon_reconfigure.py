@@ -1,0 +1,179 @@
+"""Slot reassignment and leader handover inside one platoon of several.
+
+:class:`~sandbox.behaviour.reconfigure.Reconfiguration` reads and changes a
+simulation's leader, law, offsets and tracked rows. For a platoon of a world of
+several (``platoons:`` with ``reconfigure`` or ``on_leader_failure`` in an entry),
+:class:`PlatoonView` is that simulation restricted to the platoon's rows: the
+platoon's own reconfiguration reacts to what the platoon believes failed among its
+vehicles, on its own slots, and the changes are copied back to the platoon
+(:meth:`PlatoonView.sync`). Its records (``reassignments``, ``leader_changes``,
+``slots``) are merged into the run's, slots numbered in the fleet's vehicle order (slot
+``k``: ``vehicles[k].offset``). A vehicle of another platoon is never given a slot of
+this one.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from sandbox.behaviour.reconfigure import Reconfiguration
+from sandbox.plugins.registration import LawContext
+
+
+class _FleetView:
+    """The fleet's arrays of one platoon's rows (``offset`` is the platoon's own)."""
+
+    def __init__(self, fleet: Any, rows: np.ndarray, offset: np.ndarray) -> None:
+        self._fleet, self._rows = fleet, rows
+        self.offset = offset.copy()
+        self.commanded = fleet.commanded[rows]
+        self.n = len(rows)
+
+    @property
+    def pos(self) -> np.ndarray:
+        return self._fleet.pos[self._rows]
+
+    @property
+    def theta(self) -> np.ndarray:
+        return self._fleet.theta[self._rows]
+
+    @property
+    def vel(self) -> np.ndarray:
+        return self._fleet.vel[self._rows]
+
+
+class PlatoonView:
+    """A simulation as one platoon's reconfiguration sees it (see the module).
+
+    Parameters
+    ----------
+    sim : Simulation
+        The world's simulation.
+    group : _One
+        The platoon (:class:`sandbox.loop.platoons._One`).
+    scenario : Scenario
+        The platoon's own scenario (its ``reconfigure`` and ``on_leader_failure``).
+    """
+
+    def __init__(self, sim: Any, group: Any, scenario: Any) -> None:
+        rows = group.rows
+        self._sim, self._group, self.rows = sim, group, rows
+        self.scenario = scenario
+        self.h = sim.h
+        self.names = [sim.names[i] for i in rows]
+        self.fleet = _FleetView(sim.fleet, rows, group.offset)
+        self.leader = group.leader
+        self.law, self.law_params, self.law_memory = (
+            group.law,
+            group.params,
+            group.memory,
+        )
+        self.reference = group.reference
+        self.tracks_reference = np.isin(rows, group.track)
+        self._track_rows = np.flatnonzero(self.tracks_reference)
+        self._avoid_candidates = sim._avoid_candidates[rows].copy()
+        self.rec = scenario.recovery
+        self.shift_motion = sim.shift_motion
+        self.info: dict[str, Any] = {}
+        self.reconfiguration = Reconfiguration.build(self)
+
+    @property
+    def seen(self) -> np.ndarray | None:
+        """The broadcast poses of the platoon's rows (None: the truth)."""
+        seen = self._sim.seen
+        return None if seen is None else seen[self.rows]
+
+    def law_context(
+        self,
+        t: float,
+        ref: Any,
+        offset: np.ndarray | None = None,
+        memory: dict | None = None,
+    ) -> LawContext:
+        """What the platoon's law sees at ``t`` (as ``Simulation.law_context``)."""
+        fleet, lead, seen = self.fleet, self.leader, self.seen
+        if lead < 0:
+            lpos = ltheta = None
+        elif seen is None:
+            lpos, ltheta = fleet.pos[lead], float(fleet.theta[lead])
+        else:
+            lpos, ltheta = seen[lead, :2], float(seen[lead, 2])
+        return LawContext(
+            t=t,
+            dt=self.h,
+            pos=fleet.pos,
+            theta=fleet.theta,
+            vel=fleet.vel,
+            offset=fleet.offset if offset is None else offset,
+            leader=lead,
+            leader_pos=lpos,
+            leader_theta=ltheta,
+            reference=ref,
+            params=self.law_params,
+            memory=self.law_memory if memory is None else memory,
+        )
+
+    def react(self, t: float, known: np.ndarray) -> None:
+        """React to the fleet's believed failures ``known`` (n,) at ``t``; sync."""
+        if self.reconfiguration is None:
+            return
+        self.reconfiguration.react(self, t, known[self.rows])
+        self.sync()
+
+    def sync(self) -> None:
+        """Copy the leader, law, offsets and tracked rows back to the platoon."""
+        g, sim = self._group, self._sim
+        g.leader = self.leader
+        g.law, g.params, g.memory = self.law, self.law_params, self.law_memory
+        g.offset = self.fleet.offset
+        g.track = self.rows[self.tracks_reference]
+        sim._avoid_candidates[self.rows] = self._avoid_candidates
+
+    def records(self) -> dict[str, Any]:
+        """The records of this platoon, slots numbered in the fleet's order."""
+        rows = self.rows
+
+        def fleet_slot(k: int | None) -> int | None:
+            return None if k is None else int(rows[k])
+
+        info = self.info
+        return {
+            "reassignments": [
+                {
+                    "t": r["t"],
+                    "assignment": {
+                        n: fleet_slot(k) for n, k in r["assignment"].items()
+                    },
+                }
+                for r in info.get("reassignments", [])
+            ],
+            "leader_changes": list(info.get("leader_changes", [])),
+            "slots": {
+                n: [[t, fleet_slot(k)] for t, k in steps]
+                for n, steps in info.get("slots", {}).items()
+            },
+        }
+
+
+def merged_records(
+    views: list[PlatoonView], names: list[str], rows_of: list[np.ndarray]
+) -> dict[str, Any]:
+    """The run's ``reassignments``, ``leader_changes`` and ``slots`` of all platoons.
+
+    A vehicle of a platoon without reconfiguration holds its own slot throughout.
+    """
+    out: dict[str, Any] = {"reassignments": [], "leader_changes": [], "slots": {}}
+    for view in views:
+        rec = view.records()
+        out["reassignments"] += rec["reassignments"]
+        out["leader_changes"] += rec["leader_changes"]
+        out["slots"].update(rec["slots"])
+    out["reassignments"].sort(key=lambda r: r["t"])
+    out["leader_changes"].sort(key=lambda r: r["t"])
+    for rows in rows_of:
+        for i in rows:
+            out["slots"].setdefault(names[int(i)], [[0.0, int(i)]])
+    out["slots"] = {n: out["slots"][n] for n in names}
+    return out
