@@ -11,7 +11,8 @@ the sensing, filter and detector values, the metrics settings. A fleet above
 :data:`~sandbox.geometry.neighbours.BRUTE_FORCE_MAX` vehicles is a structure of its
 own (its neighbours come from a Verlet list). Range sensors are cast world by world
 in the one loop, each world in its own physics, and several platoons
-(``platoons:``) are planned world by world, each world's platoons its own.
+(``platoons:``) are planned world by world, each world's platoons its own (their
+references free).
 """
 
 from __future__ import annotations
@@ -48,22 +49,32 @@ FREE_FIELDS = frozenset(
 )
 
 
-def structure_key(sc: Scenario) -> str:
-    """What the scenarios of one loop share (see the module docstring), as a string."""
+def structure_key(sc: Scenario, reference: bool = True) -> str:
+    """What the scenarios of one loop share (see the module docstring), as a string.
+
+    ``reference=False`` leaves the reference out (a platoon's: each world evaluates
+    its own platoons' references).
+    """
     vs = sc.vehicles
     n = len(vs)
     if n > BRUTE_FORCE_MAX:
         return f"large fleet {id(sc)}"
     rec = sc.recovery
     sensing = sc.sensing
+    if sc.platoons:  # the platoons' references are each world's own
+        reference = False
     parts = [
         (f.name, getattr(sc, f.name))
         for f in dataclasses.fields(sc)
         if f.name not in FREE_FIELDS | {"platoons"}
+        and (reference or f.name != "reference")
     ]
     # Each platoon's structure, as a scenario's (its starts and seed free).
     parts.append(
-        tuple((g.name, tuple(g.rows), structure_key(g.scenario)) for g in sc.platoons)
+        tuple(
+            (g.name, tuple(g.rows), structure_key(g.scenario, reference=False))
+            for g in sc.platoons
+        )
     )
     parts += [
         n,
