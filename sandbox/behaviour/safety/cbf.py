@@ -154,6 +154,7 @@ from sandbox.behaviour.safety.braking import (
     braking_rows,
     obstacle_normals,
 )
+from sandbox.behaviour.safety.priority import PRIORITY, holding
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
 from sandbox.model.barriers import MIN_DIST, MIN_SPEED, sensing_margin
@@ -239,6 +240,7 @@ PARAMS = {
         minimum=0.0,
         maximum=1.5708,
     ),
+    "priority": PRIORITY,
     "range": Param(
         "length",
         None,
@@ -337,6 +339,7 @@ class CBFState:
         self.max_rows = int(p["max_constraints"])
         # at most a right angle (1.5708 is pi / 2 as written)
         self.pass_right = min(float(p.get("pass_right") or 0.0), np.pi / 2)
+        self.priority = p.get("priority") or "none"  # the rule's ordering (priority.py)
         v1_max = _per_vehicle(ctx.v1_max, n)
         v2_max = _per_vehicle(ctx.v2_max, n)
         self.v1_max = np.where(np.isfinite(v1_max), v1_max, UNLIMITED_SPEED)
@@ -573,13 +576,17 @@ def _pass_right(
     mat: np.ndarray,
     off: np.ndarray,
     soft: np.ndarray,
+    hold: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Filter again, toward the nominal velocities turned right where stalled.
 
     The barriers and bounds are the same (``mat``, ``off``, ``soft``), so is safety;
-    only the point the nearest safe velocity is sought to moves.
+    only the point the nearest safe velocity is sought to moves. Vehicles that
+    ``hold`` (their priority outranks every near vehicle's) are not turned.
     """
     turn = stall_turn(z0, z, state.pass_right)
+    if hold is not None:
+        turn[hold] = 0.0
     rows = np.flatnonzero(turn > 0)
     if len(rows) == 0:
         return z, slack
@@ -638,6 +645,7 @@ def filter_commands(
     reach = reach * (1.0 + 1e-9) + 1e-9 if prune else None
     fallback = np.zeros(n, dtype=bool)
     by_vehicle = np.full(n, np.inf) if ctx.worlds > 1 else None
+    hold = None if state.priority == "none" else holding(state, ctx, filtered)
     if state.braking:
         veh, a_w, b, h = braking_rows(state, ctx, filtered)
         least = float(h.min()) if len(h) else np.inf
@@ -692,7 +700,8 @@ def filter_commands(
         soft[:, 4:] = True
         zg, sg = solve(z0[group], mat, off, soft)
         if state.pass_right > 0 and not state.speed_only:
-            zg, sg = _pass_right(state, z0[group], zg, sg, mat, off, soft)
+            held = None if hold is None else hold[group]
+            zg, sg = _pass_right(state, z0[group], zg, sg, mat, off, soft, held)
         z[group], slack[group] = zg, sg
         if state.braking:  # no command keeps every condition: brake
             fallback[group[sg > TOLERANCE]] = True
