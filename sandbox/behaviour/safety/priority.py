@@ -23,10 +23,11 @@ Orders (``priority``):
   other counting as a tie, broken by ``index``. A symmetric standoff is a tie, so it
   is decided by the index, never by rounding.
 
-"Near" is a pair of look-ahead points closer than :data:`NEAR` ``D`` (``D`` of the
-pair's barrier): the neighbours that can cut a vehicle's speed at a stall. Vehicles
-believed failed or driven open loop do not yield to anyone: every filtered vehicle
-near one yields to it. A vehicle stalled by obstacles alone yields (turns) as before.
+"Near" is within the filter's ``range``: the neighbours whose barriers can bind, and
+so cut a vehicle's speed (at speed the cut starts metres before the barrier's ``D``).
+Vehicles believed failed or driven open loop do not yield to anyone: every filtered
+vehicle near one yields to it. A vehicle stalled by obstacles alone yields (turns) as
+before.
 
 Ranks are compared within a pair only, and pairs never cross worlds; the index is the
 row within its world, so a batched call of K worlds gives each world what it gets
@@ -48,8 +49,6 @@ if TYPE_CHECKING:
 #: Slot distances closer than this are a tie (decided by the index) [m]: far above
 #: the rounding of symmetric states (1e-15 m), below a vehicle's length.
 SLOT_TIE = 0.01
-#: Near vehicles: look-ahead points closer than NEAR times the pair's D [1].
-NEAR = 2.0
 
 PRIORITY = Param(
     "choice",
@@ -120,18 +119,12 @@ def holding(state: CBFState, ctx: FilterContext, filtered: np.ndarray) -> np.nda
     theta = ctx.theta if ctx.seen is None else ctx.seen[:, 2]
     centre = ctx.pos if ctx.seen is None else ctx.seen[:, :2]
     p = centre + look * np.stack((np.cos(theta), np.sin(theta)), -1)
-    # the vehicle's own pose for itself, as the barriers use
-    own = ctx.pos + look * np.stack((np.cos(ctx.theta), np.sin(ctx.theta)), -1)
     hold = np.zeros(n, dtype=bool)
-    i, j, _ = state.neighbours.near(p)
+    i, j, _ = state.neighbours.near(p)  # within range, as the barriers' pairs
     if not len(i):
         return hold
     me, other = np.concatenate((i, j)), np.concatenate((j, i))
-    rel = own[me] - p[other]
-    dist = np.hypot(rel[:, 0], rel[:, 1])
-    d = ctx.diameter
-    big_d = 0.5 * (d[me] + d[other]) + 2.0 * look + state.margin + state.sensed
-    keep = np.flatnonzero(filtered[me] & (dist < NEAR * big_d))
+    keep = np.flatnonzero(filtered[me])
     me, other = me[keep], other[keep]
     per_world = n // max(ctx.worlds, 1)
     index = np.arange(n) % per_world
