@@ -61,6 +61,9 @@ right angle is the least turn that frees every ring. The same rule for every veh
 deterministic, breaks a symmetric stall the same way for all, like the rule of the
 road (Grover et al.'s right-hand rotation of the nominal command at a CBF deadlock;
 Wang, Ames and Egerstedt's perturbation when the filtered velocity collapses).
+A stall symmetric under the half turn (a door passed both ways) is broken only by
+rounding so; ``priority`` (:mod:`sandbox.behaviour.safety.priority`) orders the
+vehicles, and a stalled vehicle outranking every one in range holds its course.
 
 Only vehicles driven by the controller are filtered (not the open-loop ones, not those
 believed failed); the filter acts before the step API's command overrides and the
