@@ -151,6 +151,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sandbox.behaviour.safety.accounting import account
 from sandbox.behaviour.safety.braking import (
     braking_fallback,
     braking_range,
@@ -758,7 +759,7 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     v1, v2, step = filter_commands(state, ctx)
     ctx.memory["last"] = step
     if ctx.worlds == 1:
-        _account(ctx.stats, ctx.t, state.braking, step, slice(None), step.min_barrier)
+        account(ctx.stats, ctx.t, state.braking, step, slice(None), step.min_barrier)
         return v1, v2
     n = len(ctx.pos) // ctx.worlds
     for w, stats in enumerate(ctx.world_stats):  # each world's own counters
@@ -766,29 +767,5 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
         least = (
             np.inf if step.by_vehicle is None else float(step.by_vehicle[rows].min())
         )
-        _account(stats, ctx.t, state.braking, step, rows, least)
+        account(stats, ctx.t, state.braking, step, rows, least)
     return v1, v2
-
-
-def _account(
-    stats: dict, t: float, braking: bool, step: FilterStep, rows: slice, least: float
-) -> None:
-    """Add one step of the filter's rows ``rows`` to a world's counters ``stats``."""
-    active, slack = step.active[rows], step.slack[rows]
-    stats["active_steps"] = stats.get("active_steps", 0) + int(active.sum())
-    bad = slack > TOLERANCE
-    stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + int(bad.sum())
-    worst = float(slack.max()) if len(slack) else 0.0
-    stats["max_slack"] = max(stats.get("max_slack", 0.0), worst)
-    if np.isfinite(least):
-        known = stats.get("min_barrier")
-        stats["min_barrier"] = least if known is None else min(known, least)
-    if braking:
-        braking_steps = int(step.fallback[rows].sum())
-        stats["fallback_steps"] = stats.get("fallback_steps", 0) + braking_steps
-    if "unsafe_start" not in stats:  # the first step: reported, never silently
-        stats["unsafe_start"] = {
-            "t": float(t),
-            "min_barrier": least if np.isfinite(least) else None,
-            "unsafe": bool(least < -TOLERANCE),
-        }
