@@ -17,7 +17,7 @@ import pytest
 
 from sandbox import load_scenario
 from sandbox.behaviour.safety.cbf import PARAMS, CBFState
-from sandbox.behaviour.safety.priority import SLOT_TIE, holding, outranks
+from sandbox.behaviour.safety.priority import SLOT_TIE, holding, holds, outranks
 from sandbox.cli import main
 from sandbox.loop.simulation import Simulation
 from sandbox.model.obstacle_field import ObstacleField
@@ -91,11 +91,11 @@ def test_the_vehicle_outranking_its_near_ones_holds() -> None:
     slot = [[1.0, 0.0], [3.0, 0.0], [7.0, 0.0]]
     for kind, holder in (("index", 0), ("slot_distance", 2)):
         ctx = _ctx(pos, slot, kind)
-        hold = holding(CBFState(ctx), ctx, np.ones(3, bool))
+        hold, _ = holding(CBFState(ctx), ctx, np.ones(3, bool))
         assert np.flatnonzero(hold).tolist() == [holder]
     # A failed vehicle does not yield: the one beside it does not hold.
     ctx = _ctx(pos, slot, "index", failed=[False, True, False])
-    hold = holding(CBFState(ctx), ctx, np.array([True, False, True]))
+    hold, _ = holding(CBFState(ctx), ctx, np.array([True, False, True]))
     assert not hold.any()
 
 
@@ -104,7 +104,7 @@ def test_the_index_is_counted_within_each_world() -> None:
     pos = [[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [1.0, 0.0]]
     slot = [[1.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 0.0]]
     ctx = _ctx(pos, slot, "index", worlds=2)
-    hold = holding(CBFState(ctx), ctx, np.ones(4, bool))
+    hold, _ = holding(CBFState(ctx), ctx, np.ones(4, bool))
     assert hold.tolist() == [True, False, True, False]
 
 
@@ -200,3 +200,13 @@ def test_a_bad_priority_is_one_line_with_file_and_line(tmp_path, capsys) -> None
     line = len(text.splitlines())
     assert f"door.yaml:{line}" in err[0] and "safety.priority" in err[0]
     assert "expected one of: none, slot_distance, index" in err[0]
+
+
+def test_a_holder_pressed_on_an_obstacle_turns() -> None:
+    # Two holders, each with a vehicle condition (row 0) and an obstacle's (row 1):
+    # the first's filtered z lies on the obstacle's row, the second's does not.
+    mat = np.array([[[1.0, 0.0], [0.0, 1.0]], [[1.0, 0.0], [0.0, 1.0]]])
+    off = np.array([[0.0, 0.0], [0.0, 0.5]])
+    z = np.zeros((2, 2))
+    wall = np.array([[False, True], [False, True]])
+    assert holds(np.array([True, True]), wall, mat, off, z).tolist() == [False, True]

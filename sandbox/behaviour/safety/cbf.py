@@ -158,7 +158,7 @@ from sandbox.behaviour.safety.braking import (
     braking_rows,
     obstacle_normals,
 )
-from sandbox.behaviour.safety.priority import PRIORITY, holding
+from sandbox.behaviour.safety.priority import PRIORITY, holding, holds
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
 from sandbox.model.barriers import MIN_DIST, MIN_SPEED, sensing_margin
@@ -580,17 +580,18 @@ def _pass_right(
     mat: np.ndarray,
     off: np.ndarray,
     soft: np.ndarray,
-    hold: np.ndarray | None = None,
+    hold: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Filter again, toward the nominal velocities turned right where stalled.
 
     The barriers and bounds are the same (``mat``, ``off``, ``soft``), so is safety;
-    only the point the nearest safe velocity is sought to moves. Vehicles that
-    ``hold`` (their priority outranks every near vehicle's) are not turned.
+    only the point the nearest safe velocity is sought to moves. ``hold``: the
+    vehicles whose priority outranks every near vehicle's, and which rows are of
+    obstacles; those not pressed on an obstacle's condition are not turned.
     """
     turn = stall_turn(z0, z, state.pass_right)
     if hold is not None:
-        turn[hold] = 0.0
+        turn[holds(hold[0], hold[1], mat, off, z)] = 0.0
     rows = np.flatnonzero(turn > 0)
     if len(rows) == 0:
         return z, slack
@@ -649,7 +650,9 @@ def filter_commands(
     reach = reach * (1.0 + 1e-9) + 1e-9 if prune else None
     fallback = np.zeros(n, dtype=bool)
     by_vehicle = np.full(n, np.inf) if ctx.worlds > 1 else None
-    hold = None if state.priority == "none" else holding(state, ctx, filtered)
+    hold = walls = None  # the priority's holders, and their obstacles' row count
+    if state.priority != "none":
+        hold, walls = holding(state, ctx, filtered)
     if state.braking:
         veh, a_w, b, h = braking_rows(state, ctx, filtered)
         least = float(h.min()) if len(h) else np.inf
@@ -661,6 +664,7 @@ def filter_commands(
             found["by_vehicle"] = by_vehicle
         veh, a_w, b = barrier_rows(state, ctx, filtered, reach, found)
         least = found.get("min_barrier", np.inf)
+    wall = np.arange(len(veh)) >= len(veh) - (walls or 0)  # rows of obstacles last
     # In z = (v1, l v2): w = R(x3) z, so a . w = (R^T a) . z and |w - w0| = |z - z0|.
     c, s = np.cos(ctx.theta[veh]), np.sin(ctx.theta[veh])
     a = np.stack((c * a_w[:, 0] + s * a_w[:, 1], -s * a_w[:, 0] + c * a_w[:, 1]), -1)
@@ -669,15 +673,15 @@ def filter_commands(
         a[:, 1] * lo2[veh], a[:, 1] * hi2[veh]
     )
     keep = np.flatnonzero(reach > b - TOLERANCE)
-    veh, a, b = veh[keep], a[keep], b[keep]
+    veh, a, b, wall = veh[keep], a[keep], b[keep], wall[keep]
     # At most max_rows per vehicle, the most restrictive (smallest b) first.
     order = np.lexsort((b, veh))
-    veh, a, b = veh[order], a[order], b[order]
+    veh, a, b, wall = veh[order], a[order], b[order], wall[order]
     counts = np.bincount(veh, minlength=n)
     start = np.concatenate(([0], np.cumsum(counts)[:-1]))
     rank = np.arange(len(veh)) - start[veh]
     keep = np.flatnonzero(rank < state.max_rows)
-    veh, a, b, rank = veh[keep], a[keep], b[keep], rank[keep]
+    veh, a, b, rank, wall = veh[keep], a[keep], b[keep], rank[keep], wall[keep]
     counts = np.minimum(counts, state.max_rows)
 
     z = z0.copy()
@@ -704,7 +708,9 @@ def filter_commands(
         soft[:, 4:] = True
         zg, sg = solve(z0[group], mat, off, soft)
         if state.pass_right > 0 and not state.speed_only:
-            held = None if hold is None else hold[group]
+            held = None if hold is None else (hold[group], np.zeros((k, 4 + m), bool))
+            if held is not None:
+                held[1][slot[veh[mine]], 4 + rank[mine]] = wall[mine]
             zg, sg = _pass_right(state, z0[group], zg, sg, mat, off, soft, held)
         z[group], slack[group] = zg, sg
         if state.braking:  # no command keeps every condition: brake

@@ -40,6 +40,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from sandbox.behaviour.safety.braking import obstacle_normals
+from sandbox.behaviour.safety.qp import TOLERANCE
 from sandbox.plugins.registration import Param
 
 if TYPE_CHECKING:
@@ -97,11 +99,14 @@ def outranks(
     return np.where(np.abs(gap) <= SLOT_TIE, first, gap > 0)
 
 
-def holding(state: CBFState, ctx: FilterContext, filtered: np.ndarray) -> np.ndarray:
-    """The vehicles that hold their course at a stall (not turned by the rule).
+def holding(
+    state: CBFState, ctx: FilterContext, filtered: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """The vehicles that may hold their course at a stall, and the obstacles' rows.
 
-    A filtered vehicle holds when it has a near filtered vehicle and outranks every
-    near vehicle (:func:`outranks`; failed and open-loop ones outrank it).
+    A filtered vehicle may hold when it has a near filtered vehicle and outranks every
+    near vehicle (:func:`outranks`; failed and open-loop ones outrank it); it holds
+    unless an obstacle's condition presses on it (:func:`holds`).
 
     Parameters
     ----------
@@ -113,16 +118,21 @@ def holding(state: CBFState, ctx: FilterContext, filtered: np.ndarray) -> np.nda
 
     Returns
     -------
-    ndarray, shape (n,) bool
+    hold : ndarray, shape (n,) bool
+    walls : int
+        How many conditions of the step are toward obstacles (they come last).
     """
     n, look = len(ctx.pos), state.look
     theta = ctx.theta if ctx.seen is None else ctx.seen[:, 2]
     centre = ctx.pos if ctx.seen is None else ctx.seen[:, :2]
     p = centre + look * np.stack((np.cos(theta), np.sin(theta)), -1)
     hold = np.zeros(n, dtype=bool)
+    own = ctx.pos + look * np.stack((np.cos(ctx.theta), np.sin(ctx.theta)), -1)
+    near = obstacle_normals(state, ctx, own, filtered)
+    walls = 0 if near is None else len(near[0])
     i, j, _ = state.neighbours.near(p)  # within range, as the barriers' pairs
     if not len(i):
-        return hold
+        return hold, walls
     me, other = np.concatenate((i, j)), np.concatenate((j, i))
     keep = np.flatnonzero(filtered[me])
     me, other = me[keep], other[keep]
@@ -139,4 +149,30 @@ def holding(state: CBFState, ctx: FilterContext, filtered: np.ndarray) -> np.nda
     loses = np.zeros(n, dtype=bool)
     loses[me[~wins]] = True
     hold = has_peer & ~loses
-    return hold
+    return hold, walls
+
+
+def holds(
+    hold: np.ndarray, wall: np.ndarray, mat: np.ndarray, off: np.ndarray, z: np.ndarray
+) -> np.ndarray:
+    """Which of a group's vehicles hold: ``hold`` and no obstacle's condition binding.
+
+    Parameters
+    ----------
+    hold : ndarray, shape (k,) bool
+        The vehicles that may hold (:func:`holding`).
+    wall : ndarray, shape (k, c) bool
+        Which of each vehicle's conditions ``mat z <= off`` are toward obstacles.
+    mat : ndarray, shape (k, c, 2)
+    off : ndarray, shape (k, c) [m/s]
+    z : ndarray, shape (k, 2) [m/s]
+        The filtered ``(v1, l v2)``.
+
+    Returns
+    -------
+    ndarray, shape (k,) bool
+        A vehicle held back by an obstacle (a post, a wall) turns as without an order:
+        holding there would wait for no one.
+    """
+    pressed = np.einsum("kcd,kd->kc", mat, z) >= off - TOLERANCE
+    return hold & ~np.any(wall & pressed, axis=1)
