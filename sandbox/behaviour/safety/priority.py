@@ -26,8 +26,9 @@ Orders (``priority``):
 "Near" is within the filter's ``range``: the neighbours whose barriers can bind, and
 so cut a vehicle's speed (at speed the cut starts metres before the barrier's ``D``).
 Vehicles believed failed or driven open loop do not yield to anyone: every filtered
-vehicle near one yields to it. A vehicle stalled by obstacles alone yields (turns) as
-before.
+vehicle near one yields to it. A vehicle stalled by obstacles alone turns as before,
+and so does a holder whose filtered velocity presses on an obstacle's condition
+(:func:`holds`): holding there would wait for no one.
 
 Ranks are compared within a pair only, and pairs never cross worlds; the index is the
 row within its world, so a batched call of K worlds gives each world what it gets
