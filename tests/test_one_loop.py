@@ -66,6 +66,19 @@ CASES = {
         ["duration=4", "sensing.position_noise=0.01"],
     ),
     "cbf_door": ("safety/door", ["duration=4"]),
+    "cbf_priority_slot_distance": (
+        "safety/door",
+        ["duration=6", "safety.filter=cbf", "safety.priority=slot_distance"],
+    ),
+    "cbf_priority_index_braking": (
+        "safety/door",
+        [
+            "duration=6",
+            "safety.filter=cbf",
+            "safety.barrier=braking",
+            "safety.priority=index",
+        ],
+    ),
     "cbf_eight_braking": (
         "safety/circle_swap_8",
         ["duration=3", "safety.barrier=braking"],

@@ -164,6 +164,11 @@ def _table(args: argparse.Namespace, root: Path) -> int:
             file=sys.stderr,
         )
         return EXIT_INVALID
+    if args.safety:  # the filter's figures instead, from the runs' files
+        from sandbox.study.safety_summary import safety_table
+
+        sys.stdout.write(safety_table(root, rows, by, args.format))
+        return EXIT_OK
     paired = paired_table(rows, by, paths, args.format)
     if args.paired:
         sys.stdout.write(paired or "")
@@ -309,6 +314,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="table: only the paired comparisons of the settings over the same seeds "
         "(exact McNemar test; a Markdown table also shows them below the rates)",
+    )
+    p.add_argument(
+        "--safety",
+        action="store_true",
+        help="table: the safety filter's figures instead (runs with relaxed steps, "
+        "with Wilson intervals; fallback steps; the largest slack), from the runs' "
+        "files",
     )
     add_plugin_option(p, trust=True)
     p.set_defaults(func=cmd_sweep)

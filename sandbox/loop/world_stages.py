@@ -208,6 +208,7 @@ class WorldStages:
                 sensing=None if s.broadcast is None else s.sensing,
                 memory=s.filter_memory,
                 stats=s.filter_stats,
+                slot=self.plan.slot[rows],
                 **context_fields(s.range_sensor),
             )
             try:
@@ -248,6 +249,7 @@ class WorldStages:
             memory=self._filter_memory,
             worlds=self.K,
             world_stats=[s.filter_stats for s in self.states],
+            slot=self.plan.slot,
             **context_fields(self.range_sensor),
         )
         out = self._filter(ctx)  # a PluginRunError ends every world (_guarded)

@@ -277,6 +277,8 @@ class FilterContext:
         after world).
     world_stats : list of dict or None
         With ``worlds > 1``, each world's counters (``stats`` is then unused).
+    slot : ndarray (n, 2) or None
+        Each vehicle's formation slot [m] (NaN where undefined); None: unknown.
     """
 
     t: float
@@ -305,6 +307,7 @@ class FilterContext:
     platoon: np.ndarray | None = None
     worlds: int = 1
     world_stats: list[dict[str, Any]] | None = None
+    slot: np.ndarray | None = None
 
 
 @dataclass

@@ -61,6 +61,9 @@ right angle is the least turn that frees every ring. The same rule for every veh
 deterministic, breaks a symmetric stall the same way for all, like the rule of the
 road (Grover et al.'s right-hand rotation of the nominal command at a CBF deadlock;
 Wang, Ames and Egerstedt's perturbation when the filtered velocity collapses).
+A stall symmetric under the half turn (a door passed both ways) is broken only by
+rounding so; ``priority`` (:mod:`sandbox.behaviour.safety.priority`) orders the
+vehicles, and a stalled vehicle outranking every one in range holds its course.
 
 Only vehicles driven by the controller are filtered (not the open-loop ones, not those
 believed failed); the filter acts before the step API's command overrides and the
@@ -148,12 +151,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sandbox.behaviour.safety.accounting import account
 from sandbox.behaviour.safety.braking import (
     braking_fallback,
     braking_range,
     braking_rows,
     obstacle_normals,
 )
+from sandbox.behaviour.safety.priority import PRIORITY, holding, holds
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
 from sandbox.model.barriers import MIN_DIST, MIN_SPEED, sensing_margin
@@ -239,6 +244,7 @@ PARAMS = {
         minimum=0.0,
         maximum=1.5708,
     ),
+    "priority": PRIORITY,
     "range": Param(
         "length",
         None,
@@ -337,6 +343,7 @@ class CBFState:
         self.max_rows = int(p["max_constraints"])
         # at most a right angle (1.5708 is pi / 2 as written)
         self.pass_right = min(float(p.get("pass_right") or 0.0), np.pi / 2)
+        self.priority = p.get("priority") or "none"  # the rule's ordering (priority.py)
         v1_max = _per_vehicle(ctx.v1_max, n)
         v2_max = _per_vehicle(ctx.v2_max, n)
         self.v1_max = np.where(np.isfinite(v1_max), v1_max, UNLIMITED_SPEED)
@@ -573,13 +580,18 @@ def _pass_right(
     mat: np.ndarray,
     off: np.ndarray,
     soft: np.ndarray,
+    hold: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Filter again, toward the nominal velocities turned right where stalled.
 
     The barriers and bounds are the same (``mat``, ``off``, ``soft``), so is safety;
-    only the point the nearest safe velocity is sought to moves.
+    only the point the nearest safe velocity is sought to moves. ``hold``: the
+    vehicles whose priority outranks every near vehicle's, and which rows are of
+    obstacles; those not pressed on an obstacle's condition are not turned.
     """
     turn = stall_turn(z0, z, state.pass_right)
+    if hold is not None:
+        turn[holds(hold[0], hold[1], mat, off, z)] = 0.0
     rows = np.flatnonzero(turn > 0)
     if len(rows) == 0:
         return z, slack
@@ -638,6 +650,9 @@ def filter_commands(
     reach = reach * (1.0 + 1e-9) + 1e-9 if prune else None
     fallback = np.zeros(n, dtype=bool)
     by_vehicle = np.full(n, np.inf) if ctx.worlds > 1 else None
+    hold = walls = None  # the priority's holders, and their obstacles' row count
+    if state.priority != "none":
+        hold, walls = holding(state, ctx, filtered)
     if state.braking:
         veh, a_w, b, h = braking_rows(state, ctx, filtered)
         least = float(h.min()) if len(h) else np.inf
@@ -649,6 +664,7 @@ def filter_commands(
             found["by_vehicle"] = by_vehicle
         veh, a_w, b = barrier_rows(state, ctx, filtered, reach, found)
         least = found.get("min_barrier", np.inf)
+    wall = np.arange(len(veh)) >= len(veh) - (walls or 0)  # rows of obstacles last
     # In z = (v1, l v2): w = R(x3) z, so a . w = (R^T a) . z and |w - w0| = |z - z0|.
     c, s = np.cos(ctx.theta[veh]), np.sin(ctx.theta[veh])
     a = np.stack((c * a_w[:, 0] + s * a_w[:, 1], -s * a_w[:, 0] + c * a_w[:, 1]), -1)
@@ -657,15 +673,15 @@ def filter_commands(
         a[:, 1] * lo2[veh], a[:, 1] * hi2[veh]
     )
     keep = np.flatnonzero(reach > b - TOLERANCE)
-    veh, a, b = veh[keep], a[keep], b[keep]
+    veh, a, b, wall = veh[keep], a[keep], b[keep], wall[keep]
     # At most max_rows per vehicle, the most restrictive (smallest b) first.
     order = np.lexsort((b, veh))
-    veh, a, b = veh[order], a[order], b[order]
+    veh, a, b, wall = veh[order], a[order], b[order], wall[order]
     counts = np.bincount(veh, minlength=n)
     start = np.concatenate(([0], np.cumsum(counts)[:-1]))
     rank = np.arange(len(veh)) - start[veh]
     keep = np.flatnonzero(rank < state.max_rows)
-    veh, a, b, rank = veh[keep], a[keep], b[keep], rank[keep]
+    veh, a, b, rank, wall = veh[keep], a[keep], b[keep], rank[keep], wall[keep]
     counts = np.minimum(counts, state.max_rows)
 
     z = z0.copy()
@@ -692,7 +708,10 @@ def filter_commands(
         soft[:, 4:] = True
         zg, sg = solve(z0[group], mat, off, soft)
         if state.pass_right > 0 and not state.speed_only:
-            zg, sg = _pass_right(state, z0[group], zg, sg, mat, off, soft)
+            held = None if hold is None else (hold[group], np.zeros((k, 4 + m), bool))
+            if held is not None:
+                held[1][slot[veh[mine]], 4 + rank[mine]] = wall[mine]
+            zg, sg = _pass_right(state, z0[group], zg, sg, mat, off, soft, held)
         z[group], slack[group] = zg, sg
         if state.braking:  # no command keeps every condition: brake
             fallback[group[sg > TOLERANCE]] = True
@@ -746,7 +765,7 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     v1, v2, step = filter_commands(state, ctx)
     ctx.memory["last"] = step
     if ctx.worlds == 1:
-        _account(ctx.stats, ctx.t, state.braking, step, slice(None), step.min_barrier)
+        account(ctx.stats, ctx.t, state.braking, step, slice(None), step.min_barrier)
         return v1, v2
     n = len(ctx.pos) // ctx.worlds
     for w, stats in enumerate(ctx.world_stats):  # each world's own counters
@@ -754,29 +773,5 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
         least = (
             np.inf if step.by_vehicle is None else float(step.by_vehicle[rows].min())
         )
-        _account(stats, ctx.t, state.braking, step, rows, least)
+        account(stats, ctx.t, state.braking, step, rows, least)
     return v1, v2
-
-
-def _account(
-    stats: dict, t: float, braking: bool, step: FilterStep, rows: slice, least: float
-) -> None:
-    """Add one step of the filter's rows ``rows`` to a world's counters ``stats``."""
-    active, slack = step.active[rows], step.slack[rows]
-    stats["active_steps"] = stats.get("active_steps", 0) + int(active.sum())
-    bad = slack > TOLERANCE
-    stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + int(bad.sum())
-    worst = float(slack.max()) if len(slack) else 0.0
-    stats["max_slack"] = max(stats.get("max_slack", 0.0), worst)
-    if np.isfinite(least):
-        known = stats.get("min_barrier")
-        stats["min_barrier"] = least if known is None else min(known, least)
-    if braking:
-        braking_steps = int(step.fallback[rows].sum())
-        stats["fallback_steps"] = stats.get("fallback_steps", 0) + braking_steps
-    if "unsafe_start" not in stats:  # the first step: reported, never silently
-        stats["unsafe_start"] = {
-            "t": float(t),
-            "min_barrier": least if np.isfinite(least) else None,
-            "unsafe": bool(least < -TOLERANCE),
-        }
