@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from sandbox.behaviour.reconfigure import Reconfiguration
+from sandbox.loop.worlds import law_context_of
 from sandbox.plugins.registration import LawContext
 
 
@@ -93,27 +94,7 @@ class PlatoonView:
         memory: dict | None = None,
     ) -> LawContext:
         """What the platoon's law sees at ``t`` (as ``Simulation.law_context``)."""
-        fleet, lead, seen = self.fleet, self.leader, self.seen
-        if lead < 0:
-            lpos = ltheta = None
-        elif seen is None:
-            lpos, ltheta = fleet.pos[lead], float(fleet.theta[lead])
-        else:
-            lpos, ltheta = seen[lead, :2], float(seen[lead, 2])
-        return LawContext(
-            t=t,
-            dt=self.h,
-            pos=fleet.pos,
-            theta=fleet.theta,
-            vel=fleet.vel,
-            offset=fleet.offset if offset is None else offset,
-            leader=lead,
-            leader_pos=lpos,
-            leader_theta=ltheta,
-            reference=ref,
-            params=self.law_params,
-            memory=self.law_memory if memory is None else memory,
-        )
+        return law_context_of(self, t, ref, offset, memory)
 
     def react(self, t: float, known: np.ndarray) -> None:
         """React to the fleet's believed failures ``known`` (n,) at ``t``; sync."""

@@ -132,28 +132,46 @@ class WorldState:
         ``offset`` and ``memory`` default to the fleet's offsets and the law's memory;
         a reconfiguration passes others to try or re-seed the law.
         """
-        fleet, lead, seen = self.fleet, self.leader, self.seen
-        if lead < 0:
-            leader_pos = leader_theta = None
-        elif seen is None:
-            leader_pos, leader_theta = fleet.pos[lead], float(fleet.theta[lead])
-        else:
-            leader_pos, leader_theta = seen[lead, :2], float(seen[lead, 2])
-        return LawContext(
-            t=t,
-            dt=self.h,
-            pos=fleet.pos,
-            theta=fleet.theta,
-            vel=fleet.vel,
-            offset=fleet.offset if offset is None else offset,
-            leader=lead,
-            leader_pos=leader_pos,
-            leader_theta=leader_theta,
-            reference=ref,
-            params=self.law_params,
-            memory=self.law_memory if memory is None else memory,
-            **context_fields(self.range_sensor),
-        )
+        extra = context_fields(self.range_sensor)
+        return law_context_of(self, t, ref, offset, memory, **extra)
+
+
+def law_context_of(
+    owner: Any,
+    t: float,
+    ref: tuple[np.ndarray, ...] | None,
+    offset: np.ndarray | None = None,
+    memory: dict | None = None,
+    **extra: Any,
+) -> LawContext:
+    """The law context of ``owner``'s rows (a world, or one platoon of one).
+
+    ``owner`` has ``fleet``, ``leader``, ``seen``, ``h``, ``law_params`` and
+    ``law_memory``; the followers read the leader's broadcast pose (the truth without
+    sensing); ``extra`` are further fields of the context.
+    """
+    fleet, lead, seen = owner.fleet, owner.leader, owner.seen
+    if lead < 0:
+        leader_pos = leader_theta = None
+    elif seen is None:
+        leader_pos, leader_theta = fleet.pos[lead], float(fleet.theta[lead])
+    else:
+        leader_pos, leader_theta = seen[lead, :2], float(seen[lead, 2])
+    return LawContext(
+        t=t,
+        dt=owner.h,
+        pos=fleet.pos,
+        theta=fleet.theta,
+        vel=fleet.vel,
+        offset=fleet.offset if offset is None else offset,
+        leader=lead,
+        leader_pos=leader_pos,
+        leader_theta=leader_theta,
+        reference=ref,
+        params=owner.law_params,
+        memory=owner.law_memory if memory is None else memory,
+        **extra,
+    )
 
 
 class StackedFailures:
