@@ -29,6 +29,52 @@ BRAKING_PERIODS = 3.0
 BRAKING_SHARE = 0.75
 
 
+def look_ahead_points(ctx: FilterContext, look: float) -> tuple[np.ndarray, ...]:
+    """Headings, look-ahead points, and the centres and points as broadcast.
+
+    ``p = x + l (cos x3, sin x3)`` of every vehicle; without sensing the broadcast
+    ones are the true ones.
+    """
+    pos, theta = ctx.pos, ctx.theta
+    heading = np.stack((np.cos(theta), np.sin(theta)), -1)
+    p = pos + look * heading
+    if ctx.seen is None:
+        return heading, p, pos, p
+    centre_seen = ctx.seen[:, :2]
+    seen_heading = np.stack((np.cos(ctx.seen[:, 2]), np.sin(ctx.seen[:, 2])), -1)
+    return heading, p, centre_seen, centre_seen + look * seen_heading
+
+
+def pair_geometry(
+    i: np.ndarray,
+    j: np.ndarray,
+    filtered: np.ndarray,
+    p: np.ndarray,
+    p_seen: np.ndarray,
+    centre_seen: np.ndarray,
+    d: np.ndarray,
+    look: float,
+    margin: float,
+) -> tuple[np.ndarray, ...]:
+    """Both directions of the pairs ``(i, j)``, from each filtered vehicle ``me``.
+
+    Toward a cooperating ``other`` (filtered too) the gap is between look-ahead
+    points and ``D = (d_me + d_other) / 2 + 2 l + margin``; toward another, against
+    its centre with ``l`` once. Returns ``me, other, coop, rel, dist, D``, ``rel`` from
+    the other's point (or centre) to ``p[me]``.
+    """
+    me = np.concatenate((i, j))
+    other = np.concatenate((j, i))
+    keep = np.flatnonzero(filtered[me])
+    me, other = me[keep], other[keep]
+    coop = filtered[other]
+    target = np.where(coop[:, None], p_seen[other], centre_seen[other])
+    rel = p[me] - target
+    dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
+    big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
+    return me, other, coop, rel, dist, big_d
+
+
 def braking_range(
     v1_max: np.ndarray,
     lateral: np.ndarray,
@@ -125,15 +171,8 @@ def braking_rows(
     """
     look, margin, dt = state.look, state.margin + state.sensed, ctx.dt
     lag = BRAKING_PERIODS * dt
-    pos, theta, d, accel = ctx.pos, ctx.theta, ctx.diameter, state.accel
-    heading = np.stack((np.cos(theta), np.sin(theta)), -1)
-    p = pos + look * heading
-    if ctx.seen is None:
-        centre_seen, p_seen = pos, p
-    else:
-        centre_seen = ctx.seen[:, :2]
-        seen_heading = np.stack((np.cos(ctx.seen[:, 2]), np.sin(ctx.seen[:, 2])), -1)
-        p_seen = centre_seen + look * seen_heading
+    pos, d, accel = ctx.pos, ctx.diameter, state.accel
+    heading, p, centre_seen, p_seen = look_ahead_points(ctx, look)
     if ctx.v1_prev is not None:
         w_hat = heading * ctx.v1_prev[:, None]
         w_hat += look * ctx.v2_prev[:, None] * heading[:, ::-1] * [-1.0, 1.0]
@@ -157,16 +196,10 @@ def braking_rows(
     out_v, out_a, out_b, out_h = [], [], [], []
     i, j, _ = state.neighbours.near(p_seen)
     if len(i):
-        me = np.concatenate((i, j))
-        other = np.concatenate((j, i))
-        keep = np.flatnonzero(filtered[me])
-        me, other = me[keep], other[keep]
-        coop = filtered[other]
-        target = np.where(coop[:, None], p_seen[other], centre_seen[other])
-        rel = p[me] - target
-        dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
+        me, other, coop, rel, dist, big_d = pair_geometry(
+            i, j, filtered, p, p_seen, centre_seen, d, look, margin
+        )
         unit = rel / dist[:, None]
-        big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
         # Braking along the line of centres: changing v1 by a_i dt within its
         # bounds changes the closing at a_i^n = |cos| of the heading to that line.
         a_me = along_line(-np.einsum("kd,kd->k", unit, heading[me]), room, me)

@@ -156,7 +156,9 @@ from sandbox.behaviour.safety.braking import (
     braking_fallback,
     braking_range,
     braking_rows,
+    look_ahead_points,
     obstacle_normals,
+    pair_geometry,
 )
 from sandbox.behaviour.safety.priority import PRIORITY, holding, holds
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
@@ -441,15 +443,8 @@ def barrier_rows(
         Offset.
     """
     gamma, look, margin = state.gamma, state.look, state.margin
-    pos, theta, d = ctx.pos, ctx.theta, ctx.diameter
-    heading = np.stack((np.cos(theta), np.sin(theta)), -1)
-    p = pos + look * heading
-    if ctx.seen is None:
-        centre_seen, p_seen = pos, p
-    else:
-        centre_seen = ctx.seen[:, :2]
-        seen_heading = np.stack((np.cos(ctx.seen[:, 2]), np.sin(ctx.seen[:, 2])), -1)
-        p_seen = centre_seen + look * seen_heading
+    pos, d = ctx.pos, ctx.diameter
+    heading, p, centre_seen, p_seen = look_ahead_points(ctx, look)
     cooperative = filtered
     if reach is None:
         reach = np.full(len(pos), np.inf)
@@ -495,15 +490,9 @@ def barrier_rows(
         i, j = i.take(keep), j.take(keep)
     if len(i):
         # Both directions of each pair: vehicle `me` toward `other`.
-        me = np.concatenate((i, j))
-        other = np.concatenate((j, i))
-        keep = np.flatnonzero(filtered[me])
-        me, other = me[keep], other[keep]
-        coop = cooperative[other]
-        target = np.where(coop[:, None], p_seen[other], centre_seen[other])
-        rel = p[me] - target
-        dist = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), MIN_DIST)
-        big_d = 0.5 * (d[me] + d[other]) + np.where(coop, 2.0 * look, look) + margin
+        me, other, coop, rel, dist, big_d = pair_geometry(
+            i, j, filtered, p, p_seen, centre_seen, d, look, margin
+        )
         h = dist * dist - big_d * big_d
         if len(h):
             least = min(least, float(h.min()))
