@@ -216,6 +216,67 @@ def test_a_merge_and_a_split_fire_and_are_recorded(tmp_path):
     assert sim.platoons.of_vehicles() == ("east", "third", "third", "east")
 
 
+MERGE_SPLIT = Path(__file__).parents[1] / "scenarios" / "traffic" / "merge_split.yaml"
+
+
+def _merge_split_reconfiguring(tmp_path: Path) -> Path:
+    """merge_split.yaml with platoon A closing its gaps and a1 stopping at 8 s."""
+    text = MERGE_SPLIT.read_text()
+    text = text.replace(
+        "  - name: A\n    color: blue\n",
+        "  - name: A\n    color: blue\n"
+        "    reconfigure: {assign: hungarian, close_gap: true}\n",
+    )
+    text = text[: text.index("expect:")] + (
+        "failures:\n  - {vehicle: a1, at: 8, kind: stop}\n"
+    )
+    path = tmp_path / "merge_reconfigure.yaml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.slow
+def test_events_and_a_platoons_reconfiguration_work_together(tmp_path):
+    # B merges into A at 3.8 s; a1 stops at 8 s and A, now five vehicles, closes up
+    # behind it; at 14 s a2 and b0 split off as C, A keeping a0, a1 and b1
+    run = Simulation(load_scenario(_merge_split_reconfiguring(tmp_path))).run()
+    m = compute_metrics(run)
+    assert m["collisions"]["total"] == 0
+    assert [e["t"] for e in m["platoon_events"]] == [3.8, 14.0]
+    moved = m["reassignments"][0]
+    assert moved["t"] == 8.01
+    assert moved["assignment"] == {"a0": 0, "a1": None, "a2": 1, "b0": 2, "b1": 3}
+    # the fleet-wide timeline: platoon and offset through the merge, the
+    # reassignment and the split (null: no slot)
+    timeline = m["formation_timeline"]
+    assert timeline["a1"] == [[0.0, "A", [-1.6, 0.0]], [8.01, "A", None]]
+    assert timeline["b0"] == [
+        [0.0, "B", [0.0, 0.0]],
+        [3.8, "A", [-4.8, 0.0]],
+        [8.01, "A", [-3.2, 0.0]],
+        [14.0, "C", [-1.6, 0.0]],
+    ]
+    assert timeline["a2"][-1] == [14.0, "C", [0.0, 0.0]]
+    names, platoon, offset = run.formation_at()
+    assert names == ["A", "B", "C"]
+    k = int(np.searchsorted(run.t, 10.0))
+    assert platoon[k].tolist() == [0, 0, 0, 0, 0]
+    assert np.isnan(offset[k, 1]).all()
+    assert offset[k, [2, 3, 4], 0].tolist() == [-1.6, -3.2, -4.8]
+    assert platoon[-1].tolist() == [0, 0, 2, 2, 0]
+    # each vehicle's slot, the same in the slot timeline
+    assert m["slots"]["a2"] == [[0.0, 2], [8.01, 1], [14.0, 2]]
+
+
+def test_formation_without_events_is_the_files(tmp_path):
+    run = Simulation(load_scenario(_write(tmp_path, TWO))).run()
+    assert "formation_timeline" not in compute_metrics(run)
+    names, platoon, offset = run.formation_at()
+    assert names == ["east", "north"]
+    assert platoon[-1].tolist() == [0, 0, 1, 1]
+    assert offset[-1].tolist() == [[0.0, 0.0], [-1.6, 0.0], [0.0, 0.0], [-1.6, 0.0]]
+
+
 BAD_EVENTS = [
     (
         "events:\n  - at: 1\n    merge: {into: west, from: north}\n",

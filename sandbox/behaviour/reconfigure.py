@@ -94,7 +94,13 @@ class Reconfiguration:
         self.close_gap = sc.reconfigure.close_gap
         self.on_leader_failure = sc.on_leader_failure
         self.formation = fleet.offset.copy()
-        self.slot_of = np.where(fleet.commanded, -1, np.arange(n))
+        # A slot is an offset: a vehicle without one (open loop, or left without a
+        # slot before a merge or split formed this platoon) holds none.
+        self.slot_of = np.where(
+            fleet.commanded | ~np.isfinite(self.formation).all(axis=1), -1, np.arange(n)
+        )
+        #: Which slots exist (a finite offset of a vehicle not driven open loop).
+        self.slot_of_start = self.slot_of >= 0
         lead = sim.leader
         #: The slot of the vehicle that tracks the reference (-1: none).
         self.leader_slot = lead if lead >= 0 and sim.tracks_reference[lead] else -1
@@ -227,7 +233,7 @@ class Reconfiguration:
         if sim.leader >= 0 and sim.tracks_reference[sim.leader]:
             movable[sim.leader] = False
         rows = np.flatnonzero(movable)
-        free = [j for j in range(n) if not fleet.commanded[j] and j != self.leader_slot]
+        free = [j for j in range(n) if self.slot_of_start[j] and j != self.leader_slot]
         if self.close_gap:
             cols = np.array(free[: len(rows)], dtype=np.intp)
         else:

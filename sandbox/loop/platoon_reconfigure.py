@@ -10,6 +10,12 @@ vehicles, on its own slots, and the changes are copied back to the platoon
 ``slots``) are merged into the run's, slots numbered in the fleet's vehicle order (slot
 ``k``: ``vehicles[k].offset``). A vehicle of another platoon is never given a slot of
 this one.
+
+With ``events:`` a platoon's configuration is formed anew at each merge or split that
+changes it: its view is then rebuilt on the new rows and offsets (the old one
+retired, its records kept), and slot ``k`` of that platoon is the offset vehicle ``k``
+held at the event (``vehicles[k].offset`` before any). Each vehicle's slot timeline
+runs on across the views, from the event's time in the new one.
 """
 
 from __future__ import annotations
@@ -56,11 +62,14 @@ class PlatoonView:
         The platoon (:class:`sandbox.loop.platoons._One`).
     scenario : Scenario
         The platoon's own scenario (its ``reconfigure`` and ``on_leader_failure``).
+    since : float [s]
+        When the platoon's configuration was formed (0, or a merge or split).
     """
 
-    def __init__(self, sim: Any, group: Any, scenario: Any) -> None:
+    def __init__(self, sim: Any, group: Any, scenario: Any, since: float = 0.0) -> None:
         rows = group.rows
         self._sim, self._group, self.rows = sim, group, rows
+        self.group, self.since = group, round(since, 9)
         self.scenario = scenario
         self.h = sim.h
         self.names = [sim.names[i] for i in rows]
@@ -113,7 +122,11 @@ class PlatoonView:
         sim._avoid_candidates[self.rows] = self._avoid_candidates
 
     def records(self) -> dict[str, Any]:
-        """The records of this platoon, slots numbered in the fleet's order."""
+        """The records of this platoon, slots numbered in the fleet's order.
+
+        A platoon's reconfiguration reacts before the period's plan, so a slot is
+        held from the period of the reaction (the record's ``t + dt`` less ``dt``).
+        """
         rows = self.rows
 
         def fleet_slot(k: int | None) -> int | None:
@@ -132,7 +145,10 @@ class PlatoonView:
             ],
             "leader_changes": list(info.get("leader_changes", [])),
             "slots": {
-                n: [[t, fleet_slot(k)] for t, k in steps]
+                n: [
+                    [max(round(t - self.h, 9), self.since), fleet_slot(k)]
+                    for t, k in steps
+                ]
                 for n, steps in info.get("slots", {}).items()
             },
         }
@@ -143,18 +159,28 @@ def merged_records(
 ) -> dict[str, Any]:
     """The run's ``reassignments``, ``leader_changes`` and ``slots`` of all platoons.
 
-    A vehicle of a platoon without reconfiguration holds its own slot throughout.
+    A vehicle of a platoon without reconfiguration holds its own slot throughout; the
+    views are in the order they were built (a vehicle's timeline runs on from a
+    retired view into the next, an entry kept only where its slot changes).
     """
     out: dict[str, Any] = {"reassignments": [], "leader_changes": [], "slots": {}}
     for view in views:
         rec = view.records()
         out["reassignments"] += rec["reassignments"]
         out["leader_changes"] += rec["leader_changes"]
-        out["slots"].update(rec["slots"])
+        for name, steps in rec["slots"].items():
+            timeline = out["slots"].setdefault(name, [])
+            for t, k in steps:
+                while timeline and timeline[-1][0] >= t:
+                    timeline.pop()  # superseded by a view formed at or before t
+                if not timeline or timeline[-1][1] != k:
+                    timeline.append([t, k])
     out["reassignments"].sort(key=lambda r: r["t"])
     out["leader_changes"].sort(key=lambda r: r["t"])
     for rows in rows_of:
         for i in rows:
-            out["slots"].setdefault(names[int(i)], [[0.0, int(i)]])
+            timeline = out["slots"].setdefault(names[int(i)], [[0.0, int(i)]])
+            if timeline[0][0] > 0:  # joined a reconfiguring platoon at an event
+                timeline.insert(0, [0.0, int(i)])
     out["slots"] = {n: out["slots"][n] for n in names}
     return out

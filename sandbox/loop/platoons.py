@@ -164,9 +164,15 @@ class Platoons:
         )
         self._filter_memory: list[dict] = [{} for _ in self._filters]
         self._filter_stats: list[dict] = [{} for _ in self._filters]
-        #: The platoons' own reconfigurations (:meth:`attach`), and the simulation.
+        #: The platoons' own reconfigurations (:meth:`attach`), those retired by a
+        #: merge or split, and the simulation.
         self.views: list[PlatoonView] = []
+        self._retired: list[PlatoonView] = []
         self._sim: Any = None
+        #: Each vehicle's platoon and offset over time (with ``events:``).
+        self.timeline: dict[str, list[list]] | None = None
+        #: Each platoon's own scenario by name (a split's: the one it leaves).
+        self._scenarios = {p.name: p.scenario for p in scenario.platoons}
 
     @classmethod
     def build(cls, sim: Any) -> Platoons | None:
@@ -182,7 +188,29 @@ class Platoons:
         made.vehicle_names = list(sim.names)
         if sc.events:
             sim.info["platoon_events"] = made.fired
+            made.timeline = {name: [] for name in made.vehicle_names}
+            made._note_formation(0.0)
+            sim.info["formation_timeline"] = made.timeline
         return made
+
+    def _note_formation(self, t: float) -> None:
+        """Append to :attr:`timeline` each vehicle whose platoon or offset changed.
+
+        The timeline (with ``events:`` only; ``info["formation_timeline"]``) is the
+        fleet's slots through merges, splits and reassignments alike: each vehicle's
+        ``[[t, platoon, offset], ...]``, held from ``t`` [s] (the first period that
+        plans with it), the offset [m] in its platoon's formation (None: no slot).
+        """
+        for g in self.groups:
+            for i, o in zip(g.rows, g.offset, strict=True):
+                held = (
+                    [round(float(o[0]), 9), round(float(o[1]), 9)]
+                    if np.all(np.isfinite(o))
+                    else None
+                )
+                steps = self.timeline[self.vehicle_names[int(i)]]
+                if not steps or steps[-1][1] != g.name or steps[-1][2] != held:
+                    steps.append([round(t, 9), g.name, held])
 
     @classmethod
     def attach(cls, sim: Any) -> Platoons | None:
@@ -210,29 +238,47 @@ class Platoons:
         """
         self._sim = sim
         self.views = []
-        for g, spec in zip(self.groups, sim.scenario.platoons, strict=True):
-            sc = spec.scenario
-            if sc.reconfigure.assign != "none" or sc.on_leader_failure != "keep":
-                view = PlatoonView(sim, g, sc)
-                if view.reconfiguration is not None:
-                    self.views.append(view)
+        self._view_platoons(0.0)
         self._records = -1
         self._record_reconfiguration()
 
+    def _view_platoons(self, t: float) -> None:
+        """Build the views the platoons now need, and retire those of platoons gone.
+
+        A reconfiguring platoon without a view gets one: at the start, or when a merge
+        or split at ``t`` formed it.
+        """
+        if self._sim is None:
+            return
+        live = {id(g) for g in self.groups}
+        self._retired += [v for v in self.views if id(v.group) not in live]
+        self.views = [v for v in self.views if id(v.group) in live]
+        viewed = {id(v.group) for v in self.views}
+        for g in self.groups:
+            sc = self._scenarios[g.name]
+            if id(g) in viewed or (
+                sc.reconfigure.assign == "none" and sc.on_leader_failure == "keep"
+            ):
+                continue
+            view = PlatoonView(self._sim, g, sc, since=t)
+            if view.reconfiguration is not None:
+                self.views.append(view)
+
     def _record_reconfiguration(self) -> None:
         """Merge the platoons' records into the run's ``info`` when they changed."""
-        if not self.views:
+        views = self._retired + self.views
+        if not views:
             return
-        count = sum(
+        count = len(views) + sum(
             len(v.info.get("reassignments", ()))
             + len(v.info.get("leader_changes", ()))
             + sum(len(s) for s in v.info.get("slots", {}).values())
-            for v in self.views
+            for v in views
         )
         if count != self._records:
             self._records = count
             rows = [g.rows for g in self.groups]
-            self._sim.info.update(merged_records(self.views, self.vehicle_names, rows))
+            self._sim.info.update(merged_records(views, self.vehicle_names, rows))
 
     def of_vehicles(self) -> tuple[str, ...]:
         """The name of each vehicle's platoon, in vehicle order."""
@@ -275,6 +321,8 @@ class Platoons:
             for view in self.views:
                 view.react(t, self._sim.known_failed)
             self._record_reconfiguration()
+        if self.timeline is not None:
+            self._note_formation(t)
         n = self.n
         slot = np.full((n, 2), np.nan)
         v_ref = np.zeros((n, 2))
@@ -352,7 +400,9 @@ class Platoons:
                 )
                 at = self.groups.index(group)
                 self.groups[at : at + 1] = [rest, made]
+                self._scenarios[event.new] = self._scenarios[event.platoon]
             self._leaders_avoid()
+            self._view_platoons(t)
             by_name = {g.name: g for g in self.groups}
             record["platoons"] = {
                 g.name: [self.vehicle_names[i] for i in g.rows] for g in self.groups

@@ -14,7 +14,10 @@
 - ``platoon_events`` (with ``events:``): each merge or split that fired, ``{t, merge
   | split, platoons}`` with the platoons' vehicles after it (a merge also gives each
   vehicle's new offset). The per-platoon entries and the intra/inter split of the
-  contacts keep the platoons of the file (the membership at the start).
+  contacts keep the platoons of the file (the membership at the start);
+- ``formation_timeline`` (with ``events:``): the fleet's slots through merges, splits
+  and reassignments, each vehicle's ``[[t, platoon, offset], ...]`` held from ``t``
+  (offset null: no slot); :func:`formation_at` gives it per sample.
 
 :func:`platoon_view` is :meth:`sandbox.run.record.Run.platoon`: the run of one
 platoon's vehicles only.
@@ -101,6 +104,8 @@ def platoon_metrics(run: Any, out: dict[str, Any]) -> None:
     out["platoons"] = per
     if "platoon_events" in run.info:
         out["platoon_events"] = run.info["platoon_events"]
+    if "formation_timeline" in run.info:
+        out["formation_timeline"] = run.info["formation_timeline"]
 
 
 def platoon_view(run: Any, name: str) -> Any:
@@ -144,3 +149,44 @@ def platoon_view(run: Any, name: str) -> Any:
         info={k: v for k, v in run.info.items() if k != "loop_metrics"},
         scenario=sub,
     )
+
+
+def formation_at(run: Any) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Each vehicle's platoon and offset at each sample: :meth:`Run.formation_at`.
+
+    Returns ``names`` (every platoon that existed, in the order they appeared),
+    ``platoon`` (T, n) int (an index into ``names``; -1 for a vehicle that has left
+    every formation, which does not happen) and ``offset`` (T, n, 2) [m] (NaN: no
+    slot). Without ``info["formation_timeline"]`` (no ``events:``) the platoons are
+    those of the file and each offset is the one of the slot the vehicle holds
+    (:attr:`Run.slot_index` into the vehicles' offsets).
+    """
+    t = np.asarray(run.t, dtype=float)
+    T, n = len(t), run.n_vehicles
+    platoon = np.full((T, n), -1, dtype=int)
+    offset = np.full((T, n, 2), np.nan)
+    timeline = run.info.get("formation_timeline")
+    if timeline is None:
+        found = membership(run)
+        names = found[0] if found else ["platoon"]
+        for i, name in enumerate(run.names):
+            platoon[:, i] = found[1][name] if found else 0
+        sc = run.scenario
+        if sc is not None:
+            slots = np.array([v.offset for v in sc.vehicles], dtype=float)
+            held = run.slot_index
+            offset = np.where(
+                (held >= 0)[..., None], slots[np.maximum(held, 0)], np.nan
+            )
+        return names, platoon, offset
+    first: dict[str, tuple[float, int]] = {}
+    for i, vehicle in enumerate(run.names):
+        for start, name, _ in timeline[vehicle]:
+            first[name] = min(first.get(name, (start, i)), (start, i))
+    names = sorted(first, key=first.__getitem__)
+    for i, vehicle in enumerate(run.names):
+        for start, name, held in timeline[vehicle]:
+            after = t >= start - 1e-9
+            platoon[after, i] = names.index(name)
+            offset[after, i] = np.nan if held is None else held
+    return names, platoon, offset

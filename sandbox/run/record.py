@@ -183,7 +183,9 @@ class Run:
         ``reconfigure`` or ``on_leader_failure`` it follows the reassignments and
         leader changes (``info["slots"]``: each vehicle's ``[[t, slot], ...]``, held
         from ``t``); without them vehicle ``k`` holds slot ``k`` throughout (one driven
-        by a command schedule none).
+        by a command schedule none). After a merge or split (``events:``) slot ``k``
+        of the platoon it formed is the offset vehicle ``k`` held then;
+        :meth:`formation_at` gives the offsets themselves.
         """
         T, n = len(self.t), self.n_vehicles
         timeline = self.info.get("slots")
@@ -226,6 +228,18 @@ class Run:
         from sandbox.run.analysis import vehicle_track
 
         return vehicle_track(self, name)
+
+    def formation_at(self) -> tuple[list[str], np.ndarray, np.ndarray]:
+        """Each vehicle's platoon and formation offset at each sample.
+
+        ``(names, platoon, offset)``: the platoons' names, each vehicle's platoon
+        (T, n) as an index into them, and its offset (T, n, 2) [m] (NaN: no slot),
+        through merges, splits and reassignments; see
+        :func:`sandbox.run.platoons.formation_at`.
+        """
+        from sandbox.run.platoons import formation_at
+
+        return formation_at(self)
 
     def platoon(self, name: str) -> Run:
         """The run of one platoon's vehicles (with ``platoons:``), by its name.

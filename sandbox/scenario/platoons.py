@@ -237,18 +237,6 @@ def parse_platoons(
             )
         elif f.at >= first.duration:
             rd.warn(f"{path}.at", f"at = {f.at:g} s: the failure never starts")
-    reconfigured = [
-        seen_names[name]
-        for name, _, one in groups
-        if one.reconfigure.assign != "none" or one.on_leader_failure != "keep"
-    ]
-    if reconfigured and doc.get("events"):
-        rd.fail(
-            "events",
-            "merges and splits beside a platoon's reconfiguration are not supported",
-            f"events and platoons[{reconfigured[0]}] reconfiguring",
-            "events, or reconfigure/on_leader_failure, not both",
-        )
     events = read_events(rd, doc.get("events"), specs, first.duration)
     expect = read_expectations(
         rd, doc.get("expect"), "expect", names, platoons=list(seen_names)
