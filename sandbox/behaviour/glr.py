@@ -343,14 +343,27 @@ def _empty(st: GlrState, rows: np.ndarray) -> None:
     st.started[rows] = np.inf
 
 
+def mad_sigmas(d: np.ndarray) -> np.ndarray:
+    """:func:`mad_sigma` of each row of ``d`` (r, m): the same numbers, at once."""
+    med = np.median(d, axis=1)
+    return MAD_SCALE * np.median(np.abs(d - med[:, None]), axis=1) / math.sqrt(2.0)
+
+
 def _update_noise(st: GlrState, ctx: DetectorContext) -> None:
+    """Re-estimate the noise of every vehicle with enough fault-free innovations.
+
+    The vehicles with the same number of stored innovations are estimated together
+    (each row's medians as :func:`mad_sigma` takes them one vehicle at a time).
+    """
     if ctx.params["noise_window"] <= 0.0:
         return
-    for i in np.flatnonzero(st.innov_n >= MIN_NOISE_SAMPLES):
-        d = st.innov[i, : st.innov_n[i]]
-        sp = mad_sigma(d[:, :2])
-        sh = mad_sigma(d[:, 2])
-        st.sigma[i] = np.maximum(np.array([sp, sp, sh]), st.floor)
+    ready = st.innov_n >= MIN_NOISE_SAMPLES
+    for count in np.unique(st.innov_n[ready]):
+        rows = np.flatnonzero(st.innov_n == count)
+        d = st.innov[rows, :count]
+        sp = mad_sigmas(d[:, :, :2].reshape(len(rows), -1))
+        sh = mad_sigmas(d[:, :, 2])
+        st.sigma[rows] = np.maximum(np.stack((sp, sp, sh), -1), st.floor)
 
 
 def _kind(st: GlrState, i: int, t: float, ctx: DetectorContext, fit: tuple) -> str:
@@ -448,7 +461,9 @@ def glr(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     if st.count % NOISE_EVERY == 0:
         _update_noise(st, ctx)
     window = float(p["window"])
-    for k, i in enumerate(keep):
+    # Only a vehicle with an alarm, or raising one, has anything to do.
+    for k in np.flatnonzero(st.detected[keep] | (g >= st.lam)):
+        i = int(keep[k])
         if not st.detected[i]:
             if g[k] >= st.lam:
                 st.detected[i] = True
