@@ -411,8 +411,11 @@ def test_two_platoons_carry_both_references_in_their_colours(
     # east drives along x2 = -0.6 m from x1 = -8 m, north along x1 = 0.6 m
     assert refs[0].ravel().tolist() == pytest.approx([-8.0, -0.6, 0.6, -8.0], abs=1e-4)
     assert np.ptp(refs[:, 0, 1]) == 0 and np.ptp(refs[:, 1, 0]) == 0
-    # the page draws them with the platoons' pieces of the script
-    assert "drawPlatoonPaths()" in replay_html(run)
+    # the page draws them with the platoons' pieces of the script; the same run gives
+    # the same bytes
+    html = replay_html(run)
+    assert "drawPlatoonPaths()" in html
+    assert replay_html(simulate(run.scenario)) == html
 
 
 def test_a_platoon_formed_by_a_split_has_its_reference_from_the_split_on() -> None:
