@@ -369,3 +369,80 @@ def test_failed_or_diverged_runs_still_give_a_page(tmp_path: Path) -> None:
     back = unpack(embedded(page.read_text(encoding="utf-8"))["arrays"]["pose"])
     assert np.isnan(back[-1]).all() and np.isfinite(back[:-1]).all()
     assert math.isfinite(embedded(page.read_text(encoding="utf-8"))["bounds"][0])
+
+
+# ------------------------------------------------------------------ platoons
+#: The keys of a page's data without ``platoons:`` (and without beams).
+ONE_PLATOON_KEYS = {
+    "format", "scenario", "description", "names", "colors", "diameter", "leader",
+    "arrays", "samples", "recorded_samples", "stride", "events", "closest", "summary",
+    "obstacles", "reference_path", "bounds", "recovery", "camera", "leaders", "modes",
+    "large", "notes",
+}  # fmt: skip
+ONE_PLATOON_ARRAYS = {
+    "t", "pose", "cmd", "slot", "target", "reference", "state", "slot_index",
+}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def two_platoons() -> object:
+    """The bundled intersection of two platoons (east in blue, north in red)."""
+    return simulate(load_scenario(SCENARIOS / "traffic" / "intersection_two.yaml"))
+
+
+def test_two_platoons_carry_both_references_in_their_colours(
+    two_platoons: object,
+) -> None:
+    run = two_platoons
+    data = replay_data(run)
+    assert [p["name"] for p in data["platoons"]] == ["east", "north"]
+    # the platoon's colour, the one its vehicles are drawn in (e0 and n0)
+    assert [p["color"] for p in data["platoons"]] == ["#0000ff", "#ff0000"]
+    assert [data["colors"][run.names.index(v)] for v in ("e0", "n0")] == [
+        "#0000ff",
+        "#ff0000",
+    ]
+    assert all(p["since"] is None and p["until"] is None for p in data["platoons"])
+    refs = unpack(data["arrays"]["platoon_reference"])
+    assert refs.shape == (data["samples"], 2, 2)  # (T, P, 2)
+    for k, name in enumerate(("east", "north")):
+        want = run.platoon(name).reference
+        assert np.max(np.abs(refs[:, k] - want)) <= 0.5e-4 + 1e-12
+    # east drives along x2 = -0.6 m from x1 = -8 m, north along x1 = 0.6 m
+    assert refs[0].ravel().tolist() == pytest.approx([-8.0, -0.6, 0.6, -8.0], abs=1e-4)
+    assert np.ptp(refs[:, 0, 1]) == 0 and np.ptp(refs[:, 1, 0]) == 0
+    # the page draws them with the platoons' pieces of the script; the same run gives
+    # the same bytes
+    html = replay_html(run)
+    assert "drawPlatoonPaths()" in html
+    assert replay_html(simulate(run.scenario)) == html
+
+
+def test_a_platoon_formed_by_a_split_has_its_reference_from_the_split_on() -> None:
+    run = simulate(load_scenario(SCENARIOS / "traffic" / "merge_split.yaml"))
+    data = replay_data(run)
+    entries = {p["name"]: p for p in data["platoons"]}
+    assert list(entries) == ["A", "B", "C"]
+    assert (entries["B"]["until"], entries["C"]["since"]) == (3.8, 14.0)
+    assert entries["C"]["color"] not in (entries["A"]["color"], entries["B"]["color"])
+    refs = unpack(data["arrays"]["platoon_reference"])
+    t = unpack(data["arrays"]["t"])
+    c = refs[:, 2]
+    assert np.isnan(c[t < 14.0 - 1e-9]).all()
+    # C's line starts at (0, -2) at the run's time 0: at t its point is (t, -2)
+    after = t >= 14.0 - 1e-9
+    assert np.max(np.abs(c[after] - np.stack([t[after], -2 + 0 * t[after]], 1))) < 1e-3
+    b = refs[:, 1]  # B merged into A at 3.8 s: no reference of its own after it
+    assert np.isfinite(b[t < 3.8 - 1e-9]).all() and np.isnan(b[t >= 3.8 - 1e-9]).all()
+    assert np.isfinite(refs[:, 0]).all()  # A from start to end
+
+
+def test_a_run_of_one_platoon_keeps_its_data_keys_and_script(headon: object) -> None:
+    from sandbox.render.replay.page import asset
+
+    data = replay_data(headon)
+    assert set(data) == ONE_PLATOON_KEYS
+    assert set(data["arrays"]) == ONE_PLATOON_ARRAYS
+    html = replay_html(headon)
+    assert asset("replay.js").replace("</script", "<\\/script") in html
+    assert "drawPlatoon" not in html

@@ -460,3 +460,80 @@ def test_a_damaged_page_says_so(
         assert "cannot be shown" in message.inner_text()
     finally:
         ctx.close()
+
+
+def test_two_platoons_draw_both_reference_paths_in_their_colours(
+    browser: object, tmp_path: Path
+) -> None:
+    """Each platoon's dashed reference path shows in its colour along all of it."""
+    run = simulate(load_scenario(SCENARIOS / "traffic" / "intersection_two.yaml"))
+    p = Page(browser, write_html(run, tmp_path / "two.html"))
+    try:
+        p.page.keyboard.press("f")  # the whole run
+        p.js("window.sandboxReplay.seek(0)")  # no trails yet over the paths
+        drawn = p.js("window.sandboxReplay.platoons()")
+        assert drawn["paths"] == ["east", "north"]
+        shot = tmp_path / "two.png"
+        p.page.locator("#world").screenshot(path=str(shot))
+        img = np.asarray(Image.open(shot).convert("RGB")).astype(float)
+        refs = {name: run.platoon(name).reference for name in drawn["paths"]}
+        for name, color in (("east", "blue"), ("north", "red")):
+            assert drawn["points"][name] == pytest.approx(refs[name][0], abs=1e-3)
+            # inner points of the path (an end may fall in a gap) away from every
+            # vehicle and from the other path
+            others = np.concatenate([r for m, r in refs.items() if m != name])
+            far = [
+                x
+                for x in refs[name][20:-20:40]
+                if np.min(np.linalg.norm(run.pose[0, :, :2] - x, axis=1)) > 1.5
+                and np.min(np.linalg.norm(others - x, axis=1)) > 0.5
+            ]
+            assert len(far) >= 10
+            hits = [
+                tinted(img, p.js(f"window.sandboxReplay.worldToPixel({x}, {y})"), color)
+                for x, y in far
+            ]
+            # a dash is at most 3 px away from any point of a path (6 px gaps)
+            assert np.mean(hits) >= 0.9, (name, hits)
+        legend = p.page.locator("#legend").inner_text()
+        assert "east reference" in legend and "north reference" in legend
+        assert p.errors == []
+    finally:
+        p.context.close()
+
+
+def tinted(img: np.ndarray, uv: list[float], color: str, reach: float = 4.0) -> bool:
+    """Whether a pixel within ``reach`` [px] of ``uv`` is ``color`` over white.
+
+    A pixel ``white - a (white - color)`` with ``a`` at least 0.3 (an antialiased
+    line of the colour), within 40 of it; grey or another colour is not.
+    """
+    rows, cols = np.mgrid[0 : img.shape[0], 0 : img.shape[1]]
+    near = np.hypot(cols + 0.5 - uv[0], rows + 0.5 - uv[1]) <= reach
+    e = 255.0 - np.asarray(ImageColor.getrgb(color), dtype=float)
+    d = 255.0 - img[near]
+    a = d @ e / (e @ e)
+    residual = np.linalg.norm(d - a[:, None] * e, axis=1)
+    return bool(np.any((a >= 0.3) & (residual <= 40.0)))
+
+
+def test_a_platoon_formed_by_a_split_shows_its_reference_from_the_split_on(
+    browser: object, tmp_path: Path
+) -> None:
+    run = simulate(load_scenario(SCENARIOS / "traffic" / "merge_split.yaml"))
+    p = Page(browser, write_html(run, tmp_path / "split.html"))
+    try:
+        p.js("window.sandboxReplay.seek(2)")  # A and B; C does not exist yet
+        drawn = p.js("window.sandboxReplay.platoons()")
+        assert drawn["paths"] == ["A", "B", "C"]
+        assert sorted(drawn["points"]) == ["A", "B"]
+        p.js("window.sandboxReplay.seek(16)")  # B merged at 3.8 s, C split at 14 s
+        points = p.js("window.sandboxReplay.platoons()")["points"]
+        assert sorted(points) == ["A", "C"]
+        assert points["C"] == pytest.approx([16.0, -2.0], abs=1e-3)
+        legend = p.page.locator("#legend").inner_text()
+        assert "C reference (from 14.00 s)" in legend
+        assert "B reference (until 3.80 s)" in legend
+        assert p.errors == []
+    finally:
+        p.context.close()

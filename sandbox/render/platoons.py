@@ -5,9 +5,13 @@ the platoon's colour to each vehicle that names none), the legends name the plat
 instead of the vehicles, each platoon's reference path is drawn, and the
 formation-error figure has one panel per platoon (:func:`platoon_error_figure`).
 Runs of one platoon are drawn as before: every function here returns None for them.
+:func:`platoon_tracks` gives every platoon of the run over time, those a split forms
+too (the browser replay draws them).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -51,6 +55,74 @@ def platoon_references(run: Run) -> np.ndarray | None:
         [np.asarray(platoon_view(run, n).reference, dtype=float) for n, _ in groups],
         axis=1,
     )
+
+
+@dataclass(frozen=True)
+class PlatoonTrack:
+    """One platoon of a run over time (see :func:`platoon_tracks`).
+
+    Attributes
+    ----------
+    name, color : str
+        The platoon's name and colour (a colour name of the scenario).
+    reference : ndarray, shape (T, 2) [m]
+        Its reference point at each sample; NaN while the platoon does not exist
+        (before the split that forms it, from the merge that ends it) or without a
+        reference.
+    since, until : float or None [s]
+        When the split that formed it fired, and when it merged into another
+        (None: from the start, to the end).
+    """
+
+    name: str
+    color: str
+    reference: np.ndarray
+    since: float | None = None
+    until: float | None = None
+
+
+def platoon_tracks(run: Run) -> list[PlatoonTrack] | None:
+    """Every platoon of the run with its reference while it exists, or None.
+
+    The platoons of ``platoons:`` first, then those formed by a split that fired
+    (``info["platoon_events"]``), in the order they formed. A platoon formed by a
+    split has the split's reference (of the run's time) from the split on, and the
+    first colour of :data:`~sandbox.scenario.platoons.PLATOON_COLORS` no platoon of
+    the file has (the scenario gives it none); a platoon merged into another has its
+    reference until the merge. Returns None for a run of one platoon.
+    """
+    from sandbox.scenario.platoons import PLATOON_COLORS
+
+    groups = platoon_groups(run)
+    if groups is None:
+        return None
+    t = np.asarray(run.t, dtype=float)
+    fired = run.info.get("platoon_events", []) if isinstance(run.info, dict) else []
+    until = {e["merge"]["from"]: float(e["t"]) for e in fired if "merge" in e}
+
+    def track(
+        name: str, color: str, ref: np.ndarray, since: float | None = None
+    ) -> PlatoonTrack:
+        ref = np.broadcast_to(np.asarray(ref, dtype=float), (len(t), 2)).copy()
+        if since is not None:
+            ref[t < since - 1e-9] = np.nan  # before its split
+        if name in until:
+            ref[t >= until[name] - 1e-9] = np.nan  # from its merge
+        return PlatoonTrack(name, color, ref, since, until.get(name))
+
+    specs = {p.name: p for p in run.scenario.platoons}
+    out = [
+        track(name, specs[name].color, platoon_view(run, name).reference)
+        for name, _ in groups
+    ]
+    splits = {e.new: e for e in run.scenario.events if e.kind == "split"}
+    used = {str(p.color).lower() for p in run.scenario.platoons}
+    free = [c for c in PLATOON_COLORS if c not in used] or list(PLATOON_COLORS)
+    for k, e in enumerate(e for e in fired if "split" in e):
+        name = e["split"]["new"]
+        ref = splits[name].reference.build().evaluate(t)[0]
+        out.append(track(name, free[k % len(free)], ref, float(e["t"])))
+    return out
 
 
 def platoon_error_figure(run: Run) -> Figure | None:

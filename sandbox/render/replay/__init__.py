@@ -53,41 +53,68 @@ def replay_html(
     data = replay_data(
         run, metrics, title=title, max_vehicle_samples=max_vehicle_samples
     )
-    transform = None
+    transforms = []
     if show_beams:
         from sandbox.render.replay.encode import beam_data
 
         beams = beam_data(run, data)
         if beams is not None:
             data["beams"] = beams
-            transform = with_beams
+            transforms.append(with_beams)
+    if "platoons" in data:  # several platoons: their references
+        transforms.append(with_platoons)
+
+    def transform(script: str) -> str:
+        for step in transforms:
+            script = step(script)
+        return script
+
     return build_page(
-        "replay.html", data["scenario"], data, ["replay.js"], transform=transform
+        "replay.html",
+        data["scenario"],
+        data,
+        ["replay.js"],
+        transform=transform if transforms else None,
     )
 
 
-def with_beams(script: str) -> str:
-    """``replay.js`` with the pieces of ``replay_beams.js`` that draw the beams.
+def with_pieces(script: str, name: str) -> str:
+    """``replay.js`` with the pieces of the asset ``name`` inserted.
 
-    Each piece follows a line ``// @@ after: ANCHOR`` or ``// @@ before: ANCHOR`` and
-    goes right after or before the line ``ANCHOR`` of the script (a page without
-    scans keeps the script as it is, so its bytes do not change).
+    Each piece follows a line ``// @@ after: ANCHOR``, ``// @@ before: ANCHOR`` or
+    ``// @@ instead: ANCHOR`` and goes right after or before the line ``ANCHOR`` of
+    the script, or replaces it (a page without the feature keeps the script as it
+    is, so its bytes do not change).
 
     Raises
     ------
     ValueError
         An anchor is not exactly once in the script.
     """
-    pieces = asset("replay_beams.js").split("// @@ ")[1:]
+    pieces = asset(name).split("// @@ ")[1:]
     for piece in pieces:
         head, _, body = piece.partition("\n")
         where, _, anchor = head.partition(": ")
         line = anchor + "\n"
         if script.count(line) != 1:
-            raise ValueError(f"replay_beams.js: anchor {anchor!r} not once in the page")
-        new = line + body if where == "after" else body + line
+            raise ValueError(f"{name}: anchor {anchor!r} not once in the page")
+        new = {"after": line + body, "before": body + line, "instead": body}[where]
         script = script.replace(line, new)
     return script
+
+
+def with_beams(script: str) -> str:
+    """``replay.js`` with the pieces of ``replay_beams.js`` that draw the beams."""
+    return with_pieces(script, "replay_beams.js")
+
+
+def with_platoons(script: str) -> str:
+    """``replay.js`` with the pieces of ``replay_platoons.js`` (``platoons:``).
+
+    They draw every platoon's reference path and point in its colour, instead of
+    the one reference of a run of one platoon, and name them in the legend.
+    """
+    return with_pieces(script, "replay_platoons.js")
 
 
 def write_html(

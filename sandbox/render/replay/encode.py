@@ -22,6 +22,13 @@ it (``_content_bounds``, :func:`~sandbox.render.camera.auto_follow` and
 :meth:`~sandbox.render.camera.Camera.for_run`), and the colours with the GIF's palette
 (:func:`sandbox.render.palette._rgb`).
 
+With ``platoons:`` the mapping also has ``platoons`` (each platoon's ``name``,
+``color``, ``since`` and ``until``: those of
+:func:`sandbox.render.platoons.platoon_tracks`, a platoon formed by a split included)
+and ``arrays.platoon_reference``, their reference points packed as one (T, P, 2)
+array, NaN while a platoon does not exist; the page draws each reference path through
+the finite samples. A run of one platoon has neither key: its mapping is as before.
+
 Everything is a pure function of the run: the same run gives the same mapping, and the
 same bytes once written.
 """
@@ -66,6 +73,7 @@ STEPS = {
     "slot": 1e-4,
     "target": 1e-4,
     "reference": 1e-4,
+    "platoon_reference": 1e-4,
     "state": 1.0,
     "slot_index": 1.0,
 }
@@ -392,7 +400,9 @@ def replay_data(
         ``slot``, ``target``, ``reference``, ``state``, ``slot_index``), ``events``,
         ``closest``, ``summary``, ``obstacles``, ``reference_path``, ``bounds``,
         ``recovery``, ``camera``, ``leaders`` (``[t, name]``: who leads from ``t``;
-        None: the reference), ``modes``, ``samples``, ``stride``, ``notes``.
+        None: the reference), ``modes``, ``samples``, ``stride``, ``notes``; with
+        ``platoons:`` also ``platoons`` and ``arrays.platoon_reference`` (see the
+        module docstring).
     """
     if metrics is None:
         from sandbox.run.metrics import compute_metrics
@@ -428,6 +438,7 @@ def replay_data(
         "state": pack(mode + 4 * failed, 1.0, ORDERS["state"]),
         "slot_index": pack(run.slot_index[keep], 1.0, ORDERS["slot_index"]),
     }
+    platoons = _platoons(run, keep, arrays)
     reach = float(np.max(run.diameter, initial=0.0)) / 2.0
     lo, hi = _content_bounds(run, reach)
     path = _reference_path(run)
@@ -463,7 +474,7 @@ def replay_data(
     rec = rec if isinstance(rec, dict) else {}
     label = _info(run, "scenario_name")
     scenario = run.scenario
-    return {
+    data = {
         "format": FORMAT,
         "scenario": str(title or label or getattr(scenario, "name", "") or "run"),
         "description": str(getattr(scenario, "description", "") or ""),
@@ -494,6 +505,34 @@ def replay_data(
         "large": n > LARGE_FLEET,
         "notes": notes,
     }
+    if platoons is not None:
+        data["platoons"] = platoons
+    return data
+
+
+def _platoons(
+    run: Run, keep: np.ndarray, arrays: dict[str, Any]
+) -> list[dict[str, Any]] | None:
+    """Each platoon's entry of the page; packs their references into ``arrays``.
+
+    None (and ``arrays`` untouched) for a run of one platoon.
+    """
+    from sandbox.render.platoons import platoon_tracks
+
+    tracks = platoon_tracks(run)
+    if tracks is None:
+        return None
+    refs = np.stack([tr.reference for tr in tracks], axis=1)  # (T, P, 2) [m]
+    arrays["platoon_reference"] = pack(refs[keep], STEPS["platoon_reference"])
+    return [
+        {
+            "name": tr.name,
+            "color": _hex(tr.color, k),
+            "since": _rounded(tr.since),
+            "until": _rounded(tr.until),
+        }
+        for k, tr in enumerate(tracks)
+    ]
 
 
 def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
