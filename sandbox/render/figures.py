@@ -61,6 +61,7 @@ from sandbox.render.platoons import (
     platoon_error_figure,
     platoon_groups,
     platoon_paths,
+    platoon_tracks,
 )
 from sandbox.run.record import Run
 
@@ -334,8 +335,11 @@ def trajectories_figure(run: Run) -> Figure:
     groups = platoon_groups(run)  # with platoons: a legend entry per platoon
     if groups is not None:
         lead = {name: rows[0] for name, rows in groups}
+        formed = {t.name: t.color for t in platoon_tracks(run) or []}
         for name, ref in platoon_paths(run) or []:
-            ax.plot(ref[:, 0], ref[:, 1], "--", color=colors[lead[name]], lw=1.0)
+            # a platoon of the file in its leader's colour; one a split formed, its own
+            color = colors[lead[name]] if name in lead else formed[name]
+            ax.plot(ref[:, 0], ref[:, 1], "--", color=color, lw=1.0)
         first = {rows[0]: name for name, rows in groups}
     elif path is not None:
         ax.plot(

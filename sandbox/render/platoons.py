@@ -33,28 +33,31 @@ def platoon_groups(run: Run) -> list[tuple[str, list[int]]] | None:
 
 
 def platoon_paths(run: Run) -> list[tuple[str, np.ndarray]] | None:
-    """Each platoon's reference path (m, 2) [m] at the samples, or None."""
-    groups = platoon_groups(run)
-    if groups is None:
+    """Each platoon's reference path (m, 2) [m] while it exists, or None.
+
+    The platoons of :func:`platoon_tracks`: those of the file, a platoon merged into
+    another until its merge, one formed by a split from its split on.
+    """
+    tracks = platoon_tracks(run)
+    if tracks is None:
         return None
     out = []
-    for name, _ in groups:
-        pts = np.asarray(platoon_view(run, name).reference, dtype=float)
-        pts = pts[np.isfinite(pts).all(axis=1)]
+    for track in tracks:
+        pts = track.reference[np.isfinite(track.reference).all(axis=1)]
         if len(pts) >= 2:
-            out.append((name, pts))
+            out.append((track.name, pts))
     return out
 
 
 def platoon_references(run: Run) -> np.ndarray | None:
-    """Each platoon's reference point at each sample, shape (T, P, 2) [m], or None."""
-    groups = platoon_groups(run)
-    if groups is None:
+    """Each platoon's reference point at each sample, shape (T, P, 2) [m], or None.
+
+    One column per platoon of :func:`platoon_tracks` (NaN while it does not exist).
+    """
+    tracks = platoon_tracks(run)
+    if tracks is None:
         return None
-    return np.stack(
-        [np.asarray(platoon_view(run, n).reference, dtype=float) for n, _ in groups],
-        axis=1,
-    )
+    return np.stack([track.reference for track in tracks], axis=1)
 
 
 @dataclass(frozen=True)
