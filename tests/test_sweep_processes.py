@@ -157,26 +157,27 @@ def test_groups_start_small_and_are_sized_by_their_time():
 
     jobs = [(f"r{k}", ({}, "", [])) for k in range(1000)]
     groups = engine.Groups(jobs, 1)
-    # Fast runs: after the first group of 16, the full batch of 128 (chunks' size).
+    # Fast runs: after the first group (32), the full batch of 128 (chunks' size).
     first = next(groups)
     groups.timed(len(first), 0.01)
     sizes = [len(first), *(len(g) for g in groups)]
-    assert sizes[:2] == [16, 128] and set(sizes[1:-1]) == {128}
+    assert sizes[:2] == [engine.FIRST_GROUP, 128] and set(sizes[1:-1]) == {128}
     assert sum(sizes) == 1000
-    # Runs of 0.1 s each: groups of 2 s / 0.1 s = 20 runs; of 1 s: 8 (MIN_WORLDS).
-    for per_run, size in [(0.1, 20), (1.0, 8), (0.001, 128)]:
+    # Runs of 0.1 s each: groups of 5 s / 0.1 s = 50 runs; of 1 s: 8 (MIN_WORLDS).
+    assert engine.GROUP_SECONDS == 5.0 and engine.MIN_WORLDS == 8
+    for per_run, size in [(0.1, 50), (1.0, 8), (0.001, 128)]:
         groups = engine.Groups(jobs, 2)
         g = next(groups)
         groups.timed(len(g), per_run * len(g))
         assert len(next(groups)) == size
     # every run once, in order, and no group under MIN_WORLDS at the end
-    groups = engine.Groups(jobs[:45], 1)
+    groups = engine.Groups(jobs[:75], 1)
     out = []
     for g in groups:
         out.append(g)
-        groups.timed(len(g), 0.2 * len(g))  # 10 runs fit in 2 s
-    assert [len(g) for g in out] == [16, 10, 10, 9]
-    assert [j for g in out for j in g] == jobs[:45]
+        groups.timed(len(g), 0.25 * len(g))  # 20 runs fit in 5 s
+    assert [len(g) for g in out] == [32, 20, 23]
+    assert [j for g in out for j in g] == jobs[:75]
 
 
 def test_a_stop_while_a_group_is_stored_keeps_the_whole_group(

@@ -432,10 +432,13 @@ def chunks(jobs: list[Job], workers: int, size: int | None = None) -> list[list[
 
 
 #: Work [s] a group of runs should take: an interrupt loses at most about this much
-#: per process (the groups under way), and groups are as large as it allows.
-GROUP_SECONDS = 2.0
+#: per process (the groups under way), and groups are as large as it allows. A batch
+#: of K worlds shares each step's fixed cost, so on a loaded machine, where a run
+#: takes several times its idle time, a smaller target kept groups of 10-30 worlds
+#: and the sweep at half the speed of its own batches.
+GROUP_SECONDS = 5.0
 #: Runs in the first groups, before any group has been timed.
-FIRST_GROUP = 16
+FIRST_GROUP = 32
 #: Most a group grows from one timed group to the next.
 MAX_GROWTH = 8
 
