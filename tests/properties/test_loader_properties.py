@@ -175,7 +175,9 @@ def test_what_the_loader_accepts_the_schema_accepts(doc: Any) -> None:
 def test_an_accepted_scenario_can_be_simulated(doc: Any) -> None:
     scenario = accepts(doc)
     assume(scenario is not None and len(scenario.vehicles) <= 50)
-    short = dataclasses.replace(scenario, duration=3 * scenario.dt)
+    # Three periods: a merge or split timed later could never fire (a loader error),
+    # so the short run goes without its events.
+    short = dataclasses.replace(scenario, duration=3 * scenario.dt, events=())
     run = Simulation(short).run()
     assert run.status in ("ok", "diverged")
     assert len(run.t) >= 1
