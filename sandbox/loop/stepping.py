@@ -6,7 +6,8 @@ together: their motor arrays become views of stacked ones (sized at once by
 :func:`~sandbox.physics.world.motor_limits`), their control bodies read their
 velocities straight from one stacked command array, and from the second period on
 :class:`~sandbox.physics.stepping.WorldStepper` calls Chipmunk for all of them with no
-Python between worlds. Any other back-end (``Simulation(scenario, world=...)``) is
+Python between worlds (one C call per period where its extension is built and no
+contact episode is open). Any other back-end (``Simulation(scenario, world=...)``) is
 reached through the :class:`~sandbox.physics.Physics` interface only. Both give the
 numbers of each world stepped alone (``tests/test_batch.py``).
 """

@@ -13,9 +13,23 @@ batch's stacked arrays in place:
   (``pymunk.batch``'s set iterator, one call per world);
 - the state: each world's get iterator writes its bodies straight into its rows of one
   array of shape ``(K, bodies, 6)``: no per-world copy;
-- the substeps: every live world's clock (``World.time``, which a ``begin`` callback
-  stamps on the collision event) is set, then every live world is stepped; only worlds
-  with open contact episodes (:meth:`World._update_episodes`) are visited in Python.
+- the substeps: the clock the live worlds share (``World.time``, which a ``begin``
+  callback stamps on the collision event) is set, then every live world is stepped;
+  only worlds with open contact episodes (:meth:`World._update_episodes`) are visited
+  in Python.
+
+When the optional C extension ``sandbox.physics._cstep`` is built (``setup.py``
+compiles it at install where a C compiler is found; an editable install puts it next
+to ``_cstep.c``) and no world has an open contact episode, a whole period is one C
+call: the commands written, each substep's clock written and every live world
+stepped, the state read, through the addresses of pymunk's own ``cpSpaceStep``,
+``cpSpaceEachBody`` and batched iterators (``ffi.addressof``; nothing is linked
+against Chipmunk). The clock is a numpy array of two doubles that the worlds' ``begin``
+callbacks read and that the C loop writes; a callback that opens a contact episode
+raises its second value, and the C loop then returns after that substep, so that
+the episodes are updated and the period finished by the Python path: the same calls,
+in the same order, with the same arguments. Without the extension, or with
+:attr:`WorldStepper.one_call` False, every period takes the Python path.
 
 Worlds are independent (each its own Space; a callback touches only its own world), so
 stepping substep by substep across the worlds, rather than world by world, computes
@@ -34,6 +48,11 @@ import numpy as np
 
 from sandbox.physics.world import World
 
+try:
+    from sandbox.physics import _cstep
+except ImportError:  # not compiled: the Python path steps every period
+    _cstep = None
+
 #: Fields of one body in the bulk read: x1, x2, x3, v_x1, v_x2, omega.
 FIELDS = 6
 
@@ -46,7 +65,8 @@ def _exhaust(iterator: Any) -> None:
 class WorldStepper:
     """Writes, steps and reads K worlds of one batch (see the module docstring).
 
-    Build it with :meth:`build`; call :meth:`advance` once per control period.
+    Build it with :meth:`build`; call :meth:`advance` once per control period. The
+    worlds stepped share one clock (``World._clock``) from then on.
 
     Parameters
     ----------
@@ -74,7 +94,9 @@ class WorldStepper:
     ) -> None:
         ffi, lib, bodies, order = internals
         K, n = state.shape[:2]
+        self._ffi = ffi
         self.worlds = worlds
+        self._clock = np.zeros(2)
         self.substeps = substeps
         self._state = state
         # The rows the get iterator fills: the state itself when each world's bodies
@@ -113,7 +135,29 @@ class WorldStepper:
         self._read_num = np.frombuffer(ffi.buffer(self._read_arrays), np.int32)[::4]
         self._write_num = np.frombuffer(ffi.buffer(self._write_arrays), np.int32)[::4]
         self._keep = (commands, self._read)  # the memory the records point into
+        self._one_call = None
+        if _cstep is not None and self.one_call:
+            address = self._address
+            self._one_call = _cstep.advance
+            self._functions = tuple(
+                address(ffi.addressof(lib, name))
+                for name in (
+                    "cpSpaceStep",
+                    "cpSpaceEachBody",
+                    "pmSpaceBodySetIteratorFuncBatched",
+                    "pmSpaceBodyGetIteratorFuncBatched",
+                )
+            )
         self.live(list(range(K)))
+
+    #: Step a period in one C call where :mod:`sandbox.physics._cstep` is built and no
+    #: world has an open contact episode (False: always the Python path; the same
+    #: numbers). Read when a stepper is built.
+    one_call = True
+
+    def _address(self, pointer: Any) -> int:
+        """The address a cffi pointer holds, as an int."""
+        return int(self._ffi.cast("uintptr_t", pointer))
 
     @classmethod
     def build(
@@ -167,6 +211,9 @@ class WorldStepper:
     def live(self, worlds: list[int]) -> None:
         """Step only these worlds from now on (the others have stopped)."""
         ws = self.worlds
+        for world in ws:  # a stopped world keeps its own clock
+            if world._clock is self._clock:
+                world._clock = self._clock.copy()
         self._live = [ws[w] for w in worlds]
         self._spaces = [ws[w].space._space for w in worlds]
         self._controls = [ws[w].control_space._space for w in worlds]
@@ -175,28 +222,59 @@ class WorldStepper:
         self._opens = [ws[w]._open for w in worlds]
         for world in self._live:
             world._substeps = self.substeps
+            world._clock = self._clock
+        if self._one_call is not None:
+            # The C loop's arrays of addresses, in the order of the Python path's.
+            lists = (self._spaces, self._controls, self._writes, self._reads)
+            self._pointers = [
+                np.array([self._address(p) for p in pointers], dtype=np.uintp)
+                for pointers in lists
+            ]
+            self._args = (
+                *self._functions,
+                *(int(a.ctypes.data) for a in self._pointers),
+                len(worlds),
+                self.substeps,
+            )
+            self._clock_address = int(self._clock.ctypes.data)
 
     def advance(self, t0: float, h: float) -> None:
         """One control period ``h`` [s] of every live world from ``t0`` [s].
 
-        Writes the commands, steps :attr:`substeps` times (the clocks and the open
-        contact episodes as :meth:`World.step` keeps them), reads the state.
+        Writes the commands, steps :attr:`substeps` times (the clock and the open
+        contact episodes as :meth:`World.step` keeps them), reads the state: in one
+        C call while no world has an open contact episode, else in Python.
         """
-        each, c_step, live, spaces = self._each, self._c_step, self._live, self._spaces
+        each, c_step, spaces = self._each, self._c_step, self._spaces
         self._write_num[:] = 0
-        _exhaust(map(each, self._controls, repeat(self._set), self._writes))
         substeps = self.substeps
         step = h / substeps
-        opens = self._opens
-        for s in range(substeps):
-            _exhaust(map(setattr, live, repeat("time"), repeat(t0 + s * step)))
+        opens, clock = self._opens, self._clock
+        first = 0
+        if self._one_call is not None and not any(opens):
+            self._read_num[:] = 0
+            clock[1] = 0.0
+            first = self._one_call(*self._args, t0, step, self._clock_address)
+            if not clock[1]:  # every substep stepped, the state read
+                if self._order is not None:
+                    self._state[:] = self._read[:, self._order]
+                return
+            # A contact episode opened in substep first - 1: its end as below.
+            self._update_episodes(t0 + first * step)
+        else:
+            _exhaust(map(each, self._controls, repeat(self._set), self._writes))
+        for s in range(first, substeps):
+            clock[0] = t0 + s * step
             _exhaust(map(c_step, spaces, repeat(step)))
             if any(opens):
-                end = t0 + (s + 1) * step
-                for world, episodes in zip(live, opens, strict=True):
-                    if episodes:
-                        world._update_episodes(end)
+                self._update_episodes(t0 + (s + 1) * step)
         self._read_num[:] = 0
         _exhaust(map(each, spaces, repeat(self._get), self._reads))
         if self._order is not None:
             self._state[:] = self._read[:, self._order]
+
+    def _update_episodes(self, end: float) -> None:
+        """After a substep ending at ``end`` [s]: each world's open episodes."""
+        for world, episodes in zip(self._live, self._opens, strict=True):
+            if episodes:
+                world._update_episodes(end)

@@ -243,7 +243,11 @@ class World:
         self.control_space = pymunk.Space()
         self.names = [v.name for v in vehicles]
         self.obstacle_names = [o.name for o in obstacles]
-        self.time = 0.0
+        #: The clock the ``begin`` callback reads (see :attr:`time`): ``[0]`` the start
+        #: time of the substep being stepped [s], ``[1]`` raised (1.0) when the callback
+        #: opens a contact episode. A batch's stepper shares one clock among its
+        #: worlds and writes it from C (:mod:`sandbox.physics.stepping`).
+        self._clock = np.zeros(2)
         self.contact_release = contact_release
         self._substeps = substeps
         self.events: list[CollisionEvent] = []
@@ -350,6 +354,19 @@ class World:
         where = {body_id: row for row, body_id in enumerate(ids)}
         return np.array([where[b.id] for b in bodies], dtype=np.intp)
 
+    @property
+    def time(self) -> float:
+        """Start time of the substep being stepped [s]; stamped on collision events.
+
+        Set before each substep by :meth:`step`, or by the stepper of a batch, which
+        writes the clock its worlds share.
+        """
+        return float(self._clock[0])
+
+    @time.setter
+    def time(self, value: float) -> None:
+        self._clock[0] = value
+
     # ------------------------------------------------------------------ collisions
     @staticmethod
     def _pair(arbiter: pymunk.Arbiter) -> tuple[str, int, int]:
@@ -375,6 +392,7 @@ class World:
         event = CollisionEvent(self.time, self.names[a], other, kind, None, healthy)
         self.events.append(event)
         self._open[key] = _Open(event)
+        self._clock[1] = 1.0
 
     def _on_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
         episode = self._open.get(self._pair(arbiter))
