@@ -10,7 +10,8 @@ A vehicle *brakes* when its turn rate is 0 and its speed moves toward 0 by its
 along its heading and stops. :func:`braking_speeds` gives the speeds of those
 periods, and :func:`closest_approach` the least distance of two points moving at
 constant velocity within each period (two braking vehicles, or a braking vehicle
-and one that keeps its velocity): exactly, period by period.
+and one that keeps its velocity): exactly, period by period; :func:`local_minima`
+picks the periods where it has a local minimum.
 """
 
 from __future__ import annotations
@@ -62,8 +63,8 @@ def braking_periods(speed: np.ndarray, step: np.ndarray) -> np.ndarray:
     return np.ceil(np.abs(speed) / step - 1e-9).astype(np.intp).clip(0)
 
 
-def closest_approach(rel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The least distance of a relative position moving straight between samples.
+def closest_approach(rel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The least distance, period by period, of a relative position moving straight.
 
     ``rel[:, m]`` is the relative position at the start of period ``m`` (``M + 1``
     samples, ``M`` periods); within a period it moves at constant velocity, so the
@@ -76,25 +77,44 @@ def closest_approach(rel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
     Returns
     -------
-    dist : ndarray, shape (k,) [m]
-        The least distance over the ``M`` periods.
-    period : ndarray, shape (k,) int
-        The period where it is reached.
-    frac : ndarray, shape (k,) [1]
-        How far into that period, in [0, 1].
+    dist : ndarray, shape (k, M) [m]
+        The least distance over each period.
+    frac : ndarray, shape (k, M) [1]
+        How far into the period it is reached, in [0, 1].
 
-    >>> rel = np.array([[[-2.0, 1.0], [0.0, 1.0], [2.0, 1.0]]])
+    >>> rel = np.array([[[-2.0, 1.0], [0.0, 1.0], [2.0, 3.0]]])
     >>> [x.tolist() for x in closest_approach(rel)]
-    [[1.0], [0], [1.0]]
+    [[[1.0, 1.0]], [[1.0, 0.0]]]
     """
     r0, d = rel[:, :-1], rel[:, 1:] - rel[:, :-1]
     dd = np.einsum("kmd,kmd->km", d, d)
     f = np.clip(-np.einsum("kmd,kmd->km", r0, d) / np.maximum(dd, 1e-30), 0.0, 1.0)
     near = r0 + f[..., None] * d
-    dist = np.hypot(near[..., 0], near[..., 1])
-    period = np.argmin(dist, axis=1)
-    rows = np.arange(len(rel))
-    return dist[rows, period], period, f[rows, period]
+    return np.hypot(near[..., 0], near[..., 1]), f
+
+
+def local_minima(dist: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``count`` least local minima of each row of ``dist`` (k, M), by column.
+
+    A column is a local minimum when it is no larger than the one before and smaller
+    than the one after (the ends count as larger); a row with fewer minima repeats
+    its least. Returns the columns (k, count) and whether each is a minimum.
+    ``dist`` needs at least one column.
+
+    >>> cols, ok = local_minima(np.array([[3.0, 1.0, 2.0, 0.5, 0.5, 4.0]]), 2)
+    >>> cols.tolist(), ok.tolist()
+    ([[4, 1]], [[True, True]])
+    """
+    pad = np.pad(dist, ((0, 0), (1, 1)), constant_values=np.inf)
+    is_min = (pad[:, 1:-1] <= pad[:, :-2]) & (pad[:, 1:-1] < pad[:, 2:])
+    score = np.where(is_min, dist, np.inf)
+    if score.shape[1] < count:
+        score = np.pad(score, ((0, 0), (0, count - score.shape[1])), "edge")
+        score[:, dist.shape[1] :] = np.inf
+    order = np.argsort(score, axis=1, kind="stable")[:, :count]
+    ok = np.isfinite(np.take_along_axis(score, order, axis=1))
+    least = np.argmin(dist, axis=1)[:, None]
+    return np.where(ok, order, least), ok
 
 
 def sensing_margin(

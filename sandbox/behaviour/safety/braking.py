@@ -35,12 +35,17 @@ from sandbox.model.barriers import (
     braking_periods,
     braking_speeds,
     closest_approach,
+    local_minima,
 )
 
 if TYPE_CHECKING:
     from sandbox.behaviour.safety.cbf import CBFState
     from sandbox.plugins.contexts import FilterContext
 
+#: Conditions a pair makes: one at each of the least local minima of its distance
+#: along the brakings [1] (two minima, e.g. passing then following, may trade places
+#: from one step to the next; a condition at one alone lets the other go).
+MINIMA = 2
 #: Below this size of a condition's gradient ``|g|`` [m s] the condition is left out:
 #: no command changes that pair's clearance to first order.
 FLAT_GRADIENT = 1e-12
@@ -271,8 +276,9 @@ def _gradient(
     ``normal`` (away from the other). A command ``z`` for the first period and the
     braking from it after: ``v1`` moves the point ``(1 - lag) dt`` along ``e`` in
     the first period and by the rest of ``d travel / d v1`` along the braking's
-    heading after; ``l v2`` moves it ``(1 - lag) dt`` along ``e^perp`` and turns the
-    rest of the braking, ``travel(tau) - travel(dt)``, by ``v2 dt``.
+    heading after; ``l v2`` moves it along ``e^perp`` for ``(1 - lag) dt`` and, the
+    drive reaching the braking's turn rate 0 one substep late, ``lag dt`` more, and
+    turns the rest of the braking, ``travel(tau) - travel(dt)``, by ``v2 dt``.
     """
     dt, look = ctx.dt, state.look
     own = (1.0 - b.lag) * dt
@@ -281,7 +287,9 @@ def _gradient(
     rest = ran - b.travel[me, 1]
     g1 = own * np.einsum("kd,kd->k", normal, b.heading[me])
     g1 += (slope - b.slope[me, 1]) * np.einsum("kd,kd->k", normal, b.path[me])
-    g2 = own * np.einsum("kd,kd->k", normal, b.side[me])
+    # l v2 runs sideways for the period's (1 - lag) and the next one's lag
+    late = dt * np.clip(period + frac - 1.0, 0.0, b.lag)
+    g2 = (own + late) * np.einsum("kd,kd->k", normal, b.side[me])
     g2 += dt * rest / look * np.einsum("kd,kd->k", normal, b.path_side[me])
     return np.stack((g1, g2), -1)
 
@@ -369,17 +377,28 @@ def braking_rows(
         last = np.where(coop, samples - 1, np.minimum(own.moves[me] + 1, samples - 1))
         hold = np.arange(samples)[None, :] > last[:, None]
         rel = np.where(hold[..., None], rel[rows, last][:, None], rel)
-        # The next state's barrier: the brakings from the end of this period on.
-        dist, period, frac = closest_approach(rel[:, 1:])
-        period = period + 1
-        now = np.minimum(closest_approach(rel[:, :2])[0], dist) - big_d
-        near = rel[rows, period] + frac[:, None] * (
-            rel[rows, period + 1] - rel[rows, period]
+        # H over all of the brakings; the next state's from the end of this period
+        # on, one condition at each of its least local minima along the way.
+        dist, frac = closest_approach(rel)
+        now = dist.min(axis=1) - big_d
+        period, ok = local_minima(dist[:, 1:], MINIMA)
+        keep = ok | (np.arange(MINIMA) == 0)
+        pick, period = np.nonzero(keep)[0], period[keep] + 1
+        frac, after = frac[pick, period], dist[pick, period]
+        near = rel[pick, period] + frac[:, None] * (
+            rel[pick, period + 1] - rel[pick, period]
         )
-        normal = near / np.maximum(dist, MIN_DIST)[:, None]
+        normal = near / np.maximum(after, MIN_DIST)[:, None]
+        me, other, coop, big_d, now = (
+            me[pick],
+            other[pick],
+            coop[pick],
+            big_d[pick],
+            now[pick],
+        )
         grad = _gradient(state, ctx, me, normal, period, frac, own)
         share = np.where(coop, accel[me] / (accel[me] + accel[other]), 1.0)
-        a_w, b = _rows(ctx, me, grad, dist - big_d, now, share, own.first)
+        a_w, b = _rows(ctx, me, grad, after - big_d, now, share, own.first)
         out_v.append(me)
         out_a.append(a_w)
         out_b.append(b)
@@ -399,17 +418,19 @@ def braking_rows(
         signed = signed.reshape(len(rows), samples)
         reach = np.hypot(*np.moveaxis(points[:, 1:] - points[:, :-1], -1, 0))
         low = 0.5 * (signed[:, :-1] + signed[:, 1:] - reach)
-        seg = np.argmin(low[:, 1:], axis=1) + 1  # from the end of this period on
-        k = np.arange(len(rows))
         clear = 0.5 * d[rows] + look + state.margin
-        after = low[k, seg] - clear
-        now = np.minimum(low[:, 0] - clear, after)
+        now = low.min(axis=1) - clear
+        seg, ok = local_minima(low[:, 1:], MINIMA)  # from the end of this period on
+        keep = ok | (np.arange(MINIMA) == 0)
+        k, seg = np.nonzero(keep)[0], seg[keep] + 1
+        after, now = low[k, seg] - clear[k], now[k]
         at = np.where(signed[k, seg] <= signed[k, seg + 1], seg, seg + 1)
         away = flat[k * samples + at] - point[k * samples + at]
         away *= np.where(signed[k, at] < 0, -1.0, 1.0)[:, None]
         away /= np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)[:, None]
         at_end = at == samples - 1  # the last sample: the period before it, ended
         period, frac = np.where(at_end, at - 1, at), np.where(at_end, 1.0, 0.0)
+        rows = rows[k]
         grad = _gradient(state, ctx, rows, away, period, frac, own)
         a_w, b = _rows(ctx, rows, grad, after, now, np.ones(len(rows)), own.first)
         out_v.append(rows)
