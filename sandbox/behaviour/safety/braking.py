@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from sandbox.behaviour.safety.braking_check import Pending
 from sandbox.model.barriers import (
     MIN_DIST,
     braking_periods,
@@ -294,6 +295,11 @@ def _gradient(
     return np.stack((g1, g2), -1)
 
 
+def _need(after: np.ndarray, now: np.ndarray, share) -> np.ndarray:
+    """The clearance [m] a condition allows the next state: ``H_b' - rho left``."""
+    return after - share * np.maximum(after - np.minimum(now, 0.0), 0.0)
+
+
 def _rows(
     ctx: FilterContext,
     me: np.ndarray,
@@ -325,7 +331,10 @@ def _rows(
 
 
 def braking_rows(
-    state: CBFState, ctx: FilterContext, filtered: np.ndarray
+    state: CBFState,
+    ctx: FilterContext,
+    filtered: np.ndarray,
+    pending: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every braking-barrier condition of the step, ``a . w <= b``, with its ``H``.
 
@@ -341,7 +350,9 @@ def braking_rows(
     travel: the distance is 1-Lipschitz along the segment). The condition is ``g .
     (z - z_b) >= -rho (H_b' - min(H, 0))`` (``_gradient``, ``_rows``), ``rho = a_i
     / (a_i + a_j)`` toward a cooperating vehicle, 1 otherwise. Neighbours' poses
-    are the sensed ones and ``D``, ``D'`` grow by the sensing margin.
+    are the sensed ones and ``D``, ``D'`` grow by the sensing margin. ``pending``,
+    if given, receives under ``"check"`` what
+    :func:`sandbox.behaviour.safety.braking_check.check_commands` needs.
 
     Returns
     -------
@@ -381,6 +392,9 @@ def braking_rows(
         # on, one condition at each of its least local minima along the way.
         dist, frac = closest_approach(rel)
         now = dist.min(axis=1) - big_d
+        share = np.where(coop, accel[me] / (accel[me] + accel[other]), 1.0)
+        pair_after = dist[:, 1:].min(axis=1) - big_d
+        pair = (me, other, coop, theirs, big_d, _need(pair_after, now, share))
         period, ok = local_minima(dist[:, 1:], MINIMA)
         keep = ok | (np.arange(MINIMA) == 0)
         pick, period = np.nonzero(keep)[0], period[keep] + 1
@@ -397,7 +411,7 @@ def braking_rows(
             now[pick],
         )
         grad = _gradient(state, ctx, me, normal, period, frac, own)
-        share = np.where(coop, accel[me] / (accel[me] + accel[other]), 1.0)
+        share = share[pick]
         a_w, b = _rows(ctx, me, grad, after - big_d, now, share, own.first)
         out_v.append(me)
         out_a.append(a_w)
@@ -420,6 +434,7 @@ def braking_rows(
         low = 0.5 * (signed[:, :-1] + signed[:, 1:] - reach)
         clear = 0.5 * d[rows] + look + state.margin
         now = low.min(axis=1) - clear
+        wall = (rows, cols, clear, _need(low[:, 1:].min(axis=1) - clear, now, 1.0))
         seg, ok = local_minima(low[:, 1:], MINIMA)  # from the end of this period on
         keep = ok | (np.arange(MINIMA) == 0)
         k, seg = np.nonzero(keep)[0], seg[keep] + 1
@@ -437,6 +452,26 @@ def braking_rows(
         out_a.append(a_w)
         out_b.append(b)
         out_h.append(now)
+    if pending is not None:
+        none = np.zeros(0, dtype=np.intp)
+        if not len(i):
+            pair = (none, none, none.astype(bool), np.zeros((0, samples, 2)))
+            pair += (np.zeros(0), np.zeros(0))
+        if not len(rows):
+            wall = (none, none, np.zeros(0), np.zeros(0))
+        me, other, coop, theirs, big_d, need = pair
+        pending["check"] = Pending(
+            own,
+            me,
+            other,
+            coop,
+            theirs,
+            centre_seen[other],
+            ctx.vel[other],
+            big_d,
+            need,
+            *wall,
+        )
     if not out_v:
         empty = np.zeros(0, dtype=np.intp)
         return empty, np.zeros((0, 2)), np.zeros(0), np.zeros(0)

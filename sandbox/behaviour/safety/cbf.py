@@ -112,6 +112,7 @@ from sandbox.behaviour.safety.braking import (
     obstacle_normals,
     pair_geometry,
 )
+from sandbox.behaviour.safety.braking_check import check_commands
 from sandbox.behaviour.safety.priority import PRIORITY, holding, holds
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
@@ -597,8 +598,9 @@ def filter_commands(
     hold = walls = None  # the priority's holders, and their obstacles' row count
     if state.priority != "none":
         hold, walls = holding(state, ctx, filtered)
+    pending: dict = {}  # the braking barrier's check of the commands
     if state.braking:
-        veh, a_w, b, h = braking_rows(state, ctx, filtered)
+        veh, a_w, b, h = braking_rows(state, ctx, filtered, pending)
         least = float(h.min()) if len(h) else np.inf
         if by_vehicle is not None:
             np.minimum.at(by_vehicle, veh, h)
@@ -659,6 +661,9 @@ def filter_commands(
         z[group], slack[group] = zg, sg
         if state.braking:  # no command keeps every condition: brake
             fallback[group[sg > TOLERANCE]] = True
+    if "check" in pending:  # beyond first order, against the others braking
+        z_b = braking_fallback(state, ctx, np.arange(n))
+        z, _ = check_commands(state, ctx, pending["check"], z, z_b)
     braking = np.flatnonzero(fallback)
     if len(braking):
         z[braking] = braking_fallback(state, ctx, braking)
