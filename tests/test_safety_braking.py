@@ -24,6 +24,7 @@ from sandbox.behaviour.safety.braking import (
     braking_rows,
     brakings,
 )
+from sandbox.behaviour.safety.braking_check import check_commands, command_points
 from sandbox.behaviour.safety.cbf import PARAMS, CBFState, cbf, filter_commands
 from sandbox.cli import main
 from sandbox.loop.simulation import Simulation
@@ -234,6 +235,51 @@ def test_an_unsafe_state_is_filtered_no_worse_than_braking() -> None:
     assert ctx.stats["infeasible_steps"] == 0
     assert ctx.stats["unsafe_start"]["unsafe"] is True
     assert ctx.stats["min_barrier"] < 0
+
+
+def test_the_check_models_the_braking_command_as_the_barrier_does() -> None:
+    # Under its braking command a vehicle's points are the braking's, sample by
+    # sample: the check and the barrier share one model of the drive.
+    rng = np.random.default_rng(5)
+    ctx = _ctx(
+        rng.uniform(-1, 1, (4, 2)),
+        rng.uniform(-np.pi, np.pi, 4),
+        *(rng.uniform(-2, 2, 4), rng.uniform(-4, 4, 4)),
+        *(rng.uniform(-2, 2, 4), rng.uniform(-4, 4, 4)),
+    )
+    state = CBFState(ctx)
+    b = brakings(ctx, state, ctx.theta)
+    rows = np.arange(4)
+    z_b = braking_fallback(state, ctx, rows)
+    p = ctx.pos + 0.1 * b.heading
+    samples = b.travel.shape[1]
+    np.testing.assert_allclose(
+        command_points(state, ctx, b, rows, z_b, samples),
+        braking_points(ctx, b, rows, p, 0.1),
+        atol=1e-12,
+    )
+
+
+def test_the_check_moves_a_command_toward_braking() -> None:
+    # 0.3 m short of a wall's barrier at 1.5 m/s (braking runs about 0.23 m): safe.
+    # Speeding up to 1.55 m/s straight at it would run past what the condition
+    # allows; the check moves the command toward the braking command (1.45 m/s)
+    # until it passes, and leaves braking itself alone.
+    wall = ObstacleSpec("wall", "w", start=(0.0, -2.0), end=(0.0, 2.0), thickness=0.1)
+    x = -0.05 - 0.4 - 0.1 - 0.25
+    ctx = _ctx([[x, 0.0]], [0.0], [2.0], [0.0], [1.5], [0.0], obstacles=[wall])
+    state = CBFState(ctx)
+    pending: dict = {}
+    _, _, _, h = braking_rows(state, ctx, np.ones(1, bool), pending)
+    assert h.min() > 0
+    z_b = braking_fallback(state, ctx, np.arange(1))
+    z, moved = check_commands(
+        state, ctx, pending["check"], np.array([[1.55, 0.0]]), z_b
+    )
+    assert moved.tolist() == [True] and z_b[0, 0] <= z[0, 0] < 1.55
+    z, moved = check_commands(state, ctx, pending["check"], z_b.copy(), z_b)
+    assert moved.tolist() == [False]
+    np.testing.assert_array_equal(z, z_b)
 
 
 # ------------------------------------------------------------------ scenarios
