@@ -31,12 +31,8 @@ if TYPE_CHECKING:
 
 #: Halvings of the bisection toward the braking command [1]: ``t`` within 2^-8.
 HALVINGS = 8
-#: Clearance [m] a command may lose beyond what its condition allowed and pass: the
-#: drive model's own error over a period (its straight first period against the arc,
-#: measured below 1e-4 m a period on a 20-vehicle ring). A stricter check (1e-9 m)
-#: rejected every move along a boundary ``H = 0`` (the tangent move's loss of second
-#: order) and left vehicles stopped at obstacles: 15 of 24 random fields unsettled.
-SLACK = 1e-4
+#: Clearance [m] a check may miss by: rounding only.
+SLACK = 1e-9
 
 
 @dataclass
