@@ -212,7 +212,9 @@ def brakings(ctx: FilterContext, state: CBFState, theta: np.ndarray) -> Brakings
     turn = np.zeros(n) if ctx.v2_prev is None else ctx.v2_prev
     first = np.sign(last) * np.maximum(np.abs(last) - step, 0.0) + 0.0
     moves = braking_periods(first, step)
-    periods = int(moves.max(initial=0)) + 2  # the command's period, one at rest
+    # the command's period and two at rest: the lag's substep, then none (a
+    # horizon that does not depend on the slowest vehicle's stop, nor on the worlds)
+    periods = int(moves.max(initial=0)) + 3
     speeds = braking_speeds(first, step, periods + 1)
     before = np.concatenate((last[:, None], speeds[:, :-1]), axis=1)
     run = (1.0 - lag) * speeds + lag * before
@@ -460,6 +462,7 @@ def braking_rows(
         if not len(rows):
             wall = (none, none, np.zeros(0), np.zeros(0))
         me, other, coop, theirs, big_d, need = pair
+        pending["walls"] = len(rows)  # the obstacle rows, last
         pending["check"] = Pending(
             own,
             me,

@@ -611,6 +611,8 @@ def filter_commands(
             found["by_vehicle"] = by_vehicle
         veh, a_w, b = barrier_rows(state, ctx, filtered, reach, found)
         least = found.get("min_barrier", np.inf)
+    if "walls" in pending:  # the braking barrier's obstacle rows (two a pair at most)
+        walls = pending["walls"] if walls is not None else None
     wall = np.arange(len(veh)) >= len(veh) - (walls or 0)  # rows of obstacles last
     # In z = (v1, l v2): w = R(x3) z, so a . w = (R^T a) . z and |w - w0| = |z - z0|.
     c, s = np.cos(ctx.theta[veh]), np.sin(ctx.theta[veh])
