@@ -121,7 +121,7 @@ def braking_range(
 
     >>> round(braking_range(np.array([2.0]), np.array([0.4]), np.array([5.0]),
     ...                     np.array([0.5]), 0.05, 0.1, 0.01), 3)
-    2.727
+    2.732
     """
     v = float(np.max(v1_max))
     q = float(np.max(lateral))
