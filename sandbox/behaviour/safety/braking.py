@@ -12,15 +12,17 @@ driven open loop: its centre moving at its measured velocity, until the braking 
 has stopped, and ``D'``; toward an obstacle: its signed distance). A state with every
 ``H >= 0`` is *braking-safe*, and stays so while every vehicle brakes: the brakings
 from the next state are the rest of the brakings from this one. Each vehicle's
-condition asks that its command ``z = (v1, l v2)`` lose at most its share of ``H``
-against its braking command ``z_b`` to first order::
+condition asks that its command ``z = (v1, l v2)`` lose at most its share of what is
+left against its braking command ``z_b``, to first order::
 
-    g_ij . (z_i - z_b,i) >= -rho_i max(H_ij, 0),   g_ij = dH_ij / dz_i at z_b,
+    g_ij . (z_i - z_b,i) >= -rho_i (H_b' - min(H, 0)),   g_ij = dH_b' / dz_i at z_b,
 
-so the braking command keeps every condition by construction, and a vehicle's
-conditions always have a common point within its bounds. The distance beyond which no
-condition can bind is :func:`braking_range`; the equations and what they guarantee are
-in ``docs/concepts/safety.md``.
+``H_b' >= H`` the next state's barrier if it brakes, so the braking command keeps every
+condition by construction, and a vehicle's conditions always have a common point
+within its bounds. :mod:`sandbox.behaviour.safety.braking_check` then checks the QP's
+command beyond first order. The distance beyond which no condition can bind is
+:func:`braking_range`; the equations and what they guarantee are in
+``docs/concepts/safety.md``.
 """
 
 from __future__ import annotations
