@@ -34,7 +34,7 @@ and ``barrier: velocity``, then ``braking``, it prints the contact episodes, the
 relaxed steps (``safety.infeasible_steps``: vehicle-steps whose conditions had no
 common point; the velocity barrier then relaxes them by the least slack, the braking
 one brakes, ``safety.fallback_steps``), the largest slack [m/s], ``safety.min_barrier``
-(``velocity``: [m^2], ``braking``: [m/s]) and whether the run converged. ``--duration``
+(``velocity``: [m^2], ``braking``: [m]) and whether the run converged. ``--duration``
 caps each run [s] (default: the file's).
 """
 

@@ -209,6 +209,7 @@ class WorldStages:
                 memory=s.filter_memory,
                 stats=s.filter_stats,
                 slot=self.plan.slot[rows],
+                substeps=self.substeps,
                 **context_fields(s.range_sensor),
             )
             try:
@@ -250,6 +251,7 @@ class WorldStages:
             worlds=self.K,
             world_stats=[s.filter_stats for s in self.states],
             slot=self.plan.slot,
+            substeps=self.substeps,
             **context_fields(self.range_sensor),
         )
         out = self._filter(ctx)  # a PluginRunError ends every world (_guarded)

@@ -1,22 +1,17 @@
-"""The braking-distance barrier and the sensing margin: pure functions of arrays.
+"""The braking-safe barrier and the sensing margin: pure functions of arrays.
 
 Used by the safety filter (``safety: {filter: cbf, barrier: braking}``,
-:mod:`sandbox.behaviour.safety.cbf`) and by the loader's checks of a scenario (an
-unsafe start, a margin the broadcast needs); see ``docs/concepts/safety.md``.
+:mod:`sandbox.behaviour.safety.cbf`, :mod:`sandbox.behaviour.safety.braking`) and by
+the loader's checks of a scenario (an unsafe start, a margin the broadcast needs);
+see ``docs/concepts/safety.md``.
 
-A point that can brake at ``A`` [m/s^2] and is ``s`` [m] short of contact, closing at
-``c`` [m/s], can stop in time when ``c <= sqrt(2 A s)`` (the barrier of Wang, Ames and
-Egerstedt, ``h = sqrt(2 A s) - c``). In a sampled loop whose speed changes by at most
-``A dt`` per period of ``dt`` [s] the largest safe closing speed is the root of
-``F^2 + A dt F = 2 A s``::
-
-    F(s) = sqrt((A dt / 2)^2 + 2 A s) - A dt / 2,
-
-which tends to ``sqrt(2 A s)`` as ``dt -> 0``. It is exact for motion along the line
-of centres: from ``c = F(s)`` one period later the gap is ``s' = s - c dt`` and
-``F(s') = c - A dt`` (``F(s')^2 + A dt F(s') = 2 A s - 2 A c dt = (c - A dt)^2 + A dt
-(c - A dt)``), so braking at ``A`` keeps ``c <= F(s)`` until the point stops, short of
-contact.
+A vehicle *brakes* when its turn rate is 0 and its speed moves toward 0 by its
+``max_accel dt`` a period of ``dt`` [s]: its look-ahead point then runs straight
+along its heading and stops. :func:`braking_speeds` gives the speeds of those
+periods, and :func:`closest_approach` the least distance of two points moving at
+constant velocity within each period (two braking vehicles, or a braking vehicle
+and one that keeps its velocity): exactly, period by period; :func:`local_minima`
+picks the periods where it has a local minimum.
 """
 
 from __future__ import annotations
@@ -33,32 +28,93 @@ MIN_DIST = 1e-9
 MIN_SPEED = 1e-9
 
 
-def braking_speed(s: np.ndarray, accel: np.ndarray, dt: float) -> np.ndarray:
-    """Largest closing speed [m/s] from which a gap ``s`` can be braked away.
+def braking_speeds(first: np.ndarray, step: np.ndarray, periods: int) -> np.ndarray:
+    """Speeds [m/s] of the periods of a braking, from the first period's speed.
+
+    ``s_m = sign(first) max(|first| - m step, 0)``, ``m = 0 .. periods - 1``: the
+    first period at ``first``, each later one ``step`` nearer 0, then at rest.
 
     Parameters
     ----------
-    s : ndarray [m]
-        The gap left before contact (negative: already inside, gives 0).
-    accel : ndarray [m/s^2]
-        The braking ``A`` of the pair (``a_i + a_j``; ``a_i`` toward a vehicle that
-        does not brake, an obstacle or a wall).
-    dt : float [s]
-        The control period.
+    first : ndarray, shape (k,) [m/s]
+        The speed of the first period.
+    step : ndarray, shape (k,) [m/s]
+        The change a period, ``max_accel dt`` (> 0).
+    periods : int
 
     Returns
     -------
-    ndarray [m/s]
-        ``F(s) = sqrt((A dt / 2)^2 + 2 A s) - A dt / 2`` (0 for ``s <= 0``).
+    ndarray, shape (k, periods) [m/s]
 
-    >>> float(braking_speed(np.array(1.0), np.array(2.0), 0.0))
-    2.0
-    >>> round(float(braking_speed(np.array(1.0), np.array(2.0), 0.1)), 6)
-    1.902498
+    >>> braking_speeds(np.array([0.625, -0.25]), np.array([0.25, 0.25]), 4).tolist()
+    [[0.625, 0.375, 0.125, 0.0], [-0.25, 0.0, 0.0, 0.0]]
     """
-    half = 0.5 * accel * dt
-    gap = np.maximum(s, 0.0)
-    return np.sqrt(half * half + 2.0 * accel * gap) - half
+    m = np.arange(periods)
+    left = np.abs(first)[:, None] - m[None, :] * step[:, None]
+    return np.sign(first)[:, None] * np.maximum(left, 0.0) + 0.0  # no -0.0
+
+
+def braking_periods(speed: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """How many periods a braking from ``speed`` [m/s] moves (``ceil(|v| / step)``).
+
+    >>> braking_periods(np.array([0.12, 0.0, 0.1]), np.array([0.05, 0.05, 0.05]))
+    array([3, 0, 2])
+    """
+    return np.ceil(np.abs(speed) / step - 1e-9).astype(np.intp).clip(0)
+
+
+def closest_approach(rel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The least distance, period by period, of a relative position moving straight.
+
+    ``rel[:, m]`` is the relative position at the start of period ``m`` (``M + 1``
+    samples, ``M`` periods); within a period it moves at constant velocity, so the
+    least distance over the period is at ``f = clip(-r_m . d_m / |d_m|^2, 0, 1)``,
+    ``d_m = r_(m+1) - r_m``.
+
+    Parameters
+    ----------
+    rel : ndarray, shape (k, M + 1, 2) [m]
+
+    Returns
+    -------
+    dist : ndarray, shape (k, M) [m]
+        The least distance over each period.
+    frac : ndarray, shape (k, M) [1]
+        How far into the period it is reached, in [0, 1].
+
+    >>> rel = np.array([[[-2.0, 1.0], [0.0, 1.0], [2.0, 3.0]]])
+    >>> [x.tolist() for x in closest_approach(rel)]
+    [[[1.0, 1.0]], [[1.0, 0.0]]]
+    """
+    r0, d = rel[:, :-1], rel[:, 1:] - rel[:, :-1]
+    dd = np.einsum("kmd,kmd->km", d, d)
+    f = np.clip(-np.einsum("kmd,kmd->km", r0, d) / np.maximum(dd, 1e-30), 0.0, 1.0)
+    near = r0 + f[..., None] * d
+    return np.hypot(near[..., 0], near[..., 1]), f
+
+
+def local_minima(dist: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``count`` least local minima of each row of ``dist`` (k, M), by column.
+
+    A column is a local minimum when it is no larger than the one before and smaller
+    than the one after (the ends count as larger); a row with fewer minima repeats
+    its least. Returns the columns (k, count) and whether each is a minimum.
+    ``dist`` needs at least one column.
+
+    >>> cols, ok = local_minima(np.array([[3.0, 1.0, 2.0, 0.5, 0.5, 4.0]]), 2)
+    >>> cols.tolist(), ok.tolist()
+    ([[4, 1]], [[True, True]])
+    """
+    pad = np.pad(dist, ((0, 0), (1, 1)), constant_values=np.inf)
+    is_min = (pad[:, 1:-1] <= pad[:, :-2]) & (pad[:, 1:-1] < pad[:, 2:])
+    score = np.where(is_min, dist, np.inf)
+    if score.shape[1] < count:
+        score = np.pad(score, ((0, 0), (0, count - score.shape[1])), "edge")
+        score[:, dist.shape[1] :] = np.inf
+    order = np.argsort(score, axis=1, kind="stable")[:, :count]
+    ok = np.isfinite(np.take_along_axis(score, order, axis=1))
+    least = np.argmin(dist, axis=1)[:, None]
+    return np.where(ok, order, least), ok
 
 
 def sensing_margin(

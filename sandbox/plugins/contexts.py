@@ -279,6 +279,9 @@ class FilterContext:
         With ``worlds > 1``, each world's counters (``stats`` is then unused).
     slot : ndarray (n, 2) or None
         Each vehicle's formation slot [m] (NaN where undefined); None: unknown.
+    substeps : int
+        The physics' substeps a period: a drive reaches a new command one substep
+        into the period (the first substep runs at the last period's command).
     """
 
     t: float
@@ -308,6 +311,7 @@ class FilterContext:
     worlds: int = 1
     world_stats: list[dict[str, Any]] | None = None
     slot: np.ndarray | None = None
+    substeps: int = 1
 
 
 @dataclass

@@ -1,32 +1,57 @@
-"""The braking barrier of the CBF filter (``safety: {filter: cbf, barrier: braking}``).
+"""The braking-safe barrier of the CBF filter (``safety: {barrier: braking}``).
 
-Its conditions (:func:`braking_rows`), the braking command of a vehicle whose state is
-already unsafe (:func:`braking_fallback`) and the distance beyond which no condition
-binds (:func:`braking_range`); the equations and what they guarantee are in
-:mod:`sandbox.behaviour.safety.cbf` and ``docs/concepts/safety.md``.
+Every vehicle has one *braking command*: turn rate 0 and the speed ``max_accel dt``
+nearer 0 each period (:func:`braking_fallback`), along which its look-ahead point runs
+straight along its heading and stops. The barrier of a pair is the least clearance
+beyond ``D`` if both brake from now on (:func:`braking_rows`)::
+
+    H_ij(x) = min_(tau >= 0) |q_i(tau) - q_j(tau)| - D,
+
+``q`` the look-ahead points along those brakings (toward a vehicle believed failed or
+driven open loop: its centre moving at its measured velocity, until the braking vehicle
+has stopped, and ``D'``; toward an obstacle: its signed distance). A state with every
+``H >= 0`` is *braking-safe*, and stays so while every vehicle brakes: the brakings
+from the next state are the rest of the brakings from this one. Each vehicle's
+condition asks that its command ``z = (v1, l v2)`` lose at most its share of what is
+left against its braking command ``z_b``, to first order::
+
+    g_ij . (z_i - z_b,i) >= -rho_i (H_b' - min(H, 0)),   g_ij = dH_b' / dz_i at z_b,
+
+``H_b' >= H`` the next state's barrier if it brakes, so the braking command keeps every
+condition by construction, and a vehicle's conditions always have a common point
+within its bounds. :mod:`sandbox.behaviour.safety.braking_check` then checks the QP's
+command beyond first order. The distance beyond which no condition can bind is
+:func:`braking_range`; the equations and what they guarantee are in
+``docs/concepts/safety.md``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sandbox.model.barriers import MIN_DIST, MIN_SPEED, braking_speed
+from sandbox.behaviour.safety.braking_check import Pending
+from sandbox.model.barriers import (
+    MIN_DIST,
+    braking_periods,
+    braking_speeds,
+    closest_approach,
+    local_minima,
+)
 
 if TYPE_CHECKING:
     from sandbox.behaviour.safety.cbf import CBFState
     from sandbox.plugins.contexts import FilterContext
 
-#: The braking barrier's time step T = BRAKING_PERIODS dt in F(g) = sqrt((A T / 2)^2
-#: + 2 A g) - A T / 2 [1]: one period for the sampling, two for the drive, which
-#: reaches a commanded speed within a period (so a vehicle travels up to two periods
-#: at its old speed before its braking shows).
-BRAKING_PERIODS = 3.0
-#: The share kappa of the braking along the line of centres the barrier plans with,
-#: F = F_{kappa A} [1]: the rest, (1 - kappa) A dt a period, is the reserve for the
-#: line of centres and the headings turning, which the sampled barrier holds fixed.
-BRAKING_SHARE = 0.75
+#: Conditions a pair makes: one at each of the least local minima of its distance
+#: along the brakings [1] (two minima, e.g. passing then following, may trade places
+#: from one step to the next; a condition at one alone lets the other go).
+MINIMA = 2
+#: Below this size of a condition's gradient ``|g|`` [m s] the condition is left out:
+#: no command changes that pair's clearance to first order.
+FLAT_GRADIENT = 1e-12
 
 
 def look_ahead_points(ctx: FilterContext, look: float) -> tuple[np.ndarray, ...]:
@@ -86,27 +111,32 @@ def braking_range(
 ) -> float:
     """Distance [m] beyond which no braking-barrier condition can bind.
 
-    Look-ahead points move at most ``s = sqrt(v1_max^2 + lateral^2)`` and their
-    velocity changes in one period by at most ``q = a_max dt + 2 lateral``; a
-    condition ``-n . (w - w^) <= rho h`` (``h = F(gap) - c^``, ``c^ <= 2 s``) can
-    bind only if ``rho h < q``. With ``rho >= a_min / (2 a_max)`` (1 toward a
-    vehicle that does not brake, an obstacle, a wall) none binds once ``F(gap) >= K
-    = 2 s + 2 q a_max / a_min`` at the least braking ``a_min``: ``gap >= (K^2 +
-    a_min dt K) / (2 a_min)``, plus the largest ``D`` and ``l``.
+    A braking from ``v1_max`` runs at most ``S = v1_max (v1_max / a + dt) / 2 +
+    v1_max dt`` (the first period at the command's speed), a vehicle that does not
+    brake at most ``s (v1_max / a_min + 2 dt)`` meanwhile (``s = sqrt(v1_max^2 +
+    lateral^2)``, the look-ahead points' top speed), so ``H >= r - D - 2 X`` at a
+    distance ``r`` of the points, ``X`` the larger travel. A condition binds only if
+    a command within the bounds loses more than ``rho H`` against the braking
+    command: ``|g . dz| <= G = (2 dt + v1_max / a_min) 2 a dt + dt (1 + S / l) 2
+    lateral``, ``rho >= a_min / (a_min + a_max)``. Beyond ``D + l + 2 X + G /
+    rho`` none does.
 
     >>> round(braking_range(np.array([2.0]), np.array([0.4]), np.array([5.0]),
     ...                     np.array([0.5]), 0.05, 0.1, 0.01), 3)
-    4.219
+    2.732
     """
+    v = float(np.max(v1_max))
+    q = float(np.max(lateral))
     s = float(np.max(np.hypot(v1_max, lateral)))
     a_min, a_max = float(np.min(accel)), float(np.max(accel))
     if not (np.isfinite(s) and np.isfinite(a_max) and a_min > 0):
         return np.inf
-    q = a_max * dt + 2.0 * float(np.max(lateral))
-    k = 2.0 * s + 2.0 * q * a_max / a_min
-    gap = (k * k + a_min * dt * k) / (2.0 * a_min)
+    stop = v / a_min + dt  # [s] the braking's duration, the first period included
+    travel = max(0.5 * v * stop + v * dt, s * (stop + dt))
+    reach = (stop + dt) * 2.0 * a_max * dt
+    reach += dt * (1.0 + (0.5 * v * stop + v * dt) / look_ahead) * 2.0 * q
     big_d = float(np.max(diameter)) + 2.0 * look_ahead + margin
-    return gap + big_d + look_ahead
+    return big_d + look_ahead + 2.0 * travel + reach * (a_min + a_max) / a_min
 
 
 def obstacle_normals(
@@ -133,109 +163,320 @@ def obstacle_normals(
     return rows, signed, away
 
 
+@dataclass
+class Brakings:
+    """Every vehicle's braking from this state on, period by period.
+
+    The drive reaches a command one substep into the period (``lag = 1 /
+    substeps`` of it at the last command), so a period at the speeds ``s_(m-1)``
+    then ``s_m`` runs ``dt u_m``, ``u_m = (1 - lag) s_m + lag s_(m-1)`` (``s_(-1) =
+    v1^``); its first period also runs ``lag dt l v2^`` sideways and turns the
+    heading by ``lag dt v2^``, along which the rest runs (``heading``).
+
+    Attributes
+    ----------
+    first : ndarray, shape (n,) [m/s]
+        The braking command's speed, ``v1^`` moved ``max_accel dt`` toward 0.
+    speeds : ndarray, shape (n, S) [m/s]
+        ``s_m`` of the periods (0 once stopped); ``S - 1`` periods in all, at least
+        one at rest.
+    travel : ndarray, shape (n, S) [m]
+        Distance run by the start of each period.
+    slope : ndarray, shape (n, S) [s]
+        ``d travel / d v1`` of the first period's speed.
+    heading, side : ndarray, shape (n, 2)
+        The heading ``e`` now and ``e^perp``.
+    path, path_side : ndarray, shape (n, 2)
+        The heading of the braking after the first period, and its ``e^perp``.
+    moves : ndarray, shape (n,) int
+        The periods in which the braking moves.
+    lag : float [1]
+    """
+
+    first: np.ndarray
+    speeds: np.ndarray
+    travel: np.ndarray
+    slope: np.ndarray
+    heading: np.ndarray
+    side: np.ndarray
+    path: np.ndarray
+    path_side: np.ndarray
+    moves: np.ndarray
+    lag: float
+
+
+def brakings(ctx: FilterContext, state: CBFState, theta: np.ndarray) -> Brakings:
+    """Every vehicle's braking (:class:`Brakings`), at the headings ``theta``."""
+    n, dt = len(ctx.pos), ctx.dt
+    lag = 1.0 / max(int(ctx.substeps), 1)
+    step = state.accel * dt
+    last = np.zeros(n) if ctx.v1_prev is None else ctx.v1_prev
+    turn = np.zeros(n) if ctx.v2_prev is None else ctx.v2_prev
+    first = np.sign(last) * np.maximum(np.abs(last) - step, 0.0) + 0.0
+    moves = braking_periods(first, step)
+    # the command's period and two at rest: the lag's substep, then none (a
+    # horizon that does not depend on the slowest vehicle's stop, nor on the worlds)
+    periods = int(moves.max(initial=0)) + 3
+    speeds = braking_speeds(first, step, periods + 1)
+    before = np.concatenate((last[:, None], speeds[:, :-1]), axis=1)
+    run = (1.0 - lag) * speeds + lag * before
+    moving = (speeds != 0.0).astype(float)
+    moving[:, 0] = 1.0  # the command's own period, whatever its speed
+    was = np.concatenate((np.zeros((n, 1)), moving[:, :-1]), axis=1)
+    grows = (1.0 - lag) * moving + lag * was
+    travel, slope = np.zeros_like(speeds), np.zeros_like(speeds)
+    travel[:, 1:] = dt * np.cumsum(run[:, :-1], axis=1)
+    slope[:, 1:] = dt * np.cumsum(grows[:, :-1], axis=1)
+    heading = np.stack((np.cos(theta), np.sin(theta)), -1)
+    bent = theta + lag * dt * turn
+    path = np.stack((np.cos(bent), np.sin(bent)), -1)
+    return Brakings(
+        first=first,
+        speeds=run,
+        travel=travel,
+        slope=slope,
+        heading=heading,
+        side=heading[:, ::-1] * [-1.0, 1.0],
+        path=path,
+        path_side=path[:, ::-1] * [-1.0, 1.0],
+        moves=moves,
+        lag=lag,
+    )
+
+
+def braking_points(
+    ctx: FilterContext, b: Brakings, rows: np.ndarray, start: np.ndarray, look: float
+) -> np.ndarray:
+    """The look-ahead points of vehicles ``rows`` braking from ``start``, (k, S, 2).
+
+    Sampled at the start of each period: the first period along the heading (and
+    ``lag dt l v2^`` sideways), the rest along the braking's heading.
+    """
+    turn = np.zeros(len(rows)) if ctx.v2_prev is None else ctx.v2_prev[rows]
+    one = b.travel[rows, 1]
+    out = (
+        start[:, None]
+        + b.path[rows][:, None] * (b.travel[rows] - one[:, None])[..., None]
+    )
+    shift = one[:, None] * b.heading[rows] + (
+        b.lag * ctx.dt * look * turn[:, None] * b.side[rows]
+    )
+    out[:, 1:] += shift[:, None]
+    out[:, 0] = start
+    return out
+
+
+def _gradient(
+    state: CBFState,
+    ctx: FilterContext,
+    me: np.ndarray,
+    normal: np.ndarray,
+    period: np.ndarray,
+    frac: np.ndarray,
+    b: Brakings,
+) -> np.ndarray:
+    """``dH / dz`` at the braking command, ``z = (v1, l v2)``, shape (k, 2) [s].
+
+    The clearance is reached at ``tau = (period + frac) dt >= dt`` along the unit
+    ``normal`` (away from the other). A command ``z`` for the first period and the
+    braking from it after: ``v1`` moves the point ``(1 - lag) dt`` along ``e`` in
+    the first period and by the rest of ``d travel / d v1`` along the braking's
+    heading after; ``l v2`` moves it along ``e^perp`` for ``(1 - lag) dt`` and, the
+    drive reaching the braking's turn rate 0 one substep late, ``lag dt`` more, and
+    turns the rest of the braking, ``travel(tau) - travel(dt)``, by ``v2 dt``.
+    """
+    dt, look = ctx.dt, state.look
+    own = (1.0 - b.lag) * dt
+    slope = b.slope[me, period] + frac * (b.slope[me, period + 1] - b.slope[me, period])
+    ran = b.travel[me, period] + frac * dt * b.speeds[me, period]
+    rest = ran - b.travel[me, 1]
+    g1 = own * np.einsum("kd,kd->k", normal, b.heading[me])
+    g1 += (slope - b.slope[me, 1]) * np.einsum("kd,kd->k", normal, b.path[me])
+    # l v2 runs sideways for the period's (1 - lag) and the next one's lag
+    late = dt * np.clip(period + frac - 1.0, 0.0, b.lag)
+    g2 = (own + late) * np.einsum("kd,kd->k", normal, b.side[me])
+    g2 += dt * rest / look * np.einsum("kd,kd->k", normal, b.path_side[me])
+    return np.stack((g1, g2), -1)
+
+
+def _need(after: np.ndarray, now: np.ndarray, share) -> np.ndarray:
+    """The clearance [m] a condition allows the next state: ``H_b' - rho left``."""
+    return after - share * np.maximum(after - np.minimum(now, 0.0), 0.0)
+
+
+def _rows(
+    ctx: FilterContext,
+    me: np.ndarray,
+    grad: np.ndarray,
+    after: np.ndarray,
+    now: np.ndarray,
+    share: np.ndarray,
+    first: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The half-planes ``a . w <= b`` of ``g . (z - z_b) >= -rho (H_b' - min(H, 0))``.
+
+    ``H_b'`` (``after``) is the next state's barrier if the vehicle brakes, ``H``
+    (``now``) this state's, ``H <= H_b'``: a command may lose the share ``rho`` of
+    what is left above 0 (above ``H`` where ``H < 0``). In ``z``, ``-g / |g| . z <=
+    (-g . z_b + rho (H_b' - min(H, 0))) / |g|`` with ``z_b = (first, 0)``; ``a`` is
+    turned into ``w = R(x3) z``. A flat gradient gives the always-kept row ``a = 0,
+    b = 1``.
+    """
+    norm = np.hypot(grad[:, 0], grad[:, 1])
+    flat = norm < FLAT_GRADIENT
+    norm = np.where(flat, 1.0, norm)
+    a_z = -grad / norm[:, None]
+    left = np.maximum(after - np.minimum(now, 0.0), 0.0)  # >= 0 but for rounding
+    b = (-grad[:, 0] * first[me] + share * left) / norm
+    a_z[flat], b[flat] = 0.0, 1.0
+    c, s = np.cos(ctx.theta[me]), np.sin(ctx.theta[me])
+    a_w = np.stack((c * a_z[:, 0] - s * a_z[:, 1], s * a_z[:, 0] + c * a_z[:, 1]), -1)
+    return a_w, b
+
+
 def braking_rows(
-    state: CBFState, ctx: FilterContext, filtered: np.ndarray
+    state: CBFState,
+    ctx: FilterContext,
+    filtered: np.ndarray,
+    pending: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Every braking-barrier condition of the step, ``a . w <= b``, with its ``h``.
+    """Every braking-barrier condition of the step, ``a . w <= b``, with its ``H``.
 
-    For vehicle ``i`` toward ``j`` (look-ahead points ``p``, ``dp = p_i - p_j``,
-    ``n = dp / |dp|``, gap ``g = |dp| - D``, the last period's velocities ``w^``,
-    headings ``e``)::
-
-        c^ = -n . (w^_i - w^_j),   a_i^n = |n . e_i| min(a_i, room_i / dt),
-        A = a_i^n + a_j^n,
-        h = F_A(g) + A dt - c^,
-        -n . (w_i - w^_i) <= rho_i (F_A(g) - c^),
-
-    with ``F_A`` of :func:`sandbox.model.barriers.braking_speed` over ``T = 3 dt``
-    and ``kappa A`` (``h = min(h, g)`` inside ``D``); ``rho_i = a_i / (a_i + a_j)``
-    of a budget (``F_A >= c^``), ``a_i^n / A`` of a deficit (1/2 where ``A = 0``).
-    The two conditions of a pair add up to ``c <= F_A(g)``; where ``h >= 0`` each
-    asks its vehicle to slow its closing by at most ``a_i^n dt``, which a change of
-    ``v1`` within its bounds (``room_i``: down to ``-v1_max``, or 0 without
-    ``reverse``, heading toward; up to ``v1_max`` heading away) does. Toward a
-    vehicle believed failed or driven open loop ``a_j = 0`` (``rho_i = 1``) and
-    ``w^_j`` is its centre's measured velocity, against its centre (``D' = (d_i +
-    d_j) / 2 + l + margin``); toward an obstacle ``a_j = 0``, ``w^_j = 0`` and the
-    gap is ``s(p) - (d_i / 2 + l + margin)``. Neighbours' poses are the sensed ones
-    and ``D``, ``D'`` grow by the sensing margin.
+    For vehicle ``i`` toward ``j``: both brake from now on (:class:`Brakings`;
+    toward a vehicle believed failed or driven open loop, its centre at its measured
+    velocity and ``D'``, until ``i`` has stopped and one period more), their
+    look-ahead points ``q`` sampled at the periods, and the least distance less
+    ``D`` exactly (:func:`sandbox.model.barriers.closest_approach`; straight motion
+    within each period): ``H`` over all of it, ``H_b'`` from the end of this period
+    on (the next state's barrier if both brake). Toward an obstacle the least over
+    each period is bounded by ``(s_m + s_(m+1) - L_m) / 2`` (``s`` the signed
+    distance of the samples less ``d / 2 + l + margin``, ``L_m`` the period's
+    travel: the distance is 1-Lipschitz along the segment). The condition is ``g .
+    (z - z_b) >= -rho (H_b' - min(H, 0))`` (``_gradient``, ``_rows``), ``rho = a_i
+    / (a_i + a_j)`` toward a cooperating vehicle, 1 otherwise. Neighbours' poses
+    are the sensed ones and ``D``, ``D'`` grow by the sensing margin. ``pending``,
+    if given, receives under ``"check"`` what
+    :func:`sandbox.behaviour.safety.braking_check.check_commands` needs.
 
     Returns
     -------
     vehicle : ndarray, shape (r,) int
     a : ndarray, shape (r, 2)
-        Unit normal in ``w`` [1].
+        Unit normal in ``w`` [1] (0 where the condition is flat).
     b : ndarray, shape (r,) [m/s]
-    h : ndarray, shape (r,) [m/s]
-        The barrier at the last period's velocities (< 0: unsafe).
+    h : ndarray, shape (r,) [m]
+        The barrier ``H`` of the state (< 0: not braking-safe).
     """
     look, margin, dt = state.look, state.margin + state.sensed, ctx.dt
-    lag = BRAKING_PERIODS * dt
-    pos, d, accel = ctx.pos, ctx.diameter, state.accel
-    heading, p, centre_seen, p_seen = look_ahead_points(ctx, look)
-    if ctx.v1_prev is not None:
-        w_hat = heading * ctx.v1_prev[:, None]
-        w_hat += look * ctx.v2_prev[:, None] * heading[:, ::-1] * [-1.0, 1.0]
-    else:
-        w_hat = np.zeros_like(pos)
-    # The braking each can apply a period through v1 [m/s^2]: slowing the closing
-    # (cos > 0: heading toward, v1 down; else up) by a dt, or what its bounds leave.
-    lo = -state.v1_max if state.reverse else np.zeros(len(pos))
-    if ctx.v1_prev is None:
-        room = (np.full(len(pos), np.inf), np.full(len(pos), np.inf))
-    else:
-        room = (
-            np.maximum(ctx.v1_prev - lo, 0.0) / dt,
-            np.maximum(state.v1_max - ctx.v1_prev, 0.0) / dt,
-        )
-
-    def along_line(cos: np.ndarray, room: tuple, rows: np.ndarray) -> np.ndarray:
-        down, up = room[0][rows], room[1][rows]
-        return np.abs(cos) * np.minimum(accel[rows], np.where(cos > 0, down, up))
+    d, accel = ctx.diameter, state.accel
+    _, p, centre_seen, p_seen = look_ahead_points(ctx, look)
+    own = brakings(ctx, state, ctx.theta)
+    seen = own if ctx.seen is None else brakings(ctx, state, ctx.seen[:, 2])
+    samples = own.travel.shape[1]
 
     out_v, out_a, out_b, out_h = [], [], [], []
     i, j, _ = state.neighbours.near(p_seen)
     if len(i):
-        me, other, coop, rel, dist, big_d = pair_geometry(
+        me, other, coop, _, _, big_d = pair_geometry(
             i, j, filtered, p, p_seen, centre_seen, d, look, margin
         )
-        unit = rel / dist[:, None]
-        # Braking along the line of centres: changing v1 by a_i dt within its
-        # bounds changes the closing at a_i^n = |cos| of the heading to that line.
-        a_me = along_line(-np.einsum("kd,kd->k", unit, heading[me]), room, me)
-        toward = np.einsum("kd,kd->k", unit, heading[other])
-        a_other = np.where(coop, along_line(toward, room, other), 0.0)
-        pair = a_me + a_other
-        w_other = np.where(coop[:, None], w_hat[other], ctx.vel[other])
-        closing = -np.einsum("kd,kd->k", unit, w_hat[me] - w_other)
-        budget = braking_speed(dist - big_d, BRAKING_SHARE * pair, lag) - closing
-        h = budget + pair * dt
-        h = np.where(dist >= big_d, h, np.minimum(h, dist - big_d))
-        # A budget to spend is shared by the drives' bounds, a deficit to brake
-        # away by the braking along the line (half each where neither can).
+        mine = braking_points(ctx, own, me, p[me], look)
+        theirs = braking_points(ctx, seen, other, p_seen[other], look)
+        # A vehicle that does not brake keeps its measured velocity, until the
+        # braking one has stopped and one period more.
+        drift = np.arange(samples)[None, :, None] * dt * ctx.vel[other][:, None]
+        drifting = centre_seen[other][:, None] + drift
+        theirs = np.where(coop[:, None, None], theirs, drifting)
+        rel = mine - theirs
+        rows = np.arange(len(me))
+        last = np.where(coop, samples - 1, np.minimum(own.moves[me] + 1, samples - 1))
+        hold = np.arange(samples)[None, :] > last[:, None]
+        rel = np.where(hold[..., None], rel[rows, last][:, None], rel)
+        # H over all of the brakings; the next state's from the end of this period
+        # on, one condition at each of its least local minima along the way.
+        dist, frac = closest_approach(rel)
+        now = dist.min(axis=1) - big_d
         share = np.where(coop, accel[me] / (accel[me] + accel[other]), 1.0)
-        owed = np.where(
-            pair > 0, a_me / np.maximum(pair, MIN_SPEED), np.where(coop, 0.5, 1.0)
+        pair_after = dist[:, 1:].min(axis=1) - big_d
+        pair = (me, other, coop, theirs, big_d, _need(pair_after, now, share))
+        period, ok = local_minima(dist[:, 1:], MINIMA)
+        keep = ok | (np.arange(MINIMA) == 0)
+        pick, period = np.nonzero(keep)[0], period[keep] + 1
+        frac, after = frac[pick, period], dist[pick, period]
+        near = rel[pick, period] + frac[:, None] * (
+            rel[pick, period + 1] - rel[pick, period]
         )
-        rho = np.where(budget >= 0, share, owed)
+        normal = near / np.maximum(after, MIN_DIST)[:, None]
+        me, other, coop, big_d, now = (
+            me[pick],
+            other[pick],
+            coop[pick],
+            big_d[pick],
+            now[pick],
+        )
+        grad = _gradient(state, ctx, me, normal, period, frac, own)
+        share = share[pick]
+        a_w, b = _rows(ctx, me, grad, after - big_d, now, share, own.first)
         out_v.append(me)
-        out_a.append(-unit)
-        out_b.append(rho * budget - np.einsum("kd,kd->k", unit, w_hat[me]))
-        out_h.append(h)
+        out_a.append(a_w)
+        out_b.append(b)
+        out_h.append(now)
 
-    near = obstacle_normals(state, ctx, p, filtered)
-    if near is not None:
-        rows, signed, away = near
-        gap = signed - (0.5 * d[rows] + state.look + state.margin)
-        closing = -np.einsum("kd,kd->k", away, w_hat[rows])
-        a_me = along_line(-np.einsum("kd,kd->k", away, heading[rows]), room, rows)
-        budget = braking_speed(gap, BRAKING_SHARE * a_me, lag) - closing
-        h = budget + a_me * dt
-        h = np.where(gap >= 0, h, np.minimum(h, gap))
+    field = ctx.obstacle_field
+    rows = cols = np.zeros(0, dtype=np.intp)
+    if field is not None and not field.empty:
+        rows, cols = state.neighbours.obstacle_pairs(p, field)
+        keep = np.flatnonzero(filtered[rows])
+        rows, cols = rows[keep], cols[keep]
+    if len(rows):
+        points = braking_points(ctx, own, rows, p[rows], look)
+        flat = points.reshape(-1, 2)
+        index = np.arange(len(flat))
+        signed, point = field.pair_distance(flat, index, np.repeat(cols, samples))
+        signed = signed.reshape(len(rows), samples)
+        reach = np.hypot(*np.moveaxis(points[:, 1:] - points[:, :-1], -1, 0))
+        low = 0.5 * (signed[:, :-1] + signed[:, 1:] - reach)
+        clear = 0.5 * d[rows] + look + state.margin
+        now = low.min(axis=1) - clear
+        wall = (rows, cols, clear, _need(low[:, 1:].min(axis=1) - clear, now, 1.0))
+        seg, ok = local_minima(low[:, 1:], MINIMA)  # from the end of this period on
+        keep = ok | (np.arange(MINIMA) == 0)
+        k, seg = np.nonzero(keep)[0], seg[keep] + 1
+        after, now = low[k, seg] - clear[k], now[k]
+        at = np.where(signed[k, seg] <= signed[k, seg + 1], seg, seg + 1)
+        away = flat[k * samples + at] - point[k * samples + at]
+        away *= np.where(signed[k, at] < 0, -1.0, 1.0)[:, None]
+        away /= np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)[:, None]
+        at_end = at == samples - 1  # the last sample: the period before it, ended
+        period, frac = np.where(at_end, at - 1, at), np.where(at_end, 1.0, 0.0)
+        rows = rows[k]
+        grad = _gradient(state, ctx, rows, away, period, frac, own)
+        a_w, b = _rows(ctx, rows, grad, after, now, np.ones(len(rows)), own.first)
         out_v.append(rows)
-        out_a.append(-away)
-        out_b.append(budget - np.einsum("kd,kd->k", away, w_hat[rows]))
-        out_h.append(h)
+        out_a.append(a_w)
+        out_b.append(b)
+        out_h.append(now)
+    if pending is not None:
+        none = np.zeros(0, dtype=np.intp)
+        if not len(i):
+            pair = (none, none, none.astype(bool), np.zeros((0, samples, 2)))
+            pair += (np.zeros(0), np.zeros(0))
+        if not len(rows):
+            wall = (none, none, np.zeros(0), np.zeros(0))
+        me, other, coop, theirs, big_d, need = pair
+        pending["walls"] = len(rows)  # the obstacle rows, last
+        pending["check"] = Pending(
+            own,
+            me,
+            other,
+            coop,
+            theirs,
+            centre_seen[other],
+            ctx.vel[other],
+            big_d,
+            need,
+            *wall,
+        )
     if not out_v:
         empty = np.zeros(0, dtype=np.intp)
         return empty, np.zeros((0, 2)), np.zeros(0), np.zeros(0)
@@ -250,17 +491,15 @@ def braking_rows(
 def braking_fallback(
     state: CBFState, ctx: FilterContext, rows: np.ndarray
 ) -> np.ndarray:
-    """The braking command ``z = (v1, l v2)`` of vehicles in an unsafe state.
+    """The braking command ``z = (v1, l v2)`` of vehicles ``rows``.
 
-    The last period's ``z^`` scaled by ``sigma = max(0, 1 - a dt / |v1^|)``: the
-    look-ahead velocity keeps its direction and loses ``a dt`` of its speed (all of
-    it below), within every bound (``|v1 - v1^| <= a dt``, ``|l v2| <= |l v2^|``);
-    at the first step (no last period) the vehicle stands still.
+    Turn rate 0 and the last period's ``v1^`` moved ``max_accel dt`` toward 0 (to 0
+    below): within every bound, and the command every braking-barrier condition
+    is made to keep; at the first step (no last period) the vehicle stands still.
     """
     if ctx.v1_prev is None:
         return np.zeros((len(rows), 2))
-    v1, v2 = ctx.v1_prev[rows], ctx.v2_prev[rows]
+    v1 = ctx.v1_prev[rows]
     step = state.accel[rows] * ctx.dt
-    speed = np.abs(v1)
-    sigma = np.where(speed > step, 1.0 - step / np.maximum(speed, MIN_SPEED), 0.0)
-    return np.stack((sigma * v1, sigma * state.look * v2), -1)
+    v1 = np.sign(v1) * np.maximum(np.abs(v1) - step, 0.0) + 0.0
+    return np.stack((v1, np.zeros(len(rows))), -1)

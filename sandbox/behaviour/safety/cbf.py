@@ -72,73 +72,26 @@ failures (which replace the commands of the vehicles they hit).
 **The braking barrier** (``barrier: braking``; ``velocity``, all of the above, stays
 the default). The velocity barrier asks ``h' >= -gamma h`` of a velocity the drive
 can change only by ``max_accel dt`` a period, so near a barrier its conditions may
-have no common point (the slack). The braking barrier, in the spirit of Wang, Ames
-and Egerstedt's safety barrier certificates (for a pair of double integrators
-braking at ``a``, ``h = sqrt(4 a (|dp| - D)) + dp . dv / |dp|``), asks of the
-velocity ``w`` to be applied that the closing speed ``c = -n . (w_i - w_j)`` (``n =
-dp / |dp|``, ``dp = p_i - p_j`` of the look-ahead points) can still be braked away
-before the gap ``g = |dp| - D`` is gone::
+have no common point (the slack). The braking barrier
+(:mod:`sandbox.behaviour.safety.braking`) gives every vehicle one braking command,
+turn rate 0 and ``v1`` moved ``max_accel dt`` toward 0 each period, and makes the
+barrier of a pair the least clearance beyond ``D`` if both brake from now on
+(``H``, [m]: the look-ahead points' paths, with the drive's lag of one substep;
+toward a vehicle believed failed or driven open loop, its centre at its measured
+velocity and ``D'``; toward an obstacle, the signed distance). Each condition asks
+a vehicle's command to lose at most its share of what is left, to first order,
+against its braking command::
 
-    c <= F(g),   F(g) = sqrt((kappa A T / 2)^2 + 2 kappa A g) - kappa A T / 2,
+    g . (z - z_b) >= -rho (H_b' - min(H, 0)),   g = dH_b' / dz at z_b,
 
-the braking distance of a sampled loop (:func:`sandbox.model.barriers.braking_speed`;
-``sqrt(2 kappa A g)`` as ``T -> 0``), with ``T = 3 dt`` (the sampling and the drive,
-which reaches a commanded speed within a period) and ``kappa = 3/4``
-(:data:`BRAKING_SHARE`, the rest a reserve for the line of centres and the headings
-turning). ``A`` is the pair's braking along the line of centres with the drive's real
-bound: changing ``v1`` by ``max_accel_i dt`` (down when vehicle ``i`` heads toward
-the other, up when away; less where ``v1_max`` or ``reverse`` leave less room)
-changes the closing at ``a_i^n = |cos phi_i| min(max_accel_i, room_i / dt)``,
-``phi_i`` the angle between its heading and the direction to the other; ``A = a_i^n
-+ a_j^n``; ``a_j = 0`` toward a vehicle believed
-failed or driven open loop (against its centre and measured velocity, ``D'``), and
-against obstacles and walls. The state's barrier, reported as
-``safety.min_barrier`` [m/s], is::
-
-    h = F(g) + A dt - c^        (h = min(h, g) inside D),
-
-with ``c^`` the closing speed at the last period's velocities ``w^`` (the commands
-applied, at today's headings). Each vehicle takes its share of the pair's
-condition, ``-n . (w_i - w^_i) <= rho_i (F(g) - c^)``, ``rho_i = a_i / (a_i + a_j)``
-of a budget (``F >= c^``) and ``rho_i = a_i^n / A`` of a deficit; the two add up to
-``c <= F(g)``.
-
-What it guarantees, and under which assumptions:
-
-1. **Feasible from every safe state**: if every condition of a vehicle has ``h >=
-   0`` and it has one condition (two vehicles, a vehicle and a failed one or an
-   obstacle), ``v1^`` changed by ``a_i^n dt / |cos phi_i|`` in the way that slows
-   the closing, ``v2 = v2^`` (or ``w^`` itself where the budget is positive) keeps
-   it within every bound, so the QP needs no slack: a deficit asks ``rho_i (c^ - F)
-   <= a_i^n dt`` of it. Checked on 3,000 random
-   states each (``tests/test_safety_braking.py``). With several conditions a
-   vehicle between two others may owe both; no common point is not excluded.
-2. **Invariance along the line of centres**: from ``c <= F(g)``, one period later
-   the gap is at least ``g - c dt`` and ``F(g - c T) >= c - kappa A T`` (exact at
-   equality), so braking keeps the pair safe until it stops short of ``D``, when
-   the line of centres and the headings do not turn (head-on, a vehicle straight at
-   a wall). Their turning is covered to first order by the reserve ``(1 - kappa) A
-   dt`` a period only; the filter does not prove it.
-3. **An unsafe state** (no command keeps every condition, e.g. a start closer than
-   ``D``) is never relaxed: the vehicle brakes, ``z = sigma z^`` with ``sigma = max(0,
-   1 - max_accel dt / |v1^|)`` (its look-ahead velocity keeps its direction and
-   loses ``max_accel dt``; always within the bounds), counted in
-   ``safety.fallback_steps`` and ``safety.infeasible_steps`` (``max_slack``: the
-   slack the velocity barrier's relaxation would have used). The barrier at the
-   first step is reported as ``safety.unsafe_start``.
-4. **Sensing**: a vehicle knows its own pose, and filters against the broadcast
-   poses of the others (``seen``: noisy, delayed, held when lost), ``D`` grown by
-   the margin :func:`sandbox.model.barriers.sensing_margin`, ``m_s = 3 sigma_p + 3 l
-   sigma_theta + s_max tau`` (``s_max`` the look-ahead points' top speed): the
-   conditions hold for the true positions while the noise stays within 3 standard
-   deviations (per step and pair, 99.87 % one-sided) and the copies are no older
-   than ``tau``. A lost packet makes an older copy, which is not covered (a loader
-   warning). What it still takes as known: the other's last commands and heading
-   (``w^_j``), and the measured velocity of a failed vehicle.
-5. **Who failed**: ``known_failed``, what the platoon believes (the oracle or
-   ``detection: {method: residual}``); a failed vehicle not yet detected is treated
-   as a cooperative one that brakes, so the guarantee toward it holds only from its
-   detection on.
+(``H_b' >= H`` the next state's barrier if it brakes, at each of the two least local
+minima of the distance along the brakings), so the braking command keeps every
+condition by construction and the QP always has a point within the bounds: no
+slack, and ``braking_fallback`` only for rounding. What it guarantees, and under
+which assumptions, is in ``docs/concepts/safety.md``: braking keeps a braking-safe
+state (every ``H >= 0``) so exactly in the drive's model; the QP's commands keep it
+to first order, and :mod:`sandbox.behaviour.safety.braking_check` moves a command
+toward braking where the model, the others braking, says it loses more.
 
 It needs every vehicle's finite ``max_accel`` and ``v1_max`` (a loader error) and
 ``neighbour_velocity: broadcast``, ``projection: look_ahead`` (the filter's check);
@@ -160,6 +113,7 @@ from sandbox.behaviour.safety.braking import (
     obstacle_normals,
     pair_geometry,
 )
+from sandbox.behaviour.safety.braking_check import check_commands
 from sandbox.behaviour.safety.priority import PRIORITY, holding, holds
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
@@ -183,10 +137,11 @@ PARAMS = {
         "choice",
         "velocity",
         doc="velocity: h = |p_i - p_j|^2 - D^2 with h' >= -gamma h (assumes the "
-        "speed can change at once); braking: the braking-distance barrier h = "
-        "F(|p_i - p_j| - D) + dp.dv / |dp| with the drive's max_accel, feasible from "
-        "every safe state, braking when unsafe, with a margin for the declared "
-        "sensing noise and delay (needs every vehicle's max_accel and v1_max)",
+        "speed can change at once); braking: the braking-safe barrier H = the least "
+        "clearance beyond D if every vehicle brakes at its max_accel from now on, "
+        "its conditions kept by the braking command (always feasible), with a "
+        "margin for the declared sensing noise and delay (needs every vehicle's "
+        "max_accel and v1_max)",
         choices=("velocity", "braking"),
     ),
     "gamma": Param(
@@ -280,10 +235,12 @@ class FilterStep:
     rows : int
         Barrier conditions that could bind (after pruning).
     min_barrier : float
-        The least barrier value of the step (``inf`` with none): [m/s] for
-        ``braking``, at the last period's velocities; [m^2] for ``velocity``.
+        The least barrier value of the step (``inf`` with none): [m] for
+        ``braking`` (the least clearance if every vehicle brakes); [m^2] for
+        ``velocity``.
     fallback : ndarray, shape (n,), bool
-        Vehicles in an unsafe state (a braking barrier below 0), which brake.
+        Vehicles whose braking conditions had no common point (rounding only: the
+        braking command keeps them all), which brake.
     by_vehicle : ndarray, shape (n,), or None
         Each vehicle's least barrier value (a batched call of several worlds only).
     """
@@ -642,8 +599,9 @@ def filter_commands(
     hold = walls = None  # the priority's holders, and their obstacles' row count
     if state.priority != "none":
         hold, walls = holding(state, ctx, filtered)
+    pending: dict = {}  # the braking barrier's check of the commands
     if state.braking:
-        veh, a_w, b, h = braking_rows(state, ctx, filtered)
+        veh, a_w, b, h = braking_rows(state, ctx, filtered, pending)
         least = float(h.min()) if len(h) else np.inf
         if by_vehicle is not None:
             np.minimum.at(by_vehicle, veh, h)
@@ -653,6 +611,8 @@ def filter_commands(
             found["by_vehicle"] = by_vehicle
         veh, a_w, b = barrier_rows(state, ctx, filtered, reach, found)
         least = found.get("min_barrier", np.inf)
+    if "walls" in pending:  # the braking barrier's obstacle rows (two a pair at most)
+        walls = pending["walls"] if walls is not None else None
     wall = np.arange(len(veh)) >= len(veh) - (walls or 0)  # rows of obstacles last
     # In z = (v1, l v2): w = R(x3) z, so a . w = (R^T a) . z and |w - w0| = |z - z0|.
     c, s = np.cos(ctx.theta[veh]), np.sin(ctx.theta[veh])
@@ -704,6 +664,9 @@ def filter_commands(
         z[group], slack[group] = zg, sg
         if state.braking:  # no command keeps every condition: brake
             fallback[group[sg > TOLERANCE]] = True
+    if "check" in pending:  # beyond first order, against the others braking
+        z_b = braking_fallback(state, ctx, np.arange(n))
+        z, _ = check_commands(state, ctx, pending["check"], z, z_b)
     braking = np.flatnonzero(fallback)
     if len(braking):
         z[braking] = braking_fallback(state, ctx, braking)

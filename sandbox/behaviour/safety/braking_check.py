@@ -1,0 +1,231 @@
+"""The braking barrier's check of the filtered commands, beyond first order.
+
+The braking barrier's conditions (:func:`sandbox.behaviour.safety.braking.braking_rows`)
+are linear in a vehicle's command ``z = (v1, l v2)`` at its braking command ``z_b``:
+the QP's command keeps them, and the next state's clearances only to first order. A
+command that changes the speed and turn rate at their limits, step after step, can
+lose more (the braking distance is convex in ``v1``, the braking path turns with the
+heading), and was measured to lose millimetres a step in a standoff. This module
+checks each vehicle's command against the drive's model itself: with the others
+braking, the least clearance from the end of this period on, toward every neighbour
+and obstacle the conditions were made for, must be at least what the condition
+allowed, ``need = H_b' - rho (H_b' - min(H, 0))``. Where it is not, the command is
+moved toward the braking command, ``z_b + t (z - z_b)``, to the largest ``t`` in
+``[0, 1]`` that passes (a bisection; ``t = 0``, braking, always passes), which keeps
+every bound (the box is convex) and every condition (so are the half-planes).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from sandbox.model.barriers import braking_speeds, closest_approach
+
+if TYPE_CHECKING:
+    from sandbox.behaviour.safety.braking import Brakings
+    from sandbox.behaviour.safety.cbf import CBFState
+    from sandbox.plugins.contexts import FilterContext
+
+#: Halvings of the bisection toward the braking command [1]: ``t`` within 2^-8.
+HALVINGS = 8
+#: Clearance [m] a check may miss by: rounding only.
+SLACK = 1e-9
+
+
+@dataclass
+class Pending:
+    """What the check needs of one step's conditions (filled by ``braking_rows``).
+
+    Attributes
+    ----------
+    brakings : Brakings
+        The vehicles' brakings at their own headings.
+    me, other : ndarray, shape (k,) int
+        Each pair's vehicle and neighbour.
+    coop : ndarray, shape (k,) bool
+        Whether the neighbour brakes (else it keeps its measured velocity).
+    theirs : ndarray, shape (k, S, 2) [m]
+        The neighbour's look-ahead points (or centre) along its braking.
+    start, velocity : ndarray, shape (k, 2)
+        A non-braking neighbour's centre [m] and velocity [m/s].
+    big_d, need : ndarray, shape (k,) [m]
+        The pair's ``D`` and the clearance the condition allowed.
+    rows, cols : ndarray, shape (q,) int
+        Each obstacle pair's vehicle and obstacle.
+    clear, wall_need : ndarray, shape (q,) [m]
+        The clearance kept from the obstacle and what the condition allowed.
+    """
+
+    brakings: Brakings
+    me: np.ndarray
+    other: np.ndarray
+    coop: np.ndarray
+    theirs: np.ndarray
+    start: np.ndarray
+    velocity: np.ndarray
+    big_d: np.ndarray
+    need: np.ndarray
+    rows: np.ndarray
+    cols: np.ndarray
+    clear: np.ndarray
+    wall_need: np.ndarray
+
+
+def command_points(
+    state: CBFState,
+    ctx: FilterContext,
+    b: Brakings,
+    rows: np.ndarray,
+    z: np.ndarray,
+    samples: int,
+) -> np.ndarray:
+    """Look-ahead points of vehicles ``rows`` under ``z`` for a period, then braking.
+
+    The first period runs ``dt ((1 - lag) w(z) + lag w(z^))`` (``w(z) = z1 e + z2
+    e^perp``, the drive reaching ``z`` a substep late) and turns the heading by ``dt
+    (lag v2^ + (1 - lag) v2)``; the braking from ``v1 = z1`` then runs along the
+    heading turned by ``lag dt v2`` more, its first substep still ``lag dt z2``
+    sideways. Returns shape (k, samples, 2) [m], at the start of each period.
+    """
+    dt, look, lag = ctx.dt, state.look, b.lag
+    e, side = b.heading[rows], b.side[rows]
+    theta = ctx.theta[rows]
+    last = np.zeros((len(rows), 2))
+    if ctx.v1_prev is not None:
+        last = np.stack((ctx.v1_prev[rows], look * ctx.v2_prev[rows]), -1)
+    turn = lag * last[:, 1] / look + z[:, 1] / look
+    bent = theta + dt * turn
+    path = np.stack((np.cos(bent), np.sin(bent)), -1)
+    start = ctx.pos[rows] + look * e
+    mix = (1.0 - lag) * z + lag * last
+    first = start + dt * (mix[:, :1] * e + mix[:, 1:] * side)
+    speeds = braking_speeds(z[:, 0], state.accel[rows] * dt, samples)
+    run = (1.0 - lag) * speeds[:, 1:] + lag * speeds[:, :-1]  # periods 1, 2, ...
+    travel = np.zeros((len(rows), samples - 1))
+    travel[:, 1:] = dt * np.cumsum(run[:, :-1], axis=1)
+    out = np.empty((len(rows), samples, 2))
+    out[:, 0] = start
+    out[:, 1:] = first[:, None] + path[:, None] * travel[..., None]
+    out[:, 2:] += (lag * dt * z[:, 1:] * side)[:, None]
+    return out
+
+
+def _clearances(
+    state: CBFState, ctx: FilterContext, pending: Pending, z: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each condition's clearance from the end of the period under ``z`` less need.
+
+    Returns the vehicle of each condition and its margin [m] (< 0: fails).
+    """
+    b = pending.brakings
+    samples = b.travel.shape[1] + 2  # a command may speed up by two steps' worth
+    out_v, out_m = [], []
+    me, rows = pending.me, pending.rows
+    who, at = np.unique(np.concatenate((me, rows)), return_inverse=True)
+    paths = command_points(state, ctx, b, who, z[who], samples)
+    if len(me):
+        mine = paths[at[: len(me)]]
+        theirs = np.concatenate(
+            (
+                pending.theirs,
+                np.repeat(pending.theirs[:, -1:], samples - pending.theirs.shape[1], 1),
+            ),
+            axis=1,
+        )
+        steps = np.arange(samples)[None, :, None] * ctx.dt
+        drift = pending.start[:, None] + steps * pending.velocity[:, None]
+        coop = pending.coop
+        theirs = np.where(coop[:, None, None], theirs, drift)
+        rel = mine - theirs
+        moves = np.ceil(np.abs(z[me, 0]) / (state.accel[me] * ctx.dt) - 1e-9)
+        last = np.where(coop, samples - 1, np.minimum(moves + 1, samples - 1))
+        last = last.astype(np.intp)
+        hold = np.arange(samples)[None, :] > last[:, None]
+        rel = np.where(hold[..., None], rel[np.arange(len(me)), last][:, None], rel)
+        dist, _ = closest_approach(rel[:, 1:])
+        out_v.append(me)
+        out_m.append(dist.min(axis=1) - pending.big_d - pending.need)
+    if len(rows):
+        points = paths[at[len(me) :]]
+        flat = points.reshape(-1, 2)
+        index = np.arange(len(flat))
+        field = ctx.obstacle_field
+        signed, _ = field.pair_distance(flat, index, np.repeat(pending.cols, samples))
+        signed = signed.reshape(len(rows), samples)
+        reach = np.hypot(*np.moveaxis(points[:, 1:] - points[:, :-1], -1, 0))
+        low = 0.5 * (signed[:, :-1] + signed[:, 1:] - reach)
+        out_v.append(rows)
+        out_m.append(low[:, 1:].min(axis=1) - pending.clear - pending.wall_need)
+    if not out_v:
+        return np.zeros(0, dtype=np.intp), np.zeros(0)
+    return np.concatenate(out_v), np.concatenate(out_m)
+
+
+def _passes(
+    state: CBFState, ctx: FilterContext, pending: Pending, z: np.ndarray
+) -> np.ndarray:
+    """Whether every condition of each vehicle keeps its clearance under ``z``."""
+    veh, margin = _clearances(state, ctx, pending, z)
+    fails = np.zeros(len(z), dtype=bool)
+    np.logical_or.at(fails, veh, margin < -SLACK)
+    return ~fails
+
+
+def _subset(pending: Pending, vehicles: np.ndarray) -> Pending:
+    """The conditions of the vehicles ``vehicles`` (mask, shape (n,)) only."""
+    k, q = vehicles[pending.me], vehicles[pending.rows]
+    return Pending(
+        pending.brakings,
+        pending.me[k],
+        pending.other[k],
+        pending.coop[k],
+        pending.theirs[k],
+        pending.start[k],
+        pending.velocity[k],
+        pending.big_d[k],
+        pending.need[k],
+        pending.rows[q],
+        pending.cols[q],
+        pending.clear[q],
+        pending.wall_need[q],
+    )
+
+
+def check_commands(
+    state: CBFState,
+    ctx: FilterContext,
+    pending: Pending,
+    z: np.ndarray,
+    z_b: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The commands moved toward braking where the drive's model says they must be.
+
+    Parameters
+    ----------
+    z, z_b : ndarray, shape (n, 2) [m/s]
+        The QP's commands ``(v1, l v2)`` and the braking commands.
+
+    Returns
+    -------
+    z : ndarray, shape (n, 2) [m/s]
+    moved : ndarray, shape (n,) bool
+        The vehicles whose command was moved.
+    """
+    ok = _passes(state, ctx, pending, z)
+    moved = ~ok
+    if not moved.any():
+        return z, moved
+    few = _subset(pending, moved)  # the conditions of the moved vehicles only
+    lo, hi = np.zeros(len(z)), np.ones(len(z))
+    for _ in range(HALVINGS):
+        mid = 0.5 * (lo + hi)
+        trial = np.where(moved[:, None], z_b + mid[:, None] * (z - z_b), z)
+        good = _passes(state, ctx, few, trial)
+        lo = np.where(moved & good, mid, lo)
+        hi = np.where(moved & ~good, mid, hi)
+    out = z.copy()
+    out[moved] = z_b[moved] + lo[moved, None] * (z[moved] - z_b[moved])
+    return out, moved
