@@ -100,7 +100,7 @@ class Reconfiguration:
             fleet.commanded | ~np.isfinite(self.formation).all(axis=1), -1, np.arange(n)
         )
         #: Which slots exist (a finite offset of a vehicle not driven open loop).
-        self.slot_of_start = self.slot_of >= 0
+        self.slot_exists = self.slot_of >= 0
         lead = sim.leader
         #: The slot of the vehicle that tracks the reference (-1: none).
         self.leader_slot = lead if lead >= 0 and sim.tracks_reference[lead] else -1
@@ -233,7 +233,7 @@ class Reconfiguration:
         if sim.leader >= 0 and sim.tracks_reference[sim.leader]:
             movable[sim.leader] = False
         rows = np.flatnonzero(movable)
-        free = [j for j in range(n) if self.slot_of_start[j] and j != self.leader_slot]
+        free = [j for j in range(n) if self.slot_exists[j] and j != self.leader_slot]
         if self.close_gap:
             cols = np.array(free[: len(rows)], dtype=np.intp)
         else:

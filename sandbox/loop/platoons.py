@@ -168,6 +168,8 @@ class Platoons:
         #: merge or split, and the simulation.
         self.views: list[PlatoonView] = []
         self._retired: list[PlatoonView] = []
+        #: How many reconfiguration records the run's ``info`` holds (-1: none yet).
+        self._records = -1
         self._sim: Any = None
         #: Each vehicle's platoon and offset over time (with ``events:``).
         self.timeline: dict[str, list[list]] | None = None
@@ -315,13 +317,15 @@ class Platoons:
             The first platoon's reference point (NaN without one); each platoon's
             reference is drawn from its own section.
         """
+        before = (len(self.fired), self._records)
         if self.events:  # merges and splits due now (loop/platoon_events.py)
             self._fire(t, (pos, theta, vel))
         if self.views:  # each platoon's own reconfiguration
             for view in self.views:
                 view.react(t, self._sim.known_failed)
             self._record_reconfiguration()
-        if self.timeline is not None:
+        if self.timeline is not None and before != (len(self.fired), self._records):
+            # offsets change only at an event or a reconfiguration
             self._note_formation(t)
         n = self.n
         slot = np.full((n, 2), np.nan)
