@@ -124,8 +124,10 @@ def test_the_door_under_the_recommended_configuration() -> None:
     # a_k and b_k start symmetric about the door's centre and cannot both pass the gap
     # at once; they wait until the rounding of the physics breaks the tie: one pair
     # passes the door, the other four vehicles drive round the ends of the wall, 6 m
-    # from it (measured: b0 at 25.3 s and a0 at 27.9 s through the door; a1 and b1
-    # round the ends at 35.5 s, a2 at 49.0 s, b2 at 52.0 s; the last settles at 57.2 s)
+    # from it. Which of a0 and b0 goes first, and when, is the rounding's: it differs
+    # between CPUs (numpy's sine and cosine on AVX-512 and on AVX2 differ in the last
+    # bit). Measured: b0 at 25.3 s and a0 at 27.9 s on one machine, a0 at 25.3 s and
+    # b0 at 30.6 s on another; the last settles at 57.2 s and 56.4 s.
     run, m = run_scenario(SAFETY / "door.yaml", *REC)
     through, around = {}, {}
     for name in ("a0", "a1", "a2", "b0", "b1", "b2"):
@@ -134,13 +136,12 @@ def test_the_door_under_the_recommended_configuration() -> None:
         for k in cross:
             (through if abs(v.x2[k]) < 0.5 else around)[name] = run.t[k]
     assert sorted(through) == ["a0", "b0"]
-    assert through["b0"] == pytest.approx(25.3, abs=0.1)
-    assert through["a0"] == pytest.approx(27.9, abs=0.1)
+    assert min(through.values()) > 15.0  # the tie holds until rounding breaks it
     assert sorted(around) == ["a1", "a2", "b1", "b2"]
     assert m["collisions"]["total"] == 0 and m["deadlocks"] == []
     assert m["converged"]
     last = max(v["settling_time"] for v in m["vehicles"].values())
-    assert last == pytest.approx(57.2, abs=0.1)
+    assert 45.0 < last < 60.0
 
 
 def test_the_jittered_files_draw_their_starts_near_the_exact_ones() -> None:

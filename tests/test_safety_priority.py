@@ -166,16 +166,24 @@ def test_the_mirrored_door_is_a_standoff_without_priority_and_passed_with() -> N
 
 @pytest.mark.slow
 def test_the_door_file_passes_with_the_index() -> None:
-    # As measured: b0 passes the door at about 12 s and a0 after it, decided by the
-    # order (without it, rounding decides after about 20 s); a1, b1, a2 and b2 go
-    # round the ends of the wall and the last settles at 46.3 s (57.2 s without).
+    # The order decides the standoff at once: the half-turn mirror of the pairs a_k,
+    # b_k is broken by more than 1 mm at 1.2 s (without an order, rounding breaks it
+    # after about 15 s). Who passes the door, and when, follows from the whole
+    # course, which rounding shapes too and which differs between CPUs (measured:
+    # b0 by 12 s on one machine; a2, a0 and b2 at 8.7, 11.0 and 15.2 s on another);
+    # what holds is that the door is passed early, with no contact and no deadlock.
     sets = ["safety.filter=cbf", "recovery.tangential=1", "safety.priority=index"]
     run = Simulation(load_scenario(DOOR, overrides=sets)).run()
     m = compute_metrics(run)
-    assert m["converged"] and m["collisions"]["total"] == 0
+    assert m["converged"] and m["collisions"]["total"] == 0 and m["deadlocks"] == []
+    a = [run.names.index(f"a{k}") for k in range(3)]
+    b = [run.names.index(f"b{k}") for k in range(3)]
+    mirror = np.abs(run.pose[:, a, :2] + run.pose[:, b, :2]).max(axis=(1, 2))
+    assert run.t[np.flatnonzero(mirror > 1e-3)[0]] < 2.0
     k = int(round(16.0 / (run.t[1] - run.t[0])))
-    a0, b0 = run.names.index("a0"), run.names.index("b0")
-    assert run.pose[k, a0, 0] > 1.5 and run.pose[k, b0, 0] < -1.5
+    x1, x2 = run.pose[: k + 1, :, 0], run.pose[: k + 1, :, 1]
+    crossed = (np.sign(x1[1:]) != np.sign(x1[:-1])) & (np.abs(x2[1:]) < 0.5)
+    assert crossed.any()  # some vehicle through the door by 16 s
 
 
 def test_the_default_keeps_the_key_out_and_the_bytes(tmp_path) -> None:

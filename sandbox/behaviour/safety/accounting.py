@@ -1,7 +1,9 @@
-"""The CBF filter's counters of one world (``metrics.json`` ``safety``).
+"""The CBF filter's counters of each world (``metrics.json`` ``safety``).
 
-Split from :mod:`sandbox.behaviour.safety.cbf`, which adds each step of the filter's
-rows of a world to that world's counters through :func:`account`.
+Split from :mod:`sandbox.behaviour.safety.cbf`, which adds each step of the filter to
+the counters of its one world through :func:`account`, or of its K stacked worlds
+through :func:`account_worlds` (the same counters, each world's reductions taken at
+once over a ``(K, n)`` view of the rows).
 """
 
 from __future__ import annotations
@@ -38,3 +40,96 @@ def account(
             "min_barrier": least if np.isfinite(least) else None,
             "unsafe": bool(least < -TOLERANCE),
         }
+
+
+class WorldCounters:
+    """Copies of the K worlds' largest slack and least barrier, kept between steps.
+
+    With them a step finds, for all worlds at once, which world's counters it
+    changes, and writes only those (most steps change few of them).
+
+    Parameters
+    ----------
+    world_stats : list of dict
+        The K worlds' counters as they stand (usually empty).
+    """
+
+    def __init__(self, world_stats: list[dict]) -> None:
+        self.max_slack = np.array([s.get("max_slack", 0.0) for s in world_stats])
+        known = [s.get("min_barrier") for s in world_stats]
+        self.min_barrier = np.array([np.inf if m is None else m for m in known])
+        self.started = False
+
+
+def account_worlds(
+    world_stats: list[dict],
+    t: float,
+    braking: bool,
+    step: FilterStep,
+    n: int,
+    counters: WorldCounters,
+) -> None:
+    """Add one step of a batched call to the counters of each of its K worlds.
+
+    Each world's counters are those :func:`account` gives for its rows
+    ``w n : (w + 1) n`` alone (counts, exact maxima and minima); the reductions are
+    taken for all worlds at once, and a world's counters are written where the step
+    changes them (every world's at the first step).
+
+    Parameters
+    ----------
+    world_stats : list of dict
+        The K worlds' counters, in the order of their rows.
+    t : float [s]
+    braking : bool
+        Whether the filter's barrier is ``braking`` (its fallback steps counted).
+    step : FilterStep
+        The step of the stacked rows, shape ``(K n,)`` each.
+    n : int
+        Vehicles per world.
+    counters : WorldCounters
+        The worlds' largest slack and least barrier so far (updated).
+    """
+    k = len(world_stats)
+    active = step.active.reshape(k, n).sum(axis=1)
+    slack = step.slack.reshape(k, n)
+    bad = (slack > TOLERANCE).sum(axis=1)
+    worst = slack.max(axis=1)
+    if step.by_vehicle is None:
+        least = np.full(k, np.inf)
+    else:
+        least = step.by_vehicle.reshape(k, n).min(axis=1)
+    finite = np.isfinite(least)
+    fallen = step.fallback.reshape(k, n).sum(axis=1) if braking else np.zeros(k, int)
+    raised = worst > counters.max_slack
+    lowered = finite & (least < counters.min_barrier)
+    if counters.started:
+        touched = np.flatnonzero(
+            (active > 0) | (bad > 0) | raised | lowered | (fallen > 0)
+        )
+    else:
+        touched = np.arange(k)
+    counters.max_slack[raised] = worst[raised]
+    counters.min_barrier[lowered] = least[lowered]
+    if len(touched) == 0:
+        counters.started = True
+        return
+    active, bad, worst = active.tolist(), bad.tolist(), worst.tolist()
+    least, finite, fallen = least.tolist(), finite.tolist(), fallen.tolist()
+    for w in touched.tolist():
+        stats = world_stats[w]
+        stats["active_steps"] = stats.get("active_steps", 0) + active[w]
+        stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + bad[w]
+        stats["max_slack"] = max(stats.get("max_slack", 0.0), worst[w])
+        if finite[w]:
+            known = stats.get("min_barrier")
+            stats["min_barrier"] = least[w] if known is None else min(known, least[w])
+        if braking:
+            stats["fallback_steps"] = stats.get("fallback_steps", 0) + fallen[w]
+        if "unsafe_start" not in stats:  # the first step: reported, never silently
+            stats["unsafe_start"] = {
+                "t": float(t),
+                "min_barrier": least[w] if finite[w] else None,
+                "unsafe": bool(least[w] < -TOLERANCE),
+            }
+    counters.started = True

@@ -104,7 +104,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sandbox.behaviour.safety.accounting import account
+from sandbox.behaviour.safety.accounting import (
+    WorldCounters,
+    account,
+    account_worlds,
+)
 from sandbox.behaviour.safety.braking import (
     braking_fallback,
     braking_range,
@@ -719,11 +723,9 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     if ctx.worlds == 1:
         account(ctx.stats, ctx.t, state.braking, step, slice(None), step.min_barrier)
         return v1, v2
-    n = len(ctx.pos) // ctx.worlds
-    for w, stats in enumerate(ctx.world_stats):  # each world's own counters
-        rows = slice(w * n, (w + 1) * n)
-        least = (
-            np.inf if step.by_vehicle is None else float(step.by_vehicle[rows].min())
-        )
-        account(stats, ctx.t, state.braking, step, rows, least)
+    counters = ctx.memory.get("counters")
+    if counters is None:
+        counters = ctx.memory["counters"] = WorldCounters(ctx.world_stats)
+    n = len(ctx.pos) // ctx.worlds  # each world's own counters
+    account_worlds(ctx.world_stats, ctx.t, state.braking, step, n, counters)
     return v1, v2
