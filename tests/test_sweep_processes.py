@@ -157,26 +157,31 @@ def test_groups_start_small_and_are_sized_by_their_time():
 
     jobs = [(f"r{k}", ({}, "", [])) for k in range(1000)]
     groups = engine.Groups(jobs, 1)
-    # Fast runs: after the first group (32), the full batch of 128 (chunks' size).
+    # Fast runs: after the first group (32), groups of at most 128 (chunks' size):
+    # the 968 runs left in 8 equal groups (968 / 8 = 121), none small at the end.
     first = next(groups)
     groups.timed(len(first), 0.01)
     sizes = [len(first), *(len(g) for g in groups)]
-    assert sizes[:2] == [engine.FIRST_GROUP, 128] and set(sizes[1:-1]) == {128}
-    assert sum(sizes) == 1000
-    # Runs of 0.1 s each: groups of 5 s / 0.1 s = 50 runs; of 1 s: 8 (MIN_WORLDS).
+    assert sizes == [engine.FIRST_GROUP] + [121] * 8
+    # Runs of 0.1 s each: groups of up to 5 s / 0.1 s = 50 runs; of 1 s: 8
+    # (MIN_WORLDS); of 1 ms: 128. On two workers a round is one group each, of one
+    # size: the 936 runs left after the first round (2 x 32) in rounds of two equal
+    # groups, 20 groups of 936 / 20 -> 47; 117 groups of 8; 8 groups of 117.
     assert engine.GROUP_SECONDS == 5.0 and engine.MIN_WORLDS == 8
-    for per_run, size in [(0.1, 50), (1.0, 8), (0.001, 128)]:
+    for per_run, size in [(0.1, 47), (1.0, 8), (0.001, 117)]:
         groups = engine.Groups(jobs, 2)
         g = next(groups)
+        assert len(next(groups)) == len(g) == engine.FIRST_GROUP  # the first round
         groups.timed(len(g), per_run * len(g))
-        assert len(next(groups)) == size
-    # every run once, in order, and no group under MIN_WORLDS at the end
+        assert len(next(groups)) == len(next(groups)) == size
+    # every run once, in order, and no group under MIN_WORLDS at the end: 75 runs
+    # in rounds of equal groups (25, then 50 in groups of at most 20: 17, 17, 16)
     groups = engine.Groups(jobs[:75], 1)
     out = []
     for g in groups:
         out.append(g)
         groups.timed(len(g), 0.25 * len(g))  # 20 runs fit in 5 s
-    assert [len(g) for g in out] == [32, 20, 23]
+    assert [len(g) for g in out] == [25, 17, 17, 16]
     assert [j for g in out for j in g] == jobs[:75]
 
 

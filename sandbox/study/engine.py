@@ -453,9 +453,11 @@ class Groups:
     the size :func:`chunks` gives and at most :data:`MAX_GROWTH` times the last. Runs
     of a few milliseconds reach the full batch size with the second group; runs of
     seconds stay in small groups, so that finished runs are stored early and an
-    interrupt loses little. A remainder smaller than :data:`MIN_WORLDS` joins the
-    group before it. Cutting groups changes no result (a batch is bit-identical to
-    single runs).
+    interrupt loses little. The runs left are cut into whole rounds of one group per
+    worker, of about equal sizes up to that size (so the last round keeps every
+    worker busy, and no small group trails), and a remainder smaller than
+    :data:`MIN_WORLDS` joins the group before it. Cutting groups changes no result (a
+    batch is bit-identical to single runs).
 
     Parameters
     ----------
@@ -467,10 +469,13 @@ class Groups:
 
     def __init__(self, jobs: list[Job], workers: int) -> None:
         self.jobs = jobs
+        self.workers = max(1, workers)
         self.next_at = 0
         full = chunks(jobs, workers) if jobs else [[]]
         self.cap = max(1, len(full[0]))
         self.size = min(self.cap, FIRST_GROUP)
+        self._round_size = self.size  # the size of the groups of the current round
+        self._round_left = 0  # groups still to cut in the current round
 
     def __iter__(self) -> Iterator[list[Job]]:
         return self
@@ -479,7 +484,14 @@ class Groups:
         left = len(self.jobs) - self.next_at
         if left <= 0:
             raise StopIteration
-        n = min(self.size, left)
+        if self._round_left == 0:  # a round: one group per worker, of one size
+            # the runs left, cut into whole rounds of equal groups up to ``size``:
+            # no small group at the end, and the last round keeps every worker busy
+            groups = -(-left // (self.size * self.workers)) * self.workers
+            self._round_size = max(-(-left // groups), MIN_WORLDS)
+            self._round_left = self.workers
+        self._round_left -= 1
+        n = min(self._round_size, self.size, left)
         if left - n < MIN_WORLDS and left <= self.cap:
             n = left  # no small group left at the end
         group = self.jobs[self.next_at : self.next_at + n]
