@@ -17,7 +17,15 @@ DIVERGED_POSITION = 1e6
 DIVERGED_SPEED = 1e3
 
 
-def diverged(fleet: Fleet) -> tuple[int, str] | None:
+class RowsView:
+    """Some rows of the stacked fleet (one world's), for :func:`diverged`."""
+
+    def __init__(self, fleet: Fleet, rows: slice) -> None:
+        self.pos, self.theta = fleet.pos[rows], fleet.theta[rows]
+        self.vel, self.chi = fleet.vel[rows], fleet.chi[rows]
+
+
+def diverged(fleet: Fleet | RowsView) -> tuple[int, str] | None:
     """First vehicle whose state is non-finite or beyond the bounds, with the reason."""
     # Fast path, one reduction per array: clearly healthy (NaN fails every comparison).
     vel, chi = fleet.vel, fleet.chi

@@ -16,12 +16,12 @@ worlds' vehicles (``K * n`` rows, world after world; a single run is K = 1):
 4. **record** a sample every ``record_every`` periods, and the loop metrics;
 5. **advance**: write the commands to the physics and step it ``substeps`` times.
 
-The built-in laws and strategies (and a plug-in registered with ``batched=True``)
-are called once for all worlds; the detector, the reconfiguration, the safety filter,
-command schedules and plug-ins without the flag are called world by world inside the
-same loop (:mod:`sandbox.loop.worlds`). Each world's numbers are those it has alone:
-the functions are elementwise over rows, neighbour pairs never cross worlds, and
-every world keeps its own random streams, memories and contact episodes.
+The built-ins (laws, strategies, filter, detectors, sensing, range sensors) and
+plug-ins registered with ``batched=True`` are called once for all worlds; the
+reconfiguration, command schedules and other plug-ins world by world inside the
+same loop (:mod:`sandbox.loop.world_stages`). Each world's numbers are those it has
+alone: the functions are elementwise over rows, neighbour pairs never cross worlds,
+and every world keeps its own random streams, memories and contact episodes.
 
 :meth:`Simulation.step` runs one period with optional overrides and returns an
 :class:`~sandbox.loop.observation.Observation`; :meth:`Simulation.run` is the loop of
@@ -48,7 +48,8 @@ from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.behaviour.sensing import StackedBroadcast
 from sandbox.errors import PluginRunError
 from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList, WorldPairs
-from sandbox.loop.divergence import diverged
+from sandbox.loop.collector import collector_off, frozen_heap
+from sandbox.loop.divergence import RowsView, diverged
 from sandbox.loop.ending import Ending
 from sandbox.loop.plan import Plan, structure_key
 from sandbox.loop.platoons import Platoons
@@ -124,7 +125,8 @@ class Simulation(StepAPI, Ending, WorldStages):
     """
 
     def __init__(self, scenario: Scenario, world: Physics | None = None) -> None:
-        self._build([scenario], [world])
+        with collector_off():  # building makes no cyclic garbage (loop/collector.py)
+            self._build([scenario], [world])
 
     @classmethod
     def stacked(
@@ -145,7 +147,8 @@ class Simulation(StepAPI, Ending, WorldStages):
         """
         sim = cls.__new__(cls)
         scenarios = list(scenarios)
-        sim._build(scenarios, list(worlds) if worlds else [None] * len(scenarios))
+        with collector_off():
+            sim._build(scenarios, list(worlds) if worlds else [None] * len(scenarios))
         return sim
 
     @classmethod
@@ -385,7 +388,7 @@ class Simulation(StepAPI, Ending, WorldStages):
         self.finite = diverged(fleet) is None
         if not self.finite:
             for w in self._live_worlds():
-                bad = diverged(_RowsView(fleet, self._rows(w)))
+                bad = diverged(RowsView(fleet, self._rows(w)))
                 if bad is None:
                     continue
                 state = self.states[w]
@@ -774,22 +777,15 @@ class Simulation(StepAPI, Ending, WorldStages):
     def _loop(self, progress, should_stop) -> bool:
         """Steps until done; True when ``should_stop`` stopped them."""
         report_every = max(1, self.steps // 100)
-        while not self.done:
-            k = self.k
-            self._step(should_stop=should_stop)
-            if self._stopped:
-                return True
-            if progress is not None and k % report_every == 0 and k < self.k:
-                progress(k, self.steps)
+        with frozen_heap():
+            while not self.done:
+                k = self.k
+                self._step(should_stop=should_stop)
+                if self._stopped:
+                    return True
+                if progress is not None and k % report_every == 0 and k < self.k:
+                    progress(k, self.steps)
         return False
-
-
-class _RowsView:
-    """Some rows of the stacked fleet, for ``divergence.diverged``."""
-
-    def __init__(self, fleet: Fleet, rows: slice) -> None:
-        self.pos, self.theta = fleet.pos[rows], fleet.theta[rows]
-        self.vel, self.chi = fleet.vel[rows], fleet.chi[rows]
 
 
 def simulate(scenario: Scenario, **kwargs) -> Run:

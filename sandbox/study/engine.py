@@ -294,6 +294,15 @@ def run_tasks(
     each run its own row or error. Returns ``(run id, result)`` for every task, the
     result None when ``should_stop`` stopped it.
     """
+    from sandbox.loop.collector import frozen_heap
+
+    with frozen_heap():  # the collector skips the group's objects (loop/collector.py)
+        return _run_group(jobs, should_stop)
+
+
+def _run_group(
+    jobs: list[Job], should_stop: Callable[[], bool] | None
+) -> list[tuple[str, dict[str, Any] | None]]:
     from sandbox.loop.plan import structure_key
     from sandbox.loop.simulation import Simulation
 
