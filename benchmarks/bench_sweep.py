@@ -25,8 +25,13 @@ physics' own speed), the median over ``--repeat`` repetitions (default 3). Timin
 floor beside each row keeps the ratios fair on a machine whose load changes while the
 benchmark runs; the load averages before and after are printed with the table.
 
+With ``--scaling RUNS`` (the target: 1,024) it also times ``--jobs 1`` against
+``--jobs 2`` on that many runs, and beside it the machine's own two-core speed-up:
+the same batches in one process alone, then in two processes at once.
+
     python benchmarks/bench_sweep.py                      # 256 runs, 3 repetitions
     python benchmarks/bench_sweep.py --runs 64 --repeat 1  # quicker
+    python benchmarks/bench_sweep.py --scaling 1024       # and --jobs 2 scaling
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -120,12 +126,64 @@ def sweep(runs: int, jobs: int, out: Path, extra: tuple[str, ...] = ()) -> float
     return elapsed
 
 
+def _batch_process(runs: int) -> subprocess.Popen:
+    """A fresh process that prints the seconds of ``batched(runs, 128)`` (imports
+    and a warm-up excluded)."""
+    code = (
+        "import sys, time; sys.path.insert(0, sys.argv[1]); "
+        "from bench_sweep import batched; batched(8, 8); t = time.perf_counter(); "
+        "batched(int(sys.argv[2]), 128); print(time.perf_counter() - t)"
+    )
+    here = str(Path(__file__).resolve().parent)
+    return subprocess.Popen(
+        [sys.executable, "-c", code, here, str(runs)], stdout=subprocess.PIPE, text=True
+    )
+
+
+def ceiling(runs: int) -> float:
+    """The machine's own speed-up on two cores: one batch alone against two at once.
+
+    The same work (``runs`` runs in batches of 128) in one process, then in two
+    processes started together: ``2 t_alone / t_pair`` (2.0: the two cores are
+    independent; less where they share a physical core, caches or memory bandwidth,
+    or the host is busy). No sweep can scale beyond it.
+    """
+    alone = float(_batch_process(runs).communicate()[0])
+    pair = [_batch_process(runs) for _ in range(2)]
+    both = max(float(p.communicate()[0]) for p in pair)
+    return 2 * alone / both
+
+
+def scaling(runs: int, repeat: int, out: Path) -> tuple[list[float], list[float]]:
+    """``--jobs 2`` over ``--jobs 1`` on ``runs`` runs, and the machine's ceiling.
+
+    Each repetition times ``sandbox sweep --jobs 1``, ``--jobs 2`` and
+    :func:`ceiling`, one after the other (each sweep into a fresh store, the pool
+    started by the command as a user's is).
+    """
+    speedups, ceilings = [], []
+    for rep in range(repeat):
+        one = sweep(runs, 1, out / f"s{rep}j1")
+        two = sweep(runs, 2, out / f"s{rep}j2")
+        speedups.append(one / two)
+        ceilings.append(ceiling(runs))
+    return speedups, ceilings
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--runs", type=int, default=256, help="runs per measurement")
     p.add_argument("--single", type=int, default=16, help="single runs measured")
     p.add_argument("--bare", type=int, default=64, help="bare runs beside each row")
     p.add_argument("--repeat", type=int, default=3, help="repetitions (median)")
+    p.add_argument(
+        "--scaling",
+        type=int,
+        default=0,
+        metavar="RUNS",
+        help="also time --jobs 1 against --jobs 2 on RUNS runs (the target: 1024), "
+        "beside the machine's own two-core speed-up",
+    )
     args = p.parse_args(argv)
     runs, cores, bare_runs = args.runs, usable_cores(), min(args.bare, args.runs)
     rows: dict[str, tuple[int, list[float]]] = {}
@@ -199,6 +257,16 @@ def main(argv: list[str] | None = None) -> int:
             )
         ]
         print(f"--jobs 2 over --jobs 1: {statistics.median(speedup):.2f}x (median)")
+    if args.scaling and cores > 1:
+        with tempfile.TemporaryDirectory() as tmp:
+            speedups, ceilings = scaling(args.scaling, args.repeat, Path(tmp))
+        print(
+            f"{args.scaling} runs: --jobs 2 over --jobs 1 "
+            f"{statistics.median(speedups):.2f}x (each: "
+            f"{', '.join(f'{x:.2f}' for x in speedups)}); two batches at once over "
+            f"one alone (the machine's ceiling) {statistics.median(ceilings):.2f}x "
+            f"(each: {', '.join(f'{x:.2f}' for x in ceilings)})"
+        )
     return 0
 
 
