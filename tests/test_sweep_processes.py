@@ -185,6 +185,29 @@ def test_groups_start_small_and_are_sized_by_their_time():
     assert [j for g in out for j in g] == jobs[:75]
 
 
+def test_the_first_group_is_sized_by_the_work_of_a_run():
+    import yaml
+
+    from sandbox.study import engine
+
+    def first(path: str, *sets: str) -> int:
+        doc = yaml.safe_load((REPO / "scenarios" / path).read_text())
+        return engine.first_group([("r0", (doc, path, [*sets, "seed=0"]))])
+
+    # FIRST_WORK = 64 x 3 x 1200 vehicle-periods: 64 Fig. 15 runs of 12 s (three
+    # vehicles, 1,200 periods), 48 of 16 s, and the floor of 8 for 20 vehicles of
+    # 15 s (230,400 / 30,000 = 7)
+    fig15 = "paper/fig15_continuous_beta1.yaml"
+    assert first(fig15, "duration=12") == 64
+    assert first(fig15, "duration=16") == 48
+    assert first("safety/circle_swap_20_jittered.yaml") == engine.MIN_WORLDS
+    # unreadable, or with plug-ins (their code is loaded where the runs run only)
+    assert engine.first_group([("r0", ({}, "", []))]) == engine.FIRST_GROUP
+    doc = yaml.safe_load((REPO / "scenarios" / fig15).read_text())
+    plugged = [("r0", ({**doc, "plugins": ["x.py"]}, fig15, ["seed=0"]))]
+    assert engine.first_group(plugged) == engine.FIRST_GROUP
+
+
 def test_a_stop_while_a_group_is_stored_keeps_the_whole_group(
     tmp_path, monkeypatch, capsys
 ):

@@ -446,8 +446,14 @@ def chunks(jobs: list[Job], workers: int, size: int | None = None) -> list[list[
 #: takes several times its idle time, a smaller target kept groups of 10-30 worlds
 #: and the sweep at half the speed of its own batches.
 GROUP_SECONDS = 5.0
-#: Runs in the first groups, before any group has been timed.
+#: Runs in the first groups, before any group has been timed, where the first run's
+#: scenario cannot be read (else :func:`first_group`).
 FIRST_GROUP = 32
+#: Work of the first groups [vehicle-periods: vehicles x control periods a run]: 64
+#: runs of the three-vehicle Fig. 15 platoon of 12 s (about 0.7 s in one process;
+#: below 64 worlds a batch's fixed cost a period weighs: 32 worlds ran at 1.5 times
+#: the cost per run of 128).
+FIRST_WORK = 64 * 3 * 1200
 #: Most a group grows from one timed group to the next.
 MAX_GROWTH = 8
 
@@ -455,7 +461,7 @@ MAX_GROWTH = 8
 class Groups:
     """The groups of a sweep's tasks, sized by how long the last ones took.
 
-    The first groups have :data:`FIRST_GROUP` runs; then each group is as large as
+    The first groups have :func:`first_group` runs; then each group is as large as
     the last timed group says fits in :data:`GROUP_SECONDS` (the time per run of a
     small group overestimates that of a larger one, whose batch shares the step's
     fixed cost: the estimate errs on the small side), from :data:`MIN_WORLDS` up to
@@ -482,7 +488,7 @@ class Groups:
         self.next_at = 0
         full = chunks(jobs, workers) if jobs else [[]]
         self.cap = max(1, len(full[0]))
-        self.size = min(self.cap, FIRST_GROUP)
+        self.size = min(self.cap, first_group(jobs))
         self._round_size = self.size  # the size of the groups of the current round
         self._round_left = 0  # groups still to cut in the current round
 
@@ -515,6 +521,30 @@ class Groups:
         fits = int(GROUP_SECONDS / per_run)
         self.size = max(MIN_WORLDS, min(self.cap, fits, MAX_GROWTH * runs))
         self.size = min(self.size, self.cap)
+
+
+def first_group(jobs: list[Job]) -> int:
+    """Runs in the first groups: :data:`FIRST_WORK` over the first run's work.
+
+    The work of a run is its vehicles times its control periods, read from the
+    first run's scenario (all runs of a sweep share the base; a grid may change
+    their size, which the timed groups then follow); at least :data:`MIN_WORLDS`,
+    and :data:`FIRST_GROUP` where the scenario cannot be read or lists plug-ins.
+    """
+    if not jobs:
+        return FIRST_GROUP
+    base_doc, _, overrides = jobs[0][1][:3]
+    if not isinstance(base_doc, dict) or "plugins" in base_doc:
+        return FIRST_GROUP  # a plug-in's code is loaded where the runs run only
+    if any(o.strip().startswith("plugins") for o in overrides):
+        return FIRST_GROUP
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = _scenario(*jobs[0][1][:3])
+    if isinstance(sc, dict):  # invalid, or an error: its row comes later
+        return FIRST_GROUP
+    work = len(sc.vehicles) * max(1, round(sc.duration / sc.dt))
+    return max(MIN_WORLDS, FIRST_WORK // work)
 
 
 def _timed_group(jobs: list[Job]) -> tuple[float, list[tuple[str, Any]]]:
