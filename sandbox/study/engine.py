@@ -553,6 +553,28 @@ def _timed_group(jobs: list[Job]) -> tuple[float, list[tuple[str, Any]]]:
     return time.perf_counter() - start, out
 
 
+def pool_context(start: bool = False) -> Any:
+    """The start method of a local pool: a fork server where there is one, else spawn.
+
+    The server imports the simulation once (:data:`PRELOAD`); every worker forked
+    from it starts with it imported (instead of a third of a second each). With
+    ``start``, the server is started now, so that it imports while the sweep reads
+    its store (:func:`sandbox.study.sweep.run_sweep` asks before it opens it).
+    """
+    import multiprocessing as mp
+
+    ctx = mp.get_context(
+        "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
+    )
+    if ctx.get_start_method() == "forkserver":
+        ctx.set_forkserver_preload(PRELOAD)
+        if start:
+            from multiprocessing import forkserver
+
+            forkserver.ensure_running()
+    return ctx
+
+
 def run_local(
     jobs: list[Job], workers: int, should_stop: Callable[[], bool] | None = None
 ) -> Iterator[tuple[str, dict[str, Any] | None]]:
@@ -574,15 +596,8 @@ def run_local(
                 return
         return
     import concurrent.futures as cf
-    import multiprocessing as mp
 
-    ctx = mp.get_context(
-        "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-    )
-    if ctx.get_start_method() == "forkserver":
-        # The server imports the simulation once; every worker forked from it starts
-        # with it imported (instead of a third of a second each).
-        ctx.set_forkserver_preload(PRELOAD)
+    ctx = pool_context()
     pool = cf.ProcessPoolExecutor(
         max_workers=workers,
         mp_context=ctx,

@@ -153,6 +153,8 @@ def run_sweep(
         sweep writing into it).
     """
     spec.check_size(max_runs)
+    if jobs > 1 and not (scheduler or scheduler_file):
+        engine.pool_context(start=True)  # the pool's server imports meanwhile
     base_doc = read_base(spec)
     check_points(spec, base_doc)
     store = Store(out)
