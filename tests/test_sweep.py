@@ -17,7 +17,7 @@ from helpers import REPO, write_yaml
 
 import sandbox
 from sandbox.cli import main
-from sandbox.study import engine
+from sandbox.study import engine, groups
 from sandbox.study.spec import build_spec, split_values
 from sandbox.study.summary import wilson
 
@@ -198,7 +198,7 @@ def test_interrupted_sweep_resumes(tmp_path, base, monkeypatch, capsys):
             raise KeyboardInterrupt
         return real(*jobs, **kw)
 
-    monkeypatch.setattr(engine, "BATCH_WORLDS", 2)
+    monkeypatch.setattr(groups, "BATCH_WORLDS", 2)
     monkeypatch.setattr(engine, "run_tasks", flaky)
     assert main(cmd) == 130
     assert "2 of 5 runs stored" in capsys.readouterr().err

@@ -214,7 +214,7 @@ def test_a_stop_while_a_group_is_stored_keeps_the_whole_group(
     # SIGINT arrives just as the second group of 4 finishes: all 8 runs finished so
     # far are stored (not 4 and then 1 of the group, as before), and nothing more.
     from sandbox.cli import main
-    from sandbox.study import engine
+    from sandbox.study import engine, groups
 
     base = write_yaml(tmp_path, base_doc(duration=0.5), "base.yaml")
     real, calls = engine.run_tasks, []
@@ -226,7 +226,7 @@ def test_a_stop_while_a_group_is_stored_keeps_the_whole_group(
             os.kill(os.getpid(), signal.SIGINT)
         return out
 
-    monkeypatch.setattr(engine, "BATCH_WORLDS", 4)
+    monkeypatch.setattr(groups, "BATCH_WORLDS", 4)
     monkeypatch.setattr(engine, "run_tasks", then_interrupted)
     out = tmp_path / "out"
     assert main(["sweep", str(base), "--seeds", "0:20", "--out", str(out)]) == 130
