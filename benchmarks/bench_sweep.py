@@ -127,8 +127,10 @@ def sweep(runs: int, jobs: int, out: Path, extra: tuple[str, ...] = ()) -> float
 
 
 def _batch_process(runs: int) -> subprocess.Popen:
-    """A fresh process that prints the seconds of ``batched(runs, 128)`` (imports
-    and a warm-up excluded)."""
+    """A fresh process that prints the seconds of ``batched(runs, 128)``.
+
+    Its imports and a warm-up are not timed.
+    """
     code = (
         "import sys, time; sys.path.insert(0, sys.argv[1]); "
         "from bench_sweep import batched; batched(8, 8); t = time.perf_counter(); "

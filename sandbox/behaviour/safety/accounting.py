@@ -23,21 +23,40 @@ def account(
 ) -> None:
     """Add one step of the filter's rows ``rows`` to a world's counters ``stats``."""
     active, slack = step.active[rows], step.slack[rows]
-    stats["active_steps"] = stats.get("active_steps", 0) + int(active.sum())
-    bad = slack > TOLERANCE
-    stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + int(bad.sum())
     worst = float(slack.max()) if len(slack) else 0.0
+    fallen = int(step.fallback[rows].sum()) if braking else 0
+    bad = int((slack > TOLERANCE).sum())
+    _add(stats, t, braking, int(active.sum()), bad, worst, least, fallen)
+
+
+def _add(
+    stats: dict,
+    t: float,
+    braking: bool,
+    active: int,
+    bad: int,
+    worst: float,
+    least: float,
+    fallen: int,
+) -> None:
+    """Add one step of a world to its counters ``stats``.
+
+    The step's counts of vehicles (active, without a common point, fallen back to
+    braking), its largest slack and its least barrier.
+    """
+    stats["active_steps"] = stats.get("active_steps", 0) + active
+    stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + bad
     stats["max_slack"] = max(stats.get("max_slack", 0.0), worst)
-    if np.isfinite(least):
+    finite = bool(np.isfinite(least))
+    if finite:
         known = stats.get("min_barrier")
         stats["min_barrier"] = least if known is None else min(known, least)
     if braking:
-        braking_steps = int(step.fallback[rows].sum())
-        stats["fallback_steps"] = stats.get("fallback_steps", 0) + braking_steps
+        stats["fallback_steps"] = stats.get("fallback_steps", 0) + fallen
     if "unsafe_start" not in stats:  # the first step: reported, never silently
         stats["unsafe_start"] = {
             "t": float(t),
-            "min_barrier": least if np.isfinite(least) else None,
+            "min_barrier": least if finite else None,
             "unsafe": bool(least < -TOLERANCE),
         }
 
@@ -115,21 +134,9 @@ def account_worlds(
         counters.started = True
         return
     active, bad, worst = active.tolist(), bad.tolist(), worst.tolist()
-    least, finite, fallen = least.tolist(), finite.tolist(), fallen.tolist()
+    least, fallen = least.tolist(), fallen.tolist()
     for w in touched.tolist():
-        stats = world_stats[w]
-        stats["active_steps"] = stats.get("active_steps", 0) + active[w]
-        stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + bad[w]
-        stats["max_slack"] = max(stats.get("max_slack", 0.0), worst[w])
-        if finite[w]:
-            known = stats.get("min_barrier")
-            stats["min_barrier"] = least[w] if known is None else min(known, least[w])
-        if braking:
-            stats["fallback_steps"] = stats.get("fallback_steps", 0) + fallen[w]
-        if "unsafe_start" not in stats:  # the first step: reported, never silently
-            stats["unsafe_start"] = {
-                "t": float(t),
-                "min_barrier": least[w] if finite[w] else None,
-                "unsafe": bool(least[w] < -TOLERANCE),
-            }
+        _add(
+            world_stats[w], t, braking, active[w], bad[w], worst[w], least[w], fallen[w]
+        )
     counters.started = True
