@@ -94,6 +94,11 @@ CASES = {
     ),
     "reconfigure_handover": ("failures/leader_crash_elect", ["duration=5"]),
     "reconfigure_hungarian": ("failures/column_close", ["duration=5"]),
+    # each world's own law (it re-forms) on the copies it receives
+    "reconfigure_sensed": (
+        "failures/column_close",
+        ["duration=3", "sensing.position_noise=0.02", "sensing.delay=0.02"],
+    ),
     "command_schedules": ("paper/stabilization", ["duration=3"]),
     "range_sensors_sensed_obstacles": (
         "failures/obstacle_field",

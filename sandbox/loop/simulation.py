@@ -411,6 +411,7 @@ class Simulation(StepAPI, Ending, WorldStages):
             self.seen = seen
         if self.range_sensor is not None:
             self.range_sensor.update(t, fleet.pos, fleet.theta)
+        self._views_at = -1  # the worlds' views see this period's arrays and copies
         return True
 
     def _targets(self, t: float) -> tuple[np.ndarray, ...]:
