@@ -100,10 +100,11 @@ It needs every vehicle's finite ``max_accel`` and ``v1_max`` (a loader error) an
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from sandbox.behaviour.estimation import BroadcastEstimate
 from sandbox.behaviour.safety.accounting import account
 from sandbox.behaviour.safety.braking import (
     braking_fallback,
@@ -117,7 +118,12 @@ from sandbox.behaviour.safety.braking_check import check_commands
 from sandbox.behaviour.safety.priority import PRIORITY, holding, holds
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
-from sandbox.model.barriers import MIN_DIST, MIN_SPEED, sensing_margin
+from sandbox.model.barriers import (
+    ESTIMATE_GAIN,
+    MIN_DIST,
+    MIN_SPEED,
+    sensing_margin,
+)
 from sandbox.plugins.contexts import FilterContext
 from sandbox.plugins.registration import Param, register_filter
 
@@ -202,6 +208,18 @@ PARAMS = {
         maximum=1.5708,
     ),
     "priority": PRIORITY,
+    "estimate_gain": Param(
+        "number",
+        None,
+        doc="barrier: braking under sensing: the least gain K of the estimate of the "
+        "others' poses (each broadcast copy carried over the delay by the commands, "
+        "then a filter x <- x + K (copy - x)); the sensing margin is 3 sqrt(K) "
+        "(sigma_p + (l + S) sigma_theta). Smaller: less noise, slower to correct "
+        "what the commands do not explain; 1: each copy alone (left out: 0.1)",
+        minimum=0.0,
+        maximum=1.0,
+        exclusive=True,
+    ),
     "range": Param(
         "length",
         None,
@@ -312,15 +330,22 @@ class CBFState:
         self.braking = p.get("barrier", "velocity") == "braking"
         #: The margin for what the vehicles sense of each other [m] (braking only).
         self.sensed = 0.0
+        #: The estimate of the others' poses from the broadcast (braking only).
+        self.estimate: BroadcastEstimate | None = None
         if self.braking and ctx.sensing is not None:
-            top = float(np.max(np.hypot(self.v1_max, self.lateral)))
+            gain = p.get("estimate_gain")
+            gain = ESTIMATE_GAIN if gain is None else float(gain)
             self.sensed = sensing_margin(
                 ctx.sensing.get("position_noise", 0.0),
                 ctx.sensing.get("heading_noise", 0.0),
-                ctx.sensing.get("delay", 0.0),
-                top,
+                gain,
                 self.look,
+                float(np.max(self.v1_max)),
+                float(np.min(self.accel)),
+                ctx.dt,
             )
+            delay = int(round(ctx.sensing.get("delay", 0.0) / ctx.dt))
+            self.estimate = BroadcastEstimate(delay, gain, ctx.dt, ctx.substeps)
         radius = p.get("range")
         if radius is None:
             radius = auto_range(
@@ -570,6 +595,9 @@ def filter_commands(
     step : FilterStep
     """
     n, look = len(ctx.pos), state.look
+    if state.estimate is not None and ctx.seen is not None:  # the others' poses now
+        seen = state.estimate.update(ctx.seen, ctx.v1_prev, ctx.v2_prev)
+        ctx = replace(ctx, seen=seen)
     filtered = np.ones(n, dtype=bool)
     if ctx.known_failed is not None:
         filtered &= ~ctx.known_failed
