@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from sandbox.model.barriers import ESTIMATE_GAIN
 from sandbox.model.dynamics import wrap_angle
 
 
@@ -199,3 +200,34 @@ class BroadcastEstimate:
             )
             turn = u[:, 1]
         return now
+
+
+def platoon_estimate(scenario, dt: float, substeps: int) -> BroadcastEstimate | None:
+    """The estimate the platoon's law and recovery see under the braking barrier.
+
+    With sensing and ``safety: {filter: cbf, barrier: braking}`` the formation law,
+    the recovery strategy and the safety filter all see the others through the
+    estimate (:class:`BroadcastEstimate`, least gain ``safety.estimate_gain``), not
+    the copies as received: a law that differentiates its leader's copies, or a
+    strategy steering round a neighbour's, turns 2 cm of white noise into commands
+    that swing from one period to the next, and a vehicle in a runaway's way does
+    not leave it. The failure detector keeps the copies (its residual is their
+    difference from the commands). None otherwise: every other run sees the copies,
+    as before.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    dt : float [s]
+    substeps : int
+    """
+    sensing, safety = scenario.sensing, scenario.safety
+    if not (
+        sensing.position_noise or sensing.heading_noise or sensing.delay or sensing.loss
+    ):
+        return None
+    if safety.filter != "cbf" or safety.params.get("barrier") != "braking":
+        return None
+    gain = safety.params.get("estimate_gain")
+    gain = ESTIMATE_GAIN if gain is None else float(gain)
+    return BroadcastEstimate(int(round(sensing.delay / dt)), gain, dt, substeps)
