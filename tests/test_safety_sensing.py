@@ -198,6 +198,7 @@ def _ring(n: int, seed: int, radius: float) -> dict:
     }
 
 
+@pytest.mark.slow
 def test_a_ring_swap_under_sensing_keeps_clear() -> None:
     # Eight vehicles swap across a 4 m ring seeing each other through 2 cm of noise
     # and 50 ms of delay, the residual detector in place of the oracle. With the
