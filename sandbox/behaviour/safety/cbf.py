@@ -93,6 +93,14 @@ state (every ``H >= 0``) so exactly in the drive's model; the QP's commands keep
 to first order, and :mod:`sandbox.behaviour.safety.braking_check` moves a command
 toward braking where the model, the others braking, says it loses more.
 
+Under sensing the braking barrier sees the others through an estimate of their
+poses now (:class:`~sandbox.behaviour.estimation.BroadcastEstimate`: each broadcast
+copy carried over the delay by the commands, then filtered with the least gain ``K =
+estimate_gain``), the same for every vehicle, and grows ``D`` by the sensing margin
+``3 sqrt(K) (sigma_p + (l + S) sigma_theta)``
+(:func:`~sandbox.model.barriers.sensing_margin`); the velocity barrier keeps the
+copies as received.
+
 It needs every vehicle's finite ``max_accel`` and ``v1_max`` (a loader error) and
 ``neighbour_velocity: broadcast``, ``projection: look_ahead`` (the filter's check);
 ``gamma`` is not used. The automatic ``range`` is :func:`braking_range`.
@@ -145,8 +153,9 @@ PARAMS = {
         doc="velocity: h = |p_i - p_j|^2 - D^2 with h' >= -gamma h (assumes the "
         "speed can change at once); braking: the braking-safe barrier H = the least "
         "clearance beyond D if every vehicle brakes at its max_accel from now on, "
-        "its conditions kept by the braking command (always feasible), with a "
-        "margin for the declared sensing noise and delay (needs every vehicle's "
+        "its conditions kept by the braking command (always feasible); under "
+        "sensing it sees the others through an estimate, with a margin for its "
+        "error (needs every vehicle's "
         "max_accel and v1_max)",
         choices=("velocity", "braking"),
     ),
@@ -579,6 +588,10 @@ def filter_commands(
     state: CBFState, ctx: FilterContext, prune: bool = True
 ) -> tuple[np.ndarray, np.ndarray, FilterStep]:
     """The filtered ``(v1, v2)`` of one step, and what the filter did.
+
+    Under sensing with the braking barrier the step first takes the period's copies
+    into the estimate (``state.estimate``), and the rest of the step sees the
+    estimate in place of ``ctx.seen``: call it once a period.
 
     Parameters
     ----------
