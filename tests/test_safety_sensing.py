@@ -245,3 +245,11 @@ def test_the_law_and_the_recovery_see_the_estimate_under_the_braking_barrier() -
     sim = Simulation(load_scenario(doc))
     sim.run()
     assert sim.believed is sim.seen
+
+
+def test_a_lossy_broadcast_is_covered_and_not_warned_of(recwarn) -> None:
+    # The estimate carries on through lost packets by the commands (the copies as
+    # received were held, older than the delay, and the loader warned of it).
+    sets = ["safety.filter=cbf", "safety.barrier=braking", "sensing.loss=0.1"]
+    load_scenario("safety/head_on_swap", overrides=[*sets, "sensing.delay=0.05"])
+    assert not [w for w in recwarn if "sensing.loss" in str(w.message)]
