@@ -38,7 +38,7 @@ copies has variance ``sigma^2 / m <= K sigma^2``, and the recursion ``P' = (1 - 
 P + K^2 sigma^2`` keeps ``P <= K sigma^2``, tending to ``K sigma^2 / (2 - K)``), on
 the heading ``sigma_theta sqrt(K)``. Where the drive does not follow its commands
 (a contact, a shove), the error left decays by ``1 - K`` a copy: a time constant of
-``dt / K``. Every row is its own vehicle: the estimate of K stacked worlds is each
+``dt / K``. Every row is its own vehicle: the estimate of stacked worlds is each
 world's alone.
 """
 
