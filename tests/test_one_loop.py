@@ -65,6 +65,19 @@ CASES = {
         "safety/circle_swap_3_jittered",
         ["duration=4", "sensing.position_noise=0.01"],
     ),
+    "cbf_braking_estimate_delayed_lossy": (
+        "safety/circle_swap_3_jittered",
+        [
+            "duration=4",
+            "safety.filter=cbf",
+            "safety.barrier=braking",
+            "safety.estimate_gain=0.2",
+            "sensing.position_noise=0.02",
+            "sensing.heading_noise=0.01",
+            "sensing.delay=0.05",
+            "sensing.loss=0.1",
+        ],
+    ),
     "cbf_door": ("safety/door", ["duration=4"]),
     "cbf_priority_slot_distance": (
         "safety/door",

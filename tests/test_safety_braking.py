@@ -108,20 +108,21 @@ def test_the_closest_approach_is_exact_period_by_period() -> None:
     assert dist[0, 0] == pytest.approx(0.5) and frac[0, 0] == pytest.approx(0.5)
 
 
-def test_the_sensing_margin_formula() -> None:
-    # 3 sigma_p + 3 l sigma_theta + s_max tau = 3 * 0.02 + 3 * 0.1 * 0.05 + 2.04 * 0.1
-    assert sensing_margin(0.02, 0.05, 0.1, 2.04, 0.1) == pytest.approx(
-        0.06 + 0.015 + 0.204
+def test_the_sensing_margin_grows_d() -> None:
+    # 3 sqrt(K) (sigma_p + (l + S) sigma_theta), K = 0.1, S = 0.43 m (the longest
+    # braking, tests/test_safety_sensing.py): sigma_p = 0.05 m, sigma_theta = 0.05
+    # rad give 3 * 0.316228 * (0.05 + 0.53 * 0.05) = 0.072575 m.
+    sensing = {"position_noise": 0.05, "heading_noise": 0.05, "delay": 0.1}
+    assert sensing_margin(0.05, 0.05, 0.1, 0.1, 2.0, 5.0, 0.01) == pytest.approx(
+        3 * np.sqrt(0.1) * 0.0765
     )
     ctx = _ctx([[0.0, 0.0]], [0.0], [0.0], [0.0], [0.0], [0.0])
-    ctx.sensing = {"position_noise": 0.02, "heading_noise": 0.05, "delay": 0.1}
-    state = CBFState(ctx)
-    top = np.hypot(2.0, 0.1 * 4.0)  # the look-ahead point's top speed
-    assert state.sensed == pytest.approx(0.06 + 0.015 + top * 0.1)
+    ctx.sensing = sensing
+    assert CBFState(ctx).sensed == pytest.approx(3 * np.sqrt(0.1) * 0.0765)
     # the barrier's D grows by it: two vehicles at rest 1 m apart (look-ahead points
-    # 0.8 m apart), D = 0.75 m + the margin: 0.8 - 0.75 - 0.2728 < 0, unsafe.
+    # 0.8 m apart), D = 0.75 m + the margin: 0.8 - 0.75 - 0.0726 < 0, unsafe.
     ctx = _ctx([[0.0, 0.0], [1.0, 0.0]], [0.0, np.pi], *([[0.0, 0.0]] * 4))
-    ctx.sensing = {"position_noise": 0.02, "heading_noise": 0.05, "delay": 0.1}
+    ctx.sensing = sensing
     _, _, _, h = braking_rows(CBFState(ctx), ctx, np.ones(2, bool))
     assert np.all(h < 0)
     ctx.sensing = None
@@ -350,8 +351,8 @@ def test_the_braking_barrier_covers_a_noisy_delayed_broadcast() -> None:
     r, m = run(HEAD_ON, *noisy)
     assert m["collisions"]["total"] == 0
     # the centres keep d + margin apart, margin 0.05 m grown by the sensing margin
-    # 3 * 0.01 + 2.04 * 0.02 = 0.071 m (up to the drive's lag)
-    assert m["min_distance"] >= D + 0.05 + 0.071 - 0.01
+    # 3 sqrt(0.1) 0.01 = 0.0095 m (up to the drive's lag)
+    assert m["min_distance"] >= D + 0.05 + 0.0095 - 0.01
 
 
 @pytest.mark.slow
@@ -409,8 +410,7 @@ def test_bad_braking_input_is_one_line(sets, message, capsys) -> None:
     ("sets", "key"),
     [
         (["safety.margin=3.5"], "safety.margin: the start is unsafe"),
-        (["sensing.loss=0.1"], "sensing.loss: 0.1: the braking barrier's margin"),
-        (["sensing.position_noise=0.2"], "sensing.position_noise: the braking"),
+        (["sensing.position_noise=0.6"], "sensing.position_noise: the braking"),
     ],
 )
 def test_braking_warnings_name_the_key(sets, key) -> None:

@@ -38,6 +38,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from sandbox.behaviour.detection import Detection
+from sandbox.behaviour.estimation import platoon_estimate
 from sandbox.behaviour.ranges import (
     RangeSensor,
     StackedRanges,
@@ -249,6 +250,9 @@ class Simulation(StepAPI, Ending, WorldStages):
             else None
         )
         self.seen: np.ndarray | None = None
+        # what the law and the recovery see: the copies, or their estimate (braking)
+        self.believed: np.ndarray | None = None
+        self._estimate = platoon_estimate(first, self.h, self.substeps)
         safety = first.safety
         self._filter = (
             None if safety.filter == "none" else runnable(get("filter", safety.filter))
@@ -287,9 +291,8 @@ class Simulation(StepAPI, Ending, WorldStages):
         self._control_time = 0.0
         self._views_at = -1
         self._view_worlds()
-        # Several platoons (loop/platoons.py): each world's own; each platoon's law,
-        # recovery and safety filter on its rows (world by world when K > 1).
-        # Platoons.attach sets each world's strategy, filter and avoiders.
+        # Several platoons (loop/platoons.py): each platoon's law, recovery and filter
+        # on its rows, world by world (attach sets strategy, filter and avoiders).
         for state in self.states:
             state.platoons = Platoons.attach(state)
         self.platoons = self.states[0].platoons
@@ -409,6 +412,9 @@ class Simulation(StepAPI, Ending, WorldStages):
                 rows = self._rows(w)
                 seen[rows] = self.states[w].broadcast.update(pos[rows], theta[rows])
             self.seen = seen
+        self.believed = self.seen
+        if self._estimate is not None:  # the detector and the filter keep the copies
+            self.believed = self._estimate.update(self.seen, fleet.v1, fleet.v2)
         if self.range_sensor is not None:
             self.range_sensor.update(t, fleet.pos, fleet.theta)
         self._views_at = -1  # the worlds' views see this period's arrays and copies
@@ -420,7 +426,7 @@ class Simulation(StepAPI, Ending, WorldStages):
             fl = self.fleet
             self._view_worlds()  # a platoon's reconfiguration reads its world's rows
             if self.K == 1:
-                return self.platoons.targets(t, fl.pos, fl.theta, fl.vel, self.seen)
+                return self.platoons.targets(t, fl.pos, fl.theta, fl.vel, self.believed)
             return self._platoon_targets(t)
         K, n, N = self.K, self.n, self.N
         if self._ref_table is not None:
@@ -456,8 +462,8 @@ class Simulation(StepAPI, Ending, WorldStages):
         if lead < 0:
             leader_pos = leader_theta = None
         else:
-            src = fl.pos if self.seen is None else self.seen[:, :2]
-            heading = fl.theta if self.seen is None else self.seen[:, 2]
+            src = fl.pos if self.believed is None else self.believed[:, :2]
+            heading = fl.theta if self.believed is None else self.believed[:, 2]
             leader_pos = np.ascontiguousarray(src.reshape(K, n, 2)[:, lead : lead + 1])
             leader_theta = np.ascontiguousarray(
                 heading.reshape(K, n)[:, lead : lead + 1]
@@ -547,7 +553,7 @@ class Simulation(StepAPI, Ending, WorldStages):
             R=self.rec.R,
             obstacle_field=self._avoid_field,
             neighbours=self.neighbours,
-            seen_pos=None if self.seen is None else self.seen[:, :2],
+            seen_pos=None if self.believed is None else self.believed[:, :2],
             **context_fields(self.range_sensor),
         )
 

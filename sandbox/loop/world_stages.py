@@ -36,6 +36,7 @@ class WorldStages:
         if self.K == 1:
             s = self.states[0]
             s.fleet, s.seen, s.known_failed = fl, self.seen, self.known_failed
+            s.believed = self.believed
             return
         for w, s in enumerate(self.states):
             rows = slice(w * n, (w + 1) * n)
@@ -53,6 +54,7 @@ class WorldStages:
                 fl.failed[rows],
             )
             s.seen = None if self.seen is None else self.seen[rows]
+            s.believed = None if self.believed is None else self.believed[rows]
             s.known_failed = self.known_failed[rows]
 
     def _rows(self, w: int) -> slice:
@@ -68,7 +70,7 @@ class WorldStages:
         point = np.full((self.K, 2), np.nan)
         for w in self._live_worlds():
             s, rows = self.states[w], self._rows(w)
-            seen = None if self.seen is None else self.seen[rows]
+            seen = None if self.believed is None else self.believed[rows]
             got = s.platoons.targets(
                 t, fl.pos[rows], fl.theta[rows], fl.vel[rows], seen
             )
@@ -111,7 +113,7 @@ class WorldStages:
                 R=s.rec.R,
                 obstacle_field=avoid_field(s.range_sensor, s.obstacles, s.rec),
                 neighbours=s.neighbours,
-                seen_pos=None if s.seen is None else s.seen[:, :2],
+                seen_pos=None if s.believed is None else s.believed[:, :2],
                 **context_fields(s.range_sensor),
             )
             try:

@@ -82,6 +82,9 @@ class WorldState:
         self.sensing = asdict(sc.sensing)
         #: The broadcast poses received at t_k, shape (n, 3), or None without sensing.
         self.seen: np.ndarray | None = None
+        #: What the law and the recovery see of the others: ``seen``, or its estimate
+        #: under the braking barrier (``Simulation.believed``).
+        self.believed: np.ndarray | None = None
         self.known_failed = np.zeros(fleet.n, dtype=bool)
         # The limits as a single run of the world sees them (scalars when uniform).
         self.v1_max = uniform(fleet.v1_max)
@@ -150,7 +153,9 @@ def law_context_of(
     ``law_memory``; the followers read the leader's broadcast pose (the truth without
     sensing); ``extra`` are further fields of the context.
     """
-    fleet, lead, seen = owner.fleet, owner.leader, owner.seen
+    fleet, lead = owner.fleet, owner.leader
+    seen = getattr(owner, "believed", None)  # a world's: the copies or their estimate
+    seen = owner.seen if seen is None else seen
     if lead < 0:
         leader_pos = leader_theta = None
     elif seen is None:

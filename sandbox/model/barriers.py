@@ -16,10 +16,15 @@ picks the periods where it has a local minimum.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-#: Standard deviations of the position and heading noise the margin covers [1].
+#: Standard deviations of the estimate's error the sensing margin covers [1].
 SIGMAS = 3.0
+#: The least gain ``K`` of the estimate of the others' poses under sensing (the key
+#: ``safety.estimate_gain`` left out) [1]: a time constant of ``dt / K``.
+ESTIMATE_GAIN = 0.1
 
 
 #: Shortest distance treated as a direction [m].
@@ -120,18 +125,25 @@ def local_minima(dist: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
 def sensing_margin(
     position_noise: float,
     heading_noise: float,
-    delay: float,
-    speed: float,
+    gain: float,
     look_ahead: float,
+    v1_max: float,
+    accel: float,
+    dt: float,
 ) -> float:
-    """Distance [m] the broadcast pose of a neighbour's look-ahead point may be off.
+    """Distance [m] the estimate of a neighbour's braking path may be off.
 
-    ``SIGMAS`` (3) standard deviations of the position noise along the line of
-    centres, the look-ahead point's swing ``l`` times 3 standard deviations of the
-    heading noise, and the distance the neighbour covers at its top speed during the
-    delay::
+    The filter takes the others' poses from the estimate of
+    :mod:`sandbox.behaviour.estimation` (the broadcast copies carried over the delay
+    by the commands, through a filter of least gain ``K``), whose error has a standard
+    deviation of at most ``sigma_p sqrt(K)`` per coordinate and ``sigma_theta
+    sqrt(K)`` on the heading. A position error moves every point of the neighbour's
+    braking path alike; a heading error ``delta`` turns the path about the centre,
+    moving its points by up to ``(l + S) delta``, ``S = v1_max (v1_max / a + dt) / 2
+    + v1_max dt`` the longest braking (the first period at the command's speed). So,
+    :data:`SIGMAS` (3) standard deviations along the line of the closest approach::
 
-        m_s = 3 sigma_p + 3 l sigma_theta + s_max tau.
+        m_s = 3 sqrt(K) (sigma_p + (l + S) sigma_theta).
 
     Parameters
     ----------
@@ -139,18 +151,22 @@ def sensing_margin(
         ``sigma_p``, per coordinate.
     heading_noise : float [rad]
         ``sigma_theta``.
-    delay : float [s]
-        ``tau``.
-    speed : float [m/s]
-        ``s_max``, the largest speed of a look-ahead point.
+    gain : float [1]
+        ``K``, the estimate's least gain, in (0, 1].
     look_ahead : float [m]
         ``l``.
+    v1_max, accel : float [m/s], [m/s^2]
+        The largest speed and the braking's deceleration (the fleet's largest and
+        smallest).
+    dt : float [s]
 
     Returns
     -------
     float [m]
 
-    >>> round(sensing_margin(0.01, 0.0, 0.02, 2.0, 0.1), 6)
-    0.07
+    >>> round(sensing_margin(0.02, 0.0, 0.25, 0.1, 2.0, 5.0, 0.01), 6)
+    0.03
     """
-    return SIGMAS * position_noise + SIGMAS * look_ahead * heading_noise + speed * delay
+    travel = 0.5 * v1_max * (v1_max / accel + dt) + v1_max * dt
+    spread = position_noise + (look_ahead + travel) * heading_noise
+    return SIGMAS * math.sqrt(gain) * spread

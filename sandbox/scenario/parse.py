@@ -15,7 +15,6 @@ at the caller's code.
 from __future__ import annotations
 
 import copy
-import math
 import os
 import sys
 import warnings
@@ -29,7 +28,7 @@ import yaml
 from sandbox import plugins
 from sandbox.errors import Problem, SandboxWarning, ScenarioError
 from sandbox.geometry.neighbours import NeighbourList
-from sandbox.model.barriers import sensing_margin
+from sandbox.model.barriers import ESTIMATE_GAIN, sensing_margin
 from sandbox.model.tunnelling import tunnelling_warning
 from sandbox.plugins.registration import (
     Param,
@@ -348,7 +347,7 @@ def parse_scenario(
         recovery,
     )
     _safety_range(rd, safety, listed + generated)
-    _safety_braking(rd, safety, listed + generated, sensing)
+    _safety_braking(rd, safety, listed + generated, sensing, dt)
     _check_handover(
         rd,
         on_leader_failure,
@@ -637,15 +636,19 @@ def _safety_range(rd: _Reader, safety: Any, vehicles: list[tuple[str, Any]]) -> 
 
 
 def _safety_braking(
-    rd: _Reader, safety: Any, vehicles: list[tuple[str, Any]], sensing: Any
+    rd: _Reader,
+    safety: Any,
+    vehicles: list[tuple[str, Any]],
+    sensing: Any,
+    dt: float,
 ) -> None:
-    """A braking barrier's needs: drive limits, a broadcast it covers, a safe start.
+    """A braking barrier's needs: drive limits, a margin it can keep, a safe start.
 
     ``barrier: braking`` needs every vehicle's finite ``max_accel`` and ``v1_max``
-    (an error); a lossy broadcast is not covered by its margin, a margin for the
-    sensing noise and delay larger than a vehicle, or a start whose look-ahead
-    points are closer than the barrier's ``D`` are warned of (the start is also
-    reported in ``metrics.json``, ``safety.unsafe_start``).
+    (an error); a margin for the error of the estimated poses under sensing larger
+    than a vehicle, or a start whose look-ahead points are closer than the
+    barrier's ``D`` are warned of (the start is also reported in ``metrics.json``,
+    ``safety.unsafe_start``).
     """
     if safety.params.get("barrier") != "braking":
         return
@@ -664,26 +667,26 @@ def _safety_braking(
         return
     look = float(safety.params["look_ahead"])
     margin = float(safety.params["margin"])
-    lateral = [look * v.v2_max if v.v2_max is not None else v.v1_max for v in specs]
-    top = max(math.hypot(v.v1_max, q) for v, q in zip(specs, lateral, strict=True))
     sensed = 0.0
     if sensing is not None:
+        gain = safety.params.get("estimate_gain")
         sensed = sensing_margin(
-            sensing.position_noise, sensing.heading_noise, sensing.delay, top, look
+            sensing.position_noise,
+            sensing.heading_noise,
+            ESTIMATE_GAIN if gain is None else float(gain),
+            look,
+            max(v.v1_max for v in specs),
+            min(v.max_accel for v in specs),
+            dt,
         )
-        if sensing.loss > 0:
-            rd.warn(
-                "sensing.loss",
-                f"{sensing.loss:g}: the braking barrier's margin covers the noise and "
-                "the delay, not lost packets (a held copy grows older than the delay)",
-            )
         smallest = min(v.diameter for v in specs)
         if sensed > smallest:
             rd.warn(
                 "sensing.position_noise",
-                f"the braking barrier's sensing margin 3 sigma + 3 l sigma_theta + "
-                f"v tau = {sensed:.3g} m is larger than a vehicle ({smallest:g} m): "
-                "the filter keeps the platoon that much further apart",
+                f"the braking barrier's sensing margin 3 sqrt(K) (sigma_p + (l + S) "
+                f"sigma_theta) = {sensed:.3g} m is larger than a vehicle "
+                f"({smallest:g} m): the filter keeps the platoon that much further "
+                "apart (a smaller safety.estimate_gain K makes it smaller)",
             )
     pose = np.array([v.pose for v in specs], dtype=float).reshape(-1, 3)
     point = pose[:, :2] + look * np.stack((np.cos(pose[:, 2]), np.sin(pose[:, 2])), -1)

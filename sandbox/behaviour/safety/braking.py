@@ -353,8 +353,10 @@ def braking_rows(
     distance of the samples less ``d / 2 + l + margin``, ``L_m`` the period's
     travel: the distance is 1-Lipschitz along the segment). The condition is ``g .
     (z - z_b) >= -rho (H_b' - min(H, 0))`` (``_gradient``, ``_rows``), ``rho = a_i
-    / (a_i + a_j)`` toward a cooperating vehicle, 1 otherwise. Neighbours' poses
-    are the sensed ones and ``D``, ``D'`` grow by the sensing margin. ``pending``,
+    / (a_i + a_j)`` toward a cooperating vehicle, 1 otherwise. Under sensing the
+    neighbours' poses are their estimate (``ctx.seen``, set by
+    :func:`~sandbox.behaviour.safety.cbf.filter_commands`) and ``D``, ``D'`` grow
+    by the sensing margin. ``pending``,
     if given, receives under ``"check"`` what
     :func:`sandbox.behaviour.safety.braking_check.check_commands` needs.
 

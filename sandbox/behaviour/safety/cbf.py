@@ -93,6 +93,14 @@ state (every ``H >= 0``) so exactly in the drive's model; the QP's commands keep
 to first order, and :mod:`sandbox.behaviour.safety.braking_check` moves a command
 toward braking where the model, the others braking, says it loses more.
 
+Under sensing the braking barrier sees the others through an estimate of their
+poses now (:class:`~sandbox.behaviour.estimation.BroadcastEstimate`: each broadcast
+copy carried over the delay by the commands, then filtered with the least gain ``K =
+estimate_gain``), the same for every vehicle, and grows ``D`` by the sensing margin
+``3 sqrt(K) (sigma_p + (l + S) sigma_theta)``
+(:func:`~sandbox.model.barriers.sensing_margin`); the velocity barrier keeps the
+copies as received.
+
 It needs every vehicle's finite ``max_accel`` and ``v1_max`` (a loader error) and
 ``neighbour_velocity: broadcast``, ``projection: look_ahead`` (the filter's check);
 ``gamma`` is not used. The automatic ``range`` is :func:`braking_range`.
@@ -100,10 +108,11 @@ It needs every vehicle's finite ``max_accel`` and ``v1_max`` (a loader error) an
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from sandbox.behaviour.estimation import BroadcastEstimate
 from sandbox.behaviour.safety.accounting import (
     WorldCounters,
     account,
@@ -121,7 +130,12 @@ from sandbox.behaviour.safety.braking_check import check_commands
 from sandbox.behaviour.safety.priority import PRIORITY, holding, holds
 from sandbox.behaviour.safety.qp import TOLERANCE, solve
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
-from sandbox.model.barriers import MIN_DIST, MIN_SPEED, sensing_margin
+from sandbox.model.barriers import (
+    ESTIMATE_GAIN,
+    MIN_DIST,
+    MIN_SPEED,
+    sensing_margin,
+)
 from sandbox.plugins.contexts import FilterContext
 from sandbox.plugins.registration import Param, register_filter
 
@@ -143,8 +157,9 @@ PARAMS = {
         doc="velocity: h = |p_i - p_j|^2 - D^2 with h' >= -gamma h (assumes the "
         "speed can change at once); braking: the braking-safe barrier H = the least "
         "clearance beyond D if every vehicle brakes at its max_accel from now on, "
-        "its conditions kept by the braking command (always feasible), with a "
-        "margin for the declared sensing noise and delay (needs every vehicle's "
+        "its conditions kept by the braking command (always feasible); under "
+        "sensing it sees the others through an estimate, with a margin for its "
+        "error (needs every vehicle's "
         "max_accel and v1_max)",
         choices=("velocity", "braking"),
     ),
@@ -206,6 +221,18 @@ PARAMS = {
         maximum=1.5708,
     ),
     "priority": PRIORITY,
+    "estimate_gain": Param(
+        "number",
+        None,
+        doc="barrier: braking under sensing: the least gain K of the estimate of the "
+        "others' poses (each broadcast copy carried over the delay by the commands, "
+        "then a filter x <- x + K (copy - x)); the sensing margin is 3 sqrt(K) "
+        "(sigma_p + (l + S) sigma_theta). Smaller: less noise, slower to correct "
+        "what the commands do not explain; 1: each copy alone (left out: 0.1)",
+        minimum=0.0,
+        maximum=1.0,
+        exclusive=True,
+    ),
     "range": Param(
         "length",
         None,
@@ -316,15 +343,22 @@ class CBFState:
         self.braking = p.get("barrier", "velocity") == "braking"
         #: The margin for what the vehicles sense of each other [m] (braking only).
         self.sensed = 0.0
+        #: The estimate of the others' poses from the broadcast (braking only).
+        self.estimate: BroadcastEstimate | None = None
         if self.braking and ctx.sensing is not None:
-            top = float(np.max(np.hypot(self.v1_max, self.lateral)))
+            gain = p.get("estimate_gain")
+            gain = ESTIMATE_GAIN if gain is None else float(gain)
             self.sensed = sensing_margin(
                 ctx.sensing.get("position_noise", 0.0),
                 ctx.sensing.get("heading_noise", 0.0),
-                ctx.sensing.get("delay", 0.0),
-                top,
+                gain,
                 self.look,
+                float(np.max(self.v1_max)),
+                float(np.min(self.accel)),
+                ctx.dt,
             )
+            delay = int(round(ctx.sensing.get("delay", 0.0) / ctx.dt))
+            self.estimate = BroadcastEstimate(delay, gain, ctx.dt, ctx.substeps)
         radius = p.get("range")
         if radius is None:
             radius = auto_range(
@@ -559,6 +593,10 @@ def filter_commands(
 ) -> tuple[np.ndarray, np.ndarray, FilterStep]:
     """The filtered ``(v1, v2)`` of one step, and what the filter did.
 
+    Under sensing with the braking barrier the step first takes the period's copies
+    into the estimate (``state.estimate``), and the rest of the step sees the
+    estimate in place of ``ctx.seen``: call it once a period.
+
     Parameters
     ----------
     state : CBFState
@@ -574,6 +612,9 @@ def filter_commands(
     step : FilterStep
     """
     n, look = len(ctx.pos), state.look
+    if state.estimate is not None and ctx.seen is not None:  # the others' poses now
+        seen = state.estimate.update(ctx.seen, ctx.v1_prev, ctx.v2_prev)
+        ctx = replace(ctx, seen=seen)
     filtered = np.ones(n, dtype=bool)
     if ctx.known_failed is not None:
         filtered &= ~ctx.known_failed
