@@ -312,7 +312,7 @@ def _rows(
     now: np.ndarray,
     share: np.ndarray,
     first: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The half-planes ``a . w <= b`` of ``g . (z - z_b) >= -rho (H_b' - min(H, 0))``.
 
     ``H_b'`` (``after``) is the next state's barrier if the vehicle brakes, ``H``
@@ -320,7 +320,8 @@ def _rows(
     what is left above 0 (above ``H`` where ``H < 0``). In ``z``, ``-g / |g| . z <=
     (-g . z_b + rho (H_b' - min(H, 0))) / |g|`` with ``z_b = (first, 0)``; ``a`` is
     turned into ``w = R(x3) z``. A flat gradient gives the always-kept row ``a = 0,
-    b = 1``.
+    b = 1``. Also returns ``|g|`` [s] (inf where flat): a clearance [m] over it is
+    the row's ``b`` [m/s].
     """
     norm = np.hypot(grad[:, 0], grad[:, 1])
     flat = norm < FLAT_GRADIENT
@@ -331,7 +332,7 @@ def _rows(
     a_z[flat], b[flat] = 0.0, 1.0
     c, s = np.cos(ctx.theta[me]), np.sin(ctx.theta[me])
     a_w = np.stack((c * a_z[:, 0] - s * a_z[:, 1], s * a_z[:, 0] + c * a_z[:, 1]), -1)
-    return a_w, b
+    return a_w, b, np.where(flat, np.inf, norm)
 
 
 def braking_rows(
@@ -374,7 +375,8 @@ def braking_rows(
     seen = own if ctx.seen is None else brakings(ctx, state, ctx.seen[:, 2])
     samples = own.travel.shape[1]
 
-    out_v, out_a, out_b, out_h = [], [], [], []
+    out_v, out_a, out_b, out_h, out_c, out_g = [], [], [], [], [], []
+    pairs = 0  # the check's conditions: the pairs', then the obstacles'
     i, j, _ = state.neighbours.near(p_seen)
     if len(i):
         me, other, coop, _, _, big_d = pair_geometry(
@@ -416,11 +418,14 @@ def braking_rows(
         )
         grad = _gradient(state, ctx, me, normal, period, frac, own)
         share = share[pick]
-        a_w, b = _rows(ctx, me, grad, after - big_d, now, share, own.first)
+        a_w, b, norm = _rows(ctx, me, grad, after - big_d, now, share, own.first)
         out_v.append(me)
         out_a.append(a_w)
         out_b.append(b)
         out_h.append(now)
+        out_c.append(pick)
+        out_g.append(norm)
+        pairs = len(pair[0])
 
     field = ctx.obstacle_field
     rows = cols = np.zeros(0, dtype=np.intp)
@@ -451,11 +456,13 @@ def braking_rows(
         period, frac = np.where(at_end, at - 1, at), np.where(at_end, 1.0, 0.0)
         rows = rows[k]
         grad = _gradient(state, ctx, rows, away, period, frac, own)
-        a_w, b = _rows(ctx, rows, grad, after, now, np.ones(len(rows)), own.first)
+        a_w, b, norm = _rows(ctx, rows, grad, after, now, np.ones(len(rows)), own.first)
         out_v.append(rows)
         out_a.append(a_w)
         out_b.append(b)
         out_h.append(now)
+        out_c.append(pairs + k)
+        out_g.append(norm)
     if pending is not None:
         none = np.zeros(0, dtype=np.intp)
         if not len(i):
@@ -465,6 +472,9 @@ def braking_rows(
             wall = (none, none, np.zeros(0), np.zeros(0))
         me, other, coop, theirs, big_d, need = pair
         pending["walls"] = len(rows)  # the obstacle rows, last
+        # each row's condition of the check, and its |g| [s]
+        pending["cond"] = np.concatenate(out_c) if out_c else none
+        pending["norm"] = np.concatenate(out_g) if out_g else np.zeros(0)
         pending["check"] = Pending(
             own,
             me,
