@@ -36,6 +36,10 @@ HALVINGS = 8
 SLACK = 1e-9
 #: Rounds of :func:`_escape`'s tightening [1].
 ESCAPES = 3
+#: How many times its shortfall a tightened condition asks back [1] (more than once:
+#: a loss linear in the command's size, as the bound of a period's segment toward an
+#: obstacle, ``(s_m + s_(m+1) - L_m) / 2``, is paid at every point of the segment).
+OVERPAY = 2.0
 
 
 @dataclass
@@ -269,7 +273,8 @@ def _escape(
 
     Where the check finds that a vehicle's command ``z`` keeps less clearance than a
     condition allowed, by ``s`` [m], that condition's rows ``g . (z - z_b) >= -rho
-    left`` are tightened to ``>= -rho left + s`` (``b`` less ``s / |g|``) and the
+    left`` are tightened to ``>= -rho left + c s`` (``b`` less ``c s / |g|``, ``c`` =
+    ``OVERPAY``) and the
     command is projected onto the tightened conditions within the bounds, the
     others as they were; ``ESCAPES`` times, the shortfalls of the new command added.
     Along the segment from the braking command to such a command the first-order
@@ -292,7 +297,7 @@ def _escape(
         _, margin = _clearances(state, ctx, few, out)
         short = np.zeros(total)
         short[ids] = np.maximum(-margin, 0.0)
-        shift += short[cond] / norm
+        shift += OVERPAY * short[cond] / norm
         for m in np.unique(counts[moved]):
             group = np.flatnonzero(moved & (counts == m))
             slot = np.full(len(z), -1, dtype=np.intp)
