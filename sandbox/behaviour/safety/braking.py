@@ -39,6 +39,7 @@ from sandbox.model.barriers import (
     braking_speeds,
     closest_approach,
     local_minima,
+    segment_floor,
 )
 
 if TYPE_CHECKING:
@@ -350,9 +351,9 @@ def braking_rows(
     ``D`` exactly (:func:`sandbox.model.barriers.closest_approach`; straight motion
     within each period): ``H`` over all of it, ``H_b'`` from the end of this period
     on (the next state's barrier if both brake). Toward an obstacle the least over
-    each period is bounded by ``(s_m + s_(m+1) - L_m) / 2`` (``s`` the signed
-    distance of the samples less ``d / 2 + l + margin``, ``L_m`` the period's
-    travel: the distance is 1-Lipschitz along the segment). The condition is ``g .
+    each period is bounded below by the tangent lines of its signed distance, convex,
+    at the period's two ends (:func:`sandbox.model.barriers.segment_floor`), less
+    ``d / 2 + l + margin``. The condition is ``g .
     (z - z_b) >= -rho (H_b' - min(H, 0))`` (``_gradient``, ``_rows``), ``rho = a_i
     / (a_i + a_j)`` toward a cooperating vehicle, 1 otherwise. Neighbours' poses
     are the sensed ones and ``D``, ``D'`` grow by the sensing margin. ``pending``,
@@ -439,8 +440,7 @@ def braking_rows(
         index = np.arange(len(flat))
         signed, point = field.pair_distance(flat, index, np.repeat(cols, samples))
         signed = signed.reshape(len(rows), samples)
-        reach = np.hypot(*np.moveaxis(points[:, 1:] - points[:, :-1], -1, 0))
-        low = 0.5 * (signed[:, :-1] + signed[:, 1:] - reach)
+        low = segment_floor(points, signed, point.reshape(len(rows), samples, 2))
         clear = 0.5 * d[rows] + look + state.margin
         now = low.min(axis=1) - clear
         wall = (rows, cols, clear, _need(low[:, 1:].min(axis=1) - clear, now, 1.0))

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
-from sandbox.model.barriers import braking_speeds, closest_approach
+from sandbox.model.barriers import braking_speeds, closest_approach, segment_floor
 
 if TYPE_CHECKING:
     from sandbox.behaviour.safety.braking import Brakings
@@ -36,9 +36,8 @@ HALVINGS = 8
 SLACK = 1e-9
 #: Rounds of :func:`_escape`'s tightening [1].
 ESCAPES = 3
-#: How many times its shortfall a tightened condition asks back [1] (more than once:
-#: a loss linear in the command's size, as the bound of a period's segment toward an
-#: obstacle, ``(s_m + s_(m+1) - L_m) / 2``, is paid at every point of the segment).
+#: How many times its shortfall a tightened condition asks back [1] (more than once,
+#: so that a loss that grows with the command's size is paid along the segment).
 OVERPAY = 2.0
 
 
@@ -148,7 +147,7 @@ def command_points(
     return out
 
 
-def _clearances(
+def clearances(
     state: CBFState, ctx: FilterContext, pending: Pending, z: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each condition's clearance from the end of the period under ``z`` less need.
@@ -188,10 +187,12 @@ def _clearances(
         flat = points.reshape(-1, 2)
         index = np.arange(len(flat))
         field = ctx.obstacle_field
-        signed, _ = field.pair_distance(flat, index, np.repeat(pending.cols, samples))
+        signed, near = field.pair_distance(
+            flat, index, np.repeat(pending.cols, samples)
+        )
         signed = signed.reshape(len(rows), samples)
-        reach = np.hypot(*np.moveaxis(points[:, 1:] - points[:, :-1], -1, 0))
-        low = 0.5 * (signed[:, :-1] + signed[:, 1:] - reach)
+        near = near.reshape(len(rows), samples, 2)
+        low = segment_floor(points, signed, near)
         out_v.append(rows)
         out_m.append(low[:, 1:].min(axis=1) - pending.clear - pending.wall_need)
     if not out_v:
@@ -203,7 +204,7 @@ def _passes(
     state: CBFState, ctx: FilterContext, pending: Pending, z: np.ndarray
 ) -> np.ndarray:
     """Whether every condition of each vehicle keeps its clearance under ``z``."""
-    veh, margin = _clearances(state, ctx, pending, z)
+    veh, margin = clearances(state, ctx, pending, z)
     fails = np.zeros(len(z), dtype=bool)
     np.logical_or.at(fails, veh, margin < -SLACK)
     return ~fails
@@ -294,7 +295,7 @@ def _escape(
     out, ok = z.copy(), moved.copy()
     counts = np.bincount(veh, minlength=len(z))
     for _ in range(ESCAPES):
-        _, margin = _clearances(state, ctx, few, out)
+        _, margin = clearances(state, ctx, few, out)
         short = np.zeros(total)
         short[ids] = np.maximum(-margin, 0.0)
         shift += OVERPAY * short[cond] / norm
