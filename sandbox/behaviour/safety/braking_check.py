@@ -13,6 +13,13 @@ allowed, ``need = H_b' - rho (H_b' - min(H, 0))``. Where it is not, the command 
 moved toward the braking command, ``z_b + t (z - z_b)``, to the largest ``t`` in
 ``[0, 1]`` that passes (a bisection; ``t = 0``, braking, always passes), which keeps
 every bound (the box is convex) and every condition (so are the half-planes).
+
+That alone holds a vehicle whose command has nothing left to lose (``H = 0``, the QP's
+command on its condition's line: every ``t > 0`` loses beyond first order and fails).
+So the command is also moved toward an *escape* (:func:`_escape`): the QP's solution
+with each failing condition asking back twice its shortfall, along which the
+first-order gain beats the loss for small ``t``. Of the two commands that pass, the
+nearer to the QP's is applied; both keep every condition's ``need`` exactly.
 """
 
 from __future__ import annotations

@@ -91,7 +91,9 @@ slack, and ``braking_fallback`` only for rounding. What it guarantees, and under
 which assumptions, is in ``docs/concepts/safety.md``: braking keeps a braking-safe
 state (every ``H >= 0``) so exactly in the drive's model; the QP's commands keep it
 to first order, and :mod:`sandbox.behaviour.safety.braking_check` moves a command
-toward braking where the model, the others braking, says it loses more.
+toward braking, or toward the QP's solution with the conditions it fails asking back
+twice their shortfall (the nearer), where the model, the others braking, says it
+loses more.
 
 It needs every vehicle's finite ``max_accel`` and ``v1_max`` (a loader error) and
 ``neighbour_velocity: broadcast``, ``projection: look_ahead`` (the filter's check);
