@@ -282,16 +282,16 @@ def _escape(
     Where the check finds that a vehicle's command ``z`` keeps less clearance than a
     condition allowed, by ``s`` [m], that condition's rows ``g . (z - z_b) >= -rho
     left`` are tightened to ``>= -rho left + c s`` (``b`` less ``c s / |g|``, ``c`` =
-    ``OVERPAY``) and the
-    command is projected onto the tightened conditions within the bounds, the
-    others as they were; ``ESCAPES`` times, the shortfalls of the new command added.
-    Along the segment from the braking command to such a command the first-order
-    gain ``t s`` beats the loss beyond first order, ``O(t^2)``, for small ``t``: the
-    bisection then finds a command that moves, where toward ``z`` itself (``s`` lost
-    on a condition with nothing left, ``H = 0``) it finds only braking.
+    ``OVERPAY``) and ``z`` is projected onto the tightened conditions within the
+    bounds, the others as they were; ``ESCAPES`` times, the shortfalls of the new
+    command added. Along the segment from the braking command to such a command the
+    first-order gain ``t c s`` beats the loss beyond first order, ``O(t^2)``, for small
+    ``t``: the bisection then finds a command that moves, where toward ``z`` itself
+    (``s`` lost on a condition with nothing left, ``H = 0``) it finds only braking.
 
-    Returns the commands (``z`` where there is none) and which vehicles have one
-    (the tightened conditions had a common point within the bounds).
+    Returns the commands, and which vehicles have one (their tightened conditions had
+    a common point within the bounds at every round; elsewhere the command is not
+    to be used).
     """
     few = _subset(pending, moved)
     ids = _ids(pending, moved)
