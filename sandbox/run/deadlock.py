@@ -1,19 +1,23 @@
 """Deadlocks of a recorded run: healthy vehicles trapped short of their slots.
 
 A healthy vehicle (no failure active, a slot defined) farther than
-``metrics.deadlock_distance`` (default 0.5 m) from its slot is *trapped* over a stretch
-of the run when either
+``metrics.deadlock_distance`` (``d``, default 0.5 m) from its slot is *trapped* over a
+stretch of the run when either
 
 - it is **stopped**: its speed stays below ``metrics.deadlock_speed`` (default 1 cm/s)
-  for at least ``metrics.deadlock_time`` (default 2 s); or
-- it **makes no headway**, whatever its speed (with ``metrics.deadlock_progress`` >
-  0; 0, the default for now, turns this rule off): over every window of
-  ``metrics.deadlock_time`` in the stretch it stays that far from its slot and comes
-  nearer to it by less than ``metrics.deadlock_progress`` times
-  ``metrics.deadlock_distance`` (0.5 gives 0.25 m in 2 s). A vehicle creeping along an
-  obstacle, circling, or shuffling in a jam is trapped; one driving to its slot at an
-  eighth of a metre a second (with 0.5) is not. Such a stall is dated from the start
-  of its first window without headway.
+  for at least ``metrics.deadlock_time`` (``T``, default 2 s); or
+- it is **creeping**: it makes no headway, whatever its speed. With ``e(t)`` its
+  distance to its slot and ``f`` = ``metrics.deadlock_progress`` (default 0.5; 0 turns
+  this rule off), a window ``[t - T, t]`` is without headway when ``e > d`` at every
+  sample of it and ``e(t) > e(t - T) - f d`` (0.5 gives 0.25 m in 2 s). A vehicle
+  creeping along an obstacle, circling, or shuffling in a jam makes no headway; one
+  driving to its slot at an eighth of a metre a second (with 0.5) does. The windows
+  without headway that overlap make a stretch, dated from the start of its first
+  window. Which stretches count is ``metrics.deadlock_creeping``: ``to_end`` (the
+  default) only the one that lasts to the end of the run, the window ending at the
+  last sample among them (a vehicle still making no headway when the run ends: a
+  platoon held up by obstacles and catching up with its moving slots is not
+  trapped, one left behind is); ``any`` every stretch.
 
 Stalls of several vehicles that overlap in time are one deadlock (two vehicles nose to
 nose, a ring of vehicles jammed at the centre of a swap). Each deadlock is written to
@@ -37,7 +41,10 @@ import numpy as np
 DEADLOCK_SPEED = 0.01  # [m/s]
 DEADLOCK_TIME = 2.0  # [s]
 DEADLOCK_DISTANCE = 0.5  # [m]
-DEADLOCK_PROGRESS = 0.0  # of deadlock_distance, per deadlock_time (0: rule off)
+DEADLOCK_PROGRESS = 0.5  # of deadlock_distance, per deadlock_time (0: rule off)
+#: Which stretches without headway count: the one lasting to the end, or any.
+DEADLOCK_CREEPING = "to_end"
+CREEPING = ("to_end", "any")
 
 
 def stuck_samples(
@@ -150,6 +157,7 @@ def find_deadlocks(
     duration: float = DEADLOCK_TIME,
     distance: float = DEADLOCK_DISTANCE,
     progress: float = DEADLOCK_PROGRESS,
+    creeping: str = DEADLOCK_CREEPING,
 ) -> list[dict[str, Any]]:
     """The deadlocks of a run, as written to ``metrics.json``.
 
@@ -168,6 +176,9 @@ def find_deadlocks(
     progress : float
         Headway over ``duration`` below which a moving vehicle is trapped, as a
         fraction of ``distance`` (see :func:`no_headway`).
+    creeping : {"to_end", "any"}
+        Which stretches without headway count: only one lasting to the last sample,
+        or every one.
 
     Returns
     -------
@@ -191,9 +202,14 @@ def find_deadlocks(
         for a, b in _stretches(stuck[:, i]):
             if t[b] - t[a] >= duration - 1e-9:
                 stalls.append((float(t[a]), float(t[b]), i))
+    if creeping not in CREEPING:
+        raise ValueError(f"creeping: expected one of {CREEPING}, got {creeping!r}")
+    end = float(t[-1]) if len(t) else 0.0
     for i, spans in enumerate(
         no_headway(t, pos, slot, failed, duration, distance, progress)
     ):
+        if creeping == "to_end":
+            spans = [(a, b) for a, b in spans if b >= end]
         stalls.extend((a, b, i) for a, b in spans)
     stalls.sort()
     groups: list[list[Any]] = []  # [start, end, set of vehicles]

@@ -30,7 +30,8 @@ Definitions (the keys of ``metrics.json``):
 - ``deadlocks``: ``{vehicles, t, duration}`` for each time healthy vehicles were
   trapped farther than ``metrics.deadlock_distance`` from their slots: stopped (below
   ``metrics.deadlock_speed``) for ``metrics.deadlock_time``, or making less headway
-  than ``metrics.deadlock_progress`` of that distance over it, whatever their speed
+  than ``metrics.deadlock_progress`` of that distance over it, whatever their speed,
+  to the end of the run (``metrics.deadlock_creeping: to_end``; ``any``: at any time)
   (:mod:`sandbox.run.deadlock`).
 - ``converged``: every healthy vehicle (no failure active at the end of the run, with a
   slot) has a settling time.
@@ -354,6 +355,7 @@ def _deadlocks(run: Run, spec: Any) -> list[dict[str, Any]]:
             "duration": spec.deadlock_time,
             "distance": spec.deadlock_distance,
             "progress": spec.deadlock_progress,
+            "creeping": spec.deadlock_creeping,
         }
     return find_deadlocks(
         np.asarray(run.t),

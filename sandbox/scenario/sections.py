@@ -322,12 +322,20 @@ METRICS: dict[str, Param] = {
     ),
     "deadlock_progress": Param(
         "number",
-        0.0,
+        0.5,
         "",
         "Headway toward its slot, as a fraction of deadlock_distance per "
         "deadlock_time, below which a moving vehicle farther than deadlock_distance "
         "is trapped (a deadlock); 0: only stopped vehicles are",
         minimum=0.0,
+    ),
+    "deadlock_creeping": Param(
+        "choice",
+        "to_end",
+        doc="Which stretches without headway (deadlock_progress) are deadlocks: "
+        "to_end: only one that lasts to the end of the run (a vehicle held up for a "
+        "while, e.g. behind its moving slot, is not trapped); any: every one",
+        choices=("to_end", "any"),
     ),
 }
 

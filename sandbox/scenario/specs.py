@@ -270,7 +270,8 @@ class MetricsSpec:
     ``deadlock_distance`` from its slot is in a deadlock when it stays slower than
     ``deadlock_speed`` for ``deadlock_time``, or comes nearer to its slot by less than
     ``deadlock_progress`` times ``deadlock_distance`` over ``deadlock_time``
-    (:mod:`sandbox.run.deadlock`).
+    (``deadlock_creeping``: ``to_end``, only when that lasts to the end of the run, or
+    ``any``) (:mod:`sandbox.run.deadlock`).
     """
 
     settle_tol: float = 0.05
@@ -280,7 +281,8 @@ class MetricsSpec:
     deadlock_speed: float = 0.01
     deadlock_time: float = 2.0
     deadlock_distance: float = 0.5
-    deadlock_progress: float = 0.0
+    deadlock_progress: float = 0.5
+    deadlock_creeping: str = "to_end"
 
 
 @dataclass(frozen=True)

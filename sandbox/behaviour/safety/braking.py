@@ -39,6 +39,7 @@ from sandbox.model.barriers import (
     braking_speeds,
     closest_approach,
     local_minima,
+    segment_floor,
 )
 
 if TYPE_CHECKING:
@@ -312,7 +313,7 @@ def _rows(
     now: np.ndarray,
     share: np.ndarray,
     first: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The half-planes ``a . w <= b`` of ``g . (z - z_b) >= -rho (H_b' - min(H, 0))``.
 
     ``H_b'`` (``after``) is the next state's barrier if the vehicle brakes, ``H``
@@ -320,7 +321,8 @@ def _rows(
     what is left above 0 (above ``H`` where ``H < 0``). In ``z``, ``-g / |g| . z <=
     (-g . z_b + rho (H_b' - min(H, 0))) / |g|`` with ``z_b = (first, 0)``; ``a`` is
     turned into ``w = R(x3) z``. A flat gradient gives the always-kept row ``a = 0,
-    b = 1``.
+    b = 1``. Also returns ``|g|`` [s] (inf where flat): a clearance [m] over it is
+    the row's ``b`` [m/s].
     """
     norm = np.hypot(grad[:, 0], grad[:, 1])
     flat = norm < FLAT_GRADIENT
@@ -331,7 +333,7 @@ def _rows(
     a_z[flat], b[flat] = 0.0, 1.0
     c, s = np.cos(ctx.theta[me]), np.sin(ctx.theta[me])
     a_w = np.stack((c * a_z[:, 0] - s * a_z[:, 1], s * a_z[:, 0] + c * a_z[:, 1]), -1)
-    return a_w, b
+    return a_w, b, np.where(flat, np.inf, norm)
 
 
 def braking_rows(
@@ -349,9 +351,9 @@ def braking_rows(
     ``D`` exactly (:func:`sandbox.model.barriers.closest_approach`; straight motion
     within each period): ``H`` over all of it, ``H_b'`` from the end of this period
     on (the next state's barrier if both brake). Toward an obstacle the least over
-    each period is bounded by ``(s_m + s_(m+1) - L_m) / 2`` (``s`` the signed
-    distance of the samples less ``d / 2 + l + margin``, ``L_m`` the period's
-    travel: the distance is 1-Lipschitz along the segment). The condition is ``g .
+    each period is bounded below by the tangent lines of its signed distance, convex,
+    at the period's two ends (:func:`sandbox.model.barriers.segment_floor`), less
+    ``d / 2 + l + margin``. The condition is ``g .
     (z - z_b) >= -rho (H_b' - min(H, 0))`` (``_gradient``, ``_rows``), ``rho = a_i
     / (a_i + a_j)`` toward a cooperating vehicle, 1 otherwise. Under sensing the
     neighbours' poses are their estimate (``ctx.seen``, set by
@@ -376,7 +378,8 @@ def braking_rows(
     seen = own if ctx.seen is None else brakings(ctx, state, ctx.seen[:, 2])
     samples = own.travel.shape[1]
 
-    out_v, out_a, out_b, out_h = [], [], [], []
+    out_v, out_a, out_b, out_h, out_c, out_g = [], [], [], [], [], []
+    pairs = 0  # the check's conditions: the pairs', then the obstacles'
     i, j, _ = state.neighbours.near(p_seen)
     if len(i):
         me, other, coop, _, _, big_d = pair_geometry(
@@ -418,11 +421,14 @@ def braking_rows(
         )
         grad = _gradient(state, ctx, me, normal, period, frac, own)
         share = share[pick]
-        a_w, b = _rows(ctx, me, grad, after - big_d, now, share, own.first)
+        a_w, b, norm = _rows(ctx, me, grad, after - big_d, now, share, own.first)
         out_v.append(me)
         out_a.append(a_w)
         out_b.append(b)
         out_h.append(now)
+        out_c.append(pick)
+        out_g.append(norm)
+        pairs = len(pair[0])
 
     field = ctx.obstacle_field
     rows = cols = np.zeros(0, dtype=np.intp)
@@ -436,8 +442,7 @@ def braking_rows(
         index = np.arange(len(flat))
         signed, point = field.pair_distance(flat, index, np.repeat(cols, samples))
         signed = signed.reshape(len(rows), samples)
-        reach = np.hypot(*np.moveaxis(points[:, 1:] - points[:, :-1], -1, 0))
-        low = 0.5 * (signed[:, :-1] + signed[:, 1:] - reach)
+        low = segment_floor(points, signed, point.reshape(len(rows), samples, 2))
         clear = 0.5 * d[rows] + look + state.margin
         now = low.min(axis=1) - clear
         wall = (rows, cols, clear, _need(low[:, 1:].min(axis=1) - clear, now, 1.0))
@@ -453,11 +458,13 @@ def braking_rows(
         period, frac = np.where(at_end, at - 1, at), np.where(at_end, 1.0, 0.0)
         rows = rows[k]
         grad = _gradient(state, ctx, rows, away, period, frac, own)
-        a_w, b = _rows(ctx, rows, grad, after, now, np.ones(len(rows)), own.first)
+        a_w, b, norm = _rows(ctx, rows, grad, after, now, np.ones(len(rows)), own.first)
         out_v.append(rows)
         out_a.append(a_w)
         out_b.append(b)
         out_h.append(now)
+        out_c.append(pairs + k)
+        out_g.append(norm)
     if pending is not None:
         none = np.zeros(0, dtype=np.intp)
         if not len(i):
@@ -467,6 +474,9 @@ def braking_rows(
             wall = (none, none, np.zeros(0), np.zeros(0))
         me, other, coop, theirs, big_d, need = pair
         pending["walls"] = len(rows)  # the obstacle rows, last
+        # each row's condition of the check, and its |g| [s]
+        pending["cond"] = np.concatenate(out_c) if out_c else none
+        pending["norm"] = np.concatenate(out_g) if out_g else np.zeros(0)
         pending["check"] = Pending(
             own,
             me,

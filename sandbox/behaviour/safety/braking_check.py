@@ -13,6 +13,13 @@ allowed, ``need = H_b' - rho (H_b' - min(H, 0))``. Where it is not, the command 
 moved toward the braking command, ``z_b + t (z - z_b)``, to the largest ``t`` in
 ``[0, 1]`` that passes (a bisection; ``t = 0``, braking, always passes), which keeps
 every bound (the box is convex) and every condition (so are the half-planes).
+
+That alone holds a vehicle whose command has nothing left to lose (``H = 0``, the QP's
+command on its condition's line: every ``t > 0`` loses beyond first order and fails).
+So the command is also moved toward an *escape* (:func:`_escape`): the QP's solution
+with each failing condition asking back twice its shortfall, along which the
+first-order gain beats the loss for small ``t``. Of the two commands that pass, the
+nearer to the QP's is applied; both keep every condition's ``need`` exactly.
 """
 
 from __future__ import annotations
@@ -22,7 +29,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sandbox.model.barriers import braking_speeds, closest_approach
+from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
+from sandbox.model.barriers import braking_speeds, closest_approach, segment_floor
 
 if TYPE_CHECKING:
     from sandbox.behaviour.safety.braking import Brakings
@@ -33,6 +41,11 @@ if TYPE_CHECKING:
 HALVINGS = 8
 #: Clearance [m] a check may miss by: rounding only.
 SLACK = 1e-9
+#: Rounds of :func:`_escape`'s tightening [1].
+ESCAPES = 3
+#: How many times its shortfall a tightened condition asks back [1] (more than once,
+#: so that a loss that grows with the command's size is paid along the segment).
+OVERPAY = 2.0
 
 
 @dataclass
@@ -74,6 +87,34 @@ class Pending:
     wall_need: np.ndarray
 
 
+@dataclass
+class Solved:
+    """The braking conditions the QP kept, for :func:`_escape`.
+
+    Attributes
+    ----------
+    veh : ndarray, shape (r,) int
+        Each row's vehicle.
+    a : ndarray, shape (r, 2) [1]
+        Its unit normal in ``z = (v1, l v2)``: ``a . z <= b``.
+    b : ndarray, shape (r,) [m/s]
+    rank : ndarray, shape (r,) int
+        Its place among its vehicle's rows.
+    cond : ndarray, shape (r,) int
+        Its condition of the check (a pair's, then an obstacle's, as in
+        :class:`Pending`).
+    norm : ndarray, shape (r,) [s]
+        ``|g|`` of the row (inf where flat).
+    """
+
+    veh: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    rank: np.ndarray
+    cond: np.ndarray
+    norm: np.ndarray
+
+
 def command_points(
     state: CBFState,
     ctx: FilterContext,
@@ -113,7 +154,7 @@ def command_points(
     return out
 
 
-def _clearances(
+def clearances(
     state: CBFState, ctx: FilterContext, pending: Pending, z: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each condition's clearance from the end of the period under ``z`` less need.
@@ -153,10 +194,12 @@ def _clearances(
         flat = points.reshape(-1, 2)
         index = np.arange(len(flat))
         field = ctx.obstacle_field
-        signed, _ = field.pair_distance(flat, index, np.repeat(pending.cols, samples))
+        signed, near = field.pair_distance(
+            flat, index, np.repeat(pending.cols, samples)
+        )
         signed = signed.reshape(len(rows), samples)
-        reach = np.hypot(*np.moveaxis(points[:, 1:] - points[:, :-1], -1, 0))
-        low = 0.5 * (signed[:, :-1] + signed[:, 1:] - reach)
+        near = near.reshape(len(rows), samples, 2)
+        low = segment_floor(points, signed, near)
         out_v.append(rows)
         out_m.append(low[:, 1:].min(axis=1) - pending.clear - pending.wall_need)
     if not out_v:
@@ -168,10 +211,16 @@ def _passes(
     state: CBFState, ctx: FilterContext, pending: Pending, z: np.ndarray
 ) -> np.ndarray:
     """Whether every condition of each vehicle keeps its clearance under ``z``."""
-    veh, margin = _clearances(state, ctx, pending, z)
+    veh, margin = clearances(state, ctx, pending, z)
     fails = np.zeros(len(z), dtype=bool)
     np.logical_or.at(fails, veh, margin < -SLACK)
     return ~fails
+
+
+def _ids(pending: Pending, vehicles: np.ndarray) -> np.ndarray:
+    """The conditions of :func:`_subset`, as places among all of ``pending``'s."""
+    k, q = vehicles[pending.me], vehicles[pending.rows]
+    return np.concatenate((np.flatnonzero(k), len(k) + np.flatnonzero(q)))
 
 
 def _subset(pending: Pending, vehicles: np.ndarray) -> Pending:
@@ -194,19 +243,113 @@ def _subset(pending: Pending, vehicles: np.ndarray) -> Pending:
     )
 
 
+def _bisect(
+    state: CBFState,
+    ctx: FilterContext,
+    few: Pending,
+    z: np.ndarray,
+    z_b: np.ndarray,
+    moved: np.ndarray,
+) -> np.ndarray:
+    """``z_b + t (z - z_b)`` of the ``moved`` vehicles at the largest ``t`` that passes.
+
+    ``HALVINGS`` halvings of ``[0, 1]``; ``t = 0``, the braking command, always passes.
+    The other vehicles keep ``z``.
+    """
+    lo, hi = np.zeros(len(z)), np.ones(len(z))
+    for _ in range(HALVINGS):
+        mid = 0.5 * (lo + hi)
+        trial = np.where(moved[:, None], z_b + mid[:, None] * (z - z_b), z)
+        good = _passes(state, ctx, few, trial)
+        lo = np.where(moved & good, mid, lo)
+        hi = np.where(moved & ~good, mid, hi)
+    out = z.copy()
+    out[moved] = z_b[moved] + lo[moved, None] * (z[moved] - z_b[moved])
+    return out
+
+
+def _escape(
+    state: CBFState,
+    ctx: FilterContext,
+    pending: Pending,
+    z: np.ndarray,
+    moved: np.ndarray,
+    solved: Solved,
+    box: tuple[np.ndarray, ...],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Commands near ``z`` that pay, to first order, for what ``z`` loses beyond it.
+
+    Where the check finds that a vehicle's command ``z`` keeps less clearance than a
+    condition allowed, by ``s`` [m], that condition's rows ``g . (z - z_b) >= -rho
+    left`` are tightened to ``>= -rho left + c s`` (``b`` less ``c s / |g|``, ``c`` =
+    ``OVERPAY``) and ``z`` is projected onto the tightened conditions within the
+    bounds, the others as they were; ``ESCAPES`` times, the shortfalls of the new
+    command added. Along the segment from the braking command to such a command the
+    first-order gain ``t c s`` beats the loss beyond first order, ``O(t^2)``, for small
+    ``t``: the bisection then finds a command that moves, where toward ``z`` itself
+    (``s`` lost on a condition with nothing left, ``H = 0``) it finds only braking.
+
+    Returns the commands, and which vehicles have one (their tightened conditions had
+    a common point within the bounds at every round; elsewhere the command is not
+    to be used).
+    """
+    few = _subset(pending, moved)
+    ids = _ids(pending, moved)
+    total = len(pending.me) + len(pending.rows)
+    mine = np.flatnonzero(moved[solved.veh])
+    veh, cond, norm = solved.veh[mine], solved.cond[mine], solved.norm[mine]
+    shift = np.zeros(len(mine))
+    out, ok = z.copy(), moved.copy()
+    counts = np.bincount(veh, minlength=len(z))
+    for _ in range(ESCAPES):
+        _, margin = clearances(state, ctx, few, out)
+        short = np.zeros(total)
+        short[ids] = np.maximum(-margin, 0.0)
+        shift += OVERPAY * short[cond] / norm
+        for m in np.unique(counts[moved]):
+            group = np.flatnonzero(moved & (counts == m))
+            slot = np.full(len(z), -1, dtype=np.intp)
+            slot[group] = np.arange(len(group))
+            rows = np.flatnonzero(slot[veh] >= 0)
+            b = solved.b[mine[rows]] - shift[rows]
+            mat, off, soft = bounded_problems(
+                tuple(x[group] for x in box),
+                slot[veh[rows]],
+                solved.a[mine[rows]],
+                b,
+                solved.rank[mine[rows]],
+                int(m),
+            )
+            zg, slack = solve(z[group], mat, off, soft)
+            out[group] = zg
+            ok[group] &= slack <= TOLERANCE
+    return out, ok
+
+
 def check_commands(
     state: CBFState,
     ctx: FilterContext,
     pending: Pending,
     z: np.ndarray,
     z_b: np.ndarray,
+    solved: Solved | None = None,
+    box: tuple[np.ndarray, ...] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The commands moved toward braking where the drive's model says they must be.
+
+    A command that fails the check is moved toward the braking command (the largest
+    ``t`` of ``z_b + t (z - z_b)`` that passes), and, given the QP's conditions as
+    solved (``solved``, ``box``), toward the command of :func:`_escape` too; of the
+    two, the one nearer ``z`` is kept. Both pass the check, exactly (``SLACK``).
 
     Parameters
     ----------
     z, z_b : ndarray, shape (n, 2) [m/s]
         The QP's commands ``(v1, l v2)`` and the braking commands.
+    solved : Solved, optional
+        The conditions the QP kept.
+    box : tuple of ndarray, each shape (n,), optional
+        The bounds ``lo1, hi1, lo2, hi2`` of ``z`` [m/s].
 
     Returns
     -------
@@ -219,13 +362,12 @@ def check_commands(
     if not moved.any():
         return z, moved
     few = _subset(pending, moved)  # the conditions of the moved vehicles only
-    lo, hi = np.zeros(len(z)), np.ones(len(z))
-    for _ in range(HALVINGS):
-        mid = 0.5 * (lo + hi)
-        trial = np.where(moved[:, None], z_b + mid[:, None] * (z - z_b), z)
-        good = _passes(state, ctx, few, trial)
-        lo = np.where(moved & good, mid, lo)
-        hi = np.where(moved & ~good, mid, hi)
-    out = z.copy()
-    out[moved] = z_b[moved] + lo[moved, None] * (z[moved] - z_b[moved])
+    out = _bisect(state, ctx, few, z, z_b, moved)
+    if solved is None or box is None:
+        return out, moved
+    target, found = _escape(state, ctx, pending, z, moved, solved, box)
+    if found.any():
+        other = _bisect(state, ctx, _subset(pending, found), target, z_b, found)
+        nearer = np.hypot(*(other - z).T) < np.hypot(*(out - z).T)
+        out = np.where((found & nearer)[:, None], other, out)
     return out, moved

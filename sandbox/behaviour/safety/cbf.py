@@ -91,7 +91,9 @@ slack, and ``braking_fallback`` only for rounding. What it guarantees, and under
 which assumptions, is in ``docs/concepts/safety.md``: braking keeps a braking-safe
 state (every ``H >= 0``) so exactly in the drive's model; the QP's commands keep it
 to first order, and :mod:`sandbox.behaviour.safety.braking_check` moves a command
-toward braking where the model, the others braking, says it loses more.
+toward braking, or toward the QP's solution with the conditions it fails asking back
+twice their shortfall (the nearer), where the model, the others braking, says it
+loses more.
 
 Under sensing the braking barrier sees the others through an estimate of their
 poses now (:class:`~sandbox.behaviour.estimation.BroadcastEstimate`: each broadcast
@@ -126,9 +128,9 @@ from sandbox.behaviour.safety.braking import (
     obstacle_normals,
     pair_geometry,
 )
-from sandbox.behaviour.safety.braking_check import check_commands
+from sandbox.behaviour.safety.braking_check import Solved, check_commands
 from sandbox.behaviour.safety.priority import PRIORITY, holding, holds
-from sandbox.behaviour.safety.qp import TOLERANCE, solve
+from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
 from sandbox.model.barriers import (
     ESTIMATE_GAIN,
@@ -667,15 +669,16 @@ def filter_commands(
         a[:, 1] * lo2[veh], a[:, 1] * hi2[veh]
     )
     keep = np.flatnonzero(reach > b - TOLERANCE)
-    veh, a, b, wall = veh[keep], a[keep], b[keep], wall[keep]
+    veh, a, b, wall, src = veh[keep], a[keep], b[keep], wall[keep], keep
     # At most max_rows per vehicle, the most restrictive (smallest b) first.
     order = np.lexsort((b, veh))
-    veh, a, b, wall = veh[order], a[order], b[order], wall[order]
+    veh, a, b, wall, src = veh[order], a[order], b[order], wall[order], src[order]
     counts = np.bincount(veh, minlength=n)
     start = np.concatenate(([0], np.cumsum(counts)[:-1]))
     rank = np.arange(len(veh)) - start[veh]
     keep = np.flatnonzero(rank < state.max_rows)
     veh, a, b, rank, wall = veh[keep], a[keep], b[keep], rank[keep], wall[keep]
+    src = src[keep]  # each kept row's place among the rows as made
     counts = np.minimum(counts, state.max_rows)
 
     z = z0.copy()
@@ -689,17 +692,11 @@ def filter_commands(
         k = len(group)
         slot = np.full(n, -1, dtype=np.intp)
         slot[group] = np.arange(k)
-        mat = np.zeros((k, 4 + m, 2))
-        off = np.zeros((k, 4 + m))
-        mat[:, 0, 0], off[:, 0] = 1.0, hi1[group]
-        mat[:, 1, 0], off[:, 1] = -1.0, -lo1[group]
-        mat[:, 2, 1], off[:, 2] = 1.0, hi2[group]
-        mat[:, 3, 1], off[:, 3] = -1.0, -lo2[group]
         mine = np.flatnonzero(slot[veh] >= 0)
-        mat[slot[veh[mine]], 4 + rank[mine]] = a[mine]
-        off[slot[veh[mine]], 4 + rank[mine]] = b[mine]
-        soft = np.zeros((k, 4 + m), dtype=bool)
-        soft[:, 4:] = True
+        box = (lo1[group], hi1[group], lo2[group], hi2[group])
+        mat, off, soft = bounded_problems(
+            box, slot[veh[mine]], a[mine], b[mine], rank[mine], m
+        )
         zg, sg = solve(z0[group], mat, off, soft)
         if state.pass_right > 0 and not state.speed_only:
             held = None if hold is None else (hold[group], np.zeros((k, 4 + m), bool))
@@ -711,7 +708,9 @@ def filter_commands(
             fallback[group[sg > TOLERANCE]] = True
     if "check" in pending:  # beyond first order, against the others braking
         z_b = braking_fallback(state, ctx, np.arange(n))
-        z, _ = check_commands(state, ctx, pending["check"], z, z_b)
+        solved = Solved(veh, a, b, rank, pending["cond"][src], pending["norm"][src])
+        box = (lo1, hi1, lo2, hi2)
+        z, _ = check_commands(state, ctx, pending["check"], z, z_b, solved, box)
     braking = np.flatnonzero(fallback)
     if len(braking):
         z[braking] = braking_fallback(state, ctx, braking)

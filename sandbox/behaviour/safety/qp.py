@@ -188,3 +188,50 @@ def solve(
         z[bad] = np.where(ok[:, None], zr, zb)
         slack[bad] = sb
     return z, slack
+
+
+def bounded_problems(
+    box: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    owner: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    rank: np.ndarray,
+    m: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The problems of ``k`` vehicles: their bounds, then ``m`` soft half-planes each.
+
+    Parameters
+    ----------
+    box : tuple of ndarray, each shape (k,)
+        ``lo1, hi1, lo2, hi2``: the bounds ``lo1 <= z1 <= hi1``, ``lo2 <= z2 <= hi2``.
+    owner : ndarray, shape (r,) int
+        The problem (in ``[0, k)``) of each half-plane.
+    a : ndarray, shape (r, 2)
+        Unit normals.
+    b : ndarray, shape (r,)
+    rank : ndarray, shape (r,) int
+        Each half-plane's place among its problem's, in ``[0, m)``.
+    m : int
+
+    Returns
+    -------
+    mat : ndarray, shape (k, 4 + m, 2)
+    off : ndarray, shape (k, 4 + m)
+        The four bounds first; places without a half-plane are padding (``a = 0,
+        b = 0``: kept by every ``z``).
+    soft : ndarray, shape (k, 4 + m) bool
+        The half-planes (not the bounds).
+    """
+    lo1, hi1, lo2, hi2 = box
+    k = len(lo1)
+    mat = np.zeros((k, 4 + m, 2))
+    off = np.zeros((k, 4 + m))
+    mat[:, 0, 0], off[:, 0] = 1.0, hi1
+    mat[:, 1, 0], off[:, 1] = -1.0, -lo1
+    mat[:, 2, 1], off[:, 2] = 1.0, hi2
+    mat[:, 3, 1], off[:, 3] = -1.0, -lo2
+    mat[owner, 4 + rank] = a
+    off[owner, 4 + rank] = b
+    soft = np.zeros((k, 4 + m), dtype=bool)
+    soft[:, 4:] = True
+    return mat, off, soft
