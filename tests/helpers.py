@@ -93,3 +93,40 @@ def collisions(
     >>> assert collisions(PAPER / "fig14_discontinuous_beta5.yaml")["total"] == 0
     """
     return run_scenario(source, *sets, **fields)[1]["collisions"]
+
+
+#: The robot of the safety benchmark (``scenarios/safety/``): d = 0.5 m, 10 kg,
+#: 2 m/s, 4 rad/s, 5 m/s^2.
+SAFETY_ROBOT = {
+    "diameter": 0.5,
+    "mass": 10.0,
+    "v1_max": 2.0,
+    "v2_max": 4.0,
+    "max_accel": 5.0,
+}
+
+
+def ring_doc(n: int, jitter: float, seed: int, radius: float = 4.0) -> dict:
+    """A ring swap: ``n`` vehicles on a circle, each bound for the antipodal slot.
+
+    The starts are spread evenly and jittered by up to ``jitter`` [rad] (drawn from
+    ``seed``), every vehicle facing the centre; no recovery, 12 s.
+    """
+    rng = np.random.default_rng(seed)
+    angle = 2 * np.pi * np.arange(n) / n + rng.uniform(-jitter, jitter, n)
+    vehicles = []
+    for k, a in enumerate(angle):
+        x, y = radius * np.cos(a), radius * np.sin(a)
+        vehicles.append(
+            {"name": f"v{k}", "pose": [x, y, a + np.pi], "offset": [-x, -y]}
+        )
+    return {
+        "duration": 12,
+        "dt": 0.01,
+        "substeps": 4,
+        "vehicle": SAFETY_ROBOT,
+        "reference": {"type": "point", "position": [0, 0]},
+        "formation": {"law": "virtual"},
+        "recovery": {"strategy": "none"},
+        "vehicles": vehicles,
+    }

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import ring_doc
 
 from sandbox import load_scenario
 from sandbox.behaviour.safety.braking import (
@@ -410,27 +411,6 @@ def run(doc_or_path, *sets: str):
     sc = load_scenario(doc_or_path, overrides=list(sets))
     r = Simulation(sc).run()
     return r, compute_metrics(r)
-
-
-def ring_doc(n: int, jitter: float, seed: int, radius: float = 4.0) -> dict:
-    rng = np.random.default_rng(seed)
-    angle = 2 * np.pi * np.arange(n) / n + rng.uniform(-jitter, jitter, n)
-    vehicles = []
-    for k, a in enumerate(angle):
-        x, y = radius * np.cos(a), radius * np.sin(a)
-        vehicles.append(
-            {"name": f"v{k}", "pose": [x, y, a + np.pi], "offset": [-x, -y]}
-        )
-    return {
-        "duration": 12,
-        "dt": 0.01,
-        "substeps": 4,
-        "vehicle": ROBOT,
-        "reference": {"type": "point", "position": [0, 0]},
-        "formation": {"law": "virtual"},
-        "recovery": {"strategy": "none"},
-        "vehicles": vehicles,
-    }
 
 
 @pytest.mark.slow

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import ring_doc
 
 from sandbox import load_scenario
 from sandbox.behaviour.estimation import BroadcastEstimate, drive_period
@@ -174,24 +175,11 @@ def test_the_sensing_margin_by_hand() -> None:
 
 # ------------------------------------------------------------------ scenarios
 def _ring(n: int, seed: int, radius: float) -> dict:
-    rng = np.random.default_rng(seed)
-    angle = 2 * np.pi * np.arange(n) / n + rng.uniform(-0.05, 0.05, n)
-    vehicles = []
-    for k, a in enumerate(angle):
-        x, y = radius * np.cos(a), radius * np.sin(a)
-        vehicles.append(
-            {"name": f"v{k}", "pose": [x, y, a + np.pi], "offset": [-x, -y]}
-        )
     return {
+        **ring_doc(n, 0.05, seed, radius),
         "duration": 10,
-        "dt": 0.01,
-        "substeps": 4,
         "seed": seed,
-        "vehicle": ROBOT,
-        "reference": {"type": "point", "position": [0, 0]},
-        "formation": {"law": "virtual"},
         "recovery": {"strategy": "continuous", "beta": 1.0, "tangential": 1.0},
-        "vehicles": vehicles,
         "safety": {"filter": "cbf", "barrier": "braking"},
         "sensing": {"position_noise": 0.02, "delay": 0.05},
         "detection": {"method": "residual"},
