@@ -32,6 +32,10 @@ if TYPE_CHECKING:
 #: How long the run is sampled at full speed [s], period by period, before its
 #: lower bound (:func:`ray_floor`) takes over.
 RUN_HORIZON = 2.0
+#: How long the bound of a straight path follows the two constant velocities [s]:
+#: the run at the runaway's own speed and heading closes at a rounding's speed
+#: (1e-13 m/s), which for ever would close any gap.
+RAY_TAIL = 60.0
 
 
 def run_target(state: CBFState, ctx: FilterContext) -> np.ndarray:
@@ -117,7 +121,7 @@ def ray_floor(
     A point from ``q`` at the constant ``velocity`` [m/s] against the driven path of
     :func:`sandbox.model.barriers.driven_path` from its vertex ``start`` on. Straight
     (``beta = 0``) both move at constant velocities, and the least of ``|r + t (u_q -
-    u_c)|`` over ``t >= 0`` is exact. Turning, the path stays within its annulus
+    u_c)|`` over ``0 <= t <= RAY_TAIL`` is exact (:data:`RAY_TAIL`). Turning, the path stays within its annulus
     (radii ``r cos(beta / 2)`` and ``r`` about ``C``), and the ray's distance to
     ``C`` takes every value from ``rho = |q - C|`` (moving away from ``C``) or the
     line's distance to ``C`` (moving nearer) on: the bound is ``max(rho - r, 0)``,
@@ -139,6 +143,7 @@ def ray_floor(
     closing = velocity - speed[:, None] * heading
     cc = np.einsum("kd,kd->k", closing, closing)
     t = np.maximum(-np.einsum("kd,kd->k", rel, closing), 0.0) / np.maximum(cc, 1e-30)
+    t = np.minimum(t, RAY_TAIL)
     near = rel + t[:, None] * closing
     flat = np.hypot(near[:, 0], near[:, 1])
     flat_n = near / np.maximum(flat, MIN_DIST)[:, None]
