@@ -121,12 +121,12 @@ def ray_floor(
     A point from ``q`` at the constant ``velocity`` [m/s] against the driven path of
     :func:`sandbox.model.barriers.driven_path` from its vertex ``start`` on. Straight
     (``beta = 0``) both move at constant velocities, and the least of ``|r + t (u_q -
-    u_c)|`` over ``0 <= t <= RAY_TAIL`` is exact (:data:`RAY_TAIL`). Turning, the path stays within its annulus
-    (radii ``r cos(beta / 2)`` and ``r`` about ``C``), and the ray's distance to
-    ``C`` takes every value from ``rho = |q - C|`` (moving away from ``C``) or the
-    line's distance to ``C`` (moving nearer) on: the bound is ``max(rho - r, 0)``,
-    whenever it meets the annulus, whatever the timing. Returns the bound and its
-    unit gradient in ``q``.
+    u_c)|`` over ``0 <= t <=`` :data:`RAY_TAIL` is exact. Turning, the path stays
+    within its annulus (radii ``r cos(beta / 2)`` and ``r`` about ``C``), and the
+    ray's distance to ``C`` takes every value from ``rho = |q - C|`` (moving away
+    from ``C``) or the line's distance to ``C`` (moving nearer) on: the bound is
+    ``max(rho - r, 0)``, as if the path were where the ray meets the annulus,
+    whatever the timing. Returns the bound and its unit gradient in ``q``.
 
     >>> d, n = ray_floor(np.array([[0.0, 3.0]]), np.array([[1.0, 0.0]]),
     ...                  np.zeros((1, 2)), np.zeros(1), np.ones(1),
