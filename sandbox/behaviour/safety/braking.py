@@ -577,10 +577,12 @@ def _run_rows(
     course, speed, turn = driven(ctx, other)
     theirs = driven_path(centre_seen[other], course, speed, turn, dt, samples)
     dist, frac = closest_approach(mine - theirs)
-    velocity = (mine[:, -1] - mine[:, -2]) / dt  # at full speed, from then on
-    bent = course + (samples - 1) * turn * dt
+    end, k = b.moves[me], np.arange(len(me))  # each run sampled to its own end
+    dist[np.arange(samples - 1)[None, :] >= end[:, None]] = np.inf
+    velocity = (mine[k, end] - mine[k, end - 1]) / dt  # at full speed from then on
+    bent = course + end * turn * dt
     tail, tail_n = ray_floor(
-        mine[:, -1], velocity, theirs[:, -1], bent, speed, turn, dt
+        mine[k, end], velocity, theirs[k, end], bent, speed, turn, dt
     )
     dist = np.concatenate((dist, tail[:, None]), 1)
     frac = np.concatenate((frac, np.ones((len(me), 1))), 1)
@@ -593,14 +595,14 @@ def _run_rows(
         mode &= ~braked
     use = np.flatnonzero(mode[me])
     me, big_d, now, dist, frac = me[use], big_d[use], now[use], dist[use], frac[use]
-    mine, theirs, tail_n = mine[use], theirs[use], tail_n[use]
+    mine, theirs, tail_n, end = mine[use], theirs[use], tail_n[use], end[use]
     need = _need(dist[:, 1:].min(axis=1) - big_d, now, 1.0)
     period, ok = local_minima(dist[:, 1:], MINIMA)
     keep = ok | (np.arange(MINIMA) == 0)
     pick, period = np.nonzero(keep)[0], period[keep] + 1
     frac, after = frac[pick, period], dist[pick, period]
-    at_tail = period == samples - 1
-    period = np.where(at_tail, samples - 2, period)
+    at_tail = period == samples - 1  # the bound from the run's end on
+    period = np.where(at_tail, end[pick] - 1, period)
     rel = mine - theirs
     near = rel[pick, period] + frac[:, None] * (
         rel[pick, period + 1] - rel[pick, period]

@@ -256,9 +256,11 @@ def _run_margin(
     course, speed, turn = run["course"], run["speed"], run["turn"]
     theirs = driven_path(run["start"], course, speed, turn, dt, samples)
     dist, _ = closest_approach((mine - theirs)[:, 1:])
-    velocity = (mine[:, -1] - mine[:, -2]) / dt
-    bent = course + (samples - 1) * turn * dt
-    tail, _ = ray_floor(mine[:, -1], velocity, theirs[:, -1], bent, speed, turn, dt)
+    end, k = run["runs"].moves[me] + 2, np.arange(len(me))  # two periods later
+    dist[np.arange(1, samples - 1)[None, :] >= end[:, None]] = np.inf
+    velocity = (mine[k, end] - mine[k, end - 1]) / dt
+    bent = course + end * turn * dt
+    tail, _ = ray_floor(mine[k, end], velocity, theirs[k, end], bent, speed, turn, dt)
     least = np.minimum(dist.min(axis=1), tail)
     return least - run["big_d"] - run["need"]
 

@@ -64,15 +64,18 @@ def run_speeds(
     return target[:, None] - np.sign(gap) * left
 
 
-def periods(state: CBFState, ctx: FilterContext, start: np.ndarray) -> int:
-    """Samples of a run from the speeds ``start`` [m/s]: to full speed, then more.
+def run_ends(state: CBFState, ctx: FilterContext, start: np.ndarray) -> np.ndarray:
+    """The sample [1] at which each run from the speeds ``start`` [m/s] is bounded.
 
-    Two periods more than the slowest start needs, so that a command up to two
-    steps' worth slower (the check's) is at full speed too.
+    The periods to full speed, one more (the drive's lag), then
+    :data:`RUN_HORIZON` at full speed; each vehicle's own (a batch of worlds gives
+    each world's values alone). A command up to two steps' worth slower (the
+    check's) is at full speed two periods later: its end is two samples later.
     """
     step = state.accel * ctx.dt
     gap = np.abs(run_target(state, ctx) - start) / step
-    return int(np.ceil(gap.max(initial=0.0) - 1e-9)) + 3 + int(RUN_HORIZON / ctx.dt)
+    full = np.ceil(gap - 1e-9).astype(np.intp).clip(0)
+    return full + 2 + int(round(RUN_HORIZON / ctx.dt))
 
 
 def runs(ctx: FilterContext, state: CBFState, theta: np.ndarray, like: Brakings):
@@ -80,7 +83,8 @@ def runs(ctx: FilterContext, state: CBFState, theta: np.ndarray, like: Brakings)
 
     As the braking (``like``, for the lag and the headings), with the speeds of
     :func:`run_speeds` from the run's first command; ``slope`` is ``d travel / d
-    v1`` of that command (1 a period until the run is at full speed).
+    v1`` of that command (1 a period until the run is at full speed), and ``moves``
+    the sample at which each run's sampling ends (:func:`run_ends`).
     """
     from sandbox.behaviour.safety.braking import Brakings
 
@@ -89,7 +93,8 @@ def runs(ctx: FilterContext, state: CBFState, theta: np.ndarray, like: Brakings)
     last = np.zeros(n) if ctx.v1_prev is None else ctx.v1_prev
     target = run_target(state, ctx)
     first = run_speeds(last, step, target, 2)[:, 1]
-    count = periods(state, ctx, first)
+    moves = run_ends(state, ctx, first)  # each run's own end
+    count = int(moves.max(initial=0)) + 1
     speeds = run_speeds(first, step, target, count)
     before = np.concatenate((last[:, None], speeds[:, :-1]), axis=1)
     run = (1.0 - lag) * speeds + lag * before
@@ -100,7 +105,6 @@ def runs(ctx: FilterContext, state: CBFState, theta: np.ndarray, like: Brakings)
     travel, slope = np.zeros_like(speeds), np.zeros_like(speeds)
     travel[:, 1:] = dt * np.cumsum(run[:, :-1], axis=1)
     slope[:, 1:] = dt * np.cumsum(grows[:, :-1], axis=1)
-    moves = np.full(n, count - 1, dtype=np.intp)
     return Brakings(
         first, run, travel, slope, like.heading, like.side, like.path,
         like.path_side, moves, lag,
