@@ -8,10 +8,12 @@ beyond ``D`` if both brake from now on (:func:`braking_rows`)::
     H_ij(x) = min_(tau >= 0) |q_i(tau) - q_j(tau)| - D,
 
 ``q`` the look-ahead points along those brakings (toward a vehicle believed failed or
-driven open loop: its centre moving at its measured velocity, until the braking vehicle
-has stopped, and ``D'``; toward an obstacle: its signed distance). A state with every
-``H >= 0`` is *braking-safe*, and stays so while every vehicle brakes: the brakings
-from the next state are the rest of the brakings from this one. Each vehicle's
+driven open loop: its centre along the path of its last commands, for ever, the
+braking vehicle's rest point included, and ``D'``, or the better backup of
+:mod:`sandbox.behaviour.safety.running`; toward an obstacle: its signed distance).
+A state with every ``H >= 0`` is *braking-safe*, and stays so while every vehicle
+brakes: the brakings from the next state are the rest of the brakings from this one.
+Each vehicle's
 condition asks that its command ``z = (v1, l v2)`` lose at most its share of what is
 left against its braking command ``z_b``, to first order::
 
@@ -362,8 +364,11 @@ def braking_rows(
     """Every braking-barrier condition of the step, ``a . w <= b``, with its ``H``.
 
     For vehicle ``i`` toward ``j``: both brake from now on (:class:`Brakings`;
-    toward a vehicle believed failed or driven open loop, its centre at its measured
-    velocity and ``D'``, until ``i`` has stopped and one period more), their
+    toward a vehicle believed failed or driven open loop, its centre along the path
+    of its last commands and ``D'``, for ever: period by period until ``i`` has
+    stopped, then its rest point against all of the path,
+    :func:`sandbox.model.barriers.path_floor`; or ``i``'s run where that is better,
+    ``_run_rows``, unless ``braked`` (n,) says it brakes), their
     look-ahead points ``q`` sampled at the periods, and the least distance less
     ``D`` exactly (:func:`sandbox.model.barriers.closest_approach`; straight motion
     within each period): ``H`` over all of it, ``H_b'`` from the end of this period

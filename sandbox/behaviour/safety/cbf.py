@@ -77,8 +77,9 @@ have no common point (the slack). The braking barrier
 turn rate 0 and ``v1`` moved ``max_accel dt`` toward 0 each period, and makes the
 barrier of a pair the least clearance beyond ``D`` if both brake from now on
 (``H``, [m]: the look-ahead points' paths, with the drive's lag of one substep;
-toward a vehicle believed failed or driven open loop, its centre at its measured
-velocity and ``D'``; toward an obstacle, the signed distance). Each condition asks
+toward a vehicle believed failed or driven open loop, its centre along the path of
+its last commands, for ever, and ``D'``, with the better of braking and a run at full
+speed; toward an obstacle, the signed distance). Each condition asks
 a vehicle's command to lose at most its share of what is left, to first order,
 against its braking command::
 
