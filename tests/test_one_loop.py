@@ -96,6 +96,19 @@ CASES = {
         "safety/circle_swap_8",
         ["duration=3", "safety.barrier=braking"],
     ),
+    # the run toward a runaway and the braking's second try, world by world
+    "cbf_braking_runaway_sensed": (
+        "failures/uncontrolled_into_leader",
+        [
+            "duration=5",
+            "safety.filter=cbf",
+            "safety.barrier=braking",
+            "recovery.tangential=1",
+            "sensing.position_noise=0.02",
+            "sensing.delay=0.05",
+            "detection.method=residual",
+        ],
+    ),
     "cbf_residual_crash": (
         "failures/detect_follower_crash",
         ["duration=4", "safety.filter=cbf"],

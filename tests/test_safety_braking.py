@@ -185,16 +185,32 @@ def _crowd(rng, count: int):
 
 
 def _check_feasible(ctx) -> tuple[bool, bool]:
-    """The braking command keeps every condition; the filter needs no slack."""
+    """The backup command keeps every condition; the filter needs no slack.
+
+    The backup is the braking command; toward a failed neighbour, for a vehicle
+    that runs, the run's first command keeps the run's rows (its other rows are
+    made at the braking command; where the two have no common point the filter
+    tries again with the vehicle braking, whose rows braking keeps).
+    """
     state = CBFState(ctx)
     n = len(ctx.pos)
     filtered = ~np.asarray(ctx.known_failed)
-    veh, a, b, h = braking_rows(state, ctx, filtered)
+    pending: dict = {}
+    veh, a, b, h = braking_rows(state, ctx, filtered, pending)
     z_b = braking_fallback(state, ctx, np.arange(n))
-    # a . w <= b at w = R(x3) z_b
+    backup = z_b[veh].copy()
+    run = pending["check"].run if "check" in pending else None
+    if run is not None and len(run["me"]):
+        pairs = len(pending["check"].me)
+        of_run = (pending["cond"] >= pairs) & (pending["cond"] < pairs + len(run["me"]))
+        backup[of_run, 0] = run["runs"].first[veh[of_run]]
+        backup[of_run, 1] = 0.0
+    # a . w <= b at w = R(x3) z
     c, s = np.cos(ctx.theta[veh]), np.sin(ctx.theta[veh])
-    w = np.stack((c * z_b[veh, 0] - s * z_b[veh, 1], s * z_b[veh, 0] + c * z_b[veh, 1]))
-    assert np.all(np.einsum("kd,dk->k", a, w) - b <= 1e-9), "braking breaks a row"
+    w = np.stack(
+        (c * backup[:, 0] - s * backup[:, 1], s * backup[:, 0] + c * backup[:, 1])
+    )
+    assert np.all(np.einsum("kd,dk->k", a, w) - b <= 1e-9), "the backup breaks a row"
     v1, v2, step = filter_commands(state, ctx)
     assert np.all(step.slack == 0), (h, step.slack)
     assert not step.fallback.any()

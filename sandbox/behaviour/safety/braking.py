@@ -8,10 +8,12 @@ beyond ``D`` if both brake from now on (:func:`braking_rows`)::
     H_ij(x) = min_(tau >= 0) |q_i(tau) - q_j(tau)| - D,
 
 ``q`` the look-ahead points along those brakings (toward a vehicle believed failed or
-driven open loop: its centre moving at its measured velocity, until the braking vehicle
-has stopped, and ``D'``; toward an obstacle: its signed distance). A state with every
-``H >= 0`` is *braking-safe*, and stays so while every vehicle brakes: the brakings
-from the next state are the rest of the brakings from this one. Each vehicle's
+driven open loop: its centre along the path of its last commands, for ever, the
+braking vehicle's rest point included, and ``D'``, or the better backup of
+:mod:`sandbox.behaviour.safety.running`; toward an obstacle: its signed distance).
+A state with every ``H >= 0`` is *braking-safe*, and stays so while every vehicle
+brakes: the brakings from the next state are the rest of the brakings from this one.
+Each vehicle's
 condition asks that its command ``z = (v1, l v2)`` lose at most its share of what is
 left against its braking command ``z_b``, to first order::
 
@@ -33,12 +35,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sandbox.behaviour.safety.braking_check import Pending
+from sandbox.behaviour.safety.running import ray_floor, run_target, runs
 from sandbox.model.barriers import (
     MIN_DIST,
     braking_periods,
     braking_speeds,
     closest_approach,
+    driven_path,
     local_minima,
+    path_floor,
     segment_floor,
 )
 
@@ -267,6 +272,19 @@ def braking_points(
     return out
 
 
+def driven(ctx: FilterContext, rows: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Headings [rad], speeds [m/s] and turn rates [rad/s] of vehicles that drive on.
+
+    A vehicle believed failed or driven open loop is taken to keep the commands its
+    drive applied over the last period (``v1^``, ``v2^``; at rest before any), from
+    its heading as the filter sees it (the estimate under sensing).
+    """
+    course = ctx.theta[rows] if ctx.seen is None else ctx.seen[rows, 2]
+    if ctx.v1_prev is None:
+        return course, np.zeros(len(rows)), np.zeros(len(rows))
+    return course, ctx.v1_prev[rows], ctx.v2_prev[rows]
+
+
 def _gradient(
     state: CBFState,
     ctx: FilterContext,
@@ -341,12 +359,16 @@ def braking_rows(
     ctx: FilterContext,
     filtered: np.ndarray,
     pending: dict | None = None,
+    braked: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every braking-barrier condition of the step, ``a . w <= b``, with its ``H``.
 
     For vehicle ``i`` toward ``j``: both brake from now on (:class:`Brakings`;
-    toward a vehicle believed failed or driven open loop, its centre at its measured
-    velocity and ``D'``, until ``i`` has stopped and one period more), their
+    toward a vehicle believed failed or driven open loop, its centre along the path
+    of its last commands and ``D'``, for ever: period by period until ``i`` has
+    stopped, then its rest point against all of the path,
+    :func:`sandbox.model.barriers.path_floor`; or ``i``'s run where that is better,
+    ``_run_rows``, unless ``braked`` (n,) says it brakes), their
     look-ahead points ``q`` sampled at the periods, and the least distance less
     ``D`` exactly (:func:`sandbox.model.barriers.closest_approach`; straight motion
     within each period): ``H`` over all of it, ``H_b'`` from the end of this period
@@ -379,7 +401,8 @@ def braking_rows(
     samples = own.travel.shape[1]
 
     out_v, out_a, out_b, out_h, out_c, out_g = [], [], [], [], [], []
-    pairs = 0  # the check's conditions: the pairs', then the obstacles'
+    pairs = runners = 0  # the check's conditions: the pairs', the runs', obstacles'
+    run = None
     i, j, _ = state.neighbours.near(p_seen)
     if len(i):
         me, other, coop, _, _, big_d = pair_geometry(
@@ -387,11 +410,12 @@ def braking_rows(
         )
         mine = braking_points(ctx, own, me, p[me], look)
         theirs = braking_points(ctx, seen, other, p_seen[other], look)
-        # A vehicle that does not brake keeps its measured velocity, until the
-        # braking one has stopped and one period more.
-        drift = np.arange(samples)[None, :, None] * dt * ctx.vel[other][:, None]
-        drifting = centre_seen[other][:, None] + drift
-        theirs = np.where(coop[:, None, None], theirs, drifting)
+        # A vehicle that does not brake keeps its commands, for ever: its centre
+        # along its driven path, sampled while the braking one stops, then the
+        # least distance from the braking one's rest point to all of the path on.
+        course, speed, turn = driven(ctx, other)
+        driving = driven_path(centre_seen[other], course, speed, turn, dt, samples)
+        theirs = np.where(coop[:, None, None], theirs, driving)
         rel = mine - theirs
         rows = np.arange(len(me))
         last = np.where(coop, samples - 1, np.minimum(own.moves[me] + 1, samples - 1))
@@ -400,7 +424,15 @@ def braking_rows(
         # H over all of the brakings; the next state's from the end of this period
         # on, one condition at each of its least local minima along the way.
         dist, frac = closest_approach(rel)
-        now = dist.min(axis=1) - big_d
+        tail_n = None
+        if not coop.all():  # the rest point against the path, as a last column
+            bent = course + last * turn * dt
+            tail, tail_n = path_floor(
+                mine[rows, last], theirs[rows, last], bent, speed, turn, dt
+            )
+            dist = np.concatenate((dist, np.where(coop, np.inf, tail)[:, None]), 1)
+            frac = np.concatenate((frac, np.ones((len(me), 1))), 1)
+        now = pair_now = dist.min(axis=1) - big_d
         share = np.where(coop, accel[me] / (accel[me] + accel[other]), 1.0)
         pair_after = dist[:, 1:].min(axis=1) - big_d
         pair = (me, other, coop, theirs, big_d, _need(pair_after, now, share))
@@ -408,10 +440,14 @@ def braking_rows(
         keep = ok | (np.arange(MINIMA) == 0)
         pick, period = np.nonzero(keep)[0], period[keep] + 1
         frac, after = frac[pick, period], dist[pick, period]
+        at_tail = period == samples - 1  # the rest point, at the last sample
+        period = np.where(at_tail, samples - 2, period)
         near = rel[pick, period] + frac[:, None] * (
             rel[pick, period + 1] - rel[pick, period]
         )
         normal = near / np.maximum(after, MIN_DIST)[:, None]
+        if tail_n is not None:
+            normal = np.where(at_tail[:, None], tail_n[pick], normal)
         me, other, coop, big_d, now = (
             me[pick],
             other[pick],
@@ -429,6 +465,20 @@ def braking_rows(
         out_c.append(pick)
         out_g.append(norm)
         pairs = len(pair[0])
+        if not pair[2].all():  # the better of braking and the run, toward them
+            run = _run_rows(state, ctx, own, pair, pair_now, braked, p, centre_seen)
+            mode, rows, pair_need = run["mode"], run["rows"], pair[5]
+            drop = ~coop & mode[me]  # the braking's rows of the vehicles that run
+            for out in (out_v, out_a, out_b, out_h, out_c, out_g):
+                out[0] = out[0][~drop]
+            pair = pair[:5] + (np.where(mode[pair[0]] & ~pair[2], -np.inf, pair_need),)
+            out_v.append(rows[0])
+            out_a.append(rows[1])
+            out_b.append(rows[2])
+            out_h.append(rows[3])
+            out_c.append(pairs + rows[4])
+            out_g.append(rows[5])
+            runners = len(run["me"])
 
     field = ctx.obstacle_field
     rows = cols = np.zeros(0, dtype=np.intp)
@@ -463,7 +513,7 @@ def braking_rows(
         out_a.append(a_w)
         out_b.append(b)
         out_h.append(now)
-        out_c.append(pairs + k)
+        out_c.append(pairs + runners + k)
         out_g.append(norm)
     if pending is not None:
         none = np.zeros(0, dtype=np.intp)
@@ -484,11 +534,13 @@ def braking_rows(
             coop,
             theirs,
             centre_seen[other],
-            ctx.vel[other],
+            *driven(ctx, other),
             big_d,
             need,
             *wall,
+            run=run,
         )
+        pending["run"] = None if run is None else run["mode"]
     if not out_v:
         empty = np.zeros(0, dtype=np.intp)
         return empty, np.zeros((0, 2)), np.zeros(0), np.zeros(0)
@@ -498,6 +550,89 @@ def braking_rows(
         np.concatenate(out_b),
         np.concatenate(out_h),
     )
+
+
+def _run_rows(
+    state: CBFState,
+    ctx: FilterContext,
+    own: Brakings,
+    pair: tuple,
+    pair_now: np.ndarray,
+    braked: np.ndarray | None,
+    p: np.ndarray,
+    centre_seen: np.ndarray,
+) -> dict:
+    """The run's conditions toward vehicles that do not brake, where it is better.
+
+    For every pair of a filtered vehicle and one that does not brake, the run's
+    barrier ``H^r`` (:mod:`sandbox.behaviour.safety.running`); a vehicle *runs*
+    where the least ``H^r`` over its such pairs is larger than the least ``H``
+    of its braking (``pair_now``), and ``braked`` (n,) does not forbid it. Returns
+    ``mode`` (n,) bool, the run pairs of the vehicles that run (``me``, ``start``,
+    ``course``, ``speed``, ``turn``, ``big_d``, ``need``, ``runs``, ``target``) and
+    their ``rows`` (vehicle, ``a``, ``b``, ``H``, the pair, ``|g|``).
+    """
+    dt, look, n = ctx.dt, state.look, len(ctx.pos)
+    me, other, coop, _, big_d, _ = pair
+    f = np.flatnonzero(~coop)
+    me, other, big_d = me[f], other[f], big_d[f]
+    b = runs(ctx, state, ctx.theta, own)
+    samples = b.travel.shape[1]
+    mine = braking_points(ctx, b, me, p[me], look)
+    course, speed, turn = driven(ctx, other)
+    theirs = driven_path(centre_seen[other], course, speed, turn, dt, samples)
+    dist, frac = closest_approach(mine - theirs)
+    end, k = b.moves[me], np.arange(len(me))  # each run sampled to its own end
+    dist[np.arange(samples - 1)[None, :] >= end[:, None]] = np.inf
+    velocity = (mine[k, end] - mine[k, end - 1]) / dt  # at full speed from then on
+    bent = course + end * turn * dt
+    tail, tail_n = ray_floor(
+        mine[k, end], velocity, theirs[k, end], bent, speed, turn, dt
+    )
+    dist = np.concatenate((dist, tail[:, None]), 1)
+    frac = np.concatenate((frac, np.ones((len(me), 1))), 1)
+    now = dist.min(axis=1) - big_d
+    worst_b, worst_r = np.full(n, np.inf), np.full(n, np.inf)
+    np.minimum.at(worst_b, me, pair_now[f])
+    np.minimum.at(worst_r, me, now)
+    mode = worst_r > worst_b
+    if braked is not None:
+        mode &= ~braked
+    use = np.flatnonzero(mode[me])
+    me, big_d, now, dist, frac = me[use], big_d[use], now[use], dist[use], frac[use]
+    mine, theirs, tail_n, end = mine[use], theirs[use], tail_n[use], end[use]
+    need = _need(dist[:, 1:].min(axis=1) - big_d, now, 1.0)
+    period, ok = local_minima(dist[:, 1:], MINIMA)
+    keep = ok | (np.arange(MINIMA) == 0)
+    pick, period = np.nonzero(keep)[0], period[keep] + 1
+    frac, after = frac[pick, period], dist[pick, period]
+    at_tail = period == samples - 1  # the bound from the run's end on
+    period = np.where(at_tail, end[pick] - 1, period)
+    rel = mine - theirs
+    near = rel[pick, period] + frac[:, None] * (
+        rel[pick, period + 1] - rel[pick, period]
+    )
+    normal = near / np.maximum(after, MIN_DIST)[:, None]
+    normal = np.where(at_tail[:, None], tail_n[pick], normal)
+    who = me[pick]
+    grad = _gradient(state, ctx, who, normal, period, frac, b)
+    a_w, rhs, norm = _rows(
+        ctx, who, grad, after - big_d[pick], now[pick], np.ones(len(pick)), b.first
+    )
+    target = run_target(state, ctx)
+    return {
+        "mode": mode,
+        "me": me,
+        "start": centre_seen[other[use]],
+        "course": course[use],
+        "speed": speed[use],
+        "turn": turn[use],
+        "big_d": big_d,
+        "need": need,
+        "runs": b,
+        "target": target,
+        "rows": (who, a_w, rhs, now[pick], pick, norm),
+    }
 
 
 def braking_fallback(

@@ -30,7 +30,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
-from sandbox.model.barriers import braking_speeds, closest_approach, segment_floor
+from sandbox.behaviour.safety.running import ray_floor, run_speeds
+from sandbox.model.barriers import (
+    braking_speeds,
+    closest_approach,
+    driven_path,
+    path_floor,
+    segment_floor,
+)
 
 if TYPE_CHECKING:
     from sandbox.behaviour.safety.braking import Brakings
@@ -59,17 +66,24 @@ class Pending:
     me, other : ndarray, shape (k,) int
         Each pair's vehicle and neighbour.
     coop : ndarray, shape (k,) bool
-        Whether the neighbour brakes (else it keeps its measured velocity).
+        Whether the neighbour brakes (else it keeps its commands, for ever).
     theirs : ndarray, shape (k, S, 2) [m]
         The neighbour's look-ahead points (or centre) along its braking.
-    start, velocity : ndarray, shape (k, 2)
-        A non-braking neighbour's centre [m] and velocity [m/s].
+    start : ndarray, shape (k, 2) [m]
+        A non-braking neighbour's centre.
+    course, speed, turn : ndarray, shape (k,) [rad], [m/s], [rad/s]
+        Its heading and the commands it keeps
+        (:func:`sandbox.model.barriers.driven_path`).
     big_d, need : ndarray, shape (k,) [m]
         The pair's ``D`` and the clearance the condition allowed.
     rows, cols : ndarray, shape (q,) int
         Each obstacle pair's vehicle and obstacle.
     clear, wall_need : ndarray, shape (q,) [m]
         The clearance kept from the obstacle and what the condition allowed.
+    run : dict or None
+        The run pairs toward vehicles that do not brake, of the vehicles that run
+        (``braking._run_rows``): checked with the run after the command, between
+        the pairs' conditions and the obstacles'.
     """
 
     brakings: Brakings
@@ -78,13 +92,16 @@ class Pending:
     coop: np.ndarray
     theirs: np.ndarray
     start: np.ndarray
-    velocity: np.ndarray
+    course: np.ndarray
+    speed: np.ndarray
+    turn: np.ndarray
     big_d: np.ndarray
     need: np.ndarray
     rows: np.ndarray
     cols: np.ndarray
     clear: np.ndarray
     wall_need: np.ndarray
+    run: dict | None = None
 
 
 @dataclass
@@ -122,6 +139,7 @@ def command_points(
     rows: np.ndarray,
     z: np.ndarray,
     samples: int,
+    target: np.ndarray | None = None,
 ) -> np.ndarray:
     """Look-ahead points of vehicles ``rows`` under ``z`` for a period, then braking.
 
@@ -129,7 +147,9 @@ def command_points(
     e^perp``, the drive reaching ``z`` a substep late) and turns the heading by ``dt
     (lag v2^ + (1 - lag) v2)``; the braking from ``v1 = z1`` then runs along the
     heading turned by ``lag dt v2`` more, its first substep still ``lag dt z2``
-    sideways. Returns shape (k, samples, 2) [m], at the start of each period.
+    sideways. Returns shape (k, samples, 2) [m], at the start of each period. With
+    ``target`` (k,) [m/s], the run toward it
+    (:func:`sandbox.behaviour.safety.running.run_speeds`) in place of the braking.
     """
     dt, look, lag = ctx.dt, state.look, b.lag
     e, side = b.heading[rows], b.side[rows]
@@ -143,7 +163,10 @@ def command_points(
     start = ctx.pos[rows] + look * e
     mix = (1.0 - lag) * z + lag * last
     first = start + dt * (mix[:, :1] * e + mix[:, 1:] * side)
-    speeds = braking_speeds(z[:, 0], state.accel[rows] * dt, samples)
+    if target is None:
+        speeds = braking_speeds(z[:, 0], state.accel[rows] * dt, samples)
+    else:
+        speeds = run_speeds(z[:, 0], state.accel[rows] * dt, target, samples)
     run = (1.0 - lag) * speeds[:, 1:] + lag * speeds[:, :-1]  # periods 1, 2, ...
     travel = np.zeros((len(rows), samples - 1))
     travel[:, 1:] = dt * np.cumsum(run[:, :-1], axis=1)
@@ -176,19 +199,30 @@ def clearances(
             ),
             axis=1,
         )
-        steps = np.arange(samples)[None, :, None] * ctx.dt
-        drift = pending.start[:, None] + steps * pending.velocity[:, None]
+        course, speed, turn = pending.course, pending.speed, pending.turn
+        dt = ctx.dt
+        driving = driven_path(pending.start, course, speed, turn, dt, samples)
         coop = pending.coop
-        theirs = np.where(coop[:, None, None], theirs, drift)
+        theirs = np.where(coop[:, None, None], theirs, driving)
         rel = mine - theirs
         moves = np.ceil(np.abs(z[me, 0]) / (state.accel[me] * ctx.dt) - 1e-9)
         last = np.where(coop, samples - 1, np.minimum(moves + 1, samples - 1))
         last = last.astype(np.intp)
+        k = np.arange(len(me))
         hold = np.arange(samples)[None, :] > last[:, None]
-        rel = np.where(hold[..., None], rel[np.arange(len(me)), last][:, None], rel)
+        rel = np.where(hold[..., None], rel[k, last][:, None], rel)
         dist, _ = closest_approach(rel[:, 1:])
+        least = dist.min(axis=1)
+        if not coop.all():  # the rest point against the rest of the path
+            bent = course + last * turn * dt
+            tail, _ = path_floor(mine[k, last], theirs[k, last], bent, speed, turn, dt)
+            least = np.minimum(least, np.where(coop, np.inf, tail))
         out_v.append(me)
-        out_m.append(dist.min(axis=1) - pending.big_d - pending.need)
+        out_m.append(least - pending.big_d - pending.need)
+    run = pending.run
+    if run is not None and len(run["me"]):
+        out_v.append(run["me"])
+        out_m.append(_run_margin(state, ctx, run, z))
     if len(rows):
         points = paths[at[len(me) :]]
         flat = points.reshape(-1, 2)
@@ -207,7 +241,31 @@ def clearances(
     return np.concatenate(out_v), np.concatenate(out_m)
 
 
-def _passes(
+def _run_margin(
+    state: CBFState, ctx: FilterContext, run: dict, z: np.ndarray
+) -> np.ndarray:
+    """Each run pair's clearance [m] from the end of the period under ``z``, less need.
+
+    The command for one period, then the run, against the other's driven path:
+    period by period, then :func:`sandbox.behaviour.safety.running.ray_floor`.
+    """
+    me, dt = run["me"], ctx.dt
+    samples = run["runs"].travel.shape[1] + 2
+    target = run["target"][me]
+    mine = command_points(state, ctx, run["runs"], me, z[me], samples, target)
+    course, speed, turn = run["course"], run["speed"], run["turn"]
+    theirs = driven_path(run["start"], course, speed, turn, dt, samples)
+    dist, _ = closest_approach((mine - theirs)[:, 1:])
+    end, k = run["runs"].moves[me] + 2, np.arange(len(me))  # two periods later
+    dist[np.arange(1, samples - 1)[None, :] >= end[:, None]] = np.inf
+    velocity = (mine[k, end] - mine[k, end - 1]) / dt
+    bent = course + end * turn * dt
+    tail, _ = ray_floor(mine[k, end], velocity, theirs[k, end], bent, speed, turn, dt)
+    least = np.minimum(dist.min(axis=1), tail)
+    return least - run["big_d"] - run["need"]
+
+
+def passes(
     state: CBFState, ctx: FilterContext, pending: Pending, z: np.ndarray
 ) -> np.ndarray:
     """Whether every condition of each vehicle keeps its clearance under ``z``."""
@@ -220,12 +278,25 @@ def _passes(
 def _ids(pending: Pending, vehicles: np.ndarray) -> np.ndarray:
     """The conditions of :func:`_subset`, as places among all of ``pending``'s."""
     k, q = vehicles[pending.me], vehicles[pending.rows]
-    return np.concatenate((np.flatnonzero(k), len(k) + np.flatnonzero(q)))
+    r = np.zeros(0, dtype=bool) if pending.run is None else vehicles[pending.run["me"]]
+    return np.concatenate(
+        (
+            np.flatnonzero(k),
+            len(k) + np.flatnonzero(r),
+            len(k) + len(r) + np.flatnonzero(q),
+        )
+    )
 
 
 def _subset(pending: Pending, vehicles: np.ndarray) -> Pending:
     """The conditions of the vehicles ``vehicles`` (mask, shape (n,)) only."""
     k, q = vehicles[pending.me], vehicles[pending.rows]
+    run = pending.run
+    if run is not None:
+        r = vehicles[run["me"]]
+        run = dict(run)
+        for key in ("me", "start", "course", "speed", "turn", "big_d", "need"):
+            run[key] = run[key][r]
     return Pending(
         pending.brakings,
         pending.me[k],
@@ -233,13 +304,16 @@ def _subset(pending: Pending, vehicles: np.ndarray) -> Pending:
         pending.coop[k],
         pending.theirs[k],
         pending.start[k],
-        pending.velocity[k],
+        pending.course[k],
+        pending.speed[k],
+        pending.turn[k],
         pending.big_d[k],
         pending.need[k],
         pending.rows[q],
         pending.cols[q],
         pending.clear[q],
         pending.wall_need[q],
+        run,
     )
 
 
@@ -260,7 +334,7 @@ def _bisect(
     for _ in range(HALVINGS):
         mid = 0.5 * (lo + hi)
         trial = np.where(moved[:, None], z_b + mid[:, None] * (z - z_b), z)
-        good = _passes(state, ctx, few, trial)
+        good = passes(state, ctx, few, trial)
         lo = np.where(moved & good, mid, lo)
         hi = np.where(moved & ~good, mid, hi)
     out = z.copy()
@@ -295,7 +369,7 @@ def _escape(
     """
     few = _subset(pending, moved)
     ids = _ids(pending, moved)
-    total = len(pending.me) + len(pending.rows)
+    total = len(_ids(pending, np.ones(len(z), dtype=bool)))
     mine = np.flatnonzero(moved[solved.veh])
     veh, cond, norm = solved.veh[mine], solved.cond[mine], solved.norm[mine]
     shift = np.zeros(len(mine))
@@ -357,7 +431,7 @@ def check_commands(
     moved : ndarray, shape (n,) bool
         The vehicles whose command was moved.
     """
-    ok = _passes(state, ctx, pending, z)
+    ok = passes(state, ctx, pending, z)
     moved = ~ok
     if not moved.any():
         return z, moved

@@ -77,8 +77,9 @@ have no common point (the slack). The braking barrier
 turn rate 0 and ``v1`` moved ``max_accel dt`` toward 0 each period, and makes the
 barrier of a pair the least clearance beyond ``D`` if both brake from now on
 (``H``, [m]: the look-ahead points' paths, with the drive's lag of one substep;
-toward a vehicle believed failed or driven open loop, its centre at its measured
-velocity and ``D'``; toward an obstacle, the signed distance). Each condition asks
+toward a vehicle believed failed or driven open loop, its centre along the path of
+its last commands, for ever, and ``D'``, with the better of braking and a run at full
+speed; toward an obstacle, the signed distance). Each condition asks
 a vehicle's command to lose at most its share of what is left, to first order,
 against its braking command::
 
@@ -128,7 +129,7 @@ from sandbox.behaviour.safety.braking import (
     obstacle_normals,
     pair_geometry,
 )
-from sandbox.behaviour.safety.braking_check import Solved, check_commands
+from sandbox.behaviour.safety.braking_check import Solved, check_commands, passes
 from sandbox.behaviour.safety.priority import PRIORITY, holding, holds
 from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
@@ -591,7 +592,10 @@ def _pass_right(
 
 
 def filter_commands(
-    state: CBFState, ctx: FilterContext, prune: bool = True
+    state: CBFState,
+    ctx: FilterContext,
+    prune: bool = True,
+    braked: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, FilterStep]:
     """The filtered ``(v1, v2)`` of one step, and what the filter did.
 
@@ -606,6 +610,10 @@ def filter_commands(
     prune : bool
         Whether pairs that cannot bind are dropped before their conditions are made
         (the result is the same; False is for checking that).
+    braked : ndarray, shape (n,), bool, optional
+        Under the braking barrier, vehicles that may not take the run toward
+        vehicles that do not brake (the second try of the step: ``ctx`` then
+        holds the estimate already).
 
     Returns
     -------
@@ -614,7 +622,7 @@ def filter_commands(
     step : FilterStep
     """
     n, look = len(ctx.pos), state.look
-    if state.estimate is not None and ctx.seen is not None:  # the others' poses now
+    if braked is None and state.estimate is not None and ctx.seen is not None:
         seen = state.estimate.update(ctx.seen, ctx.v1_prev, ctx.v2_prev)
         ctx = replace(ctx, seen=seen)
     filtered = np.ones(n, dtype=bool)
@@ -648,7 +656,7 @@ def filter_commands(
         hold, walls = holding(state, ctx, filtered)
     pending: dict = {}  # the braking barrier's check of the commands
     if state.braking:
-        veh, a_w, b, h = braking_rows(state, ctx, filtered, pending)
+        veh, a_w, b, h = braking_rows(state, ctx, filtered, pending, braked)
         least = float(h.min()) if len(h) else np.inf
         if by_vehicle is not None:
             np.minimum.at(by_vehicle, veh, h)
@@ -706,11 +714,22 @@ def filter_commands(
         z[group], slack[group] = zg, sg
         if state.braking:  # no command keeps every condition: brake
             fallback[group[sg > TOLERANCE]] = True
+    running = pending.get("run")  # the vehicles whose backup is the run
+    braked = np.zeros(n, dtype=bool) if braked is None else braked
+    if running is not None and (running & fallback).any():  # try again, braking
+        return filter_commands(state, ctx, prune, braked | (running & fallback))
     if "check" in pending:  # beyond first order, against the others braking
         z_b = braking_fallback(state, ctx, np.arange(n))
+        if running is not None:  # the run's command, which keeps its conditions
+            z_b[running, 0] = pending["check"].run["runs"].first[running]
+            z_b[running, 1] = 0.0
         solved = Solved(veh, a, b, rank, pending["cond"][src], pending["norm"][src])
         box = (lo1, hi1, lo2, hi2)
         z, _ = check_commands(state, ctx, pending["check"], z, z_b, solved, box)
+        if running is not None:
+            bad = running & ~passes(state, ctx, pending["check"], z)
+            if bad.any():
+                return filter_commands(state, ctx, prune, braked | bad)
     braking = np.flatnonzero(fallback)
     if len(braking):
         z[braking] = braking_fallback(state, ctx, braking)
