@@ -210,7 +210,9 @@ def test_interrupted_sweep_resumes(tmp_path, base, monkeypatch, capsys):
 
 @pytest.mark.slow
 def test_sigint_to_a_running_sweep_then_resume(tmp_path):
-    base = write_yaml(tmp_path, base_doc(duration=3.0), "base.yaml")
+    # two groups of 20 runs of 30 s, about a second each on an idle machine: the
+    # signal comes once the first is stored, long before the second is done
+    base = write_yaml(tmp_path, base_doc(duration=30.0), "base.yaml")
     out = tmp_path / "out"
     cmd = [
         sys.executable,

@@ -166,8 +166,11 @@ def test_dask_gives_the_local_results_and_survives_a_killed_worker(
 
 
 def test_a_lost_scheduler_is_a_clear_error_and_the_rerun_computes_the_rest(
-    tmp_path, cluster, base
+    tmp_path, cluster
 ):
+    # Three groups of 8 runs of 60 s (about a second each on an idle machine): the
+    # scheduler dies once the first group is stored, long before the third is done.
+    base = write_yaml(tmp_path, base_doc(duration=60.0), "base.yaml")
     out = tmp_path / "dask"
     proc = sweep(base, out, "--scheduler-file", str(cluster.file))
     wait_for(lambda: stored(out) >= 3)
@@ -244,7 +247,7 @@ def test_a_stopped_dask_sweep_yields_whole_groups_and_cancels_the_rest(cluster):
 
     from sandbox.study import engine
 
-    jobs = seed_jobs(64, duration=4.0)
+    jobs = seed_jobs(64, duration=20.0)  # groups of 16 runs, about a second each
     client = CountingClient(Client(scheduler_file=str(cluster.file), timeout="20s"))
     got: list = []
 
@@ -262,10 +265,11 @@ def test_a_stopped_dask_sweep_yields_whole_groups_and_cancels_the_rest(cluster):
 
 
 def test_ctrl_c_of_a_dask_sweep_keeps_the_finished_groups(tmp_path, cluster):
-    # 80 runs of 4 s: four groups of 20 (two per worker), all under way. A SIGINT
-    # once the first group is stored returns at once with the finished groups stored
-    # and in the table, and the queued groups cancelled.
-    base = write_yaml(tmp_path, base_doc(duration=4.0), "base.yaml")
+    # 80 runs of 20 s: four groups of 20 (two per worker, about a second each on an
+    # idle machine), all under way. A SIGINT once the first group is stored returns
+    # at once with the finished groups stored and in the table, and the queued
+    # groups cancelled.
+    base = write_yaml(tmp_path, base_doc(duration=20.0), "base.yaml")
     out = tmp_path / "dask"
     cmd = [sys.executable, "-m", "sandbox", "sweep", str(base), "--grid"]
     cmd += ["recovery.beta=1,4", "--seeds", "0:40", "--out", str(out)]

@@ -132,10 +132,10 @@ def rows(out: Path) -> int:
 @pytest.mark.slow
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_ctrl_c_returns_at_once_and_keeps_every_finished_run(tmp_path, jobs):
-    # 64 runs in groups of 16 first, then sized to about 2 s each: the first runs
-    # are stored after the first small group, and a Ctrl-C returns within 2 s with
-    # every finished run stored and in the table.
-    base = write_yaml(tmp_path, base_doc(duration=6.0), "base.yaml")
+    # 64 runs of 12 s in groups of 32 (--jobs 1) or 16 (--jobs 2), each about half a
+    # second or more: the first runs are stored after the first group, and a Ctrl-C
+    # returns within 2 s with every finished run stored and in the table.
+    base = write_yaml(tmp_path, base_doc(duration=12.0), "base.yaml")
     out = tmp_path / "out"
     proc = start(
         ["sweep", str(base), "--seeds", "0:64", "--jobs", str(jobs), "--out", str(out)]
