@@ -1,13 +1,14 @@
 """Processes of ``sandbox sweep`` and ``sandbox check``: killed, interrupted, cleaned.
 
 Each test starts the command in a session of its own, so that every process it
-starts (the fork server, the pool's workers, the resource tracker) is found by its
+starts (the pool's workers, a fork server where there is one) is found by its
 session id, and killed at the end whatever happens.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import os
 import signal
 import subprocess
@@ -93,8 +94,8 @@ def test_sigkill_of_a_sweep_leaves_no_worker(tmp_path):
         + ["--out", str(tmp_path / "out")]
     )
     try:
-        # the sweep, its fork server and two workers (and a resource tracker)
-        assert kill_and_count_orphans(proc, 4) == []
+        # the sweep and its two workers (forked from it on Linux)
+        assert kill_and_count_orphans(proc, 3) == []
     finally:
         cleanup(proc)
 
@@ -233,3 +234,47 @@ def test_a_stop_while_a_group_is_stored_keeps_the_whole_group(
     assert "8 of 20 runs stored" in capsys.readouterr().err
     assert calls == [4, 4] and rows(out) == 8
     assert len(list((out / "runs").glob("*.json"))) == 8
+
+
+POOL_SCRIPT = """
+import json, threading
+from sandbox.study import engine
+from test_sweep import base_doc
+
+JOBS = [(f"r{s}", (base_doc(0.5), "base.yaml", [f"seed={s}"])) for s in range(4)]
+
+def main():
+    alone = engine.pool_context().get_start_method()
+    forked = dict(engine.run_local(JOBS, 2))
+    stop = threading.Event()
+    thread = threading.Thread(target=stop.wait)
+    thread.start()  # a thread beside the main one: no fork of this process
+    beside = engine.pool_context().get_start_method()
+    served = dict(engine.run_local(JOBS, 2))
+    stop.set()
+    thread.join()
+    serial = dict(engine.run_local(JOBS, 1))
+    print(json.dumps([alone, beside, forked == serial, served == serial]))
+
+if __name__ == "__main__":  # a fork server's workers import this file
+    main()
+"""
+
+
+@pytest.mark.slow
+def test_a_pool_forks_a_single_thread_and_serves_a_threaded_parent(tmp_path):
+    # A single-threaded sweep forks its workers (they start at once); a parent
+    # with threads running gets its workers from a fork server. Both give the
+    # results of the runs in-process.
+    script = tmp_path / "pool.py"
+    script.write_text(POOL_SCRIPT, encoding="utf-8")
+    env = {**ENV, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "tests")])}
+    done = subprocess.run(
+        [sys.executable, str(script)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout) == ["fork", "forkserver", True, True]
