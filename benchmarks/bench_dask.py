@@ -4,8 +4,8 @@ The workload of ``bench_sweep.py``: the Fig. 15 scenario (three vehicles, 12 s,
 1,200 control steps of 4 substeps), ``--runs`` seeds (default 256), into a fresh
 store each time. Rows:
 
-- ``sandbox sweep --jobs 2``: the local process pool (its fork server and workers
-  started by the command, as a user runs it).
+- ``sandbox sweep --jobs 2``: the local process pool (its workers started by the
+  command, as a user runs it).
 - ``sandbox sweep --scheduler``: the same command on a
   ``LocalCluster(n_workers=2, threads_per_worker=1, processes=True)`` started once
   before the timings (as a cluster is: it outlives the sweeps sent to it) and warmed

@@ -26,12 +26,15 @@ floor beside each row keeps the ratios fair on a machine whose load changes whil
 benchmark runs; the load averages before and after are printed with the table.
 
 With ``--scaling RUNS`` (the target: 1,024) it also times ``--jobs 1`` against
-``--jobs 2`` on that many runs, and beside it the machine's own two-core speed-up:
-the same batches in one process alone, then in two processes at once.
+``--jobs 2`` on that many runs (the pool's workers forked from the sweep, then from a
+fork server), and beside it the machine's own two-core speed-up: the same batches in
+one process alone, then in two processes at once (``--scaling-only``: these rows
+alone).
 
     python benchmarks/bench_sweep.py                      # 256 runs, 3 repetitions
     python benchmarks/bench_sweep.py --runs 64 --repeat 1  # quicker
     python benchmarks/bench_sweep.py --scaling 1024       # and --jobs 2 scaling
+    python benchmarks/bench_sweep.py --scaling 1024 --scaling-only --repeat 5
 """
 
 from __future__ import annotations
@@ -156,20 +159,45 @@ def ceiling(runs: int) -> float:
     return 2 * alone / both
 
 
-def scaling(runs: int, repeat: int, out: Path) -> tuple[list[float], list[float]]:
+def served_pool(start: bool = False):
+    """A pool's start method without the fork: a fork server, its imports preloaded."""
+    import multiprocessing as mp
+
+    from sandbox.study import engine
+
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(engine.PRELOAD)
+    if start:
+        from multiprocessing import forkserver
+
+        forkserver.ensure_running()
+    return ctx
+
+
+def scaling(runs: int, repeat: int, out: Path) -> dict[str, list[float]]:
     """``--jobs 2`` over ``--jobs 1`` on ``runs`` runs, and the machine's ceiling.
 
-    Each repetition times ``sandbox sweep --jobs 1``, ``--jobs 2`` and
+    Each repetition times ``sandbox sweep --jobs 1``, ``--jobs 2`` (its workers
+    forked from the sweep, as on Linux), ``--jobs 2`` with its workers from a fork
+    server (as beside threads, or before workers were forked from the sweep) and
     :func:`ceiling`, one after the other (each sweep into a fresh store, the pool
-    started by the command as a user's is).
+    started by the command as a user's is). Returns the lists of speed-ups over
+    ``--jobs 1`` (``"fork"``, ``"fork server"``) and of ceilings (``"ceiling"``).
     """
-    speedups, ceilings = [], []
+    from sandbox.study import engine
+
+    found: dict[str, list[float]] = {"fork": [], "fork server": [], "ceiling": []}
+    forked = engine.pool_context
     for rep in range(repeat):
         one = sweep(runs, 1, out / f"s{rep}j1")
-        two = sweep(runs, 2, out / f"s{rep}j2")
-        speedups.append(one / two)
-        ceilings.append(ceiling(runs))
-    return speedups, ceilings
+        found["fork"].append(one / sweep(runs, 2, out / f"s{rep}j2"))
+        engine.pool_context = served_pool
+        try:
+            found["fork server"].append(one / sweep(runs, 2, out / f"s{rep}j2s"))
+        finally:
+            engine.pool_context = forked
+        found["ceiling"].append(ceiling(runs))
+    return found
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -186,7 +214,19 @@ def main(argv: list[str] | None = None) -> int:
         help="also time --jobs 1 against --jobs 2 on RUNS runs (the target: 1024), "
         "beside the machine's own two-core speed-up",
     )
+    p.add_argument(
+        "--scaling-only",
+        action="store_true",
+        help="time the --scaling rows only (not the table of 256 runs)",
+    )
     args = p.parse_args(argv)
+    if args.scaling_only:
+        if not args.scaling or usable_cores() < 2:
+            p.error("--scaling-only needs --scaling RUNS and two usable cores")
+        with tempfile.TemporaryDirectory() as tmp:
+            found = scaling(args.scaling, args.repeat, Path(tmp))
+        print_scaling(args.scaling, found)
+        return 0
     runs, cores, bare_runs = args.runs, usable_cores(), min(args.bare, args.runs)
     rows: dict[str, tuple[int, list[float]]] = {}
     ratios: dict[str, list[float]] = {}
@@ -261,15 +301,24 @@ def main(argv: list[str] | None = None) -> int:
         print(f"--jobs 2 over --jobs 1: {statistics.median(speedup):.2f}x (median)")
     if args.scaling and cores > 1:
         with tempfile.TemporaryDirectory() as tmp:
-            speedups, ceilings = scaling(args.scaling, args.repeat, Path(tmp))
-        print(
-            f"{args.scaling} runs: --jobs 2 over --jobs 1 "
-            f"{statistics.median(speedups):.2f}x (each: "
-            f"{', '.join(f'{x:.2f}' for x in speedups)}); two batches at once over "
-            f"one alone (the machine's ceiling) {statistics.median(ceilings):.2f}x "
-            f"(each: {', '.join(f'{x:.2f}' for x in ceilings)})"
-        )
+            found = scaling(args.scaling, args.repeat, Path(tmp))
+        print_scaling(args.scaling, found)
     return 0
+
+
+def print_scaling(runs: int, found: dict[str, list[float]]) -> None:
+    """The table of :func:`scaling`: medians, and each repetition."""
+    print()
+    print(f"| {runs} runs | median | each repetition |")
+    print("|---|---:|---|")
+    names = {
+        "fork": "--jobs 2 over --jobs 1 (workers forked from the sweep)",
+        "fork server": "--jobs 2 over --jobs 1 (workers from a fork server)",
+        "ceiling": "two batches at once over one alone (the machine's ceiling)",
+    }
+    for key, name in names.items():
+        each = ", ".join(f"{x:.2f}" for x in found[key])
+        print(f"| {name} | {statistics.median(found[key]):.2f}x | {each} |")
 
 
 def _load(avg: tuple[float, float, float]) -> str:

@@ -154,7 +154,7 @@ def run_sweep(
     """
     spec.check_size(max_runs)
     if jobs > 1 and not (scheduler or scheduler_file):
-        engine.pool_context(start=True)  # the pool's server imports meanwhile
+        engine.pool_context(start=True)  # a fork server, if one is used, imports now
     base_doc = read_base(spec)
     check_points(spec, base_doc)
     store = Store(out)
