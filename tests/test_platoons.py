@@ -417,3 +417,23 @@ def test_pictures_label_by_platoon(tmp_path):
     _, body, _ = _build_palette(run.colors)
     items = _legend_items(run, body, False)
     assert [i.label for i in items[:2]] == ["east", "north"]
+
+
+def test_a_reconfiguring_platoon_sees_the_estimate_under_the_braking_barrier(
+    tmp_path,
+):
+    # Under sensing and the braking barrier the law sees the others through their
+    # estimate (Simulation.believed), a platoon with its own reconfiguration too:
+    # its leader's pose in its law's context is the estimate, not the noisy copy.
+    text = RECONFIGURED.replace("duration: 12", "duration: 4") + (
+        "sensing: {position_noise: 0.02, delay: 0.05}\n"
+        "safety: {filter: cbf, barrier: braking}\n"
+    )
+    sim = Simulation(load_scenario(_write(tmp_path, text)))
+    for _ in range(20):
+        sim.step()
+    (view,) = [v for v in sim.platoons.views if v.group.name == "A"]
+    assert np.array_equal(view.believed, sim.believed[view.rows])
+    assert not np.allclose(view.believed, view.seen)
+    ctx = view.law_context(sim.t, None)
+    assert np.array_equal(ctx.leader_pos, view.believed[view.leader, :2])

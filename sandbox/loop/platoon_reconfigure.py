@@ -95,6 +95,12 @@ class PlatoonView:
         seen = self._sim.seen
         return None if seen is None else seen[self.rows]
 
+    @property
+    def believed(self) -> np.ndarray | None:
+        """What the platoon's law sees of its rows: ``seen``, or its estimate."""
+        believed = self._sim.believed
+        return None if believed is None else believed[self.rows]
+
     def law_context(
         self,
         t: float,

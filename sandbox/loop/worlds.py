@@ -149,13 +149,12 @@ def law_context_of(
 ) -> LawContext:
     """The law context of ``owner``'s rows (a world, or one platoon of one).
 
-    ``owner`` has ``fleet``, ``leader``, ``seen``, ``h``, ``law_params`` and
-    ``law_memory``; the followers read the leader's broadcast pose (the truth without
-    sensing); ``extra`` are further fields of the context.
+    ``owner`` has ``fleet``, ``leader``, ``believed``, ``h``, ``law_params`` and
+    ``law_memory``; the followers read the leader's pose as ``believed`` gives it
+    (the broadcast copy, or its estimate under the braking barrier; the truth
+    without sensing); ``extra`` are further fields of the context.
     """
-    fleet, lead = owner.fleet, owner.leader
-    seen = getattr(owner, "believed", None)  # a world's: the copies or their estimate
-    seen = owner.seen if seen is None else seen
+    fleet, lead, seen = owner.fleet, owner.leader, owner.believed
     if lead < 0:
         leader_pos = leader_theta = None
     elif seen is None:
