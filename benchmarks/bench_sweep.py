@@ -15,8 +15,10 @@ steps of 4 substeps), ``--runs`` times (default 256).
 - ``sweep --jobs 1`` and ``--jobs 2``: the whole ``sandbox sweep`` command, in-process
   (``sandbox.cli.main``; scenario loading, batches of up to 128 worlds, metrics, the
   results store); and ``--jobs 1`` again with ``safety: {filter: cbf}``,
-  ``detection: {method: residual}`` and ``sensing: {position_noise: 0.01}``, each
-  against the bare physics of the same bodies.
+  ``detection: {method: residual}``, ``sensing: {position_noise: 0.01}``, and the
+  leader crashing at 6 s with ``on_leader_failure: elect`` and ``reconfigure:
+  {assign: hungarian}`` (a handover and a reassignment in every run), each against
+  the bare physics of the same bodies.
 
 Every row is timed once per repetition, in one process, with the bare physics timed
 just before and just after it (``--bare`` runs each time, default 64): the ratio is
@@ -107,11 +109,19 @@ def batched(runs: int, size: int) -> float:
     return time.perf_counter() - t0
 
 
-#: The features measured in a sweep of their own: (row name, --set assignment).
+#: The features measured in a sweep of their own: (row name, --set assignments).
 FEATURES = (
-    ("safety: {filter: cbf}", "safety.filter=cbf"),
-    ("detection: {method: residual}", "detection.method=residual"),
-    ("sensing: {position_noise: 0.01}", "sensing.position_noise=0.01"),
+    ("safety: {filter: cbf}", ("safety.filter=cbf",)),
+    ("detection: {method: residual}", ("detection.method=residual",)),
+    ("sensing: {position_noise: 0.01}", ("sensing.position_noise=0.01",)),
+    (
+        "the leader crashing at 6 s, re-formed (elect, hungarian)",
+        (
+            "failures=[{vehicle: leader, at: 6.0, kind: crash}]",
+            "on_leader_failure=elect",
+            "reconfigure={assign: hungarian, close_gap: true}",
+        ),
+    ),
 )
 
 
@@ -258,11 +268,11 @@ def main(argv: list[str] | None = None) -> int:
             measure(
                 "sandbox sweep --jobs 1", runs, lambda o=out: sweep(runs, 1, o / "j1")
             )
-            for name, assignment in FEATURES:
+            for k, (name, assignments) in enumerate(FEATURES):
                 measure(
                     f"sandbox sweep --jobs 1, {name}",
                     runs,
-                    lambda o=out, a=assignment: sweep(runs, 1, o / a, (a,)),
+                    lambda o=out, a=assignments, k=k: sweep(runs, 1, o / f"f{k}", a),
                 )
             if cores > 1:
                 measure(

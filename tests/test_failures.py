@@ -241,3 +241,49 @@ def test_registering_a_failure_kind_twice_is_refused():
     }
     with pytest.raises(ValueError, match="already registered"):
         register_failure("stop")(lambda ctx: (0.0, 0.0))
+
+
+def test_the_built_in_kinds_at_once_give_the_numbers_of_their_functions():
+    # The loop applies the built-in kinds elementwise (model/failures.py, rule_of and
+    # ruled_commands); each entry must be what the kind's function returns, and the
+    # drive's limit what within_drive gives, signed zeros and infinities included.
+    from sandbox.model import failures as fm
+    from sandbox.plugins.registration import FailureContext
+
+    rng = np.random.default_rng(7)
+    cases = [
+        (fm.stuck_steering, {"v2": None}),
+        (fm.stuck_steering, {"v2": -0.8}),
+        (fm.stop, {}),
+        (fm.spin, {"v2": 3}),
+        (fm.spin, {"v2": 0}),
+        (fm.uncontrolled, {"v1": 2, "v2": None}),
+        (fm.uncontrolled, {"v1": None, "v2": 0.5}),
+        (fm.crash, {}),
+    ] * 8
+    rules = [fm.rule_of(f, p) for f, p in cases]
+    assert all(r[0] > 0 for r in rules)
+    v1 = rng.choice([0.0, -0.0, 1.5, -2.0, 0.3], size=len(cases))
+    onset = rng.choice([0.0, -0.0, 0.7, -1.1], size=len(cases))
+    got_v1, got_v2 = fm.ruled_commands(
+        np.array([r[0] for r in rules]),
+        np.array([r[1] for r in rules]),
+        np.array([r[2] for r in rules]),
+        v1,
+        onset,
+    )
+    for k, (func, params) in enumerate(cases):
+        ctx = FailureContext(0.0, 0.0, "red", 1, v1[k], 0.0, onset[k], params)
+        want = np.array(func(ctx), dtype=float)
+        got = np.array([got_v1[k], got_v2[k]])
+        assert got.tobytes() == want.tobytes(), (func, params)
+    last = rng.choice([0.0, -0.0, 1.0, -1.0, 0.05], size=200)
+    asked = rng.choice([0.0, -0.0, 2.0, -2.0, 1.0, 0.02], size=200)
+    step = rng.choice([0.05, 0.0, np.inf], size=200)
+    limited = fm.within_drives(asked, last, step)
+    alone = [
+        fm.within_drive(float(a), float(b), float(c))
+        for a, b, c in zip(asked, last, step, strict=True)
+    ]
+    assert limited.tobytes() == np.array(alone).tobytes()
+    assert fm.rule_of(lambda ctx: (0.0, 0.0), {})[0] == 0  # a plug-in is called

@@ -282,3 +282,114 @@ def test_several_platoons_in_one_loop_give_the_runs_alone(tmp_path):
     assert runs[0].pose.tobytes() != runs[2].pose.tobytes()
     sim = Simulation.stacked(scenarios)
     assert sim.observe(1).platoon == Simulation(scenarios[1]).observe().platoon
+
+
+#: Worlds that re-form apart: each world's own failures (free per world), so that the
+#: leader is handed over at another time in each world, or never.
+REFORMING = [
+    ["seed=0", "failures[0].at=1.0"],
+    ["seed=1", "failures[0].at=2.2", "vehicles[1].pose=[-1.2, 0.9, 0.3]"],
+    ["seed=2", "failures=[]"],
+    ["seed=3", "failures=[{vehicle: red, at: 1.5, kind: stop}]"],
+]
+
+
+@pytest.mark.parametrize(
+    "name, fixed",
+    [
+        ("failures/leader_crash_elect", ["formation={law: fixed}"]),
+        ("failures/leader_crash_elect", ["formation={law: rotating}"]),
+        ("failures/leader_crash_elect", ["formation={law: own_estimate}"]),
+        ("failures/leader_crash_elect", ["recovery.target_derivatives=estimate"]),
+        # the reference at rest from 1.8 s: the offsets keep its last tangent (45 deg)
+        (
+            "failures/leader_crash_elect",
+            ["reference={type: waypoints, points: [[0, 0], [1.3, 1.3]], speed: 1}"],
+        ),
+        ("failures/leader_crash_virtual", []),
+        ("failures/leader_crash_virtual", ["formation={law: virtual, rotate: true}"]),
+    ],
+    ids=[
+        "fixed",
+        "rotating",
+        "own_estimate",
+        "leader_ref",
+        "leader_ref_at_rest",
+        "virtual",
+        "to_virtual",
+    ],
+)
+def test_worlds_that_re_form_apart_share_one_law_and_give_the_bytes_alone(
+    name, fixed, tmp_path
+):
+    # The built-in law stays one call for all worlds through each world's handover
+    # and reassignment (loop/stacked_law.py), except a world whose law is replaced
+    # by the virtual leader, which then evaluates its own.
+    scenarios = [
+        load_scenario(name, overrides=["duration=4", *fixed, *extra])
+        for extra in REFORMING
+    ]
+    assert len({structure_key(sc) for sc in scenarios}) == 1
+    sim = Simulation.stacked(scenarios)
+    assert sim._stacked_law is not None and not sim._law_per_world
+    runs = sim.run_all()
+    changes = [len(r.info["leader_changes"]) for r in runs]
+    assert changes == [1, 1, 0, 0]
+    assert [len(r.info["reassignments"]) for r in runs] == [1, 1, 0, 1]
+    virtual = scenarios[0].on_leader_failure == "virtual"  # a new law where it fails
+    assert sim._stacked_law.own.tolist() == [virtual, virtual, False, False]
+    if not virtual:  # the new leader's pose is gathered in worlds 0 and 1 only
+        assert sim._stacked_law.leaders.tolist() == [1, 1, 0, 0]
+    assert_batch_is_alone(scenarios, tmp_path, runs)
+
+
+def test_a_detector_that_clears_re_forms_each_world_at_its_own_events(tmp_path):
+    # The residual detector finds the leader's spin and clears it when it ends: a
+    # world re-forms at each change of what its platoon believes, another never.
+    fixed = [
+        "duration=9",
+        "reconfigure={assign: hungarian, close_gap: false}",
+        "on_leader_failure=elect",
+    ]
+    starts = [
+        ["seed=0"],
+        ["seed=1", "failures[0].at=2.0", "failures[0].until=5.0"],
+        ["seed=2", "failures=[]"],
+    ]
+    scenarios = [
+        load_scenario("failures/detect_leader_spin", overrides=[*fixed, *extra])
+        for extra in starts
+    ]
+    sim = Simulation.stacked(scenarios)
+    assert sim._stacked_law is not None
+    runs = sim.run_all()
+    events = [len(r.info["reassignments"]) for r in runs]
+    assert events[0] >= 2 and events[1] >= 2 and events[2] == 0
+    assert_batch_is_alone(scenarios, tmp_path, runs)
+
+
+def test_every_failure_kind_of_many_worlds_at_once_gives_the_bytes_alone(tmp_path):
+    # Six worlds, each with its own failure of red: from four active failures on the
+    # loop applies the built-in kinds at once (StackedFailures, RULED_FROM), alone
+    # each world calls its kind's function; the files must not tell them apart.
+    from sandbox.loop.worlds import RULED_FROM
+
+    kinds = [
+        "{vehicle: red, at: 1.0, kind: stuck_steering}",
+        "{vehicle: red, at: 1.2, kind: stuck_steering, v2: -0.8}",
+        "{vehicle: red, at: 1.1, kind: stop}",
+        "{vehicle: red, at: 0.9, kind: spin, v2: 3.0}",
+        "{vehicle: red, at: 1.3, until: 2.0, kind: uncontrolled, v1: 2.0, v2: 0.5}",
+        "{vehicle: red, at: 1.0, kind: crash}",
+    ]
+    scenarios = [
+        load_scenario(
+            "failures/follower_stop",
+            overrides=["duration=3", f"seed={k}", f"failures=[{kind}]"],
+        )
+        for k, kind in enumerate(kinds)
+    ]
+    assert len({structure_key(sc) for sc in scenarios}) == 1
+    assert len(scenarios) >= RULED_FROM > 1  # at once together, one by one alone
+    runs = assert_batch_is_alone(scenarios, tmp_path)
+    assert all(r.failed[-1, 1] for r in runs[:4]) and not runs[4].failed[-1, 1]

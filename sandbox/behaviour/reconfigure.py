@@ -129,13 +129,22 @@ class Reconfiguration:
         return cls(sim)
 
     # ------------------------------------------------------------------ the event
-    def react(self, sim: Simulation, t: float, known: np.ndarray) -> None:
+    @property
+    def waiting(self) -> bool:
+        """Whether :meth:`react` has work at the next period even without a change.
+
+        The period after an event restarts the estimate of the recovery shift.
+        """
+        return self._reset_shift
+
+    def react(self, sim: Simulation, t: float, known: np.ndarray) -> bool:
         """Handle a change of the believed failures at ``t_k``, from ``t_k+1`` on.
 
         The plan of ``t_k`` is kept (the law has already been evaluated for it); the
         new leader, law and offsets act from the next period, 10 ms later at h =
         0.01 s, with the law's estimators re-seeded at ``t_k`` on the new
-        configuration.
+        configuration. Nothing happens unless ``known`` differs from the last call's
+        or :attr:`waiting` is true, so a loop may skip the call otherwise.
 
         Parameters
         ----------
@@ -143,13 +152,18 @@ class Reconfiguration:
         t : float [s]
         known : ndarray, shape (n,), bool
             The vehicles believed failed now.
+
+        Returns
+        -------
+        bool
+            Whether the configuration changed (a new leader, law or offsets).
         """
         if self._reset_shift:  # the first target of the new slots: restart there
             sim.shift_motion.reset()
             self._reset_shift = False
         known = np.asarray(known, dtype=bool)
         if np.array_equal(known, self.known):
-            return
+            return False
         for i in np.flatnonzero(known & ~self.known):
             if self.slot_of[i] >= 0 and self.slot_of[i] != self.leader_slot:
                 self.held[int(i)] = int(self.slot_of[i])
@@ -166,6 +180,7 @@ class Reconfiguration:
         if changed:
             self._apply(sim, t)
             self._record_slots(sim, t)
+        return changed
 
     # ------------------------------------------------------------------ handover
     def _hand_over(self, sim: Simulation, t: float, lead: int) -> bool:

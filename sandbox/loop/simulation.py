@@ -16,12 +16,15 @@ worlds' vehicles (``K * n`` rows, world after world; a single run is K = 1):
 4. **record** a sample every ``record_every`` periods, and the loop metrics;
 5. **advance**: write the commands to the physics and step it ``substeps`` times.
 
-The built-ins (laws, strategies, filter, detectors, sensing, range sensors) and
-plug-ins registered with ``batched=True`` are called once for all worlds; the
-reconfiguration, command schedules and other plug-ins world by world inside the
-same loop (:mod:`sandbox.loop.world_stages`). Each world's numbers are those it has
-alone: the functions are elementwise over rows, neighbour pairs never cross worlds,
-and every world keeps its own random streams, memories and contact episodes.
+The built-ins (laws, strategies, failure kinds, filter, detectors, sensing, range
+sensors) and plug-ins registered with ``batched=True`` are called once for all
+worlds; a built-in law stays one call while the worlds re-form apart, each with its
+own leader and estimators (:mod:`sandbox.loop.stacked_law`). A reconfiguration's
+event, command schedules and other plug-ins run world by world inside the same loop
+(:mod:`sandbox.loop.world_stages`), only for the worlds concerned. Each world's
+numbers are those it has alone: the functions are elementwise over rows, neighbour
+pairs never cross worlds, and every world keeps its own random streams, memories and
+contact episodes.
 
 :meth:`Simulation.step` runs one period with optional overrides and returns an
 :class:`~sandbox.loop.observation.Observation`; :meth:`Simulation.run` is the loop of
@@ -55,6 +58,7 @@ from sandbox.loop.ending import Ending
 from sandbox.loop.plan import Plan, structure_key
 from sandbox.loop.platoons import Platoons
 from sandbox.loop.recording import WorldsRecorder
+from sandbox.loop.stacked_law import StackedLaw, stacked_law_context
 from sandbox.loop.state import Fleet, uniform
 from sandbox.loop.step_api import StepAPI
 from sandbox.loop.stepping import WorldsPhysics
@@ -307,7 +311,12 @@ class Simulation(StepAPI, Ending, WorldStages):
                 state.filter = state._filter
         for state in self.states:  # slot reassignment and leader handover on events
             state.reconfiguration = Reconfiguration.build(state)
-        self._reconfiguring = any(s.reconfiguration is not None for s in self.states)
+        self._reconfigurable = np.array(
+            [s.reconfiguration is not None for s in self.states]
+        )
+        self._reconfiguring = bool(self._reconfigurable.any())
+        # What each world's reconfiguration last saw, and the worlds it waits on.
+        self._reacted, self._waiting = np.zeros(N, dtype=bool), set()
         # Range sensors (sensors.range; None without; one world, structure_key) and
         # where recovery and the safety filter find the static obstacles.
         sensors = [
@@ -327,15 +336,24 @@ class Simulation(StepAPI, Ending, WorldStages):
         spec = first.formation
         self.law_params = dict(spec.params) if spec else {}
         self.law_memory: dict = {}
+        self._stacked_law: StackedLaw | None = None
         per_world = False
         if spec is not None:
             plugin = get("law", spec.law)
             reconfigure = first.reconfigure.assign != "none" or (
                 first.on_leader_failure != "keep"
             )
-            per_world = reconfigure or not plugin.options.get("batched", False)
+            per_world = not plugin.options.get("batched", False)
+            if reconfigure and not per_world:  # worlds re-form apart (stacked_law.py)
+                built_in = plugin.origin.startswith("built-in")
+                per_world = self.K == 1 or not built_in
+                if not per_world:
+                    self._stacked_law = StackedLaw(self)
         self._law_per_world = per_world
         self.leader = first.leader_index
+        if self._stacked_law is not None:
+            self.law = self._stacked_law.law
+            return
         if spec is None or per_world:
             self.law = None if spec is None else self.states[0].law
             if self.K == 1:  # the world's own law: its memory and parameters
@@ -439,6 +457,8 @@ class Simulation(StepAPI, Ending, WorldStages):
             triple = [np.zeros((N, 2)), np.zeros((N, 2)), np.zeros((N, 2))]
         elif self._law_per_world:
             triple = self._world_law_targets(t, ref)
+        elif self._stacked_law is not None:
+            triple = self._stacked_law.targets(self, t, ref)
         else:
             triple = [
                 np.broadcast_to(a, (K, n, 2)).reshape(N, 2)
@@ -458,30 +478,8 @@ class Simulation(StepAPI, Ending, WorldStages):
 
     def _law_context(self, t: float, ref: tuple | None) -> LawContext:
         """What the one law of all worlds sees: arrays with a leading world axis."""
-        K, n, lead, fl = self.K, self.n, self.leader, self.fleet
-        if lead < 0:
-            leader_pos = leader_theta = None
-        else:
-            src = fl.pos if self.believed is None else self.believed[:, :2]
-            heading = fl.theta if self.believed is None else self.believed[:, 2]
-            leader_pos = np.ascontiguousarray(src.reshape(K, n, 2)[:, lead : lead + 1])
-            leader_theta = np.ascontiguousarray(
-                heading.reshape(K, n)[:, lead : lead + 1]
-            )
-        return LawContext(
-            t=t,
-            dt=self.h,
-            pos=fl.pos.reshape(K, n, 2),
-            theta=fl.theta.reshape(K, n),
-            vel=fl.vel.reshape(K, n, 2),
-            offset=fl.offset.reshape(K, n, 2),
-            leader=lead,
-            leader_pos=leader_pos,
-            leader_theta=leader_theta,
-            reference=ref,
-            params=self.law_params,
-            memory=self.law_memory,
-            **context_fields(self.range_sensor),
+        return stacked_law_context(
+            self, t, ref, self.leader, self.law_params, self.law_memory
         )
 
     def _plan(self) -> None:

@@ -1,9 +1,9 @@
 """The stages the loop runs world by world, each on its world's rows.
 
 What is not a function of the stacked rows of all worlds: a formation law or a
-strategy registered without ``batched=True`` (and each world's own law while it can
-re-form), the detector, the reconfiguration, the safety filter and the open-loop
-command schedules. Each is called with the world's
+strategy registered without ``batched=True`` (and a plug-in law while its world can
+re-form), a detector or a safety filter without it, a reconfiguration's events and
+the open-loop command schedules. Each is called with the world's
 :class:`~sandbox.loop.worlds.WorldState` (its fleet viewing the world's rows) or a
 context of those rows, inside the one pass of the loop; a plug-in that fails there
 ends its world alone. :class:`WorldStages` is a part of
@@ -153,18 +153,37 @@ class WorldStages:
         return known
 
     def _reconfigure(self, t: float, known: np.ndarray) -> None:
-        """Each world's reconfiguration reacts to what its platoon believes."""
+        """Each world's reconfiguration reacts to what its platoon believes.
+
+        Only the worlds with something to do are called: those whose belief changed
+        since their last call and those waiting for the period after an event
+        (:attr:`~sandbox.behaviour.reconfigure.Reconfiguration.waiting`). A world
+        that re-formed hands its new leader and estimators to the stacked law.
+        """
+        K, n, stacked = self.K, self.n, self._stacked_law
+        due = (known != self._reacted).reshape(K, n).any(axis=1)
+        due[list(self._waiting)] = True
+        due &= self.live & self._reconfigurable
+        if not due.any():
+            return
         self._view_worlds()
-        for w in self._live_worlds():
-            s = self.states[w]
-            if s.reconfiguration is None:
-                continue
-            s.known_failed = known[self._rows(w)]
+        self._waiting = set()
+        for w in map(int, np.flatnonzero(due)):
+            s, rows = self.states[w], self._rows(w)
+            s.known_failed = known[rows]
+            if stacked is not None:
+                stacked.before_event(w, s)
             try:
-                s.reconfiguration.react(s, t, known[self._rows(w)])
+                re_formed = s.reconfiguration.react(s, t, known[rows])
             except PluginRunError as exc:
                 self._plugin_failed(w, exc)
-            self.fleet.offset[self._rows(w)] = s.fleet.offset
+                re_formed = False
+            self.fleet.offset[rows] = s.fleet.offset
+            self._reacted[rows] = known[rows]
+            if s.reconfiguration.waiting:
+                self._waiting.add(w)
+            if re_formed and stacked is not None:
+                stacked.after_event(w, s)
         self._track_rows = np.flatnonzero(self.tracks_reference)
         if self.K == 1:
             self.leader = self.states[0].leader

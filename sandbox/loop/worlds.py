@@ -31,7 +31,13 @@ from sandbox.errors import PluginRunError
 from sandbox.geometry.neighbours import NeighbourList
 from sandbox.loop.run_info import run_description
 from sandbox.loop.state import Fleet, uniform
-from sandbox.model.failures import FailureSchedule, within_drive
+from sandbox.model.failures import (
+    FailureSchedule,
+    rule_of,
+    ruled_commands,
+    within_drive,
+    within_drives,
+)
 from sandbox.model.obstacle_field import ObstacleField
 from sandbox.physics.interface import Physics
 from sandbox.plugins.registration import (
@@ -178,12 +184,18 @@ def law_context_of(
     )
 
 
+#: From this many active failures on, the built-in kinds are applied at once.
+RULED_FROM = 4
+
+
 class StackedFailures:
     """The failure schedules of K worlds as one, a row per failure (world by world).
 
-    The same onsets, the same kind functions called with the same values, and the
-    same acceleration limit as :class:`~sandbox.model.failures.FailureSchedule` of
-    each world alone.
+    The same onsets, the same commands and the same acceleration limit as
+    :class:`~sandbox.model.failures.FailureSchedule` of each world alone: the
+    built-in kinds of every world at once by their elementwise rules
+    (:func:`~sandbox.model.failures.ruled_commands`), a plug-in kind's function
+    failure after failure (and all of them when one vehicle has two at once).
     """
 
     def __init__(self, schedules: Sequence[FailureSchedule], n: int) -> None:
@@ -212,6 +224,11 @@ class StackedFailures:
         )
         self.immovable = np.array([k.options["immovable"] for k in kinds], dtype=bool)
         self.N = len(schedules) * n
+        # The built-in kinds' elementwise rules (rule 0: the function is called).
+        rules = [rule_of(f, p) for f, p in zip(funcs, self.params, strict=True)]
+        self.rule = np.array([r[0] for r in rules], dtype=np.intp).reshape(-1)
+        self.v1_param = np.array([r[1] for r in rules], dtype=float).reshape(-1)
+        self.v2_param = np.array([r[2] for r in rules], dtype=float).reshape(-1)
 
     def __len__(self) -> int:
         return len(self.specs)
@@ -256,7 +273,18 @@ class StackedFailures:
             return v1, v2, failed, frozen, errors
         v1, v2 = v1.copy(), v2.copy()
         broken: set[int] = set()
-        for k in np.flatnonzero(self.active(t, live)):
+        active = np.flatnonzero(self.active(t, live))
+        rows = self.vehicle[active]
+        # Built-in kinds only, one a vehicle, enough of them to pay the numpy calls:
+        # at once; else one after the other (the same numbers either way).
+        if (
+            len(active) >= RULED_FROM
+            and self.rule[active].all()
+            and len(np.unique(rows)) == len(rows)
+        ):
+            self._apply_rules(active, v1, v2, last_v1, accel_step, failed, frozen)
+            return v1, v2, failed, frozen, errors
+        for k in active:
             w = int(self.world[k])
             if w in broken:
                 continue
@@ -283,6 +311,23 @@ class StackedFailures:
             failed[i] = True
             frozen[i] |= not self.controlled[k]
         return v1, v2, failed, frozen, errors
+
+    def _apply_rules(self, ruled, v1, v2, last_v1, accel_step, failed, frozen) -> None:
+        """The built-in failures ``ruled`` at once, each on its own vehicle."""
+        i = self.vehicle[ruled]
+        out_v1, out_v2 = ruled_commands(
+            self.rule[ruled],
+            self.v1_param[ruled],
+            self.v2_param[ruled],
+            v1[i],
+            self.v2_onset[ruled],
+        )
+        step = np.broadcast_to(accel_step, (self.N,))[i]
+        movable = ~self.immovable[ruled]  # within the drive's max_accel, as alone
+        v1[i] = np.where(movable, within_drives(out_v1, last_v1[i], step), out_v1)
+        v2[i] = out_v2
+        failed[i] = True
+        frozen[i] |= ~self.controlled[ruled]
 
 
 class StackedDifference:

@@ -84,6 +84,44 @@ def crash(ctx: FailureContext) -> tuple[float, float]:
     return 0.0, 0.0
 
 
+#: The built-in kinds as elementwise rules (:func:`ruled_commands`), by function.
+_RULES = {stuck_steering: 1, stop: 2, crash: 2, spin: 3, uncontrolled: 4}
+
+
+def rule_of(func, params: dict) -> tuple[int, float, float]:
+    """``(rule, v1, v2)`` of a failure for :func:`ruled_commands`; rule 0: none.
+
+    A built-in kind's function has a rule, its parameters given as numbers (NaN: a
+    ``stuck_steering`` without ``v2``); any other function is called as it is.
+    """
+    rule = _RULES.get(func, 0)
+    v1 = (params.get("v1") or 0.0) if rule == 4 else 0.0
+    v2 = params.get("v2")
+    if rule == 1:
+        v2 = np.nan if v2 is None else v2
+    else:
+        v2 = (v2 or 0.0) if rule in (3, 4) else 0.0
+    return rule, float(v1), float(v2)
+
+
+def ruled_commands(
+    rule: np.ndarray,
+    v1_param: np.ndarray,
+    v2_param: np.ndarray,
+    v1: np.ndarray,
+    v2_onset: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The commands of many built-in failures at once, the numbers of their functions.
+
+    ``rule``, ``v1_param``, ``v2_param`` as :func:`rule_of` gives them, ``v1`` the
+    controller's speed and ``v2_onset`` the turn rate at onset, one entry per failure.
+    """
+    out_v1 = np.where(rule == 1, v1, np.where(rule == 4, v1_param, 0.0))
+    held = np.where(np.isnan(v2_param), v2_onset, v2_param)  # stuck_steering
+    out_v2 = np.where(rule == 1, held, np.where(rule >= 3, v2_param, 0.0))
+    return out_v1, out_v2
+
+
 def within_drive(v1: float, last_v1: float, step: float) -> float:
     """The speed [m/s] a drive applies when a failure asks for ``v1`` [m/s].
 
@@ -93,6 +131,13 @@ def within_drive(v1: float, last_v1: float, step: float) -> float:
     (0.95, 0.0)
     """
     return min(max(v1, last_v1 - step), last_v1 + step)
+
+
+def within_drives(v1: np.ndarray, last_v1: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """:func:`within_drive` elementwise: the numbers of Python's ``min`` and ``max``."""
+    low, high = last_v1 - step, last_v1 + step
+    v1 = np.where(low > v1, low, v1)  # max(v1, low): low only when strictly greater
+    return np.where(high < v1, high, v1)
 
 
 class FailureSchedule:

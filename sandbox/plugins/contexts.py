@@ -147,7 +147,10 @@ class LawContext:
     offset : ndarray (n, 2) [m]
         The vehicles' ``offset`` (delta1, delta2).
     leader : int
-        Index of the leader, -1 if none.
+        Index of the leader, -1 if none. A built-in law of K worlds that re-form
+        apart (``reconfigure:``, ``on_leader_failure:``) gets each world's, an int
+        array of shape (K,), with ``leader_pos`` and ``leader_theta`` each world's
+        leader's; a plug-in law is then called world by world.
     leader_pos : ndarray (2,) [m] or None
     leader_theta : float [rad] or None
     reference : tuple of ndarray (2,) or None

@@ -1,0 +1,210 @@
+"""One formation law for K worlds that re-form apart (reconfiguration and handover).
+
+Without ``reconfigure:`` and ``on_leader_failure:`` the worlds of a loop share their
+leader's index and their law's history, and the loop evaluates one law on the stacked
+arrays (``(K, n, 2)``). A reconfiguration (:mod:`sandbox.behaviour.reconfigure`)
+changes one world's leader, offsets and estimators at that world's own events.
+:class:`StackedLaw` keeps the one law through them:
+
+- each world has its own leader index, and the leader's pose is gathered world by
+  world (:func:`stacked_law_context`);
+- the law's offsets are the stacked offsets of all worlds, which the loop overwrites
+  with each world's new ones after an event;
+- each estimator of eqs. (8)-(9) and (18)-(19) keeps a history per world
+  (:class:`WorldsDifference`), so that a world re-seeded at its event restarts its
+  own history alone.
+
+At an event the world's reconfiguration acts on the world's own law as a single run
+does (:meth:`StackedLaw.before_event` first gives that law the tangent angle of eq.
+(15), the one state of the law's slots besides the offsets and the leader); after it,
+the world's re-seeded estimators are spliced into the stacked law
+(:meth:`StackedLaw.after_event`). A world whose law is replaced (the virtual leader
+of ``on_leader_failure: virtual``) leaves the stacked law and evaluates its own from
+then on, world by world. Only the built-in laws are stacked this way, since the loop
+knows their state (offsets, estimators, tangent); a plug-in law is called world by
+world while its worlds can re-form. Each world's numbers are those it has alone
+(``tests/test_one_loop.py``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from sandbox.behaviour.ranges import context_fields
+from sandbox.model.laws import BackwardDifference
+from sandbox.plugins.registration import LawContext, make_law
+
+if TYPE_CHECKING:
+    from sandbox.loop.simulation import Simulation
+    from sandbox.loop.worlds import WorldState
+
+
+class WorldsDifference(BackwardDifference):
+    """A :class:`~sandbox.model.laws.BackwardDifference` of K worlds, a history each.
+
+    The signal has a leading world axis; world ``w``'s estimates are the numbers a
+    :class:`~sandbox.model.laws.BackwardDifference` of that world alone gives, its
+    history restarted by :meth:`restart`.
+
+    Parameters
+    ----------
+    shared : BackwardDifference
+        The estimator of all worlds so far (one history), whose state is taken over.
+    K : int
+        The number of worlds.
+    """
+
+    def __init__(self, shared: BackwardDifference, K: int) -> None:
+        super().__init__(shared.h)
+        self.count = np.full(K, shared.count, dtype=np.int64)
+        self.prev_x, self.prev_v = shared.prev_x, shared.prev_v
+
+    def update(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Feed every world's value at the current step; return ``(x', x'')``."""
+        x = np.array(x, dtype=float)
+        if self.prev_x is None:  # no world has a history yet
+            v, a = np.zeros_like(x), np.zeros_like(x)
+        else:
+            count = self.count.reshape((-1,) + (1,) * (x.ndim - 1))
+            v = np.where(count >= 1, (x - self.prev_x) / self.h, 0.0)  # eq. (8)
+            a = np.where(count >= 2, (v - self.prev_v) / self.h, 0.0)  # eq. (9)
+        self.prev_x, self.prev_v = x, v
+        self.count += 1
+        return v, a
+
+    def reset(self) -> None:
+        """Forget every world's history."""
+        self.count[:] = 0
+
+    def restart(self, w: int, alone: BackwardDifference) -> None:
+        """Give world ``w`` the history of ``alone``, its estimator in a run alone.
+
+        The arrays are replaced, not written into: the estimates handed out this
+        period (the plan's ``x_ref'``, ``x_ref''``) may view them.
+        """
+        self.count[w] = alone.count
+        # The stacked law has been evaluated before any event (the plan comes first).
+        if alone.prev_x is None or self.prev_x is None:
+            return
+        for name in ("prev_x", "prev_v"):
+            mine = np.array(getattr(self, name), dtype=float)
+            mine[w] = getattr(alone, name)
+            setattr(self, name, mine)
+
+
+class StackedLaw:
+    """The built-in law of K re-forming worlds as one (see the module docstring).
+
+    Parameters
+    ----------
+    sim : Simulation
+        The loop of K > 1 worlds; its stacked offsets are the law's.
+    """
+
+    def __init__(self, sim: Simulation) -> None:
+        spec = sim.scenario.formation
+        offset = sim.fleet.offset.reshape(sim.K, sim.n, 2)  # a view: events write it
+        self.law = make_law(spec.law, spec.params, offset, sim.h)
+        self.params = dict(spec.params)
+        self.memory: dict = {}
+        #: Each world's leader (-1: none), as its reconfiguration last set it.
+        self.leaders = np.array([s.leader for s in sim.states], dtype=np.intp)
+        #: The worlds that evaluate their own law (their law was replaced).
+        self.own = np.zeros(sim.K, dtype=bool)
+        self._laws = [s.law for s in sim.states]  # each world's law at the start
+
+    def targets(self, sim: Simulation, t: float, ref: tuple | None) -> list:
+        """Every world's slots, ``x_ref'`` and ``x_ref''``, each of shape (K n, 2)."""
+        K, n, N = sim.K, sim.n, sim.N
+        ctx = stacked_law_context(sim, t, ref, self.leaders, self.params, self.memory)
+        triple = [
+            np.broadcast_to(a, (K, n, 2)).reshape(N, 2) for a in self.law.targets(ctx)
+        ]
+        worlds = np.flatnonzero(self.own & sim.live)
+        if len(worlds) == 0:
+            return triple
+        triple = [np.array(a, dtype=float) for a in triple]
+        sim._view_worlds()
+        for w in worlds:
+            s, rows = sim.states[w], sim._rows(int(w))
+            parts = s.law.targets(s.law_context(t, ref))
+            for a, part in zip(triple, parts, strict=True):
+                a[rows] = part
+        return triple
+
+    def before_event(self, w: int, state: WorldState) -> None:
+        """Give world ``w``'s own law the stacked law's tangent angle, eq. (15)."""
+        if not self.own[w]:
+            state.law._tangent = self.law._tangent
+
+    def after_event(self, w: int, state: WorldState) -> None:
+        """Take in world ``w``'s re-formed law (its leader and re-seeded estimators).
+
+        Called after an event that changed the world's configuration: its own law
+        was re-seeded on the new offsets and leader. A world whose law was replaced
+        evaluates its own from now on.
+        """
+        if self.own[w]:
+            return
+        if state.law is not self._laws[w]:
+            self.own[w] = True
+            return
+        self.leaders[w] = state.leader
+        for name, value in vars(self.law).items():
+            if not isinstance(value, BackwardDifference):
+                continue
+            if not isinstance(value, WorldsDifference):
+                value = WorldsDifference(value, len(self.leaders))
+                setattr(self.law, name, value)
+            value.restart(w, getattr(state.law, name))
+
+
+def stacked_law_context(
+    sim: Simulation,
+    t: float,
+    ref: tuple | None,
+    leaders: np.ndarray | int,
+    params: dict[str, Any],
+    memory: dict[str, Any],
+) -> LawContext:
+    """What the one law of K worlds sees: arrays with a leading world axis.
+
+    ``leaders`` is the leader's index, one for every world (an int) or each world's
+    (an array of K); the leader's pose, shape (K, 1, 2) and (K, 1), is the believed
+    one (:attr:`~sandbox.loop.simulation.Simulation.believed`), the truth without
+    sensing.
+    """
+    K, n, fl = sim.K, sim.n, sim.fleet
+    src = fl.pos if sim.believed is None else sim.believed[:, :2]
+    heading = fl.theta if sim.believed is None else sim.believed[:, 2]
+    if np.ndim(leaders) == 0:
+        lead = int(leaders)
+        if lead < 0:
+            leader_pos = leader_theta = None
+        else:
+            leader_pos = np.ascontiguousarray(src.reshape(K, n, 2)[:, lead : lead + 1])
+            leader_theta = np.ascontiguousarray(
+                heading.reshape(K, n)[:, lead : lead + 1]
+            )
+    else:  # each world's own leader (-1, for a law without one: any row)
+        lead = leaders
+        worlds, rows = np.arange(K), np.maximum(leaders, 0)
+        leader_pos = src.reshape(K, n, 2)[worlds, rows][:, None, :]
+        leader_theta = heading.reshape(K, n)[worlds, rows][:, None]
+    return LawContext(
+        t=t,
+        dt=sim.h,
+        pos=fl.pos.reshape(K, n, 2),
+        theta=fl.theta.reshape(K, n),
+        vel=fl.vel.reshape(K, n, 2),
+        offset=fl.offset.reshape(K, n, 2),
+        leader=lead,
+        leader_pos=leader_pos,
+        leader_theta=leader_theta,
+        reference=ref,
+        params=params,
+        memory=memory,
+        **context_fields(sim.range_sensor),
+    )
