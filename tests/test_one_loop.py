@@ -125,7 +125,7 @@ CASES = {
         "failures/column_close",
         ["duration=3", "sensing.position_noise=0.02", "sensing.delay=0.02"],
     ),
-    "command_schedules": ("paper/stabilization", ["duration=3"]),
+    "command_schedules": ("paper/leader_ref_drift", ["duration=3"]),
     "range_sensors_sensed_obstacles": (
         "failures/obstacle_field",
         [
@@ -393,3 +393,30 @@ def test_every_failure_kind_of_many_worlds_at_once_gives_the_bytes_alone(tmp_pat
     assert len(scenarios) >= RULED_FROM > 1  # at once together, one by one alone
     runs = assert_batch_is_alone(scenarios, tmp_path)
     assert all(r.failed[-1, 1] for r in runs[:4]) and not runs[4].failed[-1, 1]
+
+
+def test_command_schedules_of_many_worlds_at_once_give_the_bytes_alone(tmp_path):
+    # Each world's leader has its own schedule (rows at other times, another count,
+    # zero before its first row): the loop looks the rows in force up for all worlds
+    # at once (StackedCommands), only when some schedule passes a row.
+    schedules = [
+        "[[0.0, 1.0, 0.2], [1.5, 1.0, 0.0]]",
+        "[[0.5, 0.8, 0.1], [1.0, 1.2, -0.2], [2.5, 0.0, 0.0]]",
+        "[[0.0, 1.0, 0.0]]",
+    ]
+    scenarios = [
+        load_scenario(
+            "paper/leader_ref_drift",
+            overrides=["duration=3", f"seed={k}", f"vehicles[0].drive.schedule={rows}"],
+        )
+        for k, rows in enumerate(schedules)
+    ]
+    assert len({structure_key(sc) for sc in scenarios}) == 1
+    runs = assert_batch_is_alone(scenarios, tmp_path)
+    # the commands applied are the rows in force (the first sample of each period)
+    cmd = runs[1].cmd[:, 0]
+    t = runs[1].t
+    assert np.all(cmd[t < 0.5] == 0.0)
+    assert np.allclose(cmd[(t >= 1.0) & (t < 2.5)], [1.2, -0.2])
+    assert np.all(cmd[t >= 2.5] == 0.0)
+

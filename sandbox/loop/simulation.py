@@ -16,11 +16,11 @@ worlds' vehicles (``K * n`` rows, world after world; a single run is K = 1):
 4. **record** a sample every ``record_every`` periods, and the loop metrics;
 5. **advance**: write the commands to the physics and step it ``substeps`` times.
 
-The built-ins (laws, strategies, failure kinds, filter, detectors, sensing, range
-sensors) and plug-ins registered with ``batched=True`` are called once for all
-worlds; a built-in law stays one call while the worlds re-form apart, each with its
-own leader and estimators (:mod:`sandbox.loop.stacked_law`). A reconfiguration's
-event, command schedules and other plug-ins run world by world inside the same loop
+The built-ins (laws, strategies, failure kinds, command schedules, filter,
+detectors, sensing, range sensors) and plug-ins registered with ``batched=True`` are
+called once for all worlds; a built-in law stays one call while the worlds re-form
+apart, each with its own leader and estimators (:mod:`sandbox.loop.stacked_law`). A
+reconfiguration's event and other plug-ins run world by world inside the same loop
 (:mod:`sandbox.loop.world_stages`), only for the worlds concerned. Each world's
 numbers are those it has alone: the functions are elementwise over rows, neighbour
 pairs never cross worlds, and every world keeps its own random streams, memories and
@@ -65,6 +65,7 @@ from sandbox.loop.stepping import WorldsPhysics
 from sandbox.loop.tally import LoopTally
 from sandbox.loop.world_stages import WorldStages
 from sandbox.loop.worlds import (
+    StackedCommands,
     StackedDifference,
     StackedFailures,
     WorldDifference,
@@ -276,12 +277,7 @@ class Simulation(StepAPI, Ending, WorldStages):
         if self._detecting and K > 1:
             if get("detector", first.detection.method).options.get("batched"):
                 self._detection = Detection.stack([s.detection for s in self.states])
-        self._schedules = [w for w, s in enumerate(self.states) if s.schedules]
-        for state in self.states:
-            state.next_change, state.scheduled = 0, np.zeros((len(state.schedules), 2))
-            changes = [tab[:, 0] for tab in state.schedules.values()]
-            state.changes = np.unique(np.concatenate(changes or [[]]))
-            state.schedule_rows = np.array(list(state.schedules), dtype=np.intp)
+        self._schedules = StackedCommands(self.states, n)
         self.k = 0
         self.recorder = WorldsRecorder(self.steps // self.record_every + 1, K, n)
         self.tally = LoopTally(K, n, self.h)
@@ -610,11 +606,11 @@ class Simulation(StepAPI, Ending, WorldStages):
         if self._schedules:
             if external is not None:  # an override of the target drives the vehicle
                 v1c, v2c = v1.copy(), v2.copy()
-                self._scheduled_commands(t, v1, v2)
+                self._schedules.apply(t, v1, v2)
                 v1[external], v2[external] = v1c[external], v2c[external]
                 passive = passive & ~external
             else:
-                self._scheduled_commands(t, v1, v2)
+                self._schedules.apply(t, v1, v2)
         if commands is not None:
             rows, mask = commands
             v1 = np.where(mask, self._command_limits(rows[:, 0]), v1)

@@ -2,8 +2,8 @@
 
 What is not a function of the stacked rows of all worlds: a formation law or a
 strategy registered without ``batched=True`` (and a plug-in law while its world can
-re-form), a detector or a safety filter without it, a reconfiguration's events and
-the open-loop command schedules. Each is called with the world's
+re-form), a detector or a safety filter without it, and a reconfiguration's events.
+Each is called with the world's
 :class:`~sandbox.loop.worlds.WorldState` (its fleet viewing the world's rows) or a
 context of those rows, inside the one pass of the loop; a plug-in that fails there
 ends its world alone. :class:`WorldStages` is a part of
@@ -281,23 +281,3 @@ class WorldStages:
             np.broadcast_to(np.asarray(out[0], dtype=float), (N,)).copy(),
             np.broadcast_to(np.asarray(out[1], dtype=float), (N,)).copy(),
         )
-
-    def _scheduled_commands(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
-        """Overwrite the open-loop vehicles' commands with their schedules at ``t``.
-
-        A row ``(t_k, v1, v2)`` holds from ``t_k`` until the next row (zero before the
-        first). The rows in force are looked up only when ``t`` passes a row time of
-        some schedule of the world.
-        """
-        now = t + 1e-12
-        for w in self._schedules:
-            s = self.states[w]
-            changes = s.changes
-            if s.next_change < len(changes) and changes[s.next_change] <= now:
-                s.next_change = int(np.searchsorted(changes, now, side="right"))
-                for k, table in enumerate(s.schedules.values()):
-                    row = np.searchsorted(table[:, 0], now, side="right") - 1
-                    s.scheduled[k] = (table[row, 1], table[row, 2]) if row >= 0 else 0.0
-            rows = w * self.n + s.schedule_rows
-            v1[rows] = s.scheduled[:, 0]
-            v2[rows] = s.scheduled[:, 1]

@@ -11,7 +11,8 @@ the safety filter) is given the world's :class:`WorldState`, which carries the n
 single run's loop had (``fleet``, ``leader``, ``law``, ``seen``, ``world``, ...), with
 ``fleet`` viewing the world's rows of the stacked arrays.
 
-:class:`StackedFailures` are the failure schedules of K worlds as one, and
+:class:`StackedFailures` are the failure schedules of K worlds as one,
+:class:`StackedCommands` their open-loop command schedules, and
 :class:`StackedDifference` the backward differences of the recovery shift with a
 history per world; the neighbour pairs of K worlds (never across worlds) are
 :class:`~sandbox.geometry.neighbours.WorldPairs`.
@@ -371,3 +372,64 @@ class WorldDifference:
     def reset(self) -> None:
         """Forget this world's history."""
         self._stacked.reset(self._w)
+
+
+class StackedCommands:
+    """The open-loop command schedules of K worlds (``drive: {type: commands}``).
+
+    A schedule's row ``(t_k, v1, v2)`` holds from ``t_k`` until its next row (zero
+    before its first). The rows in force of every schedule of every world are looked
+    up at once, and only when ``t`` passes a row time of some schedule; in between
+    the same commands are written again.
+
+    Parameters
+    ----------
+    states : sequence of WorldState
+        The worlds, each with its ``schedules`` (vehicle index to table).
+    n : int
+        Vehicles per world.
+    """
+
+    def __init__(self, states: Sequence[WorldState], n: int) -> None:
+        rows, tables = [], []
+        for w, state in enumerate(states):
+            for i, table in state.schedules.items():
+                rows.append(w * n + i)
+                tables.append(np.asarray(table, dtype=float).reshape(-1, 3))
+        #: The stacked row of each schedule's vehicle.
+        self.rows = np.array(rows, dtype=np.intp)
+        self._length = np.array([len(tab) for tab in tables], dtype=np.intp)
+        self._start = (np.cumsum(self._length) - self._length).astype(np.intp)
+        # every table's rows one after the other, and a row of zeros at the end
+        table = np.concatenate([*tables, np.zeros((1, 3))])
+        self._times, self._v1, self._v2 = table[:, 0], table[:, 1], table[:, 2]
+        #: How many rows of each schedule are in force (have started) so far.
+        self._started = np.zeros(len(rows), dtype=np.intp)
+        self._next = float(self._times[self._start].min()) if rows else np.inf
+        self._v1_now = np.zeros(len(rows))
+        self._v2_now = np.zeros(len(rows))
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def apply(self, t: float, v1: np.ndarray, v2: np.ndarray) -> None:
+        """Write the rows in force at ``t`` into the scheduled vehicles' commands."""
+        now = t + 1e-12
+        if self._next <= now:  # some schedule passes a row: look them up again
+            length, start = self._length, self._start
+            while True:
+                more = self._started < length
+                at = start + np.minimum(self._started, length - 1)
+                due = more & (self._times[at] <= now)
+                if not due.any():
+                    break
+                self._started += due
+            more = self._started < length
+            upcoming = self._times[start + np.minimum(self._started, length - 1)]
+            self._next = float(upcoming[more].min()) if more.any() else np.inf
+            held = self._started > 0
+            at = start + np.maximum(self._started - 1, 0)
+            self._v1_now = np.where(held, self._v1[at], 0.0)
+            self._v2_now = np.where(held, self._v2[at], 0.0)
+        v1[self.rows] = self._v1_now
+        v2[self.rows] = self._v2_now
