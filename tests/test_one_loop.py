@@ -419,4 +419,3 @@ def test_command_schedules_of_many_worlds_at_once_give_the_bytes_alone(tmp_path)
     assert np.all(cmd[t < 0.5] == 0.0)
     assert np.allclose(cmd[(t >= 1.0) & (t < 2.5)], [1.2, -0.2])
     assert np.all(cmd[t >= 2.5] == 0.0)
-
