@@ -18,12 +18,12 @@ At an event the world's reconfiguration acts on the world's own law as a single 
 does (:meth:`StackedLaw.before_event` first gives that law the tangent angle of eq.
 (15), the one state of the law's slots besides the offsets and the leader); after it,
 the world's re-seeded estimators are spliced into the stacked law
-(:meth:`StackedLaw.after_event`). A world whose law is replaced (the virtual leader
-of ``on_leader_failure: virtual``) leaves the stacked law and evaluates its own from
-then on, world by world. Only the built-in laws are stacked this way, since the loop
-knows their state (offsets, estimators, tangent); a plug-in law is called world by
-world while its worlds can re-form. Each world's numbers are those it has alone
-(``tests/test_one_loop.py``).
+(:meth:`StackedLaw.after_event`). The worlds whose leader the virtual leader replaced
+(``on_leader_failure: virtual``) follow a second stacked law, the virtual leader's of
+eq. (13), with each world's tangent angle where the reference rests. Only the
+built-in laws are stacked this way, since the loop knows their state (offsets,
+estimators, tangent); a plug-in law is called world by world while its worlds can
+re-form. Each world's numbers are those it has alone (``tests/test_one_loop.py``).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sandbox.behaviour.ranges import context_fields
-from sandbox.model.laws import BackwardDifference
+from sandbox.model.laws import BackwardDifference, VirtualLeaderFormation
 from sandbox.plugins.registration import LawContext, make_law
 
 if TYPE_CHECKING:
@@ -105,15 +105,18 @@ class StackedLaw:
 
     def __init__(self, sim: Simulation) -> None:
         spec = sim.scenario.formation
-        offset = sim.fleet.offset.reshape(sim.K, sim.n, 2)  # a view: events write it
-        self.law = make_law(spec.law, spec.params, offset, sim.h)
+        self._offset = sim.fleet.offset.reshape(sim.K, sim.n, 2)  # a view: events write
+        self._h = sim.h
+        self.law = make_law(spec.law, spec.params, self._offset, sim.h)
         self.params = dict(spec.params)
         self.memory: dict = {}
         #: Each world's leader (-1: none), as its reconfiguration last set it.
         self.leaders = np.array([s.leader for s in sim.states], dtype=np.intp)
-        #: The worlds that evaluate their own law (their law was replaced).
-        self.own = np.zeros(sim.K, dtype=bool)
-        self._laws = [s.law for s in sim.states]  # each world's law at the start
+        #: The worlds whose leader the virtual leader replaced (they follow it).
+        self.virtual = np.zeros(sim.K, dtype=bool)
+        #: The virtual leader's law of those worlds (eq. (13)), None before the first.
+        self.virtual_law: Any = None
+        self._laws = [s.law for s in sim.states]  # each world's law object
 
     def targets(self, sim: Simulation, t: float, ref: tuple | None) -> list:
         """Every world's slots, ``x_ref'`` and ``x_ref''``, each of shape (K n, 2)."""
@@ -122,34 +125,37 @@ class StackedLaw:
         triple = [
             np.broadcast_to(a, (K, n, 2)).reshape(N, 2) for a in self.law.targets(ctx)
         ]
-        worlds = np.flatnonzero(self.own & sim.live)
-        if len(worlds) == 0:
+        if self.virtual_law is None:
             return triple
-        triple = [np.array(a, dtype=float) for a in triple]
-        sim._view_worlds()
-        for w in worlds:
-            s, rows = sim.states[w], sim._rows(int(w))
-            parts = s.law.targets(s.law_context(t, ref))
-            for a, part in zip(triple, parts, strict=True):
-                a[rows] = part
-        return triple
+        # The virtual leader's slots of every world, taken where it leads.
+        rows = np.repeat(self.virtual, n)[:, None]
+        virtual = self.virtual_law.targets(ctx)
+        return [
+            np.where(rows, np.broadcast_to(v, (K, n, 2)).reshape(N, 2), a)
+            for v, a in zip(virtual, triple, strict=True)
+        ]
 
     def before_event(self, w: int, state: WorldState) -> None:
-        """Give world ``w``'s own law the stacked law's tangent angle, eq. (15)."""
-        if not self.own[w]:
+        """Give world ``w``'s own law its tangent angle of eq. (15) in the stack."""
+        if self.virtual[w]:
+            tangent = np.broadcast_to(self.virtual_law._tangent, (len(self.virtual), 1))
+            state.law._tangent = float(tangent[w, 0])
+        else:
             state.law._tangent = self.law._tangent
 
     def after_event(self, w: int, state: WorldState) -> None:
         """Take in world ``w``'s re-formed law (its leader and re-seeded estimators).
 
         Called after an event that changed the world's configuration: its own law
-        was re-seeded on the new offsets and leader. A world whose law was replaced
-        evaluates its own from now on.
+        was re-seeded on the new offsets and leader, or replaced by the virtual
+        leader's (``on_leader_failure: virtual``), which it follows from now on in
+        :attr:`virtual_law`.
         """
-        if self.own[w]:
-            return
-        if state.law is not self._laws[w]:
-            self.own[w] = True
+        if state.law is not self._laws[w]:  # the virtual leader took over
+            self._laws[w] = state.law
+            self._join_virtual(w, state.law)
+        if self.virtual[w]:
+            self._set_tangent(w, state.law._tangent)
             return
         self.leaders[w] = state.leader
         for name, value in vars(self.law).items():
@@ -159,6 +165,28 @@ class StackedLaw:
                 value = WorldsDifference(value, len(self.leaders))
                 setattr(self.law, name, value)
             value.restart(w, getattr(state.law, name))
+
+    def _join_virtual(self, w: int, law: Any) -> None:
+        """World ``w`` follows the virtual leader (its law ``law``, without history)."""
+        if not isinstance(law, VirtualLeaderFormation) or (
+            self.virtual_law is not None and law.rotate != self.virtual_law.rotate
+        ):
+            raise RuntimeError(f"a handover to an unexpected law: {law!r}")
+        if self.virtual_law is None:
+            params = {"rotate": law.rotate}
+            self.virtual_law = make_law("virtual", params, self._offset, self._h)
+        self.virtual[w] = True
+
+    def _set_tangent(self, w: int, angle: float) -> None:
+        """World ``w``'s tangent angle [rad] in the virtual leader's law.
+
+        One float while the reference moves (eq. (15) gives every world the same), a
+        column of each world's at rest (each keeps its own last one).
+        """
+        law, K = self.virtual_law, len(self.virtual)
+        tangent = np.array(np.broadcast_to(law._tangent, (K, 1)), dtype=float)
+        tangent[w, 0] = angle
+        law._tangent = tangent
 
 
 def stacked_law_context(
