@@ -424,3 +424,53 @@ def test_command_schedules_of_many_worlds_at_once_give_the_bytes_alone(tmp_path)
     assert np.all(cmd[t < 0.5] == 0.0)
     assert np.allclose(cmd[(t >= 1.0) & (t < 2.5)], [1.2, -0.2])
     assert np.all(cmd[t >= 2.5] == 0.0)
+
+
+def test_the_platoons_sections_of_many_worlds_are_called_once_for_all(tmp_path):
+    # Each recovery and safety section of the worlds' platoons is one call for all
+    # worlds (loop/platoon_sections.py), a world's own beta on its rows; the files
+    # are those of each world alone.
+    from sandbox.loop.platoon_sections import StackedSections
+
+    scenarios = [
+        load_scenario("traffic/head_on_narrow", overrides=["duration=6", *extra])
+        for extra in (["seed=0"], ["seed=1", "recovery.beta=2.0"], ["seed=2"])
+    ]
+    assert len({structure_key(sc) for sc in scenarios}) == 1
+    sim = Simulation.stacked(scenarios)
+    assert isinstance(sim.strategy.__self__, StackedSections)
+    assert isinstance(sim._filter.__self__, StackedSections) and sim._filter_batched
+    runs = sim.run_all()
+    assert any(r.info["safety"]["active_steps"] for r in runs)  # the filter acted
+    assert_batch_is_alone(scenarios, tmp_path, runs)
+    # A world whose platoons divide into other sections (its second platoon's own
+    # beta): the sections are called world by world, with the same bytes.
+    own = scenarios[0].with_overrides(
+        "platoons[1].recovery={strategy: continuous, beta: 3.0, R: 3d, r: 1.5d, "
+        "tangential: 1.0, leader_avoids: true}"
+    )
+    apart = [scenarios[2], own]
+    assert StackedSections.build(Simulation.stacked(apart)) is None
+    assert_batch_is_alone(apart, tmp_path / "apart")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "name",
+    [
+        "failure_stop",
+        "head_on_narrow",
+        "intersection_four",
+        "intersection_two",
+        "merge_one_lane",
+        "merge_split",
+        "overtaking",
+        "roundabout",
+    ],
+)
+def test_every_traffic_scenario_in_one_loop_gives_the_runs_alone(name, tmp_path):
+    scenarios = [
+        load_scenario(f"traffic/{name}", overrides=["duration=15", f"seed={seed}"])
+        for seed in range(3)
+    ]
+    assert_batch_is_alone(scenarios, tmp_path)

@@ -458,7 +458,6 @@ class Platoons:
         """
         v1 = np.array(ctx.v1, dtype=float)
         v2 = np.array(ctx.v2, dtype=float)
-        totals: dict[str, Any] = {}
         for k, (spec, flt, mask) in enumerate(self._filters):
             if flt is None:
                 continue
@@ -472,13 +471,23 @@ class Platoons:
             out = flt(sub)
             v1[mask] = np.broadcast_to(np.asarray(out[0], dtype=float), (self.n,))[mask]
             v2[mask] = np.broadcast_to(np.asarray(out[1], dtype=float), (self.n,))[mask]
-            for key, value in self._filter_stats[k].items():
-                if isinstance(value, int | float) and not isinstance(value, bool):
-                    totals[key] = totals.get(key, 0) + value
-                else:
-                    totals.setdefault(key, value)
-        ctx.stats.update(totals)
+        ctx.stats.update(sum_counters(self._filter_stats))
         return v1, v2
+
+
+def sum_counters(sections: list[dict[str, Any]]) -> dict[str, Any]:
+    """The counters of a world's safety sections as one: numbers summed.
+
+    A value that is not a number (a flag, a list) is the first section's.
+    """
+    totals: dict[str, Any] = {}
+    for stats in sections:
+        for key, value in stats.items():
+            if isinstance(value, int | float) and not isinstance(value, bool):
+                totals[key] = totals.get(key, 0) + value
+            else:
+                totals.setdefault(key, value)
+    return totals
 
 
 def _sections(

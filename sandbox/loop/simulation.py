@@ -56,6 +56,7 @@ from sandbox.loop.collector import collector_off, frozen_heap
 from sandbox.loop.divergence import RowsView, diverged
 from sandbox.loop.ending import Ending
 from sandbox.loop.plan import Plan, structure_key
+from sandbox.loop.platoon_sections import StackedSections
 from sandbox.loop.platoons import Platoons
 from sandbox.loop.recording import WorldsRecorder
 from sandbox.loop.stacked_law import StackedLaw, stacked_law_context
@@ -301,6 +302,11 @@ class Simulation(StepAPI, Ending, WorldStages):
             self.strategy, self._filter = s0.strategy, s0._filter
             self._strategy_per_world = self.K > 1
             self._filter_batched = False
+            sections = StackedSections.build(self)  # each section once for all worlds
+            if sections is not None:
+                self.strategy, self._strategy_per_world = sections.strategy, False
+                if self._filter is not None:
+                    self._filter, self._filter_batched = sections.filter, True
             if self.K == 1:
                 self._avoid_candidates = s0._avoid_candidates
             for state in self.states:

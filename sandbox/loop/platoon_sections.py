@@ -1,0 +1,156 @@
+"""The platoons' recovery and safety sections of K worlds, each called once for all.
+
+In a world with ``platoons:`` the platoons that share a recovery section are shifted
+by one call of its strategy, and those that share a safety section filtered by one
+call of its filter, on the whole fleet with only the section's rows kept
+(:meth:`~sandbox.loop.platoons.Platoons.strategy`,
+:meth:`~sandbox.loop.platoons.Platoons.filter`). The worlds of a loop share their
+platoons' structure (:func:`~sandbox.loop.plan.structure_key`), so section by
+section the call can take the stacked rows of all worlds instead of one world's:
+:class:`StackedSections` makes one call of each section for K worlds, with that
+section's parameters (``beta`` a row each where the worlds differ), its neighbour
+pairs within each world (:class:`~sandbox.geometry.neighbours.WorldPairs`), one
+memory for the section, and each world's counters of the section, which it sums
+into the world's filter counters as a world alone does.
+
+It is taken when every world divides its platoons into the same sections (the same
+values but ``beta``, on the same rows) and every section's strategy and filter are
+registered with ``batched=True`` (the built-ins are); otherwise the sections are
+called world by world. Each world's numbers are those it has alone
+(``tests/test_one_loop.py``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, WorldPairs
+from sandbox.loop.platoons import sum_counters
+from sandbox.plugins.registration import get
+
+if TYPE_CHECKING:
+    from sandbox.loop.simulation import Simulation
+
+
+class StackedSections:
+    """Each recovery and safety section of K worlds' platoons, one call for all.
+
+    Build it with :meth:`build` (None where the worlds' sections differ or a
+    section's plug-in is not batched).
+    """
+
+    def __init__(self, sim: Simulation) -> None:
+        self._sim = sim
+        self._platoons = [s.platoons for s in sim.states]
+        K, n = sim.K, sim.n
+        first = self._platoons[0]
+        self._recoveries = []
+        for j, (spec, (strategy, _), mask) in enumerate(first._recoveries):
+            params = dict(spec.params)
+            if "beta" in params:  # each world's beta on its rows where they differ
+                betas = [p._recoveries[j][0].params["beta"] for p in self._platoons]
+                if any(b != betas[0] for b in betas):
+                    params["beta"] = np.repeat(np.array(betas, dtype=float), n)[:, None]
+            rows = np.tile(mask, K)
+            self._recoveries.append(
+                (strategy, params, spec.R, WorldPairs(K, n, spec.R), rows)
+            )
+        self._filters = [
+            (flt, dict(spec.params), np.tile(mask, K), {})
+            for spec, flt, mask in first._filters
+        ]
+
+    @classmethod
+    def build(cls, sim: Simulation) -> StackedSections | None:
+        """The sections of the loop's K > 1 worlds, or None (world by world)."""
+        platoons = [s.platoons for s in sim.states]
+        if sim.K < 2 or platoons[0] is None or sim.n > BRUTE_FORCE_MAX:
+            return None
+        first = platoons[0]
+        for p in platoons[1:]:
+            if not _same_sections(first._recoveries, p._recoveries, "beta"):
+                return None
+            if not _same_sections(first._filters, p._filters, None):
+                return None
+        sensing = [s.sensing if s.broadcast is not None else None for s in sim.states]
+        if any(x != sensing[0] for x in sensing):
+            return None
+        for spec, _, _ in first._recoveries:
+            if not get("strategy", spec.strategy).options.get("batched", False):
+                return None
+        for spec, flt, _ in first._filters:
+            if flt is not None and not get("filter", spec.filter).options.get(
+                "batched", False
+            ):
+                return None
+        return cls(sim)
+
+    def _index(self) -> np.ndarray:
+        """Each vehicle's platoon in its world (merges and splits change it)."""
+        return np.concatenate([p.index for p in self._platoons])
+
+    def strategy(self, ctx: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The recovery shift of every vehicle of every world, a call per section.
+
+        ``ctx`` is the loop's :class:`~sandbox.plugins.StrategyContext` of the rows
+        of all worlds.
+        """
+        N = len(ctx.pos)
+        shift, active = np.zeros((N, 2)), np.zeros(N, dtype=bool)
+        index = self._index()
+        for strategy, params, R, pairs, rows in self._recoveries:
+            sub = dataclasses.replace(
+                ctx,
+                may_avoid=ctx.may_avoid & rows,
+                params=dict(params),
+                R=R,
+                neighbours=pairs,
+                platoon=index,
+            )
+            s, a = strategy(sub)
+            shift[rows] = np.asarray(s, dtype=float)[rows]
+            active[rows] = np.asarray(a, dtype=bool)[rows]
+        return shift, active
+
+    def filter(self, ctx: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The filtered commands of every world, a call per safety section.
+
+        ``ctx`` is the loop's batched :class:`~sandbox.plugins.FilterContext`; each
+        section's counters are kept per world, and summed into each world's.
+        """
+        N = len(ctx.pos)
+        v1 = np.array(ctx.v1, dtype=float)
+        v2 = np.array(ctx.v2, dtype=float)
+        index = self._index()
+        for j, (flt, params, rows, memory) in enumerate(self._filters):
+            if flt is None:
+                continue
+            sub = dataclasses.replace(
+                ctx,
+                params=dict(params),
+                memory=memory,
+                platoon=index,
+                world_stats=[p._filter_stats[j] for p in self._platoons],
+            )
+            out = flt(sub)
+            v1[rows] = np.broadcast_to(np.asarray(out[0], dtype=float), (N,))[rows]
+            v2[rows] = np.broadcast_to(np.asarray(out[1], dtype=float), (N,))[rows]
+        for state, p in zip(self._sim.states, self._platoons, strict=True):
+            state.filter_stats.update(sum_counters(p._filter_stats))
+        return v1, v2
+
+
+def _same_sections(mine: list, theirs: list, free: str | None) -> bool:
+    """Whether two worlds' sections have the same values (but ``free``) and rows."""
+    if len(mine) != len(theirs):
+        return False
+    for (a, _, mask_a), (b, _, mask_b) in zip(mine, theirs, strict=True):
+        if free is not None and free in a.params:
+            a = dataclasses.replace(a, params={**a.params, free: None})
+            b = dataclasses.replace(b, params={**b.params, free: None})
+        if a != b or not np.array_equal(mask_a, mask_b):
+            return False
+    return True
