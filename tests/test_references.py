@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from sandbox.model.references import (
+    TABULATED_REFERENCES,
     CircleReference,
     LemniscateReference,
     LineReference,
@@ -165,3 +166,18 @@ def test_waypoints_spline_matches_the_dense_solve(count: int) -> None:
     np.testing.assert_allclose(p, p0, rtol=0, atol=1e-13 * scale)
     np.testing.assert_allclose(dp, d1 * speed, rtol=0, atol=1e-11 * scale)
     np.testing.assert_allclose(ddp, d2 * speed**2, rtol=0, atol=1e-9 * scale)
+
+
+@pytest.mark.parametrize("name", sorted(REFERENCES))
+def test_a_tabulated_reference_gives_the_bits_of_each_time_alone(name: str) -> None:
+    # The loop evaluates these for many periods at once and reads row k at t = k h
+    # (loop/simulation.py, loop/platoon_targets.py): every row must be the scalar
+    # evaluation's bits, past the end of a waypoint path too.
+    ref = REFERENCES[name]
+    assert type(ref) in TABULATED_REFERENCES
+    h = 0.01
+    rows = ref.evaluate(np.array([k * h for k in range(2500)]))
+    for k in range(0, 2500, 3):
+        alone = ref.evaluate(k * h)
+        for table, value in zip(rows, alone, strict=True):
+            assert table[k].tobytes() == np.asarray(value, dtype=float).tobytes()

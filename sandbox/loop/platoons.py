@@ -6,7 +6,9 @@ physics and one record; what differs by platoon is planned here, on plain arrays
 - **targets** (:meth:`Platoons.targets`): each platoon's reference is evaluated and
   its law sees only its own rows (positions, headings, velocities, offsets), its own
   leader and its own reference; the slots, ``x_ref'`` and ``x_ref''`` of all platoons
-  are stitched into the fleet-wide arrays the controller reads;
+  are stitched into the fleet-wide arrays the controller reads
+  (:mod:`sandbox.loop.platoon_targets`, which evaluates the ``virtual`` and
+  ``leader_ref`` laws of all platoons, of one world or of K, in one pass);
 - **recovery** (:meth:`Platoons.strategy`): the platoons that share a recovery
   section are shifted by one call of its strategy, with the whole fleet as
   neighbours and only their own rows allowed to avoid;
@@ -34,7 +36,8 @@ import numpy as np
 from sandbox.geometry.neighbours import NeighbourList
 from sandbox.loop import platoon_events
 from sandbox.loop.platoon_reconfigure import PlatoonView, merged_records
-from sandbox.plugins.registration import LawContext, get, make_law, runnable
+from sandbox.loop.platoon_targets import platoon_targets
+from sandbox.plugins.registration import get, make_law, runnable
 
 
 class _One:
@@ -89,6 +92,8 @@ class _One:
         tracks &= ~commanded[self.rows]
         self.track = self.rows[tracks]
         self.commanded = self.rows[commanded[self.rows]]
+        #: The reference's rows of some periods from the first (loop/platoon_targets).
+        self.reference_rows: tuple[int, Any] = (0, None)
 
     @classmethod
     def of(cls, group: Any, offset: np.ndarray, commanded: np.ndarray, h: float):
@@ -317,6 +322,19 @@ class Platoons:
             The first platoon's reference point (NaN without one); each platoon's
             reference is drawn from its own section.
         """
+        self.prepare(t, pos, theta, vel)
+        slot, v_ref, a_ref, point = platoon_targets(
+            [(0, self)], t, pos, theta, vel, seen, self.n, 1
+        )
+        return slot, v_ref, a_ref, point[0]
+
+    def prepare(self, t: float, pos: np.ndarray, theta: np.ndarray, vel: np.ndarray):
+        """The merges and splits due at ``t``, and each platoon's reconfiguration.
+
+        What :meth:`targets` does before the laws are evaluated
+        (:func:`~sandbox.loop.platoon_targets.platoon_targets`, which a loop of K
+        worlds calls once for all of them after each world's ``prepare``).
+        """
         before = (len(self.fired), self._records)
         if self.events:  # merges and splits due now (loop/platoon_events.py)
             self._fire(t, (pos, theta, vel))
@@ -327,48 +345,6 @@ class Platoons:
         if self.timeline is not None and before != (len(self.fired), self._records):
             # offsets change only at an event or a reconfiguration
             self._note_formation(t)
-        n = self.n
-        slot = np.full((n, 2), np.nan)
-        v_ref = np.zeros((n, 2))
-        a_ref = np.zeros((n, 2))
-        point = np.full(2, np.nan)
-        for k, g in enumerate(self.groups):
-            ref = g.reference.evaluate(t) if g.reference is not None else None
-            if k == 0 and ref is not None:
-                point = np.asarray(ref[0], dtype=float)
-            rows = g.rows
-            if g.law is not None:
-                lead = g.leader
-                if lead < 0:
-                    lpos, ltheta = None, None
-                elif seen is None:
-                    lpos, ltheta = pos[rows[lead]], float(theta[rows[lead]])
-                else:
-                    lpos, ltheta = seen[rows[lead], :2], float(seen[rows[lead], 2])
-                ctx = LawContext(
-                    t=t,
-                    dt=self.h,
-                    pos=pos[rows],
-                    theta=theta[rows],
-                    vel=vel[rows],
-                    offset=g.offset,
-                    leader=lead,
-                    leader_pos=lpos,
-                    leader_theta=ltheta,
-                    reference=ref,
-                    params=g.params,
-                    memory=g.memory,
-                    platoon=np.full(len(rows), k, dtype=np.intp),
-                )
-                shape = (len(rows), 2)
-                s, v, a = (np.asarray(x, dtype=float) for x in g.law.targets(ctx))
-                slot[rows] = np.broadcast_to(s, shape)
-                v_ref[rows] = np.broadcast_to(v, shape)
-                a_ref[rows] = np.broadcast_to(a, shape)
-            if ref is not None and len(g.track):
-                slot[g.track], v_ref[g.track], a_ref[g.track] = ref[0], ref[1], ref[2]
-            slot[g.commanded] = np.nan
-        return slot, v_ref, a_ref, point
 
     def _make(self, name, rows, offset, law, params, reference, leader) -> _One:
         return _One(

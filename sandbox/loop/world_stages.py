@@ -16,6 +16,7 @@ import numpy as np
 
 from sandbox.behaviour.ranges import avoid_field, context_fields
 from sandbox.errors import PluginRunError
+from sandbox.loop.platoon_targets import platoon_targets
 from sandbox.plugins.registration import FilterContext, StrategyContext
 
 
@@ -64,18 +65,20 @@ class WorldStages:
         return [int(w) for w in np.flatnonzero(self.live)]
 
     def _platoon_targets(self, t: float) -> tuple[np.ndarray, ...]:
-        """Each world's platoons' slots, ``x_ref'``, ``x_ref''`` and points."""
-        fl, N = self.fleet, self.N
-        slot, v_ref, a_ref = (np.full((N, 2), np.nan) for _ in range(3))
-        point = np.full((self.K, 2), np.nan)
+        """Each world's platoons' slots, ``x_ref'``, ``x_ref''`` and points.
+
+        Each live world's merges, splits and reconfigurations first, world by world;
+        then the laws of all worlds' platoons together (loop/platoon_targets.py).
+        """
+        fl = self.fleet
+        worlds = []
         for w in self._live_worlds():
             s, rows = self.states[w], self._rows(w)
-            seen = None if self.believed is None else self.believed[rows]
-            got = s.platoons.targets(
-                t, fl.pos[rows], fl.theta[rows], fl.vel[rows], seen
-            )
-            slot[rows], v_ref[rows], a_ref[rows], point[w] = got
-        return slot, v_ref, a_ref, point
+            s.platoons.prepare(t, fl.pos[rows], fl.theta[rows], fl.vel[rows])
+            worlds.append((w, s.platoons))
+        return platoon_targets(
+            worlds, t, fl.pos, fl.theta, fl.vel, self.believed, self.n, self.K
+        )
 
     def _world_law_targets(self, t: float, ref: tuple | None) -> list[np.ndarray]:
         """Each world's own law on its rows (reconfiguring worlds, plug-in laws)."""

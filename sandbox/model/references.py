@@ -187,8 +187,16 @@ _CENTER = Param("point", (0.0, 0.0), unit="m", doc="Centre")
 
 
 #: References whose ``evaluate`` is elementwise in ``t``: the loop evaluates them for
-#: every step time at once (each row the bits of the scalar evaluation at ``t_k``).
-TABULATED_REFERENCES = (PointReference, LineReference, CircleReference)
+#: many step times at once (each row the bits of the scalar evaluation at ``t_k``,
+#: ``tests/test_references.py``). Every built-in type is: numpy's functions and the
+#: spline's piecewise polynomials are evaluated point by point.
+TABULATED_REFERENCES = (
+    PointReference,
+    LineReference,
+    CircleReference,
+    LemniscateReference,
+    WaypointsReference,
+)
 
 
 def _check_waypoints(values: dict, section: dict) -> list[tuple]:
