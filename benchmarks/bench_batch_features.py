@@ -32,13 +32,14 @@ import time
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_sweep import step_bare  # noqa: E402
+
 from sandbox.loop.simulation import Simulation  # noqa: E402
-from sandbox.physics.world import World  # noqa: E402
 from sandbox.scenario import load_scenario  # noqa: E402
 
 #: (row name, bundled scenario, overrides).
@@ -56,18 +57,7 @@ SCENES = (
 
 def bare_physics(sc, runs: int) -> float:
     """Seconds per run to step the scene's world for its duration, fixed commands."""
-    steps = int(round(sc.duration / sc.dt))
-    n = len(sc.vehicles)
-    theta = np.array([v.pose[2] for v in sc.vehicles])
-    h, sub = sc.dt, sc.substeps
-    t0 = time.perf_counter()
-    for _ in range(runs):
-        world = World(sc.vehicles, sc.obstacles, sc.metrics.contact_release, sub)
-        world.write_commands(theta, np.full(n, 1.0), np.zeros(n), h)
-        space, dt = world.space, h / sub
-        for _ in range(steps * sub):
-            space.step(dt)
-    return (time.perf_counter() - t0) / runs
+    return step_bare(sc, runs) / runs
 
 
 def single(sc, runs: int) -> float:

@@ -74,7 +74,15 @@ def scenario():
 
 def bare_physics(runs: int) -> float:
     """Seconds to step ``runs`` fresh worlds of the scenario for its whole duration."""
-    sc = scenario()
+    return step_bare(scenario(), runs)
+
+
+def step_bare(sc, runs: int) -> float:
+    """Seconds to step ``runs`` fresh worlds of ``sc`` for its whole duration.
+
+    The scenario's pymunk world (its bodies, motor joints and obstacles), fixed
+    commands: no controller, no law, no recording.
+    """
     steps = int(round(sc.duration / sc.dt))
     n = len(sc.vehicles)
     theta = np.array([v.pose[2] for v in sc.vehicles])

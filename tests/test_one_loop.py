@@ -9,6 +9,8 @@ manifest) must be the same bytes.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from helpers import write_yaml
@@ -454,20 +456,16 @@ def test_the_platoons_sections_of_many_worlds_are_called_once_for_all(tmp_path):
     assert_batch_is_alone(apart, tmp_path / "apart")
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(
-    "name",
-    [
-        "failure_stop",
-        "head_on_narrow",
-        "intersection_four",
-        "intersection_two",
-        "merge_one_lane",
-        "merge_split",
-        "overtaking",
-        "roundabout",
-    ],
+#: The traffic scenes but failure_crash (test_several_platoons_... runs it).
+TRAFFIC = sorted(
+    p.stem
+    for p in (Path(__file__).parents[1] / "scenarios" / "traffic").glob("*.yaml")
+    if p.stem != "failure_crash"
 )
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", TRAFFIC)
 def test_every_traffic_scenario_in_one_loop_gives_the_runs_alone(name, tmp_path):
     scenarios = [
         load_scenario(f"traffic/{name}", overrides=["duration=15", f"seed={seed}"])
