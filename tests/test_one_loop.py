@@ -19,7 +19,7 @@ from sandbox import compute_metrics, load_scenario
 from sandbox.errors import PluginRunError
 from sandbox.loop.plan import structure_key
 from sandbox.loop.simulation import Simulation
-from sandbox.plugins import register_strategy, unregister
+from sandbox.plugins import register_law, register_strategy, unregister
 from sandbox.run import recorder as recording
 from sandbox.run.output import write_run_dir
 
@@ -472,3 +472,34 @@ def test_every_traffic_scenario_in_one_loop_gives_the_runs_alone(name, tmp_path)
         for seed in range(3)
     ]
     assert_batch_is_alone(scenarios, tmp_path)
+
+
+def test_a_batched_plug_in_law_is_called_world_by_world_while_worlds_re_form(tmp_path):
+    # The loop restarts one world's history only in the built-in laws: a plug-in law
+    # registered with batched=True is called with each world's rows while its worlds
+    # can re-form, and gives the bytes alone.
+    shapes = []
+
+    @register_law("ahead_of_leader", batched=True)
+    def ahead_of_leader(ctx):
+        shapes.append(np.shape(ctx.pos))
+        slot = np.asarray(ctx.leader_pos) + ctx.offset
+        return slot, np.zeros_like(slot), np.zeros_like(slot)
+
+    try:
+        scenarios = [
+            load_scenario(
+                "failures/column_close",
+                overrides=["duration=4", "formation={law: ahead_of_leader}", *extra],
+            )
+            for extra in (["seed=0"], ["seed=1", "failures[0].at=2.0"])
+        ]
+        sim = Simulation.stacked(scenarios)
+        assert sim._law_per_world and sim._stacked_law is None
+        runs = sim.run_all()
+        assert set(shapes) == {(len(scenarios[0].vehicles), 2)}  # one world's rows
+        assert [len(r.info["reassignments"]) for r in runs] == [1, 1]
+        assert [r.status for r in runs] == ["ok", "ok"]  # the stopped one: no slot
+        assert_batch_is_alone(scenarios, tmp_path, runs)
+    finally:
+        unregister("law", "ahead_of_leader")

@@ -96,3 +96,40 @@ def test_a_plugin_that_exits_while_it_is_imported_is_one_clear_error(
     assert main(["run", str(path), "--out", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err
     assert "plug-in cannot be loaded" in err and "SystemExit" in err
+
+
+def test_a_law_may_leave_a_vehicle_without_a_slot_without_a_target() -> None:
+    # A reconfiguration gives a vehicle without a slot a NaN offset; a plug-in law's
+    # NaN target there is what the built-in laws give (no slot), not an error, while
+    # a NaN for a vehicle with a slot still ends the run.
+    import numpy as np
+
+    from sandbox.errors import PluginRunError
+    from sandbox.plugins import register_law
+    from sandbox.plugins.registration import LawContext, make_law
+
+    @register_law("offset_only")
+    def offset_only(ctx):
+        return ctx.offset, np.zeros_like(ctx.offset), np.zeros_like(ctx.offset)
+
+    def context(offset):
+        n = len(offset)
+        return LawContext(
+            t=0.0, dt=0.01, pos=np.zeros((n, 2)), theta=np.zeros(n),
+            vel=np.zeros((n, 2)), offset=offset, leader=0, leader_pos=None,
+            leader_theta=None, reference=None, params={}, memory={},
+        )  # fmt: skip
+
+    law = make_law("offset_only", {}, np.zeros((3, 2)), 0.01)
+    slotless = np.array([[0.0, 0.0], [np.nan, np.nan], [-1.0, 0.5]])
+    slot = law.targets(context(slotless))[0]
+    assert np.isnan(slot[1]).all() and np.isfinite(slot[[0, 2]]).all()
+
+    @register_law("nan_everywhere")
+    def nan_everywhere(ctx):
+        nan = np.full(np.shape(ctx.offset), np.nan)
+        return nan, nan, nan
+
+    law = make_law("nan_everywhere", {}, np.zeros((3, 2)), 0.01)
+    with pytest.raises(PluginRunError, match="NaN"):
+        law.targets(context(slotless))

@@ -617,13 +617,36 @@ def _non_finite(value: Any) -> bool:
     return False
 
 
-def _guard_call(func: Callable[..., Any], label: str) -> Callable[..., Any]:
+def _law_non_finite(out: Any, ctx: Any) -> bool:
+    """Whether a law's targets hold a NaN or an infinity for a vehicle with a slot.
+
+    A vehicle without a slot (a NaN offset: a reconfiguration left it none) may have
+    NaN targets, as the built-in laws give it.
+    """
+    offset = np.asarray(getattr(ctx, "offset", None), dtype=float)
+    if offset.ndim < 2 or not isinstance(out, tuple | list):
+        return _non_finite(out)
+    slotted = np.isfinite(offset).all(axis=-1)
+    for part in out:
+        try:
+            rows = np.broadcast_to(np.asarray(part, dtype=float), offset.shape)
+        except (TypeError, ValueError):
+            return _non_finite(out)
+        if not np.isfinite(rows[slotted]).all():
+            return True
+    return False
+
+
+def _guard_call(
+    func: Callable[..., Any], label: str, law: bool = False
+) -> Callable[..., Any]:
     def guarded(*args: Any, **kwargs: Any) -> Any:
         try:
             out = func(*args, **kwargs)
         except (Exception, SystemExit) as exc:  # a user's code may raise anything
             raise PluginRunError(label, _raised(exc)) from None
-        if _non_finite(out):
+        bad = _law_non_finite(out, args[0]) if law and args else _non_finite(out)
+        if bad:
             raise PluginRunError(label, "returned a NaN or an infinity")
         return out
 
@@ -631,14 +654,27 @@ def _guard_call(func: Callable[..., Any], label: str) -> Callable[..., Any]:
 
 
 class _GuardedInstance:
-    """A plug-in class's instance whose method the loop calls, guarded."""
+    """A plug-in class's instance whose method the loop calls, guarded.
+
+    A deep copy (a reconfiguration evaluates a copy of the law) guards the copy's
+    own method.
+    """
 
     def __init__(self, inner: Any, method: str, label: str) -> None:
-        self._inner = inner
-        setattr(self, method, _guard_call(getattr(inner, method), label))
+        self._inner, self._method, self._label = inner, method, label
+        law = method == _METHODS["law"]  # NaN targets allowed where no slot is
+        setattr(self, method, _guard_call(getattr(inner, method), label, law))
 
     def __getattr__(self, name: str) -> Any:
+        if name in ("_inner", "_method", "_label"):  # not set yet: being built
+            raise AttributeError(name)
         return getattr(self._inner, name)
+
+    def __deepcopy__(self, memo: dict) -> _GuardedInstance:
+        import copy
+
+        inner = copy.deepcopy(self._inner, memo)
+        return _GuardedInstance(inner, self._method, self._label)
 
 
 def _raised(exc: BaseException) -> str:
