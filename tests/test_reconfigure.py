@@ -335,3 +335,31 @@ def test_reconfiguring_worlds_in_one_loop_give_the_runs_alone() -> None:
         assert run.info["slots"] == alone.info["slots"]
         assert run.info["reassignments"] == alone.info["reassignments"]
     assert runs[3].info["reassignments"] != runs[0].info["reassignments"]
+
+
+def test_a_plug_in_law_class_is_reconfigured_as_the_built_in_it_copies(
+    registry_snapshot,
+):
+    # A user's FormationLaw subclass is guarded (plugins/registration.py); the
+    # reassignment writes its offsets (delta) and deep-copies it through the guard,
+    # so it re-forms exactly as the built-in law it copies.
+    from sandbox.model.laws import FixedFormation
+    from sandbox.plugins import register_law
+
+    @register_law("fixed_copy", frame="world")
+    class FixedCopy(FixedFormation):
+        """The fixed law, as a user's class."""
+
+    runs = [
+        Simulation(
+            load_scenario(
+                "failures/column_close",
+                overrides=["duration=6", f"formation={{law: {law}}}"],
+            )
+        ).run()
+        for law in ("fixed", "fixed_copy")
+    ]
+    assert [r.status for r in runs] == ["ok", "ok"]
+    assert len(runs[1].info["reassignments"]) == 1
+    assert runs[0].pose.tobytes() == runs[1].pose.tobytes()
+    assert runs[0].info["slots"] == runs[1].info["slots"]

@@ -656,19 +656,27 @@ def _guard_call(
 class _GuardedInstance:
     """A plug-in class's instance whose method the loop calls, guarded.
 
-    A deep copy (a reconfiguration evaluates a copy of the law) guards the copy's
-    own method.
+    Its other attributes are the instance's, read and written through (a
+    reconfiguration sets a law's ``delta``). A deep copy (a reconfiguration evaluates
+    a copy of the law) guards the copy's own method.
     """
 
+    _OWN = ("_inner", "_method", "_label")
+
     def __init__(self, inner: Any, method: str, label: str) -> None:
-        self._inner, self._method, self._label = inner, method, label
+        for name, value in zip(self._OWN, (inner, method, label), strict=True):
+            object.__setattr__(self, name, value)
         law = method == _METHODS["law"]  # NaN targets allowed where no slot is
-        setattr(self, method, _guard_call(getattr(inner, method), label, law))
+        guarded = _guard_call(getattr(inner, method), label, law)
+        object.__setattr__(self, method, guarded)
 
     def __getattr__(self, name: str) -> Any:
-        if name in ("_inner", "_method", "_label"):  # not set yet: being built
+        if name in self._OWN:  # not set yet: being built
             raise AttributeError(name)
         return getattr(self._inner, name)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        setattr(self._inner, name, value)
 
     def __deepcopy__(self, memo: dict) -> _GuardedInstance:
         import copy
