@@ -70,13 +70,16 @@ def platoon_targets(
     v_ref, a_ref = np.zeros((N, 2)), np.zeros((N, 2))
     point = np.full((K, 2), np.nan)
     buckets: dict[tuple, list] = {}
-    tracked: list[tuple[np.ndarray, tuple]] = []
+    tracked: list[tuple[np.ndarray, tuple]] = []  # rows that track their reference
+    commanded: list[np.ndarray] = []
     for w, platoons in worlds:
         base = w * n
         for k, g in enumerate(platoons.groups):
             ref = reference_at(g, t, platoons.h)
             if k == 0 and ref is not None:
-                point[w] = np.asarray(ref[0], dtype=float)
+                point[w] = ref[0]
+            if len(g.commanded):
+                commanded.append(base + g.commanded)
             law = g.law
             if law is not None:
                 if _stackable(law, g, ref):
@@ -94,11 +97,13 @@ def platoon_targets(
     src = pos if seen is None else seen[:, :2]
     for (cls, rotate, _), members in buckets.items():
         _stacked(cls, rotate, members, src, slot, v_ref, a_ref)
-    for rows, ref in tracked:
-        slot[rows], v_ref[rows], a_ref[rows] = ref[0], ref[1], ref[2]
-    for w, platoons in worlds:
-        for g in platoons.groups:
-            slot[w * n + g.commanded] = np.nan
+    if tracked:  # each row its platoon's reference
+        rows = np.concatenate([r for r, _ in tracked])
+        counts = [len(r) for r, _ in tracked]
+        for out, j in ((slot, 0), (v_ref, 1), (a_ref, 2)):
+            out[rows] = np.repeat(np.stack([ref[j] for _, ref in tracked]), counts, 0)
+    if commanded:
+        slot[np.concatenate(commanded)] = np.nan
     return slot, v_ref, a_ref, point
 
 
@@ -120,8 +125,8 @@ def reference_at(g: Any, t: float, h: float) -> tuple | None:
     if rows is None or not start <= k < start + CHUNK:
         start, rows = k, ref.evaluate(np.array([(k + i) * h for i in range(CHUNK)]))
         g.reference_rows = start, rows
-    i = k - start
-    return rows[0][i].copy(), rows[1][i].copy(), rows[2][i].copy()
+    i = k - start  # views of rows never written
+    return rows[0][i], rows[1][i], rows[2][i]
 
 
 def _stackable(law: Any, g: Any, ref: tuple | None) -> bool:
@@ -192,7 +197,7 @@ def _one(platoons, g, k, t, ref, pos, theta, vel, seen, base) -> tuple:
         leader=lead,
         leader_pos=lpos,
         leader_theta=ltheta,
-        reference=ref,
+        reference=None if ref is None else tuple(np.array(x) for x in ref),
         params=g.params,
         memory=g.memory,
         platoon=np.full(len(rows), k, dtype=np.intp),
