@@ -1,14 +1,14 @@
 """The platoons' slots of one world or of K worlds, their laws evaluated together.
 
-Every platoon of every world has its own reference and law (:mod:`sandbox.loop.
-platoons`), and a merge, a split or a reconfiguration changes one world's platoons
-alone. The laws whose only state is the tangent angle of eq. (15), ``virtual`` (eq.
-(13)) and ``leader_ref`` (eq. (16)), are evaluated here for all platoons at once:
-the platoons of one law, one ``rotate`` and one size, of any worlds, are one numpy
-pass (:func:`_stacked`), each platoon's offsets, leader and reference read from it
-and its tangent written back to its law, the numbers of the law's own ``targets``
-(``tests/test_one_loop.py`` and ``tests/test_platoons.py``). Any other law (those
-with estimators, a plug-in) is called platoon by platoon as before.
+Every platoon of every world has its own reference and law
+(:mod:`sandbox.loop.platoons`), and a merge, a split or a reconfiguration changes one
+world's platoons alone. The laws whose only state is the tangent angle of eq. (15),
+``virtual`` (eq. (13)) and ``leader_ref`` (eq. (16)), are evaluated here for all
+platoons at once: the platoons of one law, one ``rotate`` and one size, of any worlds,
+are one numpy pass (:func:`_stacked`), each platoon's offsets, leader and reference
+read from it and its tangent written back to its law, the numbers of the law's own
+``targets`` (``tests/test_one_loop.py`` and ``tests/test_platoons.py``). Any other
+law (one with estimators, a plug-in) is called platoon by platoon.
 """
 
 from __future__ import annotations
@@ -110,10 +110,10 @@ def platoon_targets(
 def reference_at(g: Any, t: float, h: float) -> tuple | None:
     """Platoon ``g``'s reference ``(p, p', p'')`` at ``t`` [s] (None: it has none).
 
-    A reference elementwise in time (:data:`~sandbox.model.references.
-    TABULATED_REFERENCES`) is evaluated for :data:`CHUNK` periods at once and read
-    row by row at the loop's times ``k h`` (each row the bits of the evaluation at
-    its time); any other at ``t``.
+    A reference elementwise in time
+    (:data:`~sandbox.model.references.TABULATED_REFERENCES`) is evaluated for
+    :data:`CHUNK` periods at once and read row by row at the loop's times ``k h``
+    (each row the bits of the evaluation at its time); any other at ``t``.
     """
     ref = g.reference
     if ref is None:
