@@ -48,10 +48,10 @@ class StackedSections:
         K, n = sim.K, sim.n
         first = self._platoons[0]
         self._recoveries = []
-        for j, (spec, (strategy, _), mask) in enumerate(first._recoveries):
+        for j, (spec, (strategy, _), mask) in enumerate(first.recoveries):
             params = dict(spec.params)
             if "beta" in params:  # each world's beta on its rows where they differ
-                betas = [p._recoveries[j][0].params["beta"] for p in self._platoons]
+                betas = [p.recoveries[j][0].params["beta"] for p in self._platoons]
                 if any(b != betas[0] for b in betas):
                     params["beta"] = np.repeat(np.array(betas, dtype=float), n)[:, None]
             rows = np.tile(mask, K)
@@ -60,7 +60,7 @@ class StackedSections:
             )
         self._filters = [
             (flt, dict(spec.params), np.tile(mask, K), {})
-            for spec, flt, mask in first._filters
+            for spec, flt, mask in first.filters
         ]
 
     @classmethod
@@ -71,17 +71,17 @@ class StackedSections:
             return None
         first = platoons[0]
         for p in platoons[1:]:
-            if not _same_sections(first._recoveries, p._recoveries, "beta"):
+            if not _same_sections(first.recoveries, p.recoveries, "beta"):
                 return None
-            if not _same_sections(first._filters, p._filters, None):
+            if not _same_sections(first.filters, p.filters, None):
                 return None
         sensing = [s.sensing if s.broadcast is not None else None for s in sim.states]
         if any(x != sensing[0] for x in sensing):
             return None
-        for spec, _, _ in first._recoveries:
+        for spec, _, _ in first.recoveries:
             if not get("strategy", spec.strategy).options.get("batched", False):
                 return None
-        for spec, flt, _ in first._filters:
+        for spec, flt, _ in first.filters:
             if flt is not None and not get("filter", spec.filter).options.get(
                 "batched", False
             ):
@@ -133,13 +133,13 @@ class StackedSections:
                 params=dict(params),
                 memory=memory,
                 platoon=index,
-                world_stats=[p._filter_stats[j] for p in self._platoons],
+                world_stats=[p.filter_stats[j] for p in self._platoons],
             )
             out = flt(sub)
             v1[rows] = np.broadcast_to(np.asarray(out[0], dtype=float), (N,))[rows]
             v2[rows] = np.broadcast_to(np.asarray(out[1], dtype=float), (N,))[rows]
         for state, p in zip(self._sim.states, self._platoons, strict=True):
-            state.filter_stats.update(sum_counters(p._filter_stats))
+            state.filter_stats.update(sum_counters(p.filter_stats))
         return v1, v2
 
 

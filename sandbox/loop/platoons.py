@@ -150,7 +150,8 @@ class Platoons:
         for g, spec in zip(self.groups, scenario.platoons, strict=True):
             if not spec.scenario.recovery.leader_avoids and g.leader >= 0:
                 self.avoid_candidates[g.rows[g.leader]] = False
-        self._recoveries = _sections(
+        #: The recovery sections: ``(spec, (strategy, neighbours), rows mask)`` each.
+        self.recoveries = _sections(
             scenario.platoons,
             lambda sc: sc.recovery,
             lambda spec: (
@@ -159,7 +160,8 @@ class Platoons:
             ),
             self.n,
         )
-        self._filters = _sections(
+        #: The safety sections: ``(spec, filter or None, rows mask)`` each.
+        self.filters = _sections(
             scenario.platoons,
             lambda sc: sc.safety,
             lambda spec: (
@@ -167,8 +169,9 @@ class Platoons:
             ),
             self.n,
         )
-        self._filter_memory: list[dict] = [{} for _ in self._filters]
-        self._filter_stats: list[dict] = [{} for _ in self._filters]
+        self._filter_memory: list[dict] = [{} for _ in self.filters]
+        #: Each safety section's counters (summed into the run's by :meth:`filter`).
+        self.filter_stats: list[dict] = [{} for _ in self.filters]
         #: The platoons' own reconfigurations (:meth:`attach`), those retired by a
         #: merge or split, and the simulation.
         self.views: list[PlatoonView] = []
@@ -294,7 +297,7 @@ class Platoons:
     @property
     def filtered(self) -> bool:
         """Whether some platoon has a safety filter."""
-        return any(f is not None for _, f, _ in self._filters)
+        return any(f is not None for _, f, _ in self.filters)
 
     def targets(
         self,
@@ -397,7 +400,7 @@ class Platoons:
         """Who may avoid after a merge or split: a leader as its section says."""
         cand = self.avoid_candidates
         cand[:] = ~self.commanded
-        for spec, _, mask in self._recoveries:
+        for spec, _, mask in self.recoveries:
             for g in self.groups:
                 if g.leader >= 0 and mask[g.rows[g.leader]] and not spec.leader_avoids:
                     cand[g.rows[g.leader]] = False
@@ -411,7 +414,7 @@ class Platoons:
         """
         shift = np.zeros((self.n, 2))
         active = np.zeros(self.n, dtype=bool)
-        for spec, (strategy, neighbours), mask in self._recoveries:
+        for spec, (strategy, neighbours), mask in self.recoveries:
             sub = dataclasses.replace(
                 ctx,
                 may_avoid=ctx.may_avoid & mask,
@@ -434,20 +437,20 @@ class Platoons:
         """
         v1 = np.array(ctx.v1, dtype=float)
         v2 = np.array(ctx.v2, dtype=float)
-        for k, (spec, flt, mask) in enumerate(self._filters):
+        for k, (spec, flt, mask) in enumerate(self.filters):
             if flt is None:
                 continue
             sub = dataclasses.replace(
                 ctx,
                 params=dict(spec.params),
                 memory=self._filter_memory[k],
-                stats=self._filter_stats[k],
+                stats=self.filter_stats[k],
                 platoon=self.index,
             )
             out = flt(sub)
             v1[mask] = np.broadcast_to(np.asarray(out[0], dtype=float), (self.n,))[mask]
             v2[mask] = np.broadcast_to(np.asarray(out[1], dtype=float), (self.n,))[mask]
-        ctx.stats.update(sum_counters(self._filter_stats))
+        ctx.stats.update(sum_counters(self.filter_stats))
         return v1, v2
 
 

@@ -81,7 +81,7 @@ class WorldStages:
         )
 
     def _world_law_targets(self, t: float, ref: tuple | None) -> list[np.ndarray]:
-        """Each world's own law on its rows (reconfiguring worlds, plug-in laws)."""
+        """Each world's own law on its rows (plug-in laws, a single re-forming run)."""
         self._view_worlds()
         out = [np.zeros((self.N, 2)) for _ in range(3)]
         for w in self._live_worlds():

@@ -227,9 +227,9 @@ class StackedFailures:
         self.N = len(schedules) * n
         # The built-in kinds' elementwise rules (rule 0: the function is called).
         rules = [rule_of(f, p) for f, p in zip(funcs, self.params, strict=True)]
-        self.rule = np.array([r[0] for r in rules], dtype=np.intp).reshape(-1)
-        self.v1_param = np.array([r[1] for r in rules], dtype=float).reshape(-1)
-        self.v2_param = np.array([r[2] for r in rules], dtype=float).reshape(-1)
+        self.rule = np.array([r[0] for r in rules], dtype=np.intp)
+        self.v1_param = np.array([r[1] for r in rules], dtype=float)
+        self.v2_param = np.array([r[2] for r in rules], dtype=float)
 
     def __len__(self) -> int:
         return len(self.specs)
