@@ -58,9 +58,10 @@ Isolation
     a ``spin``; slow, not turning and short of its predicted travel is a ``stop``,
     or a ``crash`` when the vehicle was in contact within the last second or its
     last :data:`SHAPE_HISTORY` seconds of observed track fit a crash better than a
-    braked stop (:func:`stop_fits`: a wreck stops within a substep, a deceleration
-    no drive makes; see :mod:`sandbox.model.failures`). Without a declared limit the two
-    move alike and a crash in free space reads as a stop. A moving vehicle whose
+    braked stop (:func:`~sandbox.behaviour.track_fits.stop_fits`: a wreck stops
+    within a substep, a deceleration no drive makes; see
+    :mod:`sandbox.model.failures`). Without a declared limit the two move alike and a
+    crash in free space reads as a stop. A moving vehicle whose
     heading residual dominates (by summed magnitudes) is a ``stuck_steering``, or
     ``uncontrolled`` when the along-track sum is beyond 2 standard deviations too.
     Any other motion against the commands (too fast, sideways) is ``uncontrolled``.
@@ -86,6 +87,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.behaviour.track_fits import stop_fits
 from sandbox.plugins.registration import (
     DetectorContext,
     Param,
@@ -275,52 +277,6 @@ def _accumulate(st: DetectorState, i: int, k: int, sums: tuple) -> None:
         st.acc_rot0[i] = rotation[k]
     st.acc_rot[i] += rotation[k]
     st.acc_n[i] += 1
-
-
-def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]:
-    """How well a crash and a braked stop explain a track (least squares).
-
-    Parameters
-    ----------
-    t : ndarray (m,) [s]
-        Times of the observed positions.
-    s : ndarray (m,) [m]
-        The positions along the direction of travel.
-    brake : float [m/s^2]
-        The drive's braking limit (finite).
-
-    Returns
-    -------
-    crash, stop : float [m^2]
-        The least sum of squared residuals of the two models, each fitted over a
-        grid of onsets ``tau`` (the sample times) and speeds ``v``, with a free
-        offset: a crash moves at ``v`` until ``tau`` and is at rest after it; a stop
-        moves at ``v`` until ``tau`` and then brakes at ``brake`` to rest (reached at
-        ``tau + v / brake``, after ``v^2 / (2 brake)``).
-
-    >>> t = np.arange(0.0, 1.0, 0.01)
-    >>> crash, stop = stop_fits(t, np.minimum(t, 0.5), 5.0)
-    >>> bool(crash < stop)
-    True
-    """
-    t = np.asarray(t, dtype=float) - t[0]
-    s = np.asarray(s, dtype=float)
-    lag = min(10, len(t) - 1)
-    speed = np.abs(s[lag:] - s[:-lag]) / np.maximum(t[lag:] - t[:-lag], 1e-9)
-    v = np.linspace(0.0, 1.5 * float(speed.max()), 61)[:, None, None]
-    tau = t[None, :, None]
-    tt = t[None, None, :]
-    run = np.minimum(tt, tau)
-    crash = v * run
-    braking = np.clip(tt - tau, 0.0, v / brake)
-    stop = v * (run + braking) - 0.5 * brake * braking**2
-
-    def ssr(model: np.ndarray) -> float:
-        r = s - model
-        r = r - r.mean(axis=-1, keepdims=True)
-        return float((r * r).sum(axis=-1).min())
-
-    return ssr(crash), ssr(stop)
 
 
 def _recent_speed(st: DetectorState, i: int) -> float | None:
