@@ -58,7 +58,7 @@ Isolation
     a ``spin``; slow, not turning and short of its predicted travel is a ``stop``,
     or a ``crash`` when the vehicle was in contact within the last second or its
     last :data:`SHAPE_HISTORY` seconds of observed track fit a crash better than a
-    braked stop (:func:`~sandbox.behaviour.track_fits.stop_fits`: a wreck stops
+    braked stop (:func:`~sandbox.behaviour.tracks.stop_fits`: a wreck stops
     within a substep, a deceleration no drive makes; see
     :mod:`sandbox.model.failures`). Without a declared limit the two move alike and a
     crash in free space reads as a stop. A moving vehicle whose
@@ -87,7 +87,7 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.behaviour.track_fits import stop_fits
+from sandbox.behaviour.tracks import TrackHistory, stop_fits
 from sandbox.plugins.registration import (
     DetectorContext,
     Param,
@@ -206,7 +206,7 @@ class DetectorState:
     detected: np.ndarray  # latched (n,) bool
     isolating: np.ndarray  # until when the kind is still read (n,) [s]
     kinds: list  # the kind of each latched detection (n,)
-    history: object = None  # the last SHAPE_HISTORY s of (t, seen xy, fresh)
+    history: TrackHistory | None = None  # the last SHAPE_HISTORY s of seen xy
 
 
 def _start(ctx: DetectorContext) -> DetectorState:
@@ -239,6 +239,12 @@ def _start(ctx: DetectorContext) -> DetectorState:
     )
 
 
+def shape_history(ctx: DetectorContext, shape: tuple[int, ...] = (2,)) -> TrackHistory:
+    """The last :data:`SHAPE_HISTORY` s of every vehicle's observations."""
+    length = int(round(SHAPE_HISTORY / ctx.dt)) + 1
+    return TrackHistory(length, len(ctx.pos), shape)
+
+
 def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
@@ -264,8 +270,11 @@ def _advance_model(st: DetectorState, ctx: DetectorContext) -> None:
     st.travel += np.hypot(*(st.pose[:, :2] - start).T)
 
 
-def _accumulate(st: DetectorState, i: int, k: int, sums: tuple) -> None:
-    """Add window ``k`` (of the due rows) to vehicle ``i``'s sums for isolation."""
+def _accumulate(st: DetectorState, i: np.ndarray, k: np.ndarray, sums: tuple) -> None:
+    """Add windows ``k`` (of the due rows) to vehicles ``i``'s sums for isolation.
+
+    ``i`` and ``k`` are arrays of the same length (``i`` without repeats).
+    """
     z, raw, observed, travel, seconds, rotation = sums
     st.acc[i] += z[k]
     st.acc_abs[i] += np.abs(z[k])
@@ -273,10 +282,15 @@ def _accumulate(st: DetectorState, i: int, k: int, sums: tuple) -> None:
     st.acc_obs[i] += observed[k]
     st.acc_pred[i] += travel[k]
     st.acc_t[i] += seconds[k]
-    if st.acc_n[i] == 0:
-        st.acc_rot0[i] = rotation[k]
+    first = st.acc_n[i] == 0
+    st.acc_rot0[i[first]] = rotation[k[first]]
     st.acc_rot[i] += rotation[k]
     st.acc_n[i] += 1
+
+
+def _floored(x: np.ndarray) -> np.ndarray:
+    """``max(0.0, x)`` of each element as Python takes it (0.0 unless ``x > 0``)."""
+    return np.where(x > 0.0, x, 0.0)
 
 
 def _recent_speed(st: DetectorState, i: int) -> float | None:
@@ -285,18 +299,12 @@ def _recent_speed(st: DetectorState, i: int) -> float | None:
     The slope of a straight line fitted to its fresh broadcast positions; None with
     fewer than 5 of them.
     """
-    if st.history is None or not st.history:
+    history = st.history
+    if history is None or not len(history):
         return None
-    now = st.history[-1][0]
-    rows = [
-        (t, xy[i])
-        for t, xy, fresh in st.history
-        if fresh[i] and t >= now - RECENT_SPEED_WINDOW - 1e-9
-    ]
-    if len(rows) < 5:
+    t, xy = history.track(i, history.newest - RECENT_SPEED_WINDOW - 1e-9)
+    if len(t) < 5:
         return None
-    t = np.array([r[0] for r in rows])
-    xy = np.array([r[1] for r in rows])
     t = t - t.mean()
     slope = (t[:, None] * (xy - xy.mean(axis=0))).sum(axis=0) / (t * t).sum()
     return float(np.hypot(*slope))
@@ -309,11 +317,9 @@ def _stopped_by_impact(st: DetectorState, i: int, brake: float) -> bool:
     """
     if not np.isfinite(brake) or st.history is None:
         return False
-    rows = [(t, xy[i]) for t, xy, fresh in st.history if fresh[i]]
-    if len(rows) < 10:
+    t, xy = st.history.track(i)
+    if len(t) < 10:
         return False
-    t = np.array([r[0] for r in rows])
-    xy = np.array([r[1] for r in rows])
     chord = xy[-5:].mean(axis=0) - xy[:5].mean(axis=0)
     norm = float(np.hypot(*chord))
     if norm < 1e-9:
@@ -380,10 +386,8 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         return st.detected.copy(), list(st.kinds)
     p = ctx.params
     if st.history is None:
-        from collections import deque
-
-        st.history = deque(maxlen=int(round(SHAPE_HISTORY / ctx.dt)) + 1)
-    st.history.append((ctx.t, ctx.seen[:, :2].copy(), ctx.fresh.copy()))
+        st.history = shape_history(ctx)
+    st.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
     mu, lam = float(p["shift"]), float(p["lambda"])
     window = max(1, int(round(p["window"] / ctx.dt)))
     sp = np.sqrt(2.0 * ctx.position_noise**2 + p["noise_floor"] ** 2)
@@ -434,43 +438,45 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     rotation = _wrap(seen[:, 2] - st.start[rows, 2])
     seconds = st.age[rows] * ctx.dt
     window_sums = (z, raw, observed, travel, seconds, rotation)
-    for k, i in enumerate(rows):
-        if gated[k]:
-            continue
-        if st.detected[i]:
-            if ctx.t <= st.isolating[i] + 1e-9:  # the kind from more residuals
-                _accumulate(st, i, k, window_sums)
-                # The kind from all residuals so far: a vehicle still braking (a
-                # stop or a spin) or a runaway whose speed is near the commanded one
-                # is plain only once its drive has reached its faulty command.
-                st.kinds[i] = _isolate(st, i, ctx.t, ctx)
-            st.clear[i] = max(0.0, st.clear[i] - inc[k])
-            if st.clear[i] >= lam:
-                st.detected[i] = False
-                st.kinds[i] = ""
-                st.clear[i] = 0.0
-            continue
-        if st.g[i] <= 0.0:
-            st.acc[i] = 0.0
-            st.acc_abs[i] = 0.0
-            st.acc_raw[i] = 0.0
-            st.acc_obs[i] = st.acc_pred[i] = st.acc_t[i] = st.acc_rot[i] = 0.0
-            st.acc_n[i] = 0
-        st.g[i] = max(0.0, st.g[i] + inc[k])
-        if st.g[i] > 0.0:
-            _accumulate(st, i, k, window_sums)
-        if st.g[i] >= lam:
-            st.detected[i] = True
-            st.kinds[i] = _isolate(st, i, ctx.t, ctx)
-            # Read on at least until a failed drive could have braked to rest from
-            # the commanded speed, and one window more.
-            brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
-            braking = float(np.hypot(*st.vel[i])) / float(brakes[i])
-            st.isolating[i] = ctx.t + max(
-                float(p["isolation"]), braking + window * ctx.dt
-            )
-            st.g[i] = 0.0
-            st.clear[i] = 0.0
+    # Each vehicle's CUSUM alone, all vehicles at once: the rows never mix. Vehicles
+    # already detected read their kind on while isolating, and clear.
+    used = np.flatnonzero(~gated)
+    held = st.detected[rows[used]]
+    k_det, k_new = used[held], used[~held]
+    for k in k_det[ctx.t <= st.isolating[rows[k_det]] + 1e-9]:
+        i = rows[k]  # the kind from more residuals
+        _accumulate(st, np.array([i]), np.array([k]), window_sums)
+        # The kind from all residuals so far: a vehicle still braking (a stop or a
+        # spin) or a runaway whose speed is near the commanded one is plain only
+        # once its drive has reached its faulty command.
+        st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+    i_det = rows[k_det]
+    st.clear[i_det] = _floored(st.clear[i_det] - inc[k_det])
+    for i in i_det[st.clear[i_det] >= lam]:
+        st.detected[i] = False
+        st.kinds[i] = ""
+        st.clear[i] = 0.0
+    i_new = rows[k_new]
+    restart = i_new[st.g[i_new] <= 0.0]  # g left 0: new sums
+    st.acc[restart] = 0.0
+    st.acc_abs[restart] = 0.0
+    st.acc_raw[restart] = 0.0
+    st.acc_obs[restart] = st.acc_pred[restart] = 0.0
+    st.acc_t[restart] = st.acc_rot[restart] = 0.0
+    st.acc_n[restart] = 0
+    st.g[i_new] = _floored(st.g[i_new] + inc[k_new])
+    rising = st.g[i_new] > 0.0
+    _accumulate(st, i_new[rising], k_new[rising], window_sums)
+    for i in i_new[st.g[i_new] >= lam]:
+        st.detected[i] = True
+        st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+        # Read on at least until a failed drive could have braked to rest from the
+        # commanded speed, and one window more.
+        brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
+        braking = float(np.hypot(*st.vel[i])) / float(brakes[i])
+        st.isolating[i] = ctx.t + max(float(p["isolation"]), braking + window * ctx.dt)
+        st.g[i] = 0.0
+        st.clear[i] = 0.0
     st.pending[rows] = True  # the next window starts at the next observation
     return st.detected.copy(), list(st.kinds)
 

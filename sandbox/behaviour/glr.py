@@ -71,7 +71,6 @@ Contacts, isolation, clearing
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,7 +79,6 @@ from sandbox.behaviour.detection import (
     CRASH_CONTACT_WINDOW,
     RECENT_SPEED_WINDOW,
     RESIDUAL_PARAMS,
-    SHAPE_HISTORY,
     STILL_SPEED,
     DetectorState,
     _advance_model,
@@ -88,7 +86,9 @@ from sandbox.behaviour.detection import (
     _start,
     _stopped_by_impact,
     _wrap,
+    shape_history,
 )
+from sandbox.behaviour.tracks import TrackHistory
 from sandbox.plugins.registration import DetectorContext, Param, register_detector
 
 #: How long after a contact the window stays empty [s].
@@ -295,7 +295,7 @@ class GlrState:
     isolating: np.ndarray  # until when the kind is read (n,) [s]
     clearing: np.ndarray  # the window restarted after isolation (n,) bool
     kinds: list  # (n,)
-    headings: deque  # the last SHAPE_HISTORY s of (t, seen heading, fresh)
+    headings: TrackHistory  # the last SHAPE_HISTORY s of seen headings
     count: int = 0  # observations seen
 
 
@@ -315,7 +315,7 @@ def _init(ctx: DetectorContext) -> GlrState:
         ]
     )
     model = _start(ctx)
-    model.history = deque(maxlen=int(round(SHAPE_HISTORY / ctx.dt)) + 1)
+    model.history = shape_history(ctx)
     return GlrState(
         model=model,
         csum=np.zeros((n, 3)),
@@ -334,7 +334,7 @@ def _init(ctx: DetectorContext) -> GlrState:
         isolating=np.full(n, -np.inf),
         clearing=np.zeros(n, dtype=bool),
         kinds=[""] * n,
-        headings=deque(maxlen=int(round(SHAPE_HISTORY / ctx.dt)) + 1),
+        headings=shape_history(ctx, ()),
     )
 
 
@@ -383,12 +383,8 @@ def _kind(st: GlrState, i: int, t: float, ctx: DetectorContext, fit: tuple) -> s
     if slow:
         # Turning: the observed heading over the last RECENT_SPEED_WINDOW s moves
         # beyond 4 standard deviations of a difference of two noisy headings.
-        rows = [
-            (tk, h[i])
-            for tk, h, fresh in st.headings
-            if fresh[i] and tk >= t - RECENT_SPEED_WINDOW - 1e-9
-        ]
-        turn = abs(float(_wrap(np.array(rows[-1][1] - rows[0][1])))) if rows else 0.0
+        times, h = st.headings.track(i, t - RECENT_SPEED_WINDOW - 1e-9)
+        turn = abs(float(_wrap(np.array(h[-1] - h[0])))) if len(times) else 0.0
         if turn > 4.0 * math.sqrt(2.0) * st.sigma[i, 2]:
             return "spin"
         if t - model.last_contact[i] <= CRASH_CONTACT_WINDOW:
@@ -410,8 +406,8 @@ def glr(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         return st.detected.copy(), list(st.kinds)
     p = ctx.params
     model = st.model
-    model.history.append((ctx.t, ctx.seen[:, :2].copy(), ctx.fresh.copy()))
-    st.headings.append((ctx.t, ctx.seen[:, 2].copy(), ctx.fresh.copy()))
+    model.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
+    st.headings.append(ctx.t, ctx.seen[:, 2], ctx.fresh)
     _advance_model(model, ctx)
     contact = ctx.in_contact
     model.last_contact = np.where(contact, ctx.t, model.last_contact)

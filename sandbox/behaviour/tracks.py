@@ -1,4 +1,9 @@
-"""Least-squares fits of an observed track: has a vehicle crashed or braked to rest?
+"""The observed tracks of the vehicles, and what the detectors fit to them.
+
+:class:`TrackHistory` keeps the last observations of every vehicle (the broadcast
+poses a detector reads, with which of them were fresh) in ring arrays, one row per
+control period: a vehicle's track is read by slicing, not by walking a list of
+periods.
 
 :func:`stop_fits` compares two models of a track along its direction of travel, each
 fitted over a grid of speeds ``v`` (:data:`SPEEDS` of them) and onsets ``tau`` (the
@@ -26,9 +31,9 @@ A row whose estimate exceeds the least estimate by more than both rows' margins
 cannot hold the minimum, and only the others are evaluated, as numpy evaluates them
 in the whole grid (a row's elements are the same elementwise operations, and its sum
 the same reduction of a contiguous row): the fit returns the very numbers of the
-whole grid, in about 0.2 ms. Where the estimates cannot be trusted (a non-finite
-sample, a braking limit that is not a positive number) or leave too many rows, the
-whole grid is evaluated, a block of speeds at a time.
+whole grid, in about 0.5 ms. Where the estimates cannot be trusted (a non-finite
+sample, times not in order, a braking limit that is not a positive number) or leave
+too many rows, the whole grid is evaluated, a block of rows at a time.
 """
 
 from __future__ import annotations
@@ -43,6 +48,65 @@ MARGIN = 1e-8
 MOST_ROWS = 0.25
 #: Rows of the grid evaluated at once [1] (the arrays of a block stay small).
 BLOCK_ROWS = 2048
+
+
+class TrackHistory:
+    """The last ``length`` observations of ``n`` vehicles, in ring arrays.
+
+    Each :meth:`append` stores one control period: its time, every vehicle's
+    observed value (a position ``(2,)``, a heading ``()``) and whether it was fresh
+    (a new broadcast, not a held copy).
+
+    >>> h = TrackHistory(3, 2, (2,))
+    >>> for k in range(4):
+    ...     h.append(0.1 * k, np.full((2, 2), float(k)), np.array([True, k % 2 == 0]))
+    >>> t, xy = h.track(1)
+    >>> t.tolist(), xy[:, 0].tolist()
+    ([0.2], [2.0])
+    """
+
+    def __init__(self, length: int, n: int, shape: tuple[int, ...] = ()) -> None:
+        self.length = int(length)
+        self.times = np.zeros(self.length)
+        self.values = np.zeros((self.length, n, *shape))
+        self.fresh = np.zeros((self.length, n), dtype=bool)
+        self.count = 0  # periods stored, at most length
+        self._next = 0  # the slot of the next period
+
+    def __len__(self) -> int:
+        return self.count
+
+    def append(self, t: float, values: np.ndarray, fresh: np.ndarray) -> None:
+        """Store one period's observations (copied), dropping the oldest when full."""
+        k = self._next
+        self.times[k] = t
+        self.values[k] = values
+        self.fresh[k] = fresh
+        self._next = (k + 1) % self.length
+        self.count = min(self.count + 1, self.length)
+
+    @property
+    def newest(self) -> float:
+        """The time of the last period stored [s]."""
+        return float(self.times[(self._next - 1) % self.length])
+
+    def _order(self) -> np.ndarray:
+        """The slots of the stored periods, oldest first."""
+        start = (self._next - self.count) % self.length
+        return (start + np.arange(self.count)) % self.length
+
+    def track(self, i: int, since: float = -np.inf) -> tuple[np.ndarray, np.ndarray]:
+        """Vehicle ``i``'s fresh observations at or after ``since``, oldest first.
+
+        Returns
+        -------
+        t : ndarray (r,) [s]
+        values : ndarray (r, *shape)
+        """
+        order = self._order()
+        t = self.times[order]
+        rows = order[self.fresh[order, i] & (t >= since)]
+        return self.times[rows], self.values[rows, i]
 
 
 def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]:
@@ -136,7 +200,7 @@ def least_row(
     crash: bool,
     rows: np.ndarray,
 ) -> float:
-    """The least sum of squares among the grid's ``rows`` (flat indices, speed-major)."""
+    """The least sum of squares among the grid's ``rows`` (flat, speed-major)."""
     m = len(t)
     least = np.inf
     for start in range(0, len(rows), BLOCK_ROWS):

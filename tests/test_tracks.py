@@ -2,7 +2,7 @@
 
 ``grid_fits`` is the fit as it was first written (every row of the grid of speeds
 and onsets evaluated at once): the reference that
-:func:`sandbox.behaviour.track_fits.stop_fits` must equal exactly, on the tracks the
+:func:`sandbox.behaviour.tracks.stop_fits` must equal exactly, on the tracks the
 detector reads (crashes, braked stops, steady driving, noise) and on hostile ones.
 """
 
@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sandbox.behaviour import track_fits
-from sandbox.behaviour.track_fits import stop_fits
+from sandbox.behaviour import tracks
+from sandbox.behaviour.tracks import stop_fits
 
 
 def grid_fits(t, s, brake):
@@ -78,13 +78,13 @@ def test_crash_and_stop_told_apart():
 def test_few_rows_are_evaluated(monkeypatch):
     # The closed forms leave a handful of the 61 x 101 rows on a clean track.
     seen = []
-    least_row = track_fits.least_row
+    least_row = tracks.least_row
 
     def counting(t, s, v, brake, crash, rows):
         seen.append(len(rows))
         return least_row(t, s, v, brake, crash, rows)
 
-    monkeypatch.setattr(track_fits, "least_row", counting)
+    monkeypatch.setattr(tracks, "least_row", counting)
     t = np.arange(0.0, 1.01, 0.01)
     rng = np.random.default_rng(3)
     stop_fits(t, np.minimum(t, 0.5) + rng.normal(0.0, 0.01, len(t)), 5.0)
