@@ -72,6 +72,7 @@ from sandbox.loop.worlds import (
     WorldDifference,
     WorldState,
 )
+from sandbox.model.dynamics import CLIP
 from sandbox.model.flatness import Gains, advance_extension, extension_rate, flat_inputs
 from sandbox.model.references import TABULATED_REFERENCES
 from sandbox.physics.interface import Physics
@@ -585,7 +586,10 @@ class Simulation(StepAPI, Ending, WorldStages):
             target = np.where(mask[:, None], rows, target)
             v_ref = np.where(mask[:, None], 0.0, v_ref)
             a_ref = np.where(mask[:, None], 0.0, a_ref)
-        aim = np.where(np.isnan(target), fleet.pos, target)
+        if np.count_nonzero(np.isnan(target)):
+            aim = np.where(np.isnan(target), fleet.pos, target)
+        else:
+            aim = target
         gains = self._gains
         chi_dot = extension_rate(fleet.pos, fleet.chi, aim, v_ref, a_ref, gains)
         aim = None
@@ -604,7 +608,7 @@ class Simulation(StepAPI, Ending, WorldStages):
                 self._turn_max,
             )
         v1, v2 = flat_inputs(fleet.theta, fleet.chi, chi_dot, gains.kp, aim)
-        v2 = np.clip(v2, -self._v2_max, self._v2_max)
+        v2 = CLIP(v2, -self._v2_max, self._v2_max)
         if self._filter is not None:  # after the controller, before the failures
             v1, v2 = self._safety(t, v1, v2)
         # Vehicles not driven by the controller this period.
@@ -620,7 +624,7 @@ class Simulation(StepAPI, Ending, WorldStages):
         if commands is not None:
             rows, mask = commands
             v1 = np.where(mask, self._command_limits(rows[:, 0]), v1)
-            v2 = np.where(mask, np.clip(rows[:, 1], -self._v2_max, self._v2_max), v2)
+            v2 = np.where(mask, CLIP(rows[:, 1], -self._v2_max, self._v2_max), v2)
             passive = passive | mask
             external = mask if external is None else external | mask
         if self._detection is not None:  # what the controllers ask for, broadcast
@@ -644,12 +648,13 @@ class Simulation(StepAPI, Ending, WorldStages):
         # chi follows the applied velocity of passive vehicles, so that the law resumes
         # without a jump when the failure or the override ends.
         passive = frozen | passive
-        if np.any(passive):
+        if np.count_nonzero(passive):
             heading = np.stack((np.cos(fleet.theta), np.sin(fleet.theta)), -1)
             chi_next[passive] = v1[passive, None] * heading[passive]
         fleet.v1, fleet.v2, fleet.failed = v1, v2, failed
         self.physics.failed[:] = failed  # an episode starting now is not healthy
-        mode = np.full(self.N, MODE_FORMATION, dtype=np.int8)
+        mode = np.empty(self.N, dtype=np.int8)
+        mode.fill(MODE_FORMATION)
         mode[plan.active] = MODE_AVOID
         if external is not None:
             mode[external] = MODE_EXTERNAL

@@ -8,6 +8,15 @@ from __future__ import annotations
 
 import numpy as np
 
+try:  # numpy >= 2
+    from numpy._core.umath import clip as _clip_ufunc
+except ImportError:  # pragma: no cover - numpy 1.26
+    from numpy.core.umath import clip as _clip_ufunc
+
+#: ``np.clip``'s own ufunc, called without the wrapper's checks: the same numbers
+#: (``CLIP(x, lo, hi)``, scalars or arrays as bounds) at a quarter of the cost.
+CLIP = _clip_ufunc
+
 
 def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
     """Wrap angles to ``[-pi, pi)`` [rad].
@@ -21,7 +30,10 @@ def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
     """
     wrapped = (np.asarray(angle, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
     # Rounding maps angles a hair below -pi (nextafter(-pi, -inf)) to +pi: fold back.
-    return np.where(wrapped >= np.pi, -np.pi, wrapped)
+    high = wrapped >= np.pi
+    if np.ndim(high) and not np.count_nonzero(high):
+        return wrapped
+    return np.where(high, -np.pi, wrapped)
 
 
 def unicycle_rates(theta: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndarray:

@@ -11,10 +11,11 @@ Symbols (report -> code): ``x1, x2`` -> ``pos[:, 0], pos[:, 1]``; ``x3`` -> ``th
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
-from sandbox.model.dynamics import wrap_angle
+from sandbox.model.dynamics import CLIP, wrap_angle
 
 # : Below this speed ``|chi|`` [m/s] the direction of chi is undefined (a vehicle at
 # rest):
@@ -44,6 +45,21 @@ class Gains:
     k4: float | np.ndarray = -20.0
     kp: float | np.ndarray = 2.0
 
+    @cached_property
+    def paired(self) -> tuple[float | np.ndarray, float | np.ndarray]:
+        """``(k1, k3)`` and ``(k2, k4)`` as the factors of eq. (6)'s two columns.
+
+        A scalar where the two gains are one scalar (the same products as a pair of
+        equal columns), else an array broadcasting over ``(n, 2)``.
+        """
+        return _pair(self.k1, self.k3), _pair(self.k2, self.k4)
+
+
+def _pair(a: float | np.ndarray, b: float | np.ndarray) -> float | np.ndarray:
+    if np.ndim(a) == 0 and np.ndim(b) == 0 and float(a) == float(b):
+        return float(a)
+    return np.stack(np.broadcast_arrays(a, b), axis=-1)
+
 
 def extension_rate(
     pos: np.ndarray,
@@ -69,8 +85,7 @@ def extension_rate(
     -------
     chi_dot : ndarray, shape (n, 2) [m/s^2]
     """
-    k_pos = np.stack(np.broadcast_arrays(gains.k1, gains.k3), axis=-1)
-    k_vel = np.stack(np.broadcast_arrays(gains.k2, gains.k4), axis=-1)
+    k_pos, k_vel = gains.paired
     return k_pos * (pos - p_ref) + k_vel * (chi - v_ref) + a_ref  # eq. (6)
 
 
@@ -107,17 +122,22 @@ def flat_inputs(
     norm2 = c1 * c1 + c2 * c2
     v1 = np.sqrt(norm2)  # eq. (5)
     defined = norm2 >= CHI_HOLD * CHI_HOLD
+    every = np.count_nonzero(defined) == defined.size  # where(defined, x, 0) is x
     safe = np.maximum(norm2, CHI_REG * CHI_REG)
     feedforward = (-c2 * chi_dot[..., 0] + c1 * chi_dot[..., 1]) / safe  # eq. (5)
     # "arctan2(chi1, chi2)" in the report is the angle of the vector (chi1, chi2).
     heading_error = wrap_angle(theta - np.arctan2(c2, c1))
-    v2 = np.where(defined, feedforward - kp * heading_error, 0.0)  # eq. (5)
+    v2 = feedforward - kp * heading_error  # eq. (5)
+    if not every:
+        v2 = np.where(defined, v2, 0.0)
     if aim is not None:
         turning = ~np.isnan(aim)
-        if np.any(turning):  # chi held back by the turn limit: turn towards its aim
+        if np.count_nonzero(turning):  # chi held back by the turn limit: turn to aim
             toward = -kp * wrap_angle(theta - np.where(turning, aim, 0.0))
-            v2 = np.where(turning, np.where(defined, feedforward, 0.0) + toward, v2)
-    return np.where(defined, v1, 0.0), v2
+            if not every:
+                feedforward = np.where(defined, feedforward, 0.0)
+            v2 = np.where(turning, feedforward + toward, v2)
+    return (v1 if every else np.where(defined, v1, 0.0)), v2
 
 
 def advance_extension(
@@ -160,21 +180,30 @@ def advance_extension(
         :func:`flat_inputs`).
     """
     step = chi_dot * dt
+    # A vector within its bound is scaled by 1.0, which leaves it as it is: the
+    # scaling is made only where some vector exceeds its bound.
     step_norm = np.hypot(step[..., 0], step[..., 1])
     limit = accel_max * dt
-    scale = np.where(step_norm > limit, limit / np.maximum(step_norm, 1e-300), 1.0)
-    nxt = chi + step * scale[..., None]
+    if np.count_nonzero(step_norm > limit):
+        scale = np.where(step_norm > limit, limit / np.maximum(step_norm, 1e-300), 1.0)
+        step = step * scale[..., None]
+    nxt = chi + step
     norm = np.hypot(nxt[..., 0], nxt[..., 1])
-    scale = np.where(norm > v1_max, v1_max / np.maximum(norm, 1e-300), 1.0)
-    nxt = nxt * scale[..., None]
+    if np.count_nonzero(norm > v1_max):
+        scale = np.where(norm > v1_max, v1_max / np.maximum(norm, 1e-300), 1.0)
+        nxt = nxt * scale[..., None]
+        norm = None  # changed: limit_turn measures it again
     if turn_max is None:
         return nxt, (nxt - chi) / dt
-    nxt, aim = limit_turn(nxt, theta, turn_max * dt)
+    nxt, aim = limit_turn(nxt, theta, turn_max * dt, norm)
     return nxt, (nxt - chi) / dt, aim
 
 
 def limit_turn(
-    chi: np.ndarray, theta: np.ndarray, limit: np.ndarray | float
+    chi: np.ndarray,
+    theta: np.ndarray,
+    limit: np.ndarray | float,
+    norm: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Turn-rate anti-windup: keep chi where the vehicle can drive in one period.
 
@@ -194,6 +223,8 @@ def limit_turn(
         The extension states after the speed and acceleration clamps.
     theta : ndarray, shape (n,) [rad]
     limit : float or ndarray, shape (n,) [rad]
+    norm : ndarray, shape (n,) [m/s], optional
+        ``|chi|`` if known (the same numbers as measuring it here).
 
     Returns
     -------
@@ -206,20 +237,20 @@ def limit_turn(
     ([[0.0, 0.0]], [1.5708])
     """
     c1, c2 = chi[..., 0], chi[..., 1]
-    norm = np.hypot(c1, c2)
+    if norm is None:
+        norm = np.hypot(c1, c2)
     angle = np.arctan2(c2, c1)
     off = wrap_angle(angle - theta)
     outside = (np.abs(off) > limit) & (norm >= CHI_HOLD)
-    if not np.any(outside):
+    if not np.count_nonzero(outside):
         return chi, np.full(norm.shape, np.nan)
-    edge = np.clip(off, -limit, limit)
+    edge = CLIP(off, -limit, limit)
     along = np.maximum(norm * np.cos(off - edge), 0.0)
     direction = theta + edge
-    out = np.where(
-        outside[..., None],
-        np.stack((along * np.cos(direction), along * np.sin(direction)), -1),
-        chi,
-    )
+    turned = np.empty(chi.shape)
+    turned[..., 0] = along * np.cos(direction)
+    turned[..., 1] = along * np.sin(direction)
+    out = np.where(outside[..., None], turned, chi)
     return out, np.where(outside, angle, np.nan)
 
 
