@@ -67,6 +67,7 @@ from typing import Any
 import numpy as np
 
 from sandbox.geometry.neighbours import NeighbourList, neighbour_pairs
+from sandbox.model.dynamics import CLIP
 from sandbox.model.obstacle_field import MIN_DIST, ObstacleField
 from sandbox.plugins.registration import (
     Param,
@@ -179,7 +180,7 @@ def continuous(
     dist: np.ndarray, R: float, r: float | None, steepness: float
 ) -> np.ndarray:
     """Section 4.2, eq. (27): 1 below r, ``1 - (dist - r)/(R - r)``, 0 above R."""
-    return np.clip(1.0 - (dist - r) / (R - r), 0.0, 1.0)  # eq. (27)
+    return CLIP(1.0 - (dist - r) / (R - r), 0.0, 1.0)  # eq. (27)
 
 
 def smooth(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.ndarray:
@@ -190,7 +191,7 @@ def smooth(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.
     """
     c, w = 0.5 * (R + r), 0.5 * (R - r)
     t = np.tanh(steepness)
-    return np.clip((np.tanh(steepness * (c - dist) / w) + t) / (2.0 * t), 0.0, 1.0)
+    return CLIP((np.tanh(steepness * (c - dist) / w) + t) / (2.0 * t), 0.0, 1.0)
 
 
 @register_strategy("none", batched=True)
@@ -306,7 +307,7 @@ def weighted_shift(
     n = len(pos)
     shift = np.zeros((n, 2))
     active = np.zeros(n, dtype=bool)
-    if not np.any(avoiders):
+    if not np.count_nonzero(avoiders):
         return shift, active
     goal = slot_directions(pos, ctx.slot) if kappa > 0 else None
     if neighbours is not None:

@@ -101,7 +101,7 @@ class NeighbourList:
         rel = np.take(pos, self._i, axis=0)
         rel -= np.take(pos, self._j, axis=0)
         d2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
-        keep = np.flatnonzero(d2 < self.radius * self.radius)
+        keep = (d2 < self.radius * self.radius).nonzero()[0]
         return self._i.take(keep), self._j.take(keep), np.take(rel, keep, axis=0)
 
     def obstacle_pairs(
@@ -174,7 +174,7 @@ class WorldPairs:
         rel -= np.take(pos, self._j, axis=0)
         d2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
         self._last = (pos, d2)
-        keep = np.flatnonzero(d2 < self.radius * self.radius)
+        keep = (d2 < self.radius * self.radius).nonzero()[0]
         return self._i.take(keep), self._j.take(keep), np.take(rel, keep, axis=0)
 
     def distances(self, pos: np.ndarray) -> np.ndarray | None:

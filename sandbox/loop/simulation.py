@@ -74,6 +74,7 @@ from sandbox.loop.worlds import (
 )
 from sandbox.model.dynamics import CLIP
 from sandbox.model.flatness import Gains, advance_extension, extension_rate, flat_inputs
+from sandbox.model.laws import spread
 from sandbox.model.references import TABULATED_REFERENCES
 from sandbox.physics.interface import Physics
 from sandbox.physics.world import World
@@ -464,8 +465,8 @@ class Simulation(StepAPI, Ending, WorldStages):
             triple = self._stacked_law.targets(self, t, ref)
         else:
             triple = [
-                np.broadcast_to(a, (K, n, 2)).reshape(N, 2)
-                for a in self.law.targets(self._law_context(t, ref))
+                (a if a.shape == (K, n, 2) else spread(a, (K, n, 2))).reshape(N, 2)
+                for a in map(np.asarray, self.law.targets(self._law_context(t, ref)))
             ]
         tr, cmd = self._track_rows, self._commanded_rows
         if (ref is not None and len(tr)) or len(cmd):

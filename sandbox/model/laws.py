@@ -40,7 +40,21 @@ def rotate_offsets(delta: np.ndarray, angle: float | np.ndarray) -> np.ndarray:
     """
     c, s = np.cos(angle), np.sin(angle)
     d1, d2 = delta[..., 0], delta[..., 1]
-    return np.stack((d1 * c - d2 * s, d2 * c + d1 * s), axis=-1)  # eq. (11)
+    first, second = d1 * c - d2 * s, d2 * c + d1 * s  # eq. (11)
+    out = np.empty((*first.shape, 2))
+    out[..., 0], out[..., 1] = first, second
+    return out
+
+
+def spread(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``a`` broadcast to ``shape``, as a new array (the values of ``broadcast_to``).
+
+    >>> spread(np.array([1.0, 2.0]), (2, 2)).tolist()
+    [[1.0, 2.0], [1.0, 2.0]]
+    """
+    out = np.empty(shape)
+    out[...] = a
+    return out
 
 
 class BackwardDifference:
@@ -178,7 +192,7 @@ class FixedFormation(FormationLaw):
         """Slots ``x_leader + delta``; derivatives from eqs. (8)-(9)."""
         v, a = self.leader_motion.update(inputs.leader_pos)
         slot = inputs.leader_pos + self.delta  # eq. (7)
-        return slot, np.broadcast_to(v, slot.shape), np.broadcast_to(a, slot.shape)
+        return slot, spread(v, slot.shape), spread(a, slot.shape)
 
 
 @register_law("rotating", batched=True)
@@ -190,7 +204,7 @@ class RotatingFormation(FixedFormation):
         v, a = self.leader_motion.update(inputs.leader_pos)
         big_delta = rotate_offsets(self.delta, inputs.leader_theta)  # eq. (11)
         slot = inputs.leader_pos + big_delta  # eq. (10)
-        return slot, np.broadcast_to(v, slot.shape), np.broadcast_to(a, slot.shape)
+        return slot, spread(v, slot.shape), spread(a, slot.shape)
 
 
 @register_law("virtual", {"rotate": ROTATE}, frame="reference", batched=True)
@@ -204,7 +218,7 @@ class VirtualLeaderFormation(FormationLaw):
         """Slots ``x_ref + Delta``; derivatives are the reference's own."""
         p, dp, ddp = inputs.reference
         slot = p + self._reference_offsets(inputs.reference)  # eq. (13)
-        return slot, np.broadcast_to(dp, slot.shape), np.broadcast_to(ddp, slot.shape)
+        return slot, spread(dp, slot.shape), spread(ddp, slot.shape)
 
 
 @register_law("leader_ref", {"rotate": ROTATE}, frame="leader_reference", batched=True)
@@ -217,7 +231,7 @@ class LeaderReferenceFormation(FormationLaw):
         """Slots ``x_leader + Delta``; derivatives are the reference's own."""
         _, dp, ddp = inputs.reference
         slot = inputs.leader_pos + self._reference_offsets(inputs.reference)  # eq. (16)
-        return slot, np.broadcast_to(dp, slot.shape), np.broadcast_to(ddp, slot.shape)
+        return slot, spread(dp, slot.shape), spread(ddp, slot.shape)
 
 
 @register_law("own_estimate", batched=True)
