@@ -25,16 +25,21 @@ class RowsView:
         self.vel, self.chi = fleet.vel[rows], fleet.chi[rows]
 
 
+def _largest(a: np.ndarray) -> float:
+    """``np.max(a)`` (NaN if any is NaN), without the wrapper's checks."""
+    return np.maximum.reduce(a, axis=None) if a.size else -np.inf
+
+
 def diverged(fleet: Fleet | RowsView) -> tuple[int, str] | None:
     """First vehicle whose state is non-finite or beyond the bounds, with the reason."""
     # Fast path, one reduction per array: clearly healthy (NaN fails every comparison).
     vel, chi = fleet.vel, fleet.chi
     speed2 = (0.999 * DIVERGED_SPEED) ** 2
     if (
-        np.max(np.abs(fleet.pos)) <= DIVERGED_POSITION
-        and np.max(np.abs(fleet.theta)) < np.inf
-        and np.max(vel[:, 0] * vel[:, 0] + vel[:, 1] * vel[:, 1]) <= speed2
-        and np.max(chi[:, 0] * chi[:, 0] + chi[:, 1] * chi[:, 1]) <= speed2
+        _largest(np.abs(fleet.pos)) <= DIVERGED_POSITION
+        and _largest(np.abs(fleet.theta)) < np.inf
+        and _largest(vel[:, 0] * vel[:, 0] + vel[:, 1] * vel[:, 1]) <= speed2
+        and _largest(chi[:, 0] * chi[:, 0] + chi[:, 1] * chi[:, 1]) <= speed2
     ):
         return None
     finite = (

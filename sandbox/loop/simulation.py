@@ -650,8 +650,10 @@ class Simulation(StepAPI, Ending, WorldStages):
         # without a jump when the failure or the override ends.
         passive = frozen | passive
         if np.count_nonzero(passive):
-            heading = np.stack((np.cos(fleet.theta), np.sin(fleet.theta)), -1)
-            chi_next[passive] = v1[passive, None] * heading[passive]
+            rows = passive.nonzero()[0]
+            theta, speed = fleet.theta[rows], v1[rows]
+            chi_next[rows, 0] = speed * np.cos(theta)
+            chi_next[rows, 1] = speed * np.sin(theta)
         fleet.v1, fleet.v2, fleet.failed = v1, v2, failed
         self.physics.failed[:] = failed  # an episode starting now is not healthy
         mode = np.empty(self.N, dtype=np.int8)

@@ -117,8 +117,9 @@ class LoopTally:
         self._buf_vel[m] = b.vel
         np.logical_not(contact, out=self._buf_free[m])
         heading = b.theta + 0.5 * b.v2 * self.h
-        commanded = np.stack((b.v1 * np.cos(heading), b.v1 * np.sin(heading)), -1)
-        self._buf_cmd[m] = commanded
+        commanded = self._buf_cmd[m]  # valid until the slot is written again
+        commanded[:, 0] = b.v1 * np.cos(heading)
+        commanded[:, 1] = b.v1 * np.sin(heading)
         self.commanded, self.commanded_at = commanded, b.k
         self._m = m + 1
         if self._m == CHUNK:

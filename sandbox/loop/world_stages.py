@@ -62,7 +62,12 @@ class WorldStages:
         return slice(w * self.n, (w + 1) * self.n)
 
     def _live_worlds(self) -> list[int]:
-        return [int(w) for w in np.flatnonzero(self.live)]
+        """The live worlds in order (a new list; remade only after a world ends)."""
+        count = np.count_nonzero(self.live)
+        cached = getattr(self, "_live_cache", None)
+        if cached is None or len(cached) != count:
+            cached = self._live_cache = [int(w) for w in self.live.nonzero()[0]]
+        return list(cached)
 
     def _platoon_targets(self, t: float) -> tuple[np.ndarray, ...]:
         """Each world's platoons' slots, ``x_ref'``, ``x_ref''`` and points.

@@ -20,6 +20,7 @@ history per world; the neighbour pairs of K worlds (never across worlds) are
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from collections.abc import Sequence
 from dataclasses import asdict
 from typing import Any
@@ -230,14 +231,25 @@ class StackedFailures:
         self.rule = np.array([r[0] for r in rules], dtype=np.intp)
         self.v1_param = np.array([r[1] for r in rules], dtype=float)
         self.v2_param = np.array([r[2] for r in rules], dtype=float)
+        # One failure a vehicle at most: every set of active failures is one a vehicle.
+        self._one_each = len(np.unique(self.vehicle)) == len(self.vehicle)
+        # The onsets and ends in order: between two of them the schedule is the same.
+        self._bounds = sorted({*self.start.tolist(), *self.end.tolist()})
+        self._on_at = -1
+        self._on = np.zeros(len(specs), dtype=bool)
+        self._waiting = len(specs)  # failures not started yet
 
     def __len__(self) -> int:
         return len(self.specs)
 
     def active(self, t: float, live: np.ndarray) -> np.ndarray:
         """Active failures of the live worlds at ``t`` [s] (one flag per failure)."""
-        on = (self.start <= t + 1e-12) & (t + 1e-12 < self.end)
-        return on & live[self.world]
+        u = t + 1e-12
+        at = bisect_right(self._bounds, u)  # the same flags between two bounds
+        if at != self._on_at:
+            self._on = (self.start <= u) & (u < self.end)
+            self._on_at = at
+        return self._on & live[self.world]
 
     def active_vehicles(self, t: float, live: np.ndarray) -> np.ndarray:
         """Rows with an active failure at ``t`` [s], shape (N,) bool."""
@@ -247,7 +259,10 @@ class StackedFailures:
 
     def start_new(self, t: float, live: np.ndarray, last_v2: np.ndarray) -> np.ndarray:
         """The failures that start at ``t`` (each reported once), their onset noted."""
-        new = np.flatnonzero(self.active(t, live) & ~self.started)
+        if not self._waiting:
+            return np.zeros(0, dtype=np.intp)
+        new = (self.active(t, live) & ~self.started).nonzero()[0]
+        self._waiting -= len(new)
         self.started[new] = True
         self.v2_onset[new] = last_v2[self.vehicle[new]]
         return new
@@ -274,14 +289,14 @@ class StackedFailures:
             return v1, v2, failed, frozen, errors
         v1, v2 = v1.copy(), v2.copy()
         broken: set[int] = set()
-        active = np.flatnonzero(self.active(t, live))
+        active = self.active(t, live).nonzero()[0]
         rows = self.vehicle[active]
         # Built-in kinds only, one a vehicle, enough of them to pay the numpy calls:
         # at once; else one after the other (the same numbers either way).
         if (
             len(active) >= RULED_FROM
             and self.rule[active].all()
-            and len(np.unique(rows)) == len(rows)
+            and (self._one_each or len(np.unique(rows)) == len(rows))
         ):
             self._apply_rules(active, v1, v2, last_v1, accel_step, failed, frozen)
             return v1, v2, failed, frozen, errors
@@ -307,7 +322,7 @@ class StackedFailures:
                 errors.append((w, exc))
                 continue
             if not self.immovable[k]:  # within the drive's max_accel, as alone
-                step = float(np.broadcast_to(accel_step, (N,))[i])
+                step = float(accel_step if np.ndim(accel_step) == 0 else accel_step[i])
                 v1[i] = within_drive(float(v1[i]), float(last_v1[i]), step)
             failed[i] = True
             frozen[i] |= not self.controlled[k]

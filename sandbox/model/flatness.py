@@ -243,7 +243,9 @@ def limit_turn(
     off = wrap_angle(angle - theta)
     outside = (np.abs(off) > limit) & (norm >= CHI_HOLD)
     if not np.count_nonzero(outside):
-        return chi, np.full(norm.shape, np.nan)
+        nowhere = np.empty(norm.shape)
+        nowhere.fill(np.nan)
+        return chi, nowhere
     edge = CLIP(off, -limit, limit)
     along = np.maximum(norm * np.cos(off - edge), 0.0)
     direction = theta + edge
