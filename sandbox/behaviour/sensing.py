@@ -64,10 +64,34 @@ class Broadcast:
         self.loss = loss
         self.rng = np.random.default_rng([seed, SENSING_STREAM])
         self._sent: deque[np.ndarray] = deque(maxlen=delay_periods + 1)
-        #: The last received pose of each vehicle, shape (n, 3) [m, m, rad].
-        self.seen: np.ndarray | None = None
-        #: Whether each vehicle's packet of the last update arrived, shape (n,) bool.
-        self.fresh: np.ndarray | None = None
+        self._seen: np.ndarray | None = None
+        self._fresh: np.ndarray | None = None
+        #: Set by a :class:`StackedBroadcast`: it and this broadcast's rows of it.
+        self.stack: tuple[StackedBroadcast, slice] | None = None
+
+    @property
+    def seen(self) -> np.ndarray | None:
+        """The last received pose of each vehicle, shape (n, 3) [m, m, rad]."""
+        if self.stack is not None:
+            stacked, rows = self.stack
+            return None if stacked.seen is None else stacked.seen[rows]
+        return self._seen
+
+    @seen.setter
+    def seen(self, value: np.ndarray | None) -> None:
+        self._seen = value
+
+    @property
+    def fresh(self) -> np.ndarray | None:
+        """Whether each vehicle's packet of the last update arrived, shape (n,) bool."""
+        if self.stack is not None:
+            stacked, rows = self.stack
+            return None if stacked.fresh is None else stacked.fresh[rows]
+        return self._fresh
+
+    @fresh.setter
+    def fresh(self, value: np.ndarray | None) -> None:
+        self._fresh = value
 
     def update(self, pos: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """Broadcast the true poses of ``t_k``; return what is received at ``t_k``.
@@ -106,29 +130,38 @@ class StackedBroadcast:
     """The broadcasts of K worlds of ``n`` vehicles as one (their rows stacked).
 
     Each world draws from its own generator, in the order it draws alone (the
-    noise, then the losses), so that every world receives the copies it receives
-    alone; the rest is elementwise over the stacked rows. The worlds share the
-    delay (their structure). After each update every world's own
-    :class:`Broadcast` shows its rows (``seen``, ``fresh``).
+    noise, then the losses; into its rows of two stacked buffers, the numbers a
+    draw of that shape gives), so that every world receives the copies it
+    receives alone; the rest is elementwise over the stacked rows. The worlds share
+    the delay (their structure). Every world's own :class:`Broadcast` shows its
+    rows of the stacked copies (``seen``, ``fresh``).
     """
 
     def __init__(self, broadcasts: list[Broadcast], n: int) -> None:
         self.parts, self.n = broadcasts, n
+        K = len(broadcasts)
         self.sigma = np.repeat(np.array([b.sigma for b in broadcasts]), n, axis=0)
         self.loss = np.repeat(np.array([b.loss for b in broadcasts]), n)
         self._sent: deque[np.ndarray] = deque(maxlen=broadcasts[0]._sent.maxlen)
         self.seen: np.ndarray | None = None
         self.fresh: np.ndarray | None = None
+        self._noise, self._draws = np.empty((K, n, 3)), np.empty((K, n))
+        # Each world's two draws, with the buffer rows they fill.
+        self._calls = [
+            (b.rng.standard_normal, self._noise[w], b.rng.random, self._draws[w])
+            for w, b in enumerate(broadcasts)
+        ]
+        for w, b in enumerate(broadcasts):
+            b.stack = (self, slice(w * n, (w + 1) * n))
 
     def update(self, pos: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """:meth:`Broadcast.update` of every world, shape (K n, 3)."""
-        n = self.n
-        noise, draws = [], []
-        for b in self.parts:
-            noise.append(b.rng.standard_normal((n, 3)))
-            draws.append(b.rng.random(n))
-        lost = np.concatenate(draws) < self.loss
-        pose = np.column_stack((pos, theta)) + np.concatenate(noise) * self.sigma
+        for normal, noise, uniform, draws in self._calls:
+            normal(out=noise)
+            uniform(out=draws)
+        lost = self._draws.reshape(-1) < self.loss
+        noise = self._noise.reshape(-1, 3) * self.sigma
+        pose = np.column_stack((pos, theta)) + noise
         self._sent.append(pose)
         arrived = self._sent[0]
         if self.seen is None:
@@ -137,9 +170,6 @@ class StackedBroadcast:
         else:
             self.seen = np.where(lost[:, None], self.seen, arrived)
             self.fresh = ~lost
-        for w, b in enumerate(self.parts):
-            b.seen = self.seen[w * n : (w + 1) * n]
-            b.fresh = self.fresh[w * n : (w + 1) * n]
         return self.seen
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from sandbox.physics.interface import Physics
 from sandbox.physics.stepping import WorldStepper
-from sandbox.physics.world import World, motor_limits
+from sandbox.physics.world import MAX_FORCE_SETTER, World, motor_limits
 
 #: The motor arrays of a World that become views of stacked ones.
 _MOTOR_ARRAYS = (
@@ -78,6 +78,9 @@ class WorldsPhysics:
             if self._bound[k]:
                 world.bind_commands(self._out[k * n : (k + 1) * n])
         self._episodes = [w._open for w in self.worlds]
+        # The motors' joints as Chipmunk's handles, row by row (max_force's setter).
+        self._set_max_force = MAX_FORCE_SETTER
+        self._joint_handles = [h for w in self.worlds for h in w.joint_handles()]
 
     # ------------------------------------------------------------------ reading
     def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -163,11 +166,13 @@ class WorldsPhysics:
             rows, force, torque = motor_limits(
                 out, self._measured, free, h / substeps, self
             )
-            for r in rows:
-                w, i = divmod(int(r), n)
-                pivot, gear = self.worlds[w].joints[i]
-                pivot.max_force = self._force[r] = force[r]
-                gear.max_force = self._torque[r] = torque[r]
+            if len(rows):
+                self._force[rows], self._torque[rows] = force[rows], torque[rows]
+                set_max, joints = self._set_max_force, self._joint_handles
+                for r in rows.tolist():  # Constraint.max_force's own C call
+                    pivot, gear = joints[r]
+                    set_max(pivot, force[r])
+                    set_max(gear, torque[r])
         if self._stepper is not None:  # every world at once
             self._stepper.advance(t0, h)
             return

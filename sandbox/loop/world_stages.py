@@ -137,6 +137,8 @@ class WorldStages:
         fl, n = self.fleet, self.n
         if self.seen is None:
             seen, fresh = np.column_stack((fl.pos, fl.theta)), None
+        elif self._broadcast is not None:  # every world's, stacked
+            seen, fresh = self.seen, self._broadcast.fresh
         else:
             seen = self.seen
             parts = [getattr(s.broadcast, "fresh", None) for s in self.states]

@@ -173,6 +173,26 @@ def _space_stepper(space: pymunk.Space) -> tuple[Any, tuple | None]:
     return step, (c_step, handle, pending)
 
 
+try:  # ``Constraint.max_force``'s setter as the C function it calls
+    from pymunk._chipmunk import lib as _lib
+
+    #: Set a joint's force limit: ``MAX_FORCE_SETTER(handle, force)``, the handle
+    #: from :meth:`World.joint_handles` (the call ``Constraint.max_force`` makes).
+    MAX_FORCE_SETTER = _lib.cpConstraintSetMaxForce
+
+    def _handle(joint: pymunk.Constraint) -> Any:
+        return joint._constraint
+
+except (ImportError, AttributeError):  # pragma: no cover - other pymunk builds
+
+    def MAX_FORCE_SETTER(joint: pymunk.Constraint, force: float) -> None:  # noqa: N802
+        """Set ``joint.max_force``."""
+        joint.max_force = force
+
+    def _handle(joint: pymunk.Constraint) -> Any:
+        return joint
+
+
 def motor_limits(
     command: np.ndarray,
     measured: np.ndarray,
@@ -536,6 +556,10 @@ class World:
             step(h)
             if self._open:
                 self._update_episodes(t0 + (s + 1) * h)
+
+    def joint_handles(self) -> list[tuple[Any, Any]]:
+        """Each vehicle's (pivot, gear) joints, as :data:`MAX_FORCE_SETTER` takes."""
+        return [(_handle(pivot), _handle(gear)) for pivot, gear in self.joints]
 
     # ------------------------------------------------------------------ failures
     def immobilize(self, index: int) -> None:
