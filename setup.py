@@ -8,21 +8,42 @@ the folder in place (see ``sandbox/scenario/bundled.py``). The replay page's
 templates, style and script (``sandbox/render/replay/assets/``) are package data too.
 Everything else is declared in ``pyproject.toml``.
 
-One optional C extension, ``sandbox.physics._cstep``: the loop that steps a batch of
+Two optional C extensions: ``sandbox.physics._cstep``, the loop that steps a batch of
 pymunk worlds through a whole control period in one call (see
-``sandbox/physics/stepping.py``). It needs a C compiler and Python's headers, nothing
-of Chipmunk (it calls pymunk's functions through their addresses). It is optional:
-where it cannot be compiled the install goes on without it (setuptools prints the
-error) and the worlds are stepped by the Python path, with the same results. An
-editable install (``pip install -e .``) compiles it next to its source.
+``sandbox/physics/stepping.py``), and ``sandbox.model._kernels``, the flatness
+controller of a period in two calls (see ``sandbox/model/kernels.py``). They need a
+C compiler and Python's headers, nothing of Chipmunk or numpy (the first calls
+pymunk's functions through their addresses, the second reads arrays through the
+buffer interface). They are optional: where one cannot be compiled the install goes
+on without it (setuptools prints the error) and the Python path runs instead, with
+the same results. An editable install (``pip install -e .``) compiles them next to
+their sources. The kernels are compiled without contracting a multiplication and an
+addition into one fused operation, which rounds once instead of twice and would
+change the numbers.
 """
 
 from setuptools import Extension, find_packages, setup
+from setuptools.command.build_ext import build_ext
 
 CSTEP = Extension("sandbox.physics._cstep", ["sandbox/physics/_cstep.c"], optional=True)
+KERNELS = Extension(
+    "sandbox.model._kernels", ["sandbox/model/_kernels.c"], optional=True
+)
+
+
+class BuildExt(build_ext):
+    """``build_ext`` with the kernels' floating-point flag where the compiler has it."""
+
+    def build_extension(self, ext):
+        """Compile ``ext``; the kernels with no contracted floating point."""
+        if ext is KERNELS and self.compiler.compiler_type == "unix":
+            ext.extra_compile_args = ["-ffp-contract=off", "-fno-fast-math"]
+        super().build_extension(ext)
+
 
 setup(
-    ext_modules=[CSTEP],
+    ext_modules=[CSTEP, KERNELS],
+    cmdclass={"build_ext": BuildExt},
     packages=[*find_packages(include=["sandbox", "sandbox.*"]), "sandbox.scenarios"],
     package_dir={"sandbox.scenarios": "scenarios"},
     package_data={

@@ -73,7 +73,8 @@ from sandbox.loop.worlds import (
     WorldState,
 )
 from sandbox.model.dynamics import CLIP
-from sandbox.model.flatness import Gains, advance_extension, extension_rate, flat_inputs
+from sandbox.model.flatness import Gains
+from sandbox.model.kernels import Controller
 from sandbox.model.laws import spread
 from sandbox.model.references import TABULATED_REFERENCES
 from sandbox.physics.interface import Physics
@@ -396,6 +397,14 @@ class Simulation(StepAPI, Ending, WorldStages):
         self._accel_max = uniform(fl.accel_max)
         # The turn-rate limit of the anti-windup: None when no vehicle has one.
         self._turn_max = None if np.all(np.isinf(fl.v2_max)) else self._v2_max
+        self._controller = Controller(
+            self._gains,
+            self.h,
+            self._v1_max,
+            self._accel_max,
+            self._v2_max,
+            self._turn_max,
+        )
 
     # ------------------------------------------------------------------ stages
     def _sense(self) -> bool:
@@ -587,29 +596,9 @@ class Simulation(StepAPI, Ending, WorldStages):
             target = np.where(mask[:, None], rows, target)
             v_ref = np.where(mask[:, None], 0.0, v_ref)
             a_ref = np.where(mask[:, None], 0.0, a_ref)
-        if np.count_nonzero(np.isnan(target)):
-            aim = np.where(np.isnan(target), fleet.pos, target)
-        else:
-            aim = target
-        gains = self._gains
-        chi_dot = extension_rate(fleet.pos, fleet.chi, aim, v_ref, a_ref, gains)
-        aim = None
-        if self._turn_max is None:
-            chi_next, chi_dot = advance_extension(
-                fleet.chi, chi_dot, h, self._v1_max, self._accel_max
-            )
-        else:  # the turn-rate limit of the anti-windup
-            chi_next, chi_dot, aim = advance_extension(
-                fleet.chi,
-                chi_dot,
-                h,
-                self._v1_max,
-                self._accel_max,
-                fleet.theta,
-                self._turn_max,
-            )
-        v1, v2 = flat_inputs(fleet.theta, fleet.chi, chi_dot, gains.kp, aim)
-        v2 = CLIP(v2, -self._v2_max, self._v2_max)
+        chi_next, v1, v2 = self._controller.step(
+            fleet.pos, fleet.chi, fleet.theta, target, v_ref, a_ref
+        )
         if self._filter is not None:  # after the controller, before the failures
             v1, v2 = self._safety(t, v1, v2)
         # Vehicles not driven by the controller this period.

@@ -1,0 +1,366 @@
+/* The flatness controller of one control period, row by row, in two C calls.
+ *
+ * sandbox/model/kernels.py calls these where this optional extension is built and
+ * its checks pass. They compute, element by element and in the same order, the
+ * operations of the numpy functions of sandbox/model/flatness.py as the loop calls
+ * them (extension_rate, advance_extension, limit_turn, flat_inputs and the clip of
+ * v2): the same IEEE-754 double operations (the extension is compiled without
+ * contraction into fused multiply-adds), numpy's own rules where it has them (its
+ * maximum and clip on ties and NaN, its floating remainder), and the C library's
+ * sqrt, hypot, sin and cos, which kernels.py checks give numpy's numbers on this
+ * machine before it uses them. The angles of chi (numpy's arctan2, which may not be
+ * the C library's) come in computed by numpy.
+ *
+ * Arrays are C-contiguous float64; a parameter array of length 1 is one value for
+ * every row (stride 0). Every pointer argument is an object with the buffer
+ * interface (a numpy array).
+ */
+
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+/* The controller's constants (sandbox/model/flatness.py). */
+#define CHI_HOLD 1e-3
+#define CHI_REG 0.01
+
+/* numpy.maximum(a, b): a where a > b or a is NaN, else b (b on a tie). */
+static inline double
+np_maximum(double a, double b)
+{
+    return (a > b || a != a) ? a : b;
+}
+
+/* numpy's clip with array bounds: max then min, the bound on a tie, NaN kept. */
+static inline double
+clip_rows(double x, double lo, double hi)
+{
+    double y = (x != x) ? x : (x > lo ? x : lo);
+    return (y != y) ? y : (y < hi ? y : hi);
+}
+
+/* numpy's clip with scalar bounds: x itself on a tie, NaN kept. */
+static inline double
+clip_scalars(double x, double lo, double hi)
+{
+    if (x != x) {
+        return x;
+    }
+    double y = (x < lo) ? lo : x;
+    return (y > hi) ? hi : y;
+}
+
+/* numpy.remainder(a, b) of floats: fmod, moved to b's sign, +-0 with b's sign. */
+static inline double
+np_remainder(double a, double b)
+{
+    double mod = fmod(a, b);
+    if (!b) {
+        return mod;
+    }
+    if (mod) {
+        if ((b < 0) != (mod < 0)) {
+            mod += b;
+        }
+    }
+    else {
+        mod = copysign(0.0, b);
+    }
+    return mod;
+}
+
+/* sandbox.model.dynamics.wrap_angle: (a + pi) % (2 pi) - pi, pi folded to -pi. */
+static inline double
+wrap_angle(double a)
+{
+    double w = np_remainder(a + M_PI, 2.0 * M_PI) - M_PI;
+    return (w >= M_PI) ? -M_PI : w;
+}
+
+/* A float64 buffer and its length. */
+typedef struct {
+    Py_buffer view;
+    double *data;
+    Py_ssize_t len;
+    Py_ssize_t step; /* 0 for one value for every row */
+} Rows;
+
+static int
+get_rows(PyObject *obj, Rows *rows, int writable)
+{
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, &rows->view, flags) < 0) {
+        return -1;
+    }
+    if (rows->view.itemsize != 8 || rows->view.format == NULL ||
+        strcmp(rows->view.format, "d") != 0) {
+        PyBuffer_Release(&rows->view);
+        PyErr_SetString(PyExc_TypeError, "expected a contiguous float64 array");
+        return -1;
+    }
+    rows->data = (double *)rows->view.buf;
+    rows->len = rows->view.len / 8;
+    rows->step = rows->len == 1 ? 0 : 1;
+    return 0;
+}
+
+static void
+release(Rows *rows, int count)
+{
+    for (int k = 0; k < count; k++) {
+        PyBuffer_Release(&rows[k].view);
+    }
+}
+
+PyDoc_STRVAR(extension_step_doc,
+"extension_step(pos, chi, target, v_ref, a_ref, k1, k2, k3, k4, accel_max,\n"
+"               v1_max, dt, nxt, norm) -> None\n"
+"\n"
+"Eq. (6) and the Euler step of advance_extension with its two clamps, for n\n"
+"vehicles: ``pos, chi, target, v_ref, a_ref`` (n, 2) (a NaN target coordinate\n"
+"aims at the position's), the gains and limits (n,) or (1,), ``dt`` [s]. Writes\n"
+"chi before the turn limit to ``nxt`` (n, 2) and its norm to ``norm`` (n,).");
+
+static PyObject *
+extension_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 14) {
+        PyErr_SetString(PyExc_TypeError, "extension_step takes 14 arguments");
+        return NULL;
+    }
+    Rows r[13];
+    int got = 0;
+    static const int out_at[] = {12, 13};
+    for (int k = 0; k < 14; k++) {
+        if (k == 11) {
+            continue;
+        }
+        int idx = k < 11 ? k : k - 1;
+        int writable = (k == out_at[0] || k == out_at[1]);
+        if (get_rows(args[k], &r[idx], writable) < 0) {
+            release(r, got);
+            return NULL;
+        }
+        got++;
+    }
+    double dt = PyFloat_AsDouble(args[11]);
+    if (dt == -1.0 && PyErr_Occurred()) {
+        release(r, got);
+        return NULL;
+    }
+    Rows *pos = &r[0], *chi = &r[1], *target = &r[2], *v_ref = &r[3], *a_ref = &r[4];
+    Rows *k1 = &r[5], *k2 = &r[6], *k3 = &r[7], *k4 = &r[8];
+    Rows *accel = &r[9], *v1_max = &r[10], *nxt = &r[11], *norm_out = &r[12];
+    Py_ssize_t n = norm_out->len;
+    if (pos->len != 2 * n || chi->len != 2 * n || target->len != 2 * n ||
+        v_ref->len != 2 * n || a_ref->len != 2 * n || nxt->len != 2 * n) {
+        release(r, got);
+        PyErr_SetString(PyExc_ValueError, "extension_step: shapes differ");
+        return NULL;
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double *p = pos->data + 2 * i, *c = chi->data + 2 * i;
+        const double *g = target->data + 2 * i;
+        const double *vr = v_ref->data + 2 * i, *ar = a_ref->data + 2 * i;
+        double aim0 = (g[0] != g[0]) ? p[0] : g[0];
+        double aim1 = (g[1] != g[1]) ? p[1] : g[1];
+        /* eq. (6): k_pos (pos - aim) + k_vel (chi - v_ref) + a_ref */
+        double d0 = k1->data[i * k1->step] * (p[0] - aim0) +
+                    k2->data[i * k2->step] * (c[0] - vr[0]);
+        double d1 = k3->data[i * k3->step] * (p[1] - aim1) +
+                    k4->data[i * k4->step] * (c[1] - vr[1]);
+        d0 = d0 + ar[0];
+        d1 = d1 + ar[1];
+        double s0 = d0 * dt, s1 = d1 * dt;
+        double step_norm = hypot(s0, s1);
+        double limit = accel->data[i * accel->step] * dt;
+        if (step_norm > limit) {
+            double scale = limit / np_maximum(step_norm, 1e-300);
+            s0 = s0 * scale;
+            s1 = s1 * scale;
+        }
+        double x0 = c[0] + s0, x1 = c[1] + s1;
+        double norm = hypot(x0, x1);
+        double vmax = v1_max->data[i * v1_max->step];
+        if (norm > vmax) {
+            double scale = vmax / np_maximum(norm, 1e-300);
+            x0 = x0 * scale;
+            x1 = x1 * scale;
+            norm = hypot(x0, x1);
+        }
+        nxt->data[2 * i] = x0;
+        nxt->data[2 * i + 1] = x1;
+        norm_out->data[i] = norm;
+    }
+    release(r, got);
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(flat_step_doc,
+"flat_step(theta, chi, nxt, norm, angle_nxt, angle_chi, kp, turn_max, v2_max,\n"
+"          dt, flags, chi_next, v1, v2) -> None\n"
+"\n"
+"limit_turn (where ``flags & 1``; ``angle_nxt`` the angle of ``nxt``),\n"
+"the applied rate, flat_inputs (``angle_chi`` the angle of ``chi``) and the clip of\n"
+"v2 to ``v2_max``: writes ``chi_next`` (n, 2), ``v1`` and ``v2`` (n,). ``flags &\n"
+"2``: the turn limit was given as one value (numpy's scalar clip); ``flags & 4``:\n"
+"``v2_max`` was.");
+
+static PyObject *
+flat_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 14) {
+        PyErr_SetString(PyExc_TypeError, "flat_step takes 14 arguments");
+        return NULL;
+    }
+    double dt = PyFloat_AsDouble(args[9]);
+    long flags = PyLong_AsLong(args[10]);
+    if ((dt == -1.0 || flags == -1) && PyErr_Occurred()) {
+        return NULL;
+    }
+    Rows r[12];
+    int got = 0;
+    for (int k = 0; k < 14; k++) {
+        if (k == 9 || k == 10) {
+            continue;
+        }
+        int idx = k < 9 ? k : k - 2;
+        if (get_rows(args[k], &r[idx], k >= 11) < 0) {
+            release(r, got);
+            return NULL;
+        }
+        got++;
+    }
+    Rows *theta = &r[0], *chi = &r[1], *nxt = &r[2], *norm = &r[3];
+    Rows *angle_nxt = &r[4], *angle_chi = &r[5], *kp = &r[6], *turn = &r[7];
+    Rows *v2_max = &r[8], *chi_next = &r[9], *v1_out = &r[10], *v2_out = &r[11];
+    Py_ssize_t n = theta->len;
+    int turning_limit = (int)(flags & 1);
+    if (chi->len != 2 * n || nxt->len != 2 * n || norm->len != n ||
+        angle_chi->len != n || chi_next->len != 2 * n || v1_out->len != n ||
+        v2_out->len != n || (turning_limit && angle_nxt->len != n)) {
+        release(r, got);
+        PyErr_SetString(PyExc_ValueError, "flat_step: shapes differ");
+        return NULL;
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double th = theta->data[i];
+        const double *c = chi->data + 2 * i, *x = nxt->data + 2 * i;
+        double out0 = x[0], out1 = x[1];
+        double aim = NAN;
+        int outside = 0;
+        if (turning_limit) { /* limit_turn */
+            double angle = angle_nxt->data[i];
+            double off = wrap_angle(angle - th);
+            double lim = turn->data[i * turn->step] * dt;
+            outside = (fabs(off) > lim) && (norm->data[i] >= CHI_HOLD);
+            if (outside) {
+                double edge = (flags & 2) ? clip_scalars(off, -lim, lim)
+                                          : clip_rows(off, -lim, lim);
+                double along = np_maximum(norm->data[i] * cos(off - edge), 0.0);
+                double direction = th + edge;
+                out0 = along * cos(direction);
+                out1 = along * sin(direction);
+                aim = angle;
+            }
+        }
+        chi_next->data[2 * i] = out0;
+        chi_next->data[2 * i + 1] = out1;
+        double cd0 = (out0 - c[0]) / dt, cd1 = (out1 - c[1]) / dt;
+        /* flat_inputs, eq. (5) */
+        double c1 = c[0], c2 = c[1];
+        double norm2 = c1 * c1 + c2 * c2;
+        double v1 = sqrt(norm2);
+        int defined = norm2 >= CHI_HOLD * CHI_HOLD;
+        double safe = np_maximum(norm2, CHI_REG * CHI_REG);
+        double feedforward = (-c2 * cd0 + c1 * cd1) / safe;
+        double k = kp->data[i * kp->step];
+        double heading_error = wrap_angle(th - angle_chi->data[i]);
+        double v2 = defined ? feedforward - k * heading_error : 0.0;
+        if (aim == aim) { /* turning: toward the aim the turn limit held chi from */
+            double toward = -k * wrap_angle(th - aim);
+            v2 = (defined ? feedforward : 0.0) + toward;
+        }
+        double vmax = v2_max->data[i * v2_max->step];
+        v2 = (flags & 4) ? clip_scalars(v2, -vmax, vmax) : clip_rows(v2, -vmax, vmax);
+        v1_out->data[i] = defined ? v1 : 0.0;
+        v2_out->data[i] = v2;
+    }
+    release(r, got);
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(elementwise_doc,
+"elementwise(op, a, b, out) -> None\n"
+"\n"
+"One of this module's scalar functions over arrays, for the checks of\n"
+"sandbox/model/kernels.py: op 0 hypot, 1 sin, 2 cos, 3 wrap_angle (b unused), 4\n"
+"numpy's maximum, 5 numpy's clip with scalar bounds (-b, b), 6 with array bounds,\n"
+"7 sqrt.");
+
+static PyObject *
+elementwise(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "elementwise takes 4 arguments");
+        return NULL;
+    }
+    long op = PyLong_AsLong(args[0]);
+    if (op == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    Rows r[3];
+    int got = 0;
+    for (int k = 0; k < 3; k++) {
+        if (get_rows(args[k + 1], &r[k], k == 2) < 0) {
+            release(r, got);
+            return NULL;
+        }
+        got++;
+    }
+    Py_ssize_t n = r[2].len;
+    if (r[0].len != n || r[1].len != n) {
+        release(r, got);
+        PyErr_SetString(PyExc_ValueError, "elementwise: shapes differ");
+        return NULL;
+    }
+    const double *a = r[0].data, *b = r[1].data;
+    double *out = r[2].data;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        switch (op) {
+            case 0: out[i] = hypot(a[i], b[i]); break;
+            case 1: out[i] = sin(a[i]); break;
+            case 2: out[i] = cos(a[i]); break;
+            case 3: out[i] = wrap_angle(a[i]); break;
+            case 4: out[i] = np_maximum(a[i], b[i]); break;
+            case 5: out[i] = clip_scalars(a[i], -b[i], b[i]); break;
+            case 6: out[i] = clip_rows(a[i], -b[i], b[i]); break;
+            default: out[i] = sqrt(a[i]); break;
+        }
+    }
+    release(r, got);
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef methods[] = {
+    {"extension_step", (PyCFunction)(void (*)(void))extension_step, METH_FASTCALL,
+     extension_step_doc},
+    {"flat_step", (PyCFunction)(void (*)(void))flat_step, METH_FASTCALL,
+     flat_step_doc},
+    {"elementwise", (PyCFunction)(void (*)(void))elementwise, METH_FASTCALL,
+     elementwise_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_kernels",
+    "The flatness controller of one period in C (see sandbox/model/kernels.py).", -1,
+    methods,
+};
+
+PyMODINIT_FUNC
+PyInit__kernels(void)
+{
+    return PyModule_Create(&module);
+}

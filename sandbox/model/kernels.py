@@ -1,0 +1,241 @@
+"""The flatness controller of one period, eqs. (5)-(6) with their limits, at once.
+
+The :class:`Controller`'s step gives what the loop asks of the controller every
+period: from the vehicles' state and their targets, ``chi`` for the next period and
+the commands ``(v1, v2)``, the composition of
+:func:`~sandbox.model.flatness.extension_rate`,
+:func:`~sandbox.model.flatness.advance_extension` (with
+:func:`~sandbox.model.flatness.limit_turn`), :func:`~sandbox.model.flatness.flat_inputs`
+and the clip of ``v2`` to ``v2_max``. Those numpy functions are the definition; about
+50 numpy calls a period, whose fixed cost (half a microsecond each) is most of a small
+fleet's controller.
+
+Where the optional extension ``sandbox.model._kernels`` (``_kernels.c``) is built,
+the same composition runs as two C loops over the vehicles, between which numpy
+computes the two arctangents (numpy's own, which need not be the C library's). The
+C loops do the operations of the numpy functions in their order, with numpy's rules
+for its maximum and clip on ties and NaN and for its floating remainder, so the
+numbers are numpy's to the bit. They also take ``sqrt``, ``hypot``, ``sin`` and
+``cos`` from the C library: at the first use, :func:`kernels_agree` compares them,
+and every rule above, with numpy on a few thousand arguments (special values
+included), and the C loops are used only if every result has the same bits
+(``tests/test_kernels.py`` compares whole controller steps). :data:`USE_KERNELS`
+False forces the numpy path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sandbox.model.dynamics import CLIP, wrap_angle
+from sandbox.model.flatness import (
+    Gains,
+    advance_extension,
+    extension_rate,
+    flat_inputs,
+)
+
+try:
+    from sandbox.model import _kernels
+except ImportError:  # pragma: no cover - built without a C compiler
+    _kernels = None
+
+#: Use the C loops where they are built and agree with numpy (False: numpy only).
+USE_KERNELS = True
+_agreed: bool | None = None
+
+
+def kernels_agree() -> bool:
+    """Whether the C loops' functions give numpy's bits here (checked once)."""
+    global _agreed
+    if _agreed is None:
+        _agreed = _kernels is not None and _check()
+    return _agreed
+
+
+def _samples() -> tuple[np.ndarray, np.ndarray]:
+    """Arguments of the check: random magnitudes, angles and special values."""
+    rng = np.random.default_rng(20261205)
+    special = np.array(
+        [0.0, -0.0, np.nan, -np.nan, np.inf, -np.inf, np.pi, -np.pi, 2 * np.pi]
+        + [np.nextafter(-np.pi, -np.inf), np.nextafter(np.pi, np.inf), 1e-300, 5e-324]
+    )
+    a = np.concatenate(
+        (
+            rng.uniform(-10.0, 10.0, 2048),
+            rng.uniform(-1e3, 1e3, 512),
+            rng.normal(0.0, 1e-3, 512),
+            np.repeat(special, len(special)),
+        )
+    )
+    b = np.concatenate(
+        (
+            rng.uniform(-10.0, 10.0, 2048),
+            rng.uniform(0.0, 5.0, 512),
+            rng.normal(0.0, 1e-3, 512),
+            np.tile(special, len(special)),
+        )
+    )
+    return a, b
+
+
+def _same(x: np.ndarray, y: np.ndarray) -> bool:
+    return bool(np.array_equal(x.view(np.uint64), y.view(np.uint64)))
+
+
+def _check() -> bool:
+    with np.errstate(all="ignore"):
+        return _agrees(*_samples())
+
+
+def _agrees(a: np.ndarray, b: np.ndarray) -> bool:
+    bound = np.abs(b)
+    expected = {
+        0: np.hypot(a, b),
+        1: np.sin(a),
+        2: np.cos(a),
+        3: wrap_angle(a),
+        4: np.maximum(a, b),
+        6: CLIP(a, -bound, bound),
+        7: np.sqrt(np.abs(a)),
+    }
+    for op, want in expected.items():
+        got = np.empty_like(a)
+        first = np.abs(a) if op == 7 else a
+        second = bound if op == 6 else b
+        _kernels.elementwise(op, first, second, got)
+        if not _same(got, want):
+            return False
+    for hi in (0.0, 0.5, 3.0, np.inf):  # the clip with scalar bounds
+        got = np.empty_like(a)
+        _kernels.elementwise(5, a, np.full_like(a, hi), got)
+        if not _same(got, CLIP(a, -hi, hi)):
+            return False
+    return True
+
+
+def _rows(value: float | np.ndarray) -> np.ndarray:
+    """A gain or limit as the C loops read it: (1,) for a scalar, else (n,)."""
+    return np.ascontiguousarray(np.atleast_1d(np.asarray(value, dtype=float)))
+
+
+def _contiguous(a: np.ndarray) -> np.ndarray:
+    if a.dtype == np.float64 and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=float)
+
+
+class Controller:
+    """The controller of a fleet: its gains and limits, and one period's step.
+
+    Parameters
+    ----------
+    gains : Gains
+        Scalars or arrays of shape (n,).
+    dt : float [s]
+    v1_max, accel_max, v2_max : float or ndarray (n,)
+        ``inf`` where unlimited.
+    turn_max : float or ndarray (n,) or None
+        The anti-windup's turn-rate limit (``v2_max``), or None without one.
+    """
+
+    def __init__(
+        self,
+        gains: Gains,
+        dt: float,
+        v1_max: float | np.ndarray,
+        accel_max: float | np.ndarray,
+        v2_max: float | np.ndarray,
+        turn_max: float | np.ndarray | None,
+    ) -> None:
+        self.gains, self.dt = gains, dt
+        self.v1_max, self.accel_max = v1_max, accel_max
+        self.v2_max, self.turn_max = v2_max, turn_max
+        self._k = [_rows(getattr(gains, k)) for k in ("k1", "k2", "k3", "k4")]
+        self._kp = _rows(gains.kp)
+        self._accel, self._v1 = _rows(accel_max), _rows(v1_max)
+        self._v2 = _rows(v2_max)
+        self._turn = _rows(np.inf if turn_max is None else turn_max)
+        self._flags = (
+            (0 if turn_max is None else 1)
+            | (2 if np.ndim(turn_max) == 0 else 0)
+            | (4 if np.ndim(v2_max) == 0 else 0)
+        )
+
+    def step(
+        self,
+        pos: np.ndarray,
+        chi: np.ndarray,
+        theta: np.ndarray,
+        target: np.ndarray,
+        v_ref: np.ndarray,
+        a_ref: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``chi`` of the next period and the commands ``(v1, v2)`` of this one.
+
+        Parameters
+        ----------
+        pos, chi : ndarray (n, 2) [m], [m/s]
+        theta : ndarray (n,) [rad]
+        target, v_ref, a_ref : ndarray (n, 2) [m], [m/s], [m/s^2]
+            The slot to track (a NaN coordinate aims at the position's) and its
+            feed-forward velocity and acceleration.
+
+        Returns
+        -------
+        chi_next : ndarray (n, 2) [m/s]
+        v1 : ndarray (n,) [m/s]
+        v2 : ndarray (n,) [rad/s]
+            Within ``v2_max``.
+        """
+        if USE_KERNELS and kernels_agree():
+            return self._step_c(pos, chi, theta, target, v_ref, a_ref)
+        return self.step_numpy(pos, chi, theta, target, v_ref, a_ref)
+
+    def step_numpy(self, pos, chi, theta, target, v_ref, a_ref):
+        """:meth:`step` by the numpy functions (the definition)."""
+        if np.count_nonzero(np.isnan(target)):
+            aim = np.where(np.isnan(target), pos, target)
+        else:
+            aim = target
+        chi_dot = extension_rate(pos, chi, aim, v_ref, a_ref, self.gains)
+        turn = None
+        if self.turn_max is None:
+            chi_next, chi_dot = advance_extension(
+                chi, chi_dot, self.dt, self.v1_max, self.accel_max
+            )
+        else:  # the turn-rate limit of the anti-windup
+            chi_next, chi_dot, turn = advance_extension(
+                chi,
+                chi_dot,
+                self.dt,
+                self.v1_max,
+                self.accel_max,
+                theta,
+                self.turn_max,
+            )
+        v1, v2 = flat_inputs(theta, chi, chi_dot, self.gains.kp, turn)
+        return chi_next, v1, CLIP(v2, -self.v2_max, self.v2_max)
+
+    def _step_c(self, pos, chi, theta, target, v_ref, a_ref):
+        n = len(theta)
+        pos, chi, theta = _contiguous(pos), _contiguous(chi), _contiguous(theta)
+        target, v_ref, a_ref = (
+            _contiguous(target),
+            _contiguous(v_ref),
+            _contiguous(a_ref),
+        )
+        nxt, norm = np.empty((n, 2)), np.empty(n)
+        k1, k2, k3, k4 = self._k
+        _kernels.extension_step(
+            pos, chi, target, v_ref, a_ref, k1, k2, k3, k4, self._accel, self._v1,
+            self.dt, nxt, norm,
+        )  # fmt: skip
+        angle_chi = np.arctan2(chi[:, 1], chi[:, 0])
+        angle_nxt = norm if self.turn_max is None else np.arctan2(nxt[:, 1], nxt[:, 0])
+        chi_next, v1, v2 = np.empty((n, 2)), np.empty(n), np.empty(n)
+        _kernels.flat_step(
+            theta, chi, nxt, norm, angle_nxt, angle_chi, self._kp, self._turn,
+            self._v2, self.dt, self._flags, chi_next, v1, v2,
+        )  # fmt: skip
+        return chi_next, v1, v2
