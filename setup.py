@@ -1,4 +1,4 @@
-"""Build configuration that ``pyproject.toml`` cannot state: scenarios and a C loop.
+"""Build configuration that ``pyproject.toml`` cannot state: scenarios and C loops.
 
 The repository keeps its scenarios in the top-level ``scenarios/`` folder, their only
 source. This maps that folder into the package as ``sandbox/scenarios/`` at build time
@@ -8,27 +8,60 @@ the folder in place (see ``sandbox/scenario/bundled.py``). The replay page's
 templates, style and script (``sandbox/render/replay/assets/``) are package data too.
 Everything else is declared in ``pyproject.toml``.
 
-Two optional C extensions: ``sandbox.physics._cstep``, the loop that steps a batch of
-pymunk worlds through a whole control period in one call (see
-``sandbox/physics/stepping.py``), and ``sandbox.model._kernels``, the flatness
-controller of a period in two calls (see ``sandbox/model/kernels.py``). They need a
-C compiler and Python's headers, nothing of Chipmunk or numpy (the first calls
-pymunk's functions through their addresses, the second reads arrays through the
-buffer interface). They are optional: where one cannot be compiled the install goes
-on without it (setuptools prints the error) and the Python path runs instead, with
-the same results. An editable install (``pip install -e .``) compiles them next to
-their sources. The kernels are compiled without contracting a multiplication and an
-addition into one fused operation, which rounds once instead of twice and would
-change the numbers.
+Three optional C extensions: ``sandbox.physics._cstep``, the loop that steps a batch
+of pymunk worlds through a whole control period in one call (see
+``sandbox/physics/stepping.py``); ``sandbox.model._kernels``, the flatness controller
+of a period in two calls (see ``sandbox/model/kernels.py``); and
+``sandbox.behaviour._pair_field``, the vehicles' terms of the avoidance field in one
+(see ``sandbox/behaviour/pair_field.py``). They need a C compiler and Python's
+headers, nothing of Chipmunk or numpy (the first calls pymunk's functions through
+their addresses, the others read arrays through the buffer interface and share
+``sandbox/numpy_rules.h``). They are optional: where one cannot be compiled the
+install goes on without it (setuptools prints the error) and the Python path runs
+instead, with the same results. An editable install (``pip install -e .``) compiles
+them next to their sources. The last two are compiled without contracting a
+multiplication and an addition into one fused operation, which rounds once instead
+of twice and would change the numbers.
 """
 
 from setuptools import Extension, find_packages, setup
 from setuptools.command.build_ext import build_ext
 
 CSTEP = Extension("sandbox.physics._cstep", ["sandbox/physics/_cstep.c"], optional=True)
+#: The extensions whose loops must give numpy's numbers to the bit.
+RULES = ["sandbox/numpy_rules.h"]
 KERNELS = Extension(
-    "sandbox.model._kernels", ["sandbox/model/_kernels.c"], optional=True
+    "sandbox.model._kernels",
+    ["sandbox/model/_kernels.c"],
+    include_dirs=["sandbox"],
+    depends=RULES,
+    optional=True,
 )
+PAIR_FIELD = Extension(
+    "sandbox.behaviour._pair_field",
+    ["sandbox/behaviour/_pair_field.c"],
+    include_dirs=["sandbox"],
+    depends=RULES,
+    optional=True,
+)
+MOTORS = Extension(
+    "sandbox.physics._motors",
+    ["sandbox/physics/_motors.c"],
+    include_dirs=["sandbox"],
+    depends=RULES,
+    optional=True,
+)
+
+QP = Extension(
+    "sandbox.behaviour.safety._qp",
+    ["sandbox/behaviour/safety/_qp.c"],
+    include_dirs=["sandbox"],
+    depends=RULES,
+    optional=True,
+)
+
+#: The extensions compiled with no fused multiply-add.
+EXACT = (KERNELS, PAIR_FIELD, MOTORS, QP)
 
 
 class BuildExt(build_ext):
@@ -36,13 +69,13 @@ class BuildExt(build_ext):
 
     def build_extension(self, ext):
         """Compile ``ext``; the kernels with no contracted floating point."""
-        if ext is KERNELS and self.compiler.compiler_type == "unix":
+        if ext in EXACT and self.compiler.compiler_type == "unix":
             ext.extra_compile_args = ["-ffp-contract=off", "-fno-fast-math"]
         super().build_extension(ext)
 
 
 setup(
-    ext_modules=[CSTEP, KERNELS],
+    ext_modules=[CSTEP, KERNELS, PAIR_FIELD, MOTORS, QP],
     cmdclass={"build_ext": BuildExt},
     packages=[*find_packages(include=["sandbox", "sandbox.*"]), "sandbox.scenarios"],
     package_dir={"sandbox.scenarios": "scenarios"},

@@ -113,3 +113,48 @@ def test_use_kernels_false_forces_numpy(monkeypatch):
     chi_next, v1, v2 = controller.step(*_state(rng, 5))
     assert chi_next.shape == (5, 2) and v1.shape == v2.shape == (5,)
     assert np.all(np.abs(v2) <= controller.v2_max)
+
+
+@needs_c
+@pytest.mark.parametrize("substeps", [1, 4])
+def test_the_motor_model_in_c_equals_numpy_to_the_bit(monkeypatch, substeps):
+    from types import SimpleNamespace
+
+    from sandbox.behaviour import detection
+
+    rng = np.random.default_rng(substeps)
+    n = 64
+    accel = np.where(rng.random(n) < 0.3, np.inf, rng.uniform(0.5, 20.0, n))
+    ctx = SimpleNamespace(
+        dt=0.01,
+        substeps=substeps,
+        commands=rng.normal(0.0, 1.0, (n, 2)),
+        motor_accel=accel,
+        turn_accel=4.0 * accel / 0.15,
+    )
+
+    def state():
+        r = np.random.default_rng(7)
+        return SimpleNamespace(
+            pose=r.normal(0.0, 2.0, (n, 3)),
+            vel=r.normal(0.0, 1.0, (n, 2)),
+            rate=r.normal(0.0, 1.0, n),
+            travel=r.uniform(0.0, 1.0, n),
+        )
+
+    with_c, numpy = state(), state()
+    calls = []
+    real = kernels._kernels.motor_model
+    monkeypatch.setattr(
+        kernels._kernels, "motor_model", lambda *a: (calls.append(1), real(*a))[1]
+    )
+    for _ in range(5):
+        detection._advance_model(with_c, ctx)
+    assert len(calls) == 5
+    monkeypatch.setattr(kernels, "USE_KERNELS", False)
+    for _ in range(5):
+        detection._advance_model(numpy, ctx)
+    for name in ("pose", "vel", "rate", "travel"):
+        assert np.array_equal(
+            _bits(getattr(with_c, name)), _bits(getattr(numpy, name))
+        ), name

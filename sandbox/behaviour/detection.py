@@ -88,6 +88,7 @@ from typing import Any
 import numpy as np
 
 from sandbox.behaviour.tracks import TrackHistory, stop_fits
+from sandbox.model.kernels import motor_model
 from sandbox.plugins.registration import (
     DetectorContext,
     Param,
@@ -252,6 +253,13 @@ def _wrap(a: np.ndarray) -> np.ndarray:
 def _advance_model(st: DetectorState, ctx: DetectorContext) -> None:
     """One control period of the motor model (see the module docstring)."""
     h, s = ctx.dt, max(1, int(ctx.substeps))
+    moved = motor_model(
+        st.pose, st.vel, st.rate, st.travel, ctx.commands, ctx.motor_accel,
+        ctx.turn_accel, h, s,
+    )  # fmt: skip
+    if moved is not None:  # the same numbers in one C call
+        st.vel, st.rate = moved
+        return
     dts = h / s
     v1, v2 = ctx.commands[:, 0], ctx.commands[:, 1]
     heading = st.pose[:, 2] + 0.5 * v2 * h

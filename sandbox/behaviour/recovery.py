@@ -54,9 +54,11 @@ Derivatives fed to eq. (6) with the shifted target (``recovery.target_derivative
 
 Obstacles are the other vehicles (centre-to-centre distance) and the static obstacles
 (distance from the vehicle centre to the nearest surface point, pushing away from it).
-Pure numpy; neighbours come from a KD-tree (scipy) above a few dozen vehicles, kept
-between control steps as a Verlet list (:class:`NeighbourList`), so the cost per step
-stays about linear in the number of vehicles.
+Numpy, with the vehicles' pair terms of the discontinuous and continuous weights in
+one C call where that optional extension is built (:mod:`sandbox.behaviour.pair_field`,
+the same numbers); neighbours come from a KD-tree (scipy) above a few dozen vehicles,
+kept between control steps as a Verlet list (:class:`NeighbourList`), so the cost per
+step stays about linear in the number of vehicles.
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.behaviour import pair_field
 from sandbox.geometry.neighbours import NeighbourList, neighbour_pairs
 from sandbox.model.dynamics import CLIP
 from sandbox.model.obstacle_field import MIN_DIST, ObstacleField
@@ -194,6 +197,13 @@ def smooth(dist: np.ndarray, R: float, r: float | None, steepness: float) -> np.
     return CLIP((np.tanh(steepness * (c - dist) / w) + t) / (2.0 * t), 0.0, 1.0)
 
 
+#: The weights whose pair terms :mod:`sandbox.behaviour.pair_field` computes in C.
+_C_KINDS: dict[Callable[..., np.ndarray], int] = {
+    discontinuous: pair_field.DISCONTINUOUS,
+    continuous: pair_field.CONTINUOUS,
+}
+
+
 @register_strategy("none", batched=True)
 def no_recovery(ctx: StrategyContext) -> tuple[np.ndarray, np.ndarray]:
     """No recovery: targets are never shifted."""
@@ -310,6 +320,71 @@ def weighted_shift(
     if not np.count_nonzero(avoiders):
         return shift, active
     goal = slot_directions(pos, ctx.slot) if kappa > 0 else None
+    kind = _C_KINDS.get(weight) if goal is None and neighbours is not None else None
+    if kind is not None and pair_field.usable():
+        # The pairs' terms in one C call (the numpy below, bit for bit).
+        pair_field.add_pair_terms(
+            pos, ctx.seen_pos, neighbours, R, r, kind, shift, active
+        )
+    else:
+        _pair_terms(ctx, weight, r, steepness, kappa, goal, shift, active)
+    if not obstacles.empty and neighbours is not None:
+        # Only the obstacles near each vehicle (alpha is 0 beyond R for every strategy);
+        # the same terms as below, summed over the candidate pairs.
+        rows, cols = neighbours.obstacle_pairs(pos, obstacles)
+        signed, point = obstacles.pair_distance(pos, rows, cols)
+        dist = np.maximum(np.abs(signed), MIN_DIST)  # eq. (25)
+        alpha = weight(np.maximum(signed, MIN_DIST), R, r, steepness)
+        outward = np.where(signed < 0, -1.0, 1.0)[:, None]
+        rel = (np.take(pos, rows, axis=0) - point) * outward
+        dd = dist * dist
+        if goal is not None:
+            u = rel / dist[:, None]
+            t = tangential_terms(u, goal[rows], kappa, obstacles.kind[cols] > 0)
+            rel = rel + t * dist[:, None]
+        for axis in (0, 1):  # eqs. (23)-(24)
+            c = alpha * (rel[:, axis] / dd)
+            shift[:, axis] += np.bincount(rows, c, minlength=n)
+        active[rows[alpha > 0]] = True
+    elif not obstacles.empty:
+        signed, point = obstacles.nearest(pos)
+        # A centre inside an obstacle (negative distance; possible only at the start) is
+        # pushed out of it with full weight: u_i points from the surface point outward.
+        dist = np.maximum(np.abs(signed), MIN_DIST)  # eq. (25)
+        alpha = weight(np.maximum(signed, MIN_DIST), R, r, steepness)
+        rel = (pos[:, None, :] - point) * np.where(signed < 0, -1.0, 1.0)[..., None]
+        if goal is not None:
+            m = signed.shape[1]
+            u = (rel / dist[..., None]).reshape(-1, 2)
+            g = np.repeat(goal, m, axis=0)
+            flat = np.tile(obstacles.kind > 0, len(pos))
+            t = tangential_terms(u, g, kappa, flat).reshape(rel.shape)
+            rel = rel + t * dist[..., None]
+        vect = rel / (dist * dist)[..., None]  # eqs. (23)-(24)
+        shift += np.sum(alpha[..., None] * vect, axis=1)
+        active |= np.any(alpha > 0, axis=1)
+    shift *= beta  # eq. (22) / (26)
+    shift[~avoiders] = 0.0
+    active &= avoiders
+    return shift, active
+
+
+def _pair_terms(
+    ctx: StrategyContext,
+    weight: Weight,
+    r: float | None,
+    steepness: float,
+    kappa: float,
+    goal: np.ndarray | None,
+    shift: np.ndarray,
+    active: np.ndarray,
+) -> None:
+    """The vehicles' terms of :func:`weighted_shift`, into ``shift`` and ``active``.
+
+    The definition (numpy) of what :func:`~sandbox.behaviour.pair_field.add_pair_terms`
+    computes in C for the discontinuous and continuous weights without ``kappa``.
+    """
+    pos, R, neighbours, n = ctx.pos, ctx.R, ctx.neighbours, len(ctx.pos)
     if neighbours is not None:
         i, j, rel = neighbours.near(pos)  # rel: from j to i
     else:
@@ -369,45 +444,6 @@ def weighted_shift(
                 shift[:, axis] = np.bincount(both, c, minlength=n)
             active[i[a_i > 0]] = True
             active[j[a_j > 0]] = True
-    if not obstacles.empty and neighbours is not None:
-        # Only the obstacles near each vehicle (alpha is 0 beyond R for every strategy);
-        # the same terms as below, summed over the candidate pairs.
-        rows, cols = neighbours.obstacle_pairs(pos, obstacles)
-        signed, point = obstacles.pair_distance(pos, rows, cols)
-        dist = np.maximum(np.abs(signed), MIN_DIST)  # eq. (25)
-        alpha = weight(np.maximum(signed, MIN_DIST), R, r, steepness)
-        outward = np.where(signed < 0, -1.0, 1.0)[:, None]
-        rel = (np.take(pos, rows, axis=0) - point) * outward
-        dd = dist * dist
-        if goal is not None:
-            u = rel / dist[:, None]
-            t = tangential_terms(u, goal[rows], kappa, obstacles.kind[cols] > 0)
-            rel = rel + t * dist[:, None]
-        for axis in (0, 1):  # eqs. (23)-(24)
-            c = alpha * (rel[:, axis] / dd)
-            shift[:, axis] += np.bincount(rows, c, minlength=n)
-        active[rows[alpha > 0]] = True
-    elif not obstacles.empty:
-        signed, point = obstacles.nearest(pos)
-        # A centre inside an obstacle (negative distance; possible only at the start) is
-        # pushed out of it with full weight: u_i points from the surface point outward.
-        dist = np.maximum(np.abs(signed), MIN_DIST)  # eq. (25)
-        alpha = weight(np.maximum(signed, MIN_DIST), R, r, steepness)
-        rel = (pos[:, None, :] - point) * np.where(signed < 0, -1.0, 1.0)[..., None]
-        if goal is not None:
-            m = signed.shape[1]
-            u = (rel / dist[..., None]).reshape(-1, 2)
-            g = np.repeat(goal, m, axis=0)
-            flat = np.tile(obstacles.kind > 0, len(pos))
-            t = tangential_terms(u, g, kappa, flat).reshape(rel.shape)
-            rel = rel + t * dist[..., None]
-        vect = rel / (dist * dist)[..., None]  # eqs. (23)-(24)
-        shift += np.sum(alpha[..., None] * vect, axis=1)
-        active |= np.any(alpha > 0, axis=1)
-    shift *= beta  # eq. (22) / (26)
-    shift[~avoiders] = 0.0
-    active &= avoiders
-    return shift, active
 
 
 def slot_directions(pos: np.ndarray, slot: np.ndarray) -> np.ndarray:

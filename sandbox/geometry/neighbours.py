@@ -86,8 +86,11 @@ class NeighbourList:
         i, j, _ = self.near(pos)
         return i, j
 
-    def near(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Like :meth:`pairs`, with the offsets ``pos[i] - pos[j]`` (m, 2) [m] too."""
+    def candidates(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The candidate pairs ``(i, j)``, intp and sorted, that :meth:`near` filters.
+
+        Rebuilt first where some vehicle has moved more than ``skin / 2``.
+        """
         n = len(pos)
         anchor = self._anchor
         if anchor is None or len(anchor) != n:
@@ -97,6 +100,14 @@ class NeighbourList:
             worst = float(np.max(moved[:, 0] * moved[:, 0] + moved[:, 1] * moved[:, 1]))
             if not worst <= 0.25 * self.skin * self.skin:  # also rebuilds on NaN
                 self._rebuild(pos)
+        return self._i, self._j
+
+    def remember(self, pos: np.ndarray, d2: np.ndarray) -> None:
+        """Take note of the candidates' squared distances at ``pos`` (unused here)."""
+
+    def near(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Like :meth:`pairs`, with the offsets ``pos[i] - pos[j]`` (m, 2) [m] too."""
+        self.candidates(pos)
         # np.take on rows is several times faster than fancy indexing pos[i].
         rel = np.take(pos, self._i, axis=0)
         rel -= np.take(pos, self._j, axis=0)
@@ -176,6 +187,14 @@ class WorldPairs:
         self._last = (pos, d2)
         keep = (d2 < self.radius * self.radius).nonzero()[0]
         return self._i.take(keep), self._j.take(keep), np.take(rel, keep, axis=0)
+
+    def candidates(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every pair of every world (the candidates :meth:`near` filters)."""
+        return self._i, self._j
+
+    def remember(self, pos: np.ndarray, d2: np.ndarray) -> None:
+        """Keep the candidates' squared distances at ``pos`` for :meth:`distances`."""
+        self._last = (pos, d2)
 
     def distances(self, pos: np.ndarray) -> np.ndarray | None:
         """Squared distances of every pair, world after world (else None).

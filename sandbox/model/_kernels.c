@@ -1,55 +1,28 @@
-/* The flatness controller of one control period, row by row, in two C calls.
+/* The flatness controller of one control period, row by row, in two C calls, and
+ * the residual detector's motor model of a period in one.
  *
  * sandbox/model/kernels.py calls these where this optional extension is built and
  * its checks pass. They compute, element by element and in the same order, the
  * operations of the numpy functions of sandbox/model/flatness.py as the loop calls
  * them (extension_rate, advance_extension, limit_turn, flat_inputs and the clip of
- * v2): the same IEEE-754 double operations (the extension is compiled without
- * contraction into fused multiply-adds), numpy's own rules where it has them (its
- * maximum and clip on ties and NaN, its floating remainder), and the C library's
- * sqrt, hypot, sin and cos, which kernels.py checks give numpy's numbers on this
- * machine before it uses them. The angles of chi (numpy's arctan2, which may not be
- * the C library's) come in computed by numpy.
+ * v2), and of sandbox/behaviour/detection.py's _advance_model: the same IEEE-754
+ * double operations (the extension is compiled without contraction into fused
+ * multiply-adds), numpy's own rules where it has them (its maximum and clip on ties
+ * and NaN, its floating remainder), and the C library's sqrt, hypot, sin and cos,
+ * which kernels.py checks give numpy's numbers on this machine before it uses them.
+ * The angles of chi (numpy's arctan2, which may not be the C library's) come in
+ * computed by numpy.
  *
  * Arrays are C-contiguous float64; a parameter array of length 1 is one value for
  * every row (stride 0). Every pointer argument is an object with the buffer
  * interface (a numpy array).
  */
 
-#define PY_SSIZE_T_CLEAN
-#include <Python.h>
-#include <math.h>
-#include <string.h>
+#include "numpy_rules.h"
 
 /* The controller's constants (sandbox/model/flatness.py). */
 #define CHI_HOLD 1e-3
 #define CHI_REG 0.01
-
-/* numpy.maximum(a, b): a where a > b or a is NaN, else b (b on a tie). */
-static inline double
-np_maximum(double a, double b)
-{
-    return (a > b || a != a) ? a : b;
-}
-
-/* numpy's clip with array bounds: max then min, the bound on a tie, NaN kept. */
-static inline double
-clip_rows(double x, double lo, double hi)
-{
-    double y = (x != x) ? x : (x > lo ? x : lo);
-    return (y != y) ? y : (y < hi ? y : hi);
-}
-
-/* numpy's clip with scalar bounds: x itself on a tie, NaN kept. */
-static inline double
-clip_scalars(double x, double lo, double hi)
-{
-    if (x != x) {
-        return x;
-    }
-    double y = (x < lo) ? lo : x;
-    return (y > hi) ? hi : y;
-}
 
 /* numpy.remainder(a, b) of floats: fmod, moved to b's sign, +-0 with b's sign. */
 static inline double
@@ -76,41 +49,6 @@ wrap_angle(double a)
 {
     double w = np_remainder(a + M_PI, 2.0 * M_PI) - M_PI;
     return (w >= M_PI) ? -M_PI : w;
-}
-
-/* A float64 buffer and its length. */
-typedef struct {
-    Py_buffer view;
-    double *data;
-    Py_ssize_t len;
-    Py_ssize_t step; /* 0 for one value for every row */
-} Rows;
-
-static int
-get_rows(PyObject *obj, Rows *rows, int writable)
-{
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, &rows->view, flags) < 0) {
-        return -1;
-    }
-    if (rows->view.itemsize != 8 || rows->view.format == NULL ||
-        strcmp(rows->view.format, "d") != 0) {
-        PyBuffer_Release(&rows->view);
-        PyErr_SetString(PyExc_TypeError, "expected a contiguous float64 array");
-        return -1;
-    }
-    rows->data = (double *)rows->view.buf;
-    rows->len = rows->view.len / 8;
-    rows->step = rows->len == 1 ? 0 : 1;
-    return 0;
-}
-
-static void
-release(Rows *rows, int count)
-{
-    for (int k = 0; k < count; k++) {
-        PyBuffer_Release(&rows[k].view);
-    }
 }
 
 PyDoc_STRVAR(extension_step_doc,
@@ -343,11 +281,84 @@ elementwise(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_RETURN_NONE;
 }
 
+PyDoc_STRVAR(motor_model_doc,
+"motor_model(pose, vel, rate, commands, accel, turn_accel, h, substeps, travel)\n"
+"    -> None\n"
+"\n"
+"One control period of the residual detector's motor model\n"
+"(sandbox/behaviour/detection.py, _advance_model) for n vehicles: ``pose`` (n, 3),\n"
+"``vel`` (n, 2), ``rate`` (n,) and ``travel`` (n,) advanced in place from the\n"
+"commands ``(v1, v2)`` (n, 2), the motors' limits ``accel`` and ``turn_accel`` (n,)\n"
+"[m/s^2, rad/s^2], the period ``h`` [s] in ``substeps``.");
+
+static PyObject *
+motor_model(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 9) {
+        PyErr_SetString(PyExc_TypeError, "motor_model takes 9 arguments");
+        return NULL;
+    }
+    double h = PyFloat_AsDouble(args[6]);
+    long substeps = PyLong_AsLong(args[7]);
+    if (PyErr_Occurred()) {
+        return NULL;
+    }
+    static const int at[] = {0, 1, 2, 3, 4, 5, 8};
+    Rows r[7];
+    int got = 0;
+    for (int k = 0; k < 7; k++) {
+        int writable = at[k] <= 2 || at[k] == 8;
+        if (get_rows(args[at[k]], &r[k], writable) < 0) {
+            release(r, got);
+            return NULL;
+        }
+        got++;
+    }
+    Rows *pose = &r[0], *vel = &r[1], *rate = &r[2], *cmd = &r[3];
+    Rows *accel = &r[4], *turn = &r[5], *travel = &r[6];
+    Py_ssize_t n = rate->len;
+    if (pose->len != 3 * n || vel->len != 2 * n || cmd->len != 2 * n ||
+        accel->len != n || turn->len != n || travel->len != n || substeps < 1) {
+        release(r, got);
+        PyErr_SetString(PyExc_ValueError, "motor_model: shapes differ");
+        return NULL;
+    }
+    double dts = h / (double)substeps;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double *p = pose->data + 3 * i, *v = vel->data + 2 * i;
+        double v1 = cmd->data[2 * i], v2 = cmd->data[2 * i + 1];
+        double heading = p[2] + 0.5 * v2 * h;
+        double t0 = v1 * cos(heading), t1 = v1 * sin(heading);
+        double lin = accel->data[i] * dts, ang = turn->data[i] * dts;
+        double sx = p[0], sy = p[1];
+        double vx = v[0], vy = v[1], w = rate->data[i];
+        for (long s = 0; s < substeps; s++) {
+            p[0] = p[0] + vx * dts;
+            p[1] = p[1] + vy * dts;
+            p[2] = p[2] + w * dts;
+            double d0 = t0 - vx, d1 = t1 - vy;
+            double norm = hypot(d0, d1);
+            double scale = norm > lin ? lin / np_maximum(norm, 1e-300) : 1.0;
+            vx = vx + d0 * scale;
+            vy = vy + d1 * scale;
+            w = w + clip_rows(v2 - w, -ang, ang);
+        }
+        v[0] = vx;
+        v[1] = vy;
+        rate->data[i] = w;
+        travel->data[i] = travel->data[i] + hypot(p[0] - sx, p[1] - sy);
+    }
+    release(r, got);
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"extension_step", (PyCFunction)(void (*)(void))extension_step, METH_FASTCALL,
      extension_step_doc},
     {"flat_step", (PyCFunction)(void (*)(void))flat_step, METH_FASTCALL,
      flat_step_doc},
+    {"motor_model", (PyCFunction)(void (*)(void))motor_model, METH_FASTCALL,
+     motor_model_doc},
     {"elementwise", (PyCFunction)(void (*)(void))elementwise, METH_FASTCALL,
      elementwise_doc},
     {NULL, NULL, 0, NULL},

@@ -239,3 +239,42 @@ class Controller:
             self._v2, self.dt, self._flags, chi_next, v1, v2,
         )  # fmt: skip
         return chi_next, v1, v2
+
+
+def motor_model(
+    pose: np.ndarray,
+    vel: np.ndarray,
+    rate: np.ndarray,
+    travel: np.ndarray,
+    commands: np.ndarray,
+    accel: np.ndarray,
+    turn_accel: np.ndarray,
+    h: float,
+    substeps: int,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """One period of the residual detector's motor model in C, or None.
+
+    ``pose`` (n, 3) and ``travel`` (n,) advance in place; returns the new ``vel``
+    (n, 2) and ``rate`` (n,) (new arrays, as the numpy model makes). None where the
+    C loop cannot run (not built, the check failed, :data:`USE_KERNELS` False, or an
+    array that is not C-contiguous float64): the caller runs the numpy model.
+    """
+    if not (USE_KERNELS and kernels_agree()):
+        return None
+    n = len(pose)
+    if not all(
+        a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable
+        for a in (pose, travel)
+    ) or not (
+        pose.shape == (n, 3)
+        and np.shape(vel) == np.shape(commands) == (n, 2)
+        and np.shape(rate) == np.shape(travel) == np.shape(accel) == (n,)
+        and np.shape(turn_accel) == (n,)
+    ):
+        return None
+    vel, rate = np.array(vel, dtype=float), np.array(rate, dtype=float)
+    _kernels.motor_model(
+        pose, vel, rate, _contiguous(commands), _contiguous(accel),
+        _contiguous(turn_accel), float(h), int(substeps), travel,
+    )  # fmt: skip
+    return vel, rate

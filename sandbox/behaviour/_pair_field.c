@@ -1,0 +1,201 @@
+/* The vehicles' terms of the avoidance field, eqs. (22)-(27), in one C call.
+ *
+ * sandbox/behaviour/pair_field.py calls this where this optional extension is built
+ * and its check passes. For the candidate pairs of a neighbour search it does what
+ * the neighbour list's filter and sandbox.behaviour.recovery.weighted_shift do with
+ * numpy for the discontinuous and continuous weights without the tangential term:
+ * keep the pairs closer than the search radius, weigh each one and add its terms to
+ * both vehicles' sums, each vehicle's terms as numpy's bincount adds them (first
+ * the pairs where it comes first, in order, then those where it comes second). The
+ * same IEEE-754 double operations in the same order (compiled without fused
+ * multiply-adds), numpy's rules for its maximum and clip, and the C library's sqrt,
+ * which the check compares with numpy's.
+ */
+
+#include "numpy_rules.h"
+
+/* sandbox.model.obstacle_field.MIN_DIST: the least distance of eq. (25) [m]. */
+#define MIN_DIST 1e-6
+
+/* An index array (numpy's intp) and its length. */
+typedef struct {
+    Py_buffer view;
+    const Py_ssize_t *data;
+    Py_ssize_t len;
+} Indices;
+
+static int
+get_indices(PyObject *obj, Indices *out)
+{
+    if (PyObject_GetBuffer(obj, &out->view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        return -1;
+    }
+    const char *f = out->view.format;
+    if (out->view.itemsize != (Py_ssize_t)sizeof(Py_ssize_t) || f == NULL ||
+        (strcmp(f, "l") != 0 && strcmp(f, "q") != 0 && strcmp(f, "n") != 0)) {
+        PyBuffer_Release(&out->view);
+        PyErr_SetString(PyExc_TypeError, "expected a contiguous intp array");
+        return -1;
+    }
+    out->data = (const Py_ssize_t *)out->view.buf;
+    out->len = out->view.len / (Py_ssize_t)sizeof(Py_ssize_t);
+    return 0;
+}
+
+/* alpha of eq. (22) (kind 0: 1 within R) or eq. (27) (kind 1: continuous). */
+static inline double
+weight(int kind, double dist, double R, double r)
+{
+    if (kind == 0) {
+        return dist < R ? 1.0 : 0.0;
+    }
+    return clip_scalars(1.0 - (dist - r) / (R - r), 0.0, 1.0);
+}
+
+/* One side's distance of eq. (25) from its offset (x, y). */
+static inline double
+side_distance(double x, double y)
+{
+    return np_maximum(sqrt(x * x + y * y), MIN_DIST);
+}
+
+PyDoc_STRVAR(pair_field_doc,
+"pair_field(pos, seen, i, j, radius, R, r, kind, shift, active, d2) -> None\n"
+"\n"
+"The vehicles' terms of the avoidance field of the candidate pairs ``(i[k], j[k])``\n"
+"(intp, in order) of the positions ``pos`` (n, 2): the pairs with ``d2 < radius^2``\n"
+"weighed with ``kind`` 0 (discontinuous) or 1 (continuous, inner radius ``r``) and\n"
+"added to ``shift`` (n, 2), which must hold zeros; ``active`` (n,) bool set where\n"
+"a term weighs above zero; every candidate's squared distance written to ``d2``.\n"
+"``seen`` (n, 2): each vehicle sees the other's broadcast position (None: the\n"
+"true positions).");
+
+static PyObject *
+pair_field(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 11) {
+        PyErr_SetString(PyExc_TypeError, "pair_field takes 11 arguments");
+        return NULL;
+    }
+    double radius = PyFloat_AsDouble(args[4]);
+    double R = PyFloat_AsDouble(args[5]);
+    double r = PyFloat_AsDouble(args[6]);
+    long kind = PyLong_AsLong(args[7]);
+    if (PyErr_Occurred()) {
+        return NULL;
+    }
+    int with_seen = args[1] != Py_None;
+    Rows pos, seen, shift, d2;
+    Indices ci, cj;
+    Py_buffer active;
+    int stage = 0; /* what has been acquired, for the release */
+    PyObject *result = NULL;
+    if (get_rows(args[0], &pos, 0) < 0) goto done;
+    stage = 1;
+    if (with_seen && get_rows(args[1], &seen, 0) < 0) goto done;
+    stage = 2;
+    if (get_indices(args[2], &ci) < 0) goto done;
+    stage = 3;
+    if (get_indices(args[3], &cj) < 0) goto done;
+    stage = 4;
+    if (get_rows(args[8], &shift, 1) < 0) goto done;
+    stage = 5;
+    if (PyObject_GetBuffer(args[9], &active, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0)
+        goto done;
+    stage = 6;
+    if (get_rows(args[10], &d2, 1) < 0) goto done;
+    stage = 7;
+    Py_ssize_t n = shift.len / 2, m = ci.len;
+    if (pos.len != 2 * n || (with_seen && seen.len != 2 * n) || cj.len != m ||
+        d2.len != m || active.len != n || active.itemsize != 1) {
+        PyErr_SetString(PyExc_ValueError, "pair_field: shapes differ");
+        goto done;
+    }
+    for (Py_ssize_t k = 0; k < m; k++) {
+        if (ci.data[k] < 0 || ci.data[k] >= n || cj.data[k] < 0 || cj.data[k] >= n) {
+            PyErr_SetString(PyExc_IndexError, "pair_field: a pair out of range");
+            goto done;
+        }
+    }
+    const double *p = pos.data, *q = with_seen ? seen.data : NULL;
+    double *out = shift.data, *dd2 = d2.data;
+    unsigned char *on = (unsigned char *)active.buf;
+    double limit = radius * radius;
+    for (Py_ssize_t k = 0; k < m; k++) { /* the search's filter, on true positions */
+        Py_ssize_t i = ci.data[k], j = cj.data[k];
+        double x = p[2 * i] - p[2 * j], y = p[2 * i + 1] - p[2 * j + 1];
+        dd2[k] = x * x + y * y;
+    }
+    /* Two passes, as bincount adds the terms: each pair's term on its first
+     * vehicle, in order, then its term on its second vehicle. */
+    for (int side = 0; side < 2; side++) {
+        for (Py_ssize_t k = 0; k < m; k++) {
+            if (!(dd2[k] < limit)) {
+                continue;
+            }
+            Py_ssize_t i = ci.data[k], j = cj.data[k];
+            double c0, c1, alpha;
+            if (!with_seen) { /* alpha (rel / dist^2), -that on j */
+                double x = p[2 * i] - p[2 * j], y = p[2 * i + 1] - p[2 * j + 1];
+                double dist = np_maximum(sqrt(dd2[k]), MIN_DIST);
+                double dd = dist * dist;
+                alpha = weight((int)kind, dist, R, r);
+                c0 = alpha * (x / dd);
+                c1 = alpha * (y / dd);
+                if (side) {
+                    c0 = -c0;
+                    c1 = -c1;
+                }
+            }
+            else if (!side) { /* i reads pos[i] - seen[j] */
+                double x = p[2 * i] - q[2 * j], y = p[2 * i + 1] - q[2 * j + 1];
+                double dist = side_distance(x, y);
+                alpha = weight((int)kind, dist, R, r);
+                c0 = alpha * x / (dist * dist);
+                c1 = alpha * y / (dist * dist);
+            }
+            else { /* j reads seen[i] - pos[j]: -alpha rel / dist^2 */
+                double x = q[2 * i] - p[2 * j], y = q[2 * i + 1] - p[2 * j + 1];
+                double dist = side_distance(x, y);
+                alpha = weight((int)kind, dist, R, r);
+                c0 = -alpha * x / (dist * dist);
+                c1 = -alpha * y / (dist * dist);
+            }
+            Py_ssize_t v = side ? j : i;
+            out[2 * v] += c0;
+            out[2 * v + 1] += c1;
+            if (alpha > 0) {
+                on[v] = 1;
+            }
+        }
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    if (stage >= 7) PyBuffer_Release(&d2.view);
+    if (stage >= 6) PyBuffer_Release(&active);
+    if (stage >= 5) PyBuffer_Release(&shift.view);
+    if (stage >= 4) PyBuffer_Release(&cj.view);
+    if (stage >= 3) PyBuffer_Release(&ci.view);
+    if (stage >= 2 && with_seen) PyBuffer_Release(&seen.view);
+    if (stage >= 1) PyBuffer_Release(&pos.view);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"pair_field", (PyCFunction)(void (*)(void))pair_field, METH_FASTCALL,
+     pair_field_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_pair_field",
+    "The vehicles' terms of the avoidance field in C (sandbox/behaviour/pair_field.py).",
+    -1, methods,
+};
+
+PyMODINIT_FUNC
+PyInit__pair_field(void)
+{
+    return PyModule_Create(&module);
+}

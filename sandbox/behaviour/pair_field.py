@@ -1,0 +1,164 @@
+"""The vehicles' terms of the avoidance field, eqs. (22)-(27), in one C call.
+
+:func:`~sandbox.behaviour.recovery.weighted_shift` sums, for every pair of vehicles
+within the safe zone, each vehicle's term ``alpha(dist) u / dist`` (eqs. (23)-(25)):
+with numpy that is about twenty calls a period, whose fixed cost (half a microsecond
+each) is most of the strategy's time for a small fleet. Where the optional extension
+``sandbox.behaviour._pair_field`` (``_pair_field.c``) is built, :func:`add_pair_terms`
+does the same for the discontinuous and continuous weights without the tangential
+term, as one loop over the neighbour search's candidate pairs: the search's filter,
+the weights and the sums in numpy's order (each vehicle's terms as ``np.bincount``
+adds them), with the same double operations, so the numbers are numpy's to the bit.
+
+The loop takes the C library's ``sqrt``; at the first use :func:`kernel_agrees`
+compares the two paths on a few hundred random fleets (true and broadcast positions,
+coincident and NaN ones included), and the C loop is used only if every result has
+the same bits (``tests/test_pair_field.py`` compares whole runs). :data:`USE_KERNEL`
+False forces the numpy path.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+try:
+    from sandbox.behaviour import _pair_field
+except ImportError:  # pragma: no cover - built without a C compiler
+    _pair_field = None
+
+#: Use the C loop where it is built and agrees with numpy (False: numpy only).
+USE_KERNEL = True
+#: The weights the C loop computes: ``kind`` 0 and 1.
+DISCONTINUOUS, CONTINUOUS = 0, 1
+_agreed: bool | None = None
+
+
+def usable() -> bool:
+    """Whether :func:`add_pair_terms` may run (built, agreeing, not switched off)."""
+    return USE_KERNEL and kernel_agrees()
+
+
+def kernel_agrees() -> bool:
+    """Whether the C loop gives the numpy path's bits here (checked once)."""
+    global _agreed
+    if _agreed is None:
+        _agreed = _pair_field is not None and _check()
+    return _agreed
+
+
+def _contiguous(a: np.ndarray) -> np.ndarray:
+    if a.dtype == np.float64 and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=float)
+
+
+def add_pair_terms(
+    pos: np.ndarray,
+    seen: np.ndarray | None,
+    neighbours: Any,
+    R: float,
+    r: float | None,
+    kind: int,
+    shift: np.ndarray,
+    active: np.ndarray,
+) -> None:
+    """Write the pairs' terms of the field (before ``beta``) into ``shift``, ``active``.
+
+    Parameters
+    ----------
+    pos : ndarray, shape (n, 2) [m]
+        True positions: the pairs are those of the neighbour search over them.
+    seen : ndarray, shape (n, 2) [m] or None
+        The broadcast positions each vehicle sees of the others (None: ``pos``).
+    neighbours : NeighbourList or WorldPairs
+        The search (its ``candidates``, ``radius`` and ``remember``).
+    R, r : float [m]
+        The weight's radii (``r`` unused by the discontinuous weight).
+    kind : int
+        :data:`DISCONTINUOUS` or :data:`CONTINUOUS`.
+    shift : ndarray, shape (n, 2), float64, C-contiguous, zeros
+    active : ndarray, shape (n,), bool, C-contiguous
+        Set where a term weighs above zero.
+    """
+    i, j = neighbours.candidates(pos)
+    d2 = np.empty(len(i))
+    _pair_field.pair_field(
+        _contiguous(pos),
+        None if seen is None else _contiguous(seen),
+        i,
+        j,
+        float(neighbours.radius),
+        float(R),
+        0.0 if r is None else float(r),
+        kind,
+        shift,
+        active,
+        d2,
+    )
+    neighbours.remember(pos, d2)
+
+
+def _check() -> bool:
+    """Both paths of ``weighted_shift`` on random fleets, bit for bit."""
+    from sandbox.behaviour import recovery
+    from sandbox.geometry.neighbours import NeighbourList
+    from sandbox.model.obstacle_field import ObstacleField
+    from sandbox.plugins.contexts import StrategyContext
+
+    global USE_KERNEL, _agreed
+    _agreed = True  # provisionally, so that the C path runs within the check
+    rng = np.random.default_rng(20261206)
+    weights = (recovery.discontinuous, recovery.continuous)
+    saved, _agreed_now = USE_KERNEL, True
+    try:
+        for trial in range(200):
+            n = int(rng.integers(2, 12))
+            pos = rng.uniform(-2.0, 2.0, (n, 2))
+            if trial % 5 == 0:
+                pos[1] = pos[0]  # coincident vehicles: eq. (25)'s least distance
+            if trial % 7 == 0:
+                pos[-1] = np.nan  # a vehicle whose position is unknown
+            seen = pos + rng.normal(0.0, 0.05, (n, 2)) if trial % 2 else None
+            ctx = StrategyContext(
+                t=0.0,
+                dt=0.01,
+                pos=pos,
+                theta=np.zeros(n),
+                vel=np.zeros((n, 2)),
+                slot=np.full((n, 2), np.nan),
+                diameter=np.zeros(n),
+                may_avoid=rng.random(n) < 0.8,
+                failed=np.zeros(n, dtype=bool),
+                params={},
+                R=1.5,
+                obstacle_field=ObstacleField(()),
+                seen_pos=seen,
+            )
+            weight = weights[(trial // 2) % 2]  # each with and without sensing
+            got = []
+            for use in (True, False):
+                USE_KERNEL = use
+                neighbours = NeighbourList(1.5)
+                got.append(
+                    recovery.weighted_shift(
+                        _with(ctx, neighbours), weight, 0.3, 0.5, 2.0
+                    )
+                )
+            (s1, a1), (s2, a2) = got
+            if not (
+                np.array_equal(s1.view(np.uint64), s2.view(np.uint64))
+                and np.array_equal(a1, a2)
+            ):
+                _agreed_now = False
+                break
+    finally:
+        USE_KERNEL = saved
+    return _agreed_now
+
+
+def _with(ctx: Any, neighbours: Any) -> Any:
+    from dataclasses import replace
+
+    return replace(ctx, neighbours=neighbours)

@@ -1,0 +1,115 @@
+"""The QP projection and the motor sizing in C give the numpy functions' bits.
+
+Both extensions are optional (``sandbox.behaviour.safety._qp``,
+``sandbox.physics._motors``): where one is built, its check must pass on this
+machine, a changed bit must fail it, and the C function must equal the numpy one to
+the bit on problems of its own; where it is not built, those assertions are skipped.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from sandbox.behaviour.safety import qp
+from sandbox.loop.simulation import Simulation
+from sandbox.physics import world
+from sandbox.scenario import load_scenario
+
+needs_qp = pytest.mark.skipif(qp._qp is None, reason="safety._qp not built")
+needs_motors = pytest.mark.skipif(world._motors is None, reason="_motors not built")
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=float).view(np.uint64)
+
+
+@needs_qp
+def test_the_qp_check_passes_on_this_machine():
+    assert qp.kernel_agrees()
+
+
+@needs_qp
+def test_the_qp_check_fails_on_one_changed_bit(monkeypatch):
+    real = qp._qp.project
+
+    def off_by_one_ulp(z0, a, b, tol, z, feasible):
+        real(z0, a, b, tol, z, feasible)
+        moved = np.flatnonzero(feasible & np.any(z != z0, axis=1))
+        if len(moved):
+            z[moved[0], 0] = np.nextafter(z[moved[0], 0], np.inf)
+
+    monkeypatch.setattr(qp, "_qp", SimpleNamespace(project=off_by_one_ulp))
+    monkeypatch.setattr(qp, "_agreed", None)
+    assert not qp.kernel_agrees()
+
+
+@needs_qp
+@pytest.mark.parametrize("m", [1, 3, 6, 12])
+def test_project_in_c_equals_numpy_on_bounded_problems(m):
+    rng = np.random.default_rng(m)
+    k = 300
+    lo = rng.uniform(-1.0, 0.0, (k, 2))
+    hi = lo + rng.uniform(0.0, 2.0, (k, 2))
+    box = (lo[:, 0], hi[:, 0], lo[:, 1], hi[:, 1])
+    owner = np.repeat(np.arange(k), m)
+    angle = rng.uniform(-np.pi, np.pi, k * m)
+    a = np.column_stack((np.cos(angle), np.sin(angle)))
+    b = rng.normal(0.2, 0.5, k * m)
+    rank = np.tile(np.arange(m), k)
+    mat, off, soft = qp.bounded_problems(box, owner, a, b, rank, m)
+    z0 = rng.normal(0.0, 1.5, (k, 2))
+    assert qp.kernel_agrees()
+    z, ok = qp.project(z0, mat, off)
+    zn, okn = qp.project_numpy(z0, mat, off)
+    assert np.array_equal(ok, okn) and np.array_equal(_bits(z), _bits(zn))
+    assert not ok.all() and ok.any()  # empty polygons and optima on edges and corners
+
+
+@needs_qp
+def test_filtered_runs_with_the_c_projection_equal_numpy(monkeypatch):
+    scenarios = [
+        load_scenario(
+            "failures/follower_stop",
+            overrides=["duration=5", "safety.filter=cbf", f"seed={s}"],
+        )
+        for s in range(3)
+    ]
+    with_c = Simulation.batch(scenarios)
+    monkeypatch.setattr(qp, "USE_KERNEL", False)
+    numpy = Simulation.batch(scenarios)
+    for a, b in zip(with_c, numpy, strict=True):
+        assert np.array_equal(_bits(a.pose), _bits(b.pose))
+        assert np.array_equal(_bits(a.cmd), _bits(b.cmd))
+
+
+@needs_motors
+def test_the_motor_check_passes_on_this_machine():
+    assert world.motor_kernel_agrees()
+
+
+@needs_motors
+def test_the_motor_check_fails_on_one_changed_bit(monkeypatch):
+    real = world._motors.motor_limits
+
+    def off_by_one_ulp(*args):
+        real(*args)
+        force = args[12]
+        force[0] = np.nextafter(force[0], np.inf)
+
+    monkeypatch.setattr(world, "_motors", SimpleNamespace(motor_limits=off_by_one_ulp))
+    monkeypatch.setattr(world, "_motors_agreed", None)
+    assert not world.motor_kernel_agrees()
+
+
+@needs_motors
+def test_runs_with_the_c_motors_equal_numpy(monkeypatch):
+    # a platoon without recovery: a collision within the first second
+    sc = load_scenario("paper/fig12_no_recovery", overrides=["duration=3"])
+    with_c = Simulation(sc).run()
+    monkeypatch.setattr(world, "USE_MOTOR_KERNEL", False)
+    numpy = Simulation(sc).run()
+    assert np.array_equal(_bits(with_c.pose), _bits(numpy.pose))
+    assert with_c.events == numpy.events and with_c.events
