@@ -60,8 +60,15 @@ QP = Extension(
     optional=True,
 )
 
+DIVERGENCE = Extension(
+    "sandbox.loop._divergence",
+    ["sandbox/loop/_divergence.c"],
+    include_dirs=["sandbox"],
+    depends=RULES,
+    optional=True,
+)
 #: The extensions compiled with no fused multiply-add.
-EXACT = (KERNELS, PAIR_FIELD, MOTORS, QP)
+EXACT = (KERNELS, PAIR_FIELD, MOTORS, QP, DIVERGENCE)
 
 
 class BuildExt(build_ext):
@@ -75,7 +82,7 @@ class BuildExt(build_ext):
 
 
 setup(
-    ext_modules=[CSTEP, KERNELS, PAIR_FIELD, MOTORS, QP],
+    ext_modules=[CSTEP, *EXACT],
     cmdclass={"build_ext": BuildExt},
     packages=[*find_packages(include=["sandbox", "sandbox.*"]), "sandbox.scenarios"],
     package_dir={"sandbox.scenarios": "scenarios"},

@@ -3,7 +3,8 @@
 A run whose state turns non-finite, or runs beyond :data:`DIVERGED_POSITION` or
 :data:`DIVERGED_SPEED`, ends with status ``diverged`` (see
 :meth:`sandbox.loop.simulation.Simulation._sense`, which checks all worlds at once
-and then each world alone).
+and then each world alone). Its fast path, whether a fleet is clearly healthy, is one
+C call where the optional extension ``sandbox.loop._divergence`` is built.
 """
 
 from __future__ import annotations
@@ -11,6 +12,11 @@ from __future__ import annotations
 import numpy as np
 
 from sandbox.loop.state import Fleet
+
+try:
+    from sandbox.loop import _divergence
+except ImportError:  # pragma: no cover - built without a C compiler
+    _divergence = None
 
 #: A state beyond these bounds is reported as ``diverged`` [m], [m/s].
 DIVERGED_POSITION = 1e6
@@ -30,17 +36,34 @@ def _largest(a: np.ndarray) -> float:
     return np.maximum.reduce(a, axis=None) if a.size else -np.inf
 
 
-def diverged(fleet: Fleet | RowsView) -> tuple[int, str] | None:
-    """First vehicle whose state is non-finite or beyond the bounds, with the reason."""
-    # Fast path, one reduction per array: clearly healthy (NaN fails every comparison).
+def healthy(fleet: Fleet | RowsView) -> bool:
+    """Whether the fleet is clearly healthy: the fast path of :func:`diverged`.
+
+    Every position within :data:`DIVERGED_POSITION`, every heading finite, every
+    speed and extension within :data:`DIVERGED_SPEED` (a little less); a NaN fails
+    every comparison. One C call where it can read the arrays, else one reduction
+    per array.
+    """
     vel, chi = fleet.vel, fleet.chi
     speed2 = (0.999 * DIVERGED_SPEED) ** 2
-    if (
+    if _divergence is not None:
+        try:
+            return _divergence.healthy(
+                fleet.pos, fleet.theta, vel, chi, DIVERGED_POSITION, speed2
+            )
+        except (BufferError, TypeError, ValueError):  # not float64 C arrays
+            pass
+    return bool(
         _largest(np.abs(fleet.pos)) <= DIVERGED_POSITION
         and _largest(np.abs(fleet.theta)) < np.inf
         and _largest(vel[:, 0] * vel[:, 0] + vel[:, 1] * vel[:, 1]) <= speed2
         and _largest(chi[:, 0] * chi[:, 0] + chi[:, 1] * chi[:, 1]) <= speed2
-    ):
+    )
+
+
+def diverged(fleet: Fleet | RowsView) -> tuple[int, str] | None:
+    """First vehicle whose state is non-finite or beyond the bounds, with the reason."""
+    if healthy(fleet):
         return None
     finite = (
         np.isfinite(fleet.pos).all(axis=1)

@@ -221,17 +221,18 @@ def motor_limits(
         Their new limits (read at ``rows``).
     """
     m = motors
-    if USE_MOTOR_KERNEL and motor_kernel_agrees():
-        arrays = (m._mass, m._moment, m._least_force, m._least_torque, m._force)
-        if _all_contiguous(command, measured, m._torque, *arrays) and _flags(
-            free, m._tracking
-        ):
-            n = len(free)
-            force, torque, change = np.empty(n), np.empty(n), np.empty(n, bool)
+    if USE_MOTOR_KERNEL and (_motors_agreed or motor_kernel_agrees()):
+        n = len(m._mass)
+        force, torque, change = np.empty(n), np.empty(n), np.empty(n, bool)
+        try:
             _motors.motor_limits(
-                command, measured, free, float(substep), MOTOR_HEADROOM, *arrays,
-                m._torque, m._tracking, force, torque, change,
+                command, measured, free, substep, MOTOR_HEADROOM, m._mass, m._moment,
+                m._least_force, m._least_torque, m._force, m._torque, m._tracking,
+                force, torque, change,
             )  # fmt: skip
+        except (BufferError, TypeError, ValueError):  # not float64 C arrays: numpy
+            pass
+        else:
             return np.flatnonzero(change), force, torque
     return motor_limits_numpy(command, measured, free, substep, motors)
 
@@ -263,17 +264,6 @@ except ImportError:  # pragma: no cover - built without a C compiler
 #: Size the motors in C where that extension is built and agrees with numpy.
 USE_MOTOR_KERNEL = True
 _motors_agreed: bool | None = None
-
-
-def _all_contiguous(*arrays: np.ndarray) -> bool:
-    return all(a.dtype == np.float64 and a.flags.c_contiguous for a in arrays)
-
-
-def _flags(*arrays: Any) -> bool:
-    return all(
-        isinstance(a, np.ndarray) and a.dtype == bool and a.flags.c_contiguous
-        for a in arrays
-    )
 
 
 def motor_kernel_agrees() -> bool:

@@ -1,9 +1,10 @@
-"""The QP projection and the motor sizing in C give the numpy functions' bits.
+"""The QP projection, the motor sizing and the divergence test in C agree with numpy.
 
-Both extensions are optional (``sandbox.behaviour.safety._qp``,
-``sandbox.physics._motors``): where one is built, its check must pass on this
-machine, a changed bit must fail it, and the C function must equal the numpy one to
-the bit on problems of its own; where it is not built, those assertions are skipped.
+The extensions are optional (``sandbox.behaviour.safety._qp``,
+``sandbox.physics._motors``, ``sandbox.loop._divergence``): where one is built, its
+check must pass on this machine, a changed bit must fail it, and the C function must
+equal the numpy one to the bit on problems of its own; where it is not built, those
+assertions are skipped.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 
 from sandbox.behaviour.safety import qp
+from sandbox.loop import divergence
 from sandbox.loop.simulation import Simulation
 from sandbox.physics import world
 from sandbox.scenario import load_scenario
@@ -113,3 +115,27 @@ def test_runs_with_the_c_motors_equal_numpy(monkeypatch):
     numpy = Simulation(sc).run()
     assert np.array_equal(_bits(with_c.pose), _bits(numpy.pose))
     assert with_c.events == numpy.events and with_c.events
+
+
+@pytest.mark.skipif(divergence._divergence is None, reason="_divergence not built")
+def test_the_divergence_fast_path_in_c_says_what_numpy_says(monkeypatch):
+    rng = np.random.default_rng(3)
+    seen = set()
+    for trial in range(400):
+        n = int(rng.integers(1, 9))
+        fleet = SimpleNamespace(
+            pos=rng.normal(0.0, 10.0, (n, 2)),
+            theta=rng.normal(0.0, 3.0, n),
+            vel=rng.normal(0.0, 1.0, (n, 2)),
+            chi=rng.normal(0.0, 1.0, (n, 2)),
+        )
+        name = ("pos", "theta", "vel", "chi")[trial % 4]
+        bad = (np.nan, np.inf, -np.inf, 2e6, 999.0, 1e3)[trial % 6]
+        if trial % 3:  # one element beyond a bound, or at it
+            getattr(fleet, name).reshape(-1)[int(rng.integers(0, n))] = bad
+        with_c = divergence.healthy(fleet)
+        monkeypatch.setattr(divergence, "_divergence", None)
+        assert divergence.healthy(fleet) is with_c
+        monkeypatch.undo()
+        seen.add(with_c)
+    assert seen == {True, False}
