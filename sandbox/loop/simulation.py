@@ -433,7 +433,7 @@ class Simulation(StepAPI, Ending, WorldStages):
                 }
                 self._end_world(w, STATUS_DIVERGED)
             self.finite = self.live.all() and diverged(fleet) is None
-        if not self.live.any():
+        if not np.count_nonzero(self.live):
             return False
         if self._broadcast is not None:  # every world's copies, each its own draws
             self.seen = self._broadcast.update(pos, theta).copy()
@@ -726,7 +726,7 @@ class Simulation(StepAPI, Ending, WorldStages):
             return
         self._control_time += time.perf_counter() - start
         self._record(self.plan)
-        if not self.live.any():
+        if not np.count_nonzero(self.live):
             self._closed = True
             return
         if should_stop is not None and should_stop():

@@ -162,7 +162,7 @@ class WorldsPhysics:
             out[:, 0] = v1 * np.cos(heading)
             out[:, 1] = v1 * np.sin(heading)
         out[:, 2] = v2
-        if self._tracking.any():
+        if np.count_nonzero(self._tracking):
             rows, force, torque = motor_limits(
                 out, self._measured, free, h / substeps, self
             )
