@@ -67,8 +67,15 @@ DIVERGENCE = Extension(
     depends=RULES,
     optional=True,
 )
+FITS = Extension(
+    "sandbox.behaviour._fits",
+    ["sandbox/behaviour/_fits.c"],
+    include_dirs=["sandbox"],
+    depends=RULES,
+    optional=True,
+)
 #: The extensions compiled with no fused multiply-add.
-EXACT = (KERNELS, PAIR_FIELD, MOTORS, QP, DIVERGENCE)
+EXACT = (KERNELS, PAIR_FIELD, MOTORS, QP, DIVERGENCE, FITS)
 
 
 class BuildExt(build_ext):

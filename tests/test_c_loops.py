@@ -14,6 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from sandbox.behaviour import tracks
 from sandbox.behaviour.safety import qp
 from sandbox.loop import divergence
 from sandbox.loop.simulation import Simulation
@@ -139,3 +140,26 @@ def test_the_divergence_fast_path_in_c_says_what_numpy_says(monkeypatch):
         monkeypatch.undo()
         seen.add(with_c)
     assert seen == {True, False}
+
+
+@pytest.mark.skipif(tracks._fits is None, reason="_fits not built")
+def test_the_stop_estimates_in_c_stay_within_the_margin_and_fit_the_same(monkeypatch):
+    rng = np.random.default_rng(4)
+    for k in range(120):
+        m = int(rng.integers(10, 150))
+        t = np.sort(rng.uniform(0.0, 1.5, m))
+        t -= t[0]
+        onset, v0 = rng.uniform(0.0, 1.2), rng.uniform(0.1, 2.0)
+        brake = float(rng.choice([0.5, 2.0, 5.0, 50.0]))
+        braked = v0 * v0 / (2.0 * brake) * (1.0 - np.exp(-3.0 * (t - onset)))
+        s = np.where(t < onset, v0 * t, v0 * onset + (braked if k % 2 else 0.0))
+        s = s + rng.normal(0.0, 0.01 * (k % 3), m)
+        v = np.linspace(0.0, 1.8 * v0, tracks.SPEEDS)
+        est, margin = tracks._stop_estimates_c(t, s, v, brake)
+        want, want_margin = tracks.stop_estimates_numpy(t, s, v, brake)
+        assert np.array_equal(margin, want_margin)
+        assert np.all(np.abs(est - want) <= 1e-6 * margin)  # far inside the margin
+        with_c = tracks.stop_fits(t, s, brake)
+        monkeypatch.setattr(tracks, "USE_KERNEL", False)
+        assert tracks.stop_fits(t, s, brake) == with_c  # the very same numbers
+        monkeypatch.undo()

@@ -49,6 +49,14 @@ MOST_ROWS = 0.25
 #: Rows of the grid evaluated at once [1] (the arrays of a block stay small).
 BLOCK_ROWS = 2048
 
+try:
+    from sandbox.behaviour import _fits
+except ImportError:  # pragma: no cover - built without a C compiler
+    _fits = None
+
+#: The braked stop's estimates in C where that extension is built (False: numpy).
+USE_KERNEL = True
+
 
 class TrackHistory:
     """The last ``length`` observations of ``n`` vehicles, in ring arrays.
@@ -261,6 +269,30 @@ def stop_estimates(
     est : ndarray (SPEEDS, m) [m^2]
     margin : ndarray (SPEEDS, 1) [m^2]
     """
+    if _fits is not None and USE_KERNEL:
+        return _stop_estimates_c(t, s, v, brake)
+    return stop_estimates_numpy(t, s, v, brake)
+
+
+def _stop_estimates_c(
+    t: np.ndarray, s: np.ndarray, v: np.ndarray, brake: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`stop_estimates` by one C loop (the same formula; see the module)."""
+    m = len(t)
+    s1, s2 = float(s.sum()), float(s @ s)
+    est = np.empty((len(v), m))
+    tc, sc, vc = (np.ascontiguousarray(a, dtype=float) for a in (t, s, v))
+    _fits.stop_estimates(tc, sc, vc, float(brake), s1, s2, est)
+    vv = v[:, None]
+    span = float(np.max(np.abs(t)))
+    reach = 2.0 * brake * span * span + vv * (2.0 * span + vv / brake)
+    return est, MARGIN * (s2 + m * reach * reach)
+
+
+def stop_estimates_numpy(
+    t: np.ndarray, s: np.ndarray, v: np.ndarray, brake: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`stop_estimates` by numpy (the definition)."""
     m = len(t)
     powers = t[None, :] ** np.arange(5)[:, None]  # (5, m)
     terms = np.concatenate((powers, powers[:3] * s))  # t^q, then s t^q
