@@ -8,6 +8,7 @@ once over a ``(K, n)`` view of the rows).
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -47,7 +48,7 @@ def _add(
     stats["active_steps"] = stats.get("active_steps", 0) + active
     stats["infeasible_steps"] = stats.get("infeasible_steps", 0) + bad
     stats["max_slack"] = max(stats.get("max_slack", 0.0), worst)
-    finite = bool(np.isfinite(least))
+    finite = math.isfinite(least)
     if finite:
         known = stats.get("min_barrier")
         stats["min_barrier"] = least if known is None else min(known, least)
