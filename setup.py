@@ -60,9 +60,9 @@ QP = Extension(
     optional=True,
 )
 
-DIVERGENCE = Extension(
-    "sandbox.loop._divergence",
-    ["sandbox/loop/_divergence.c"],
+PERIOD = Extension(
+    "sandbox.loop._period",
+    ["sandbox/loop/_period.c"],
     include_dirs=["sandbox"],
     depends=RULES,
     optional=True,
@@ -75,7 +75,7 @@ FITS = Extension(
     optional=True,
 )
 #: The extensions compiled with no fused multiply-add.
-EXACT = (KERNELS, PAIR_FIELD, MOTORS, QP, DIVERGENCE, FITS)
+EXACT = (KERNELS, PAIR_FIELD, MOTORS, QP, PERIOD, FITS)
 
 
 class BuildExt(build_ext):

@@ -1,7 +1,7 @@
 """The QP projection, the motor sizing and the divergence test in C agree with numpy.
 
 The extensions are optional (``sandbox.behaviour.safety._qp``,
-``sandbox.physics._motors``, ``sandbox.loop._divergence``): where one is built, its
+``sandbox.physics._motors``, ``sandbox.loop._period``): where one is built, its
 check must pass on this machine, a changed bit must fail it, and the C function must
 equal the numpy one to the bit on problems of its own; where it is not built, those
 assertions are skipped.
@@ -9,6 +9,7 @@ assertions are skipped.
 
 from __future__ import annotations
 
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -16,9 +17,10 @@ import pytest
 
 from sandbox.behaviour import tracks
 from sandbox.behaviour.safety import qp
-from sandbox.loop import divergence
+from sandbox.loop import divergence, tally
 from sandbox.loop.simulation import Simulation
 from sandbox.physics import world
+from sandbox.run.metrics import compute_metrics
 from sandbox.scenario import load_scenario
 
 needs_qp = pytest.mark.skipif(qp._qp is None, reason="safety._qp not built")
@@ -118,7 +120,7 @@ def test_runs_with_the_c_motors_equal_numpy(monkeypatch):
     assert with_c.events == numpy.events and with_c.events
 
 
-@pytest.mark.skipif(divergence._divergence is None, reason="_divergence not built")
+@pytest.mark.skipif(divergence._period is None, reason="_period not built")
 def test_the_divergence_fast_path_in_c_says_what_numpy_says(monkeypatch):
     rng = np.random.default_rng(3)
     seen = set()
@@ -135,7 +137,7 @@ def test_the_divergence_fast_path_in_c_says_what_numpy_says(monkeypatch):
         if trial % 3:  # one element beyond a bound, or at it
             getattr(fleet, name).reshape(-1)[int(rng.integers(0, n))] = bad
         with_c = divergence.healthy(fleet)
-        monkeypatch.setattr(divergence, "_divergence", None)
+        monkeypatch.setattr(divergence, "_period", None)
         assert divergence.healthy(fleet) is with_c
         monkeypatch.undo()
         seen.add(with_c)
@@ -163,3 +165,37 @@ def test_the_stop_estimates_in_c_stay_within_the_margin_and_fit_the_same(monkeyp
         monkeypatch.setattr(tracks, "USE_KERNEL", False)
         assert tracks.stop_fits(t, s, brake) == with_c  # the very same numbers
         monkeypatch.undo()
+
+
+@pytest.mark.skipif(tally._period is None, reason="_period not built")
+@pytest.mark.parametrize("batch", [0, 3])
+def test_the_loop_metrics_buffers_in_c_equal_numpy(monkeypatch, batch):
+    calls = []
+    real = tally._period.buffer_period
+
+    def counted(*args):
+        calls.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(tally._period, "buffer_period", counted)
+    names = ["paper/fig12_no_recovery", "failures/follower_crash"]
+
+    def metrics():
+        out = []
+        for name in names:
+            overrides = ["duration=4"]
+            if batch:
+                scenarios = [
+                    load_scenario(name, overrides=[*overrides, f"seed={s}"])
+                    for s in range(batch)
+                ]
+                runs = Simulation.batch(scenarios)
+            else:
+                runs = [Simulation(load_scenario(name, overrides=overrides)).run()]
+            out += [json.dumps(compute_metrics(r), sort_keys=True) for r in runs]
+        return out
+
+    with_c = metrics()
+    assert calls
+    monkeypatch.setattr(tally, "USE_KERNEL", False)
+    assert metrics() == with_c

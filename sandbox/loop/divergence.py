@@ -4,7 +4,7 @@ A run whose state turns non-finite, or runs beyond :data:`DIVERGED_POSITION` or
 :data:`DIVERGED_SPEED`, ends with status ``diverged`` (see
 :meth:`sandbox.loop.simulation.Simulation._sense`, which checks all worlds at once
 and then each world alone). Its fast path, whether a fleet is clearly healthy, is one
-C call where the optional extension ``sandbox.loop._divergence`` is built.
+C call where the optional extension ``sandbox.loop._period`` is built.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ import numpy as np
 from sandbox.loop.state import Fleet
 
 try:
-    from sandbox.loop import _divergence
+    from sandbox.loop import _period
 except ImportError:  # pragma: no cover - built without a C compiler
-    _divergence = None
+    _period = None
 
 #: A state beyond these bounds is reported as ``diverged`` [m], [m/s].
 DIVERGED_POSITION = 1e6
@@ -46,9 +46,9 @@ def healthy(fleet: Fleet | RowsView) -> bool:
     """
     vel, chi = fleet.vel, fleet.chi
     speed2 = (0.999 * DIVERGED_SPEED) ** 2
-    if _divergence is not None:
+    if _period is not None:
         try:
-            return _divergence.healthy(
+            return _period.healthy(
                 fleet.pos, fleet.theta, vel, chi, DIVERGED_POSITION, speed2
             )
         except (BufferError, TypeError, ValueError):  # not float64 C arrays

@@ -27,12 +27,22 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.model.kernels import kernels_agree
 from sandbox.run.metrics import (
     ALL_PAIRS_MAX,
     MOTOR_ABS_TOL,
     MOTOR_REL_TOL,
     ClosestApproach,
 )
+
+try:
+    from sandbox.loop import _period
+except ImportError:  # pragma: no cover - built without a C compiler
+    _period = None
+
+#: Copy a period into the buffers in one C call where ``sandbox.loop._period`` is
+#: built and the C library's sine and cosine are numpy's (False: numpy).
+USE_KERNEL = True
 
 #: Periods buffered before :meth:`LoopTally.flush` accounts for them.
 CHUNK = 64
@@ -105,6 +115,12 @@ class LoopTally:
     def _buffer(self, b: Any, contact: np.ndarray) -> None:
         """Copy what period ``b.k`` accounts for into the buffers."""
         K, n, m = self.K, self.n, self._m
+        if _period is not None and USE_KERNEL and kernels_agree():
+            try:
+                self._buffer_c(b, contact)
+                return
+            except (BufferError, TypeError, ValueError):  # not C arrays: numpy
+                pass
         if n >= 2 and self._closest is None:
             d2 = b.distances(b.pos)
             if d2 is None:
@@ -120,6 +136,27 @@ class LoopTally:
         commanded = self._buf_cmd[m]  # valid until the slot is written again
         commanded[:, 0] = b.v1 * np.cos(heading)
         commanded[:, 1] = b.v1 * np.sin(heading)
+        self.commanded, self.commanded_at = commanded, b.k
+        self._m = m + 1
+        if self._m == CHUNK:
+            self.flush()
+
+    def _buffer_c(self, b: Any, contact: np.ndarray) -> None:
+        """:meth:`_buffer` in one C call (the same numbers)."""
+        K, m = self.K, self._m
+        i = j = None
+        if self.n >= 2 and self._closest is None:
+            d2 = b.distances(b.pos)
+            if d2 is None:
+                i, j = self._i, self._j
+            else:
+                self._buf_d2[m] = d2.reshape(K, -1)
+        commanded = self._buf_cmd[m]  # valid until the slot is written again
+        _period.buffer_period(
+            b.pos, i, j, b.v1, b.v2, b.vel, contact, b.theta, float(self.h),
+            self._buf_d2[m], self._buf_v[m], self._buf_vel[m], self._buf_free[m],
+            commanded,
+        )  # fmt: skip
         self.commanded, self.commanded_at = commanded, b.k
         self._m = m + 1
         if self._m == CHUNK:

@@ -1,0 +1,203 @@
+/* Two pieces of the loop's period in one C call each.
+ *
+ * healthy: the divergence check's fast path (sandbox/loop/divergence.py), whether a
+ * fleet is clearly healthy: every position within the bound, every heading finite,
+ * every speed and extension squared within the bound (a NaN fails every comparison,
+ * as it fails numpy's reductions). Only a yes or a no: the slow path, in numpy,
+ * finds the vehicle and the reason.
+ *
+ * buffer_period: what the loop metrics copy of a period into their buffers
+ * (sandbox/loop/tally.py, LoopTally._buffer): the pairs' squared distances, the
+ * commands, the velocities, the free flags and the commanded velocities along the
+ * mean heading, the same operations in numpy's order (compiled without fused
+ * multiply-adds), with the C library's sin and cos, which sandbox/model/kernels.py
+ * checks give numpy's numbers before the loop uses this.
+ */
+
+#include "numpy_rules.h"
+
+PyDoc_STRVAR(healthy_doc,
+"healthy(pos, theta, vel, chi, bound, speed2) -> bool\n"
+"\n"
+"``pos``, ``vel``, ``chi`` (n, 2), ``theta`` (n,): |pos| <= bound, |theta| < inf,\n"
+"|vel|^2 and |chi|^2 <= speed2, each squared norm as x * x + y * y.");
+
+static PyObject *
+healthy(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "healthy takes 6 arguments");
+        return NULL;
+    }
+    double bound = PyFloat_AsDouble(args[4]);
+    double speed2 = PyFloat_AsDouble(args[5]);
+    if (PyErr_Occurred()) {
+        return NULL;
+    }
+    Rows r[4];
+    int got = 0;
+    for (int k = 0; k < 4; k++) {
+        if (get_rows(args[k], &r[k], 0) < 0) {
+            release(r, got);
+            return NULL;
+        }
+        got++;
+    }
+    Py_ssize_t n = r[1].len;
+    if (r[0].len != 2 * n ||
+        r[2].len != 2 * n || r[3].len != 2 * n) {
+        release(r, got);
+        PyErr_SetString(PyExc_ValueError, "healthy: shapes differ");
+        return NULL;
+    }
+    const double *pos = r[0].data, *theta = r[1].data;
+    const double *vel = r[2].data, *chi = r[3].data;
+    int ok = 1;
+    for (Py_ssize_t i = 0; i < n && ok; i++) {
+        const double *p = pos + 2 * i, *v = vel + 2 * i, *c = chi + 2 * i;
+        ok = fabs(p[0]) <= bound && fabs(p[1]) <= bound && fabs(theta[i]) < INFINITY &&
+             v[0] * v[0] + v[1] * v[1] <= speed2 && c[0] * c[0] + c[1] * c[1] <= speed2;
+    }
+    release(r, got);
+    return PyBool_FromLong(ok);
+}
+
+PyDoc_STRVAR(buffer_period_doc,
+"buffer_period(pos, i, j, v1, v2, vel, contact, theta, h, d2, v, vel_out, free,\n"
+"              cmd) -> None\n"
+"\n"
+"For N vehicles: ``pos``, ``vel`` (N, 2), ``v1``, ``v2``, ``theta`` (N,), ``contact``\n"
+"(N,) bool, the pairs ``i``, ``j`` (intp, each world's rows from 0, P of them) or\n"
+"None; writes ``d2`` (K, P) (where ``i`` is given), ``v`` (2, N), ``vel_out``\n"
+"(N, 2), ``free`` (N,) bool and ``cmd`` (N, 2), ``v1 (cos, sin)(theta + v2 h / 2)``.");
+
+static PyObject *
+buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 14) {
+        PyErr_SetString(PyExc_TypeError, "buffer_period takes 14 arguments");
+        return NULL;
+    }
+    double h = PyFloat_AsDouble(args[8]);
+    if (PyErr_Occurred()) {
+        return NULL;
+    }
+    int pairs = args[1] != Py_None;
+    /* float arrays: pos, v1, v2, vel, theta, d2, v, vel_out, cmd */
+    static const int at[] = {0, 3, 4, 5, 7, 9, 10, 11, 13};
+    Rows r[9];
+    Py_buffer ib, jb, cb, fb;
+    int got = 0, got_i = 0, got_j = 0, got_c = 0, got_f = 0;
+    PyObject *result = NULL;
+    for (int k = 0; k < 9; k++) {
+        if (at[k] == 9 && !pairs) {
+            r[k].len = 0;
+            r[k].data = NULL;
+            memset(&r[k].view, 0, sizeof(Py_buffer));
+            got++;
+            continue;
+        }
+        if (get_rows(args[at[k]], &r[k], at[k] >= 9) < 0) goto done;
+        got++;
+    }
+    if (pairs) {
+        if (PyObject_GetBuffer(args[1], &ib, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+            goto done;
+        got_i = 1;
+        if (PyObject_GetBuffer(args[2], &jb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+            goto done;
+        got_j = 1;
+        if (ib.itemsize != (Py_ssize_t)sizeof(Py_ssize_t) ||
+            jb.itemsize != (Py_ssize_t)sizeof(Py_ssize_t) || ib.len != jb.len ||
+            ib.format == NULL || strchr("lqn", ib.format[0]) == NULL ||
+            jb.format == NULL || strchr("lqn", jb.format[0]) == NULL) {
+            PyErr_SetString(PyExc_TypeError, "buffer_period: pairs must be intp");
+            goto done;
+        }
+    }
+    if (PyObject_GetBuffer(args[6], &cb, PyBUF_C_CONTIGUOUS) < 0) goto done;
+    got_c = 1;
+    if (PyObject_GetBuffer(args[12], &fb, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0)
+        goto done;
+    got_f = 1;
+    Rows *pos = &r[0], *v1 = &r[1], *v2 = &r[2], *vel = &r[3], *theta = &r[4];
+    Rows *d2 = &r[5], *v = &r[6], *vel_out = &r[7], *cmd = &r[8];
+    Py_ssize_t N = v1->len;
+    Py_ssize_t P = pairs ? ib.len / (Py_ssize_t)sizeof(Py_ssize_t) : 0;
+    if (pos->len != 2 * N || v2->len != N || vel->len != 2 * N || theta->len != N ||
+        v->len != 2 * N || vel_out->len != 2 * N || cmd->len != 2 * N ||
+        cb.len != N || cb.itemsize != 1 || fb.len != N || fb.itemsize != 1 ||
+        (pairs && (P == 0 || d2->len % P != 0))) {
+        PyErr_SetString(PyExc_ValueError, "buffer_period: shapes differ");
+        goto done;
+    }
+    if (pairs) {
+        const Py_ssize_t *ii = ib.buf, *jj = jb.buf;
+        Py_ssize_t K = d2->len / P, n = K ? N / K : 0;
+        if (K * n != N) {
+            PyErr_SetString(PyExc_ValueError, "buffer_period: shapes differ");
+            goto done;
+        }
+        for (Py_ssize_t q = 0; q < P; q++) {
+            if (ii[q] < 0 || ii[q] >= n || jj[q] < 0 || jj[q] >= n) {
+                PyErr_SetString(PyExc_IndexError, "buffer_period: a pair out of range");
+                goto done;
+            }
+        }
+        const double *p = pos->data;
+        for (Py_ssize_t w = 0; w < K; w++) {
+            const double *pw = p + 2 * n * w;
+            double *out = d2->data + P * w;
+            for (Py_ssize_t q = 0; q < P; q++) {
+                double x = pw[2 * ii[q]] - pw[2 * jj[q]];
+                double y = pw[2 * ii[q] + 1] - pw[2 * jj[q] + 1];
+                out[q] = x * x + y * y;
+            }
+        }
+    }
+    const unsigned char *contact = cb.buf;
+    unsigned char *free_ = fb.buf;
+    for (Py_ssize_t k = 0; k < N; k++) {
+        double a = v1->data[k], b = v2->data[k];
+        v->data[k] = a;
+        v->data[N + k] = b;
+        vel_out->data[2 * k] = vel->data[2 * k];
+        vel_out->data[2 * k + 1] = vel->data[2 * k + 1];
+        free_[k] = !contact[k];
+        double heading = theta->data[k] + 0.5 * b * h;
+        cmd->data[2 * k] = a * cos(heading);
+        cmd->data[2 * k + 1] = a * sin(heading);
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    for (int k = 0; k < got; k++) {
+        if (r[k].view.obj != NULL) {
+            PyBuffer_Release(&r[k].view);
+        }
+    }
+    if (got_i) PyBuffer_Release(&ib);
+    if (got_j) PyBuffer_Release(&jb);
+    if (got_c) PyBuffer_Release(&cb);
+    if (got_f) PyBuffer_Release(&fb);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"healthy", (PyCFunction)(void (*)(void))healthy, METH_FASTCALL, healthy_doc},
+    {"buffer_period", (PyCFunction)(void (*)(void))buffer_period, METH_FASTCALL,
+     buffer_period_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_period",
+    "Two pieces of the loop's period in C (see sandbox/loop/divergence.py, tally.py).", -1,
+    methods,
+};
+
+PyMODINIT_FUNC
+PyInit__period(void)
+{
+    return PyModule_Create(&module);
+}
