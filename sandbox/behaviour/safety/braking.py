@@ -51,6 +51,19 @@ if TYPE_CHECKING:
     from sandbox.behaviour.safety.cbf import CBFState
     from sandbox.plugins.contexts import FilterContext
 
+
+def columns(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The (n, 2) float array of the columns ``x`` and ``y``: ``np.stack((x, y), -1)``.
+
+    The same values for float arrays of length n, without ``np.stack``'s checks (a
+    few microseconds a call, which a small fleet's filter pays dozens of times).
+    """
+    out = np.empty((len(x), 2))
+    out[:, 0] = x
+    out[:, 1] = y
+    return out
+
+
 #: Conditions a pair makes: one at each of the least local minima of its distance
 #: along the brakings [1] (two minima, e.g. passing then following, may trade places
 #: from one step to the next; a condition at one alone lets the other go).
@@ -67,12 +80,12 @@ def look_ahead_points(ctx: FilterContext, look: float) -> tuple[np.ndarray, ...]
     ones are the true ones.
     """
     pos, theta = ctx.pos, ctx.theta
-    heading = np.stack((np.cos(theta), np.sin(theta)), -1)
+    heading = columns(np.cos(theta), np.sin(theta))
     p = pos + look * heading
     if ctx.seen is None:
         return heading, p, pos, p
     centre_seen = ctx.seen[:, :2]
-    seen_heading = np.stack((np.cos(ctx.seen[:, 2]), np.sin(ctx.seen[:, 2])), -1)
+    seen_heading = columns(np.cos(ctx.seen[:, 2]), np.sin(ctx.seen[:, 2]))
     return heading, p, centre_seen, centre_seen + look * seen_heading
 
 
@@ -96,7 +109,7 @@ def pair_geometry(
     """
     me = np.concatenate((i, j))
     other = np.concatenate((j, i))
-    keep = np.flatnonzero(filtered[me])
+    keep = filtered[me].nonzero()[0]
     me, other = me[keep], other[keep]
     coop = filtered[other]
     target = np.where(coop[:, None], p_seen[other], centre_seen[other])

@@ -125,6 +125,7 @@ from sandbox.behaviour.safety.braking import (
     braking_fallback,
     braking_range,
     braking_rows,
+    columns,
     look_ahead_points,
     obstacle_normals,
     pair_geometry,
@@ -139,6 +140,7 @@ from sandbox.model.barriers import (
     MIN_SPEED,
     sensing_margin,
 )
+from sandbox.model.dynamics import CLIP
 from sandbox.plugins.contexts import FilterContext
 from sandbox.plugins.registration import Param, register_filter
 
@@ -484,7 +486,7 @@ def barrier_rows(
             else:
                 slack_i, slack_j = base + along_i, base - along_j
         keep = (slack_i < reach[i]) | (slack_j < reach[j])
-        keep = np.flatnonzero(keep | ~(cooperative[i] & cooperative[j]))
+        keep = (keep | ~(cooperative[i] & cooperative[j])).nonzero()[0]
         i, j = i.take(keep), j.take(keep)
     if len(i):
         # Both directions of each pair: vehicle `me` toward `other`.
@@ -554,7 +556,7 @@ def stall_turn(z0: np.ndarray, z: np.ndarray, angle: float) -> np.ndarray:
     nominal = np.hypot(z0[:, 0], z0[:, 1])
     kept = np.hypot(z[:, 0], z[:, 1])
     cut = 1.0 - kept / np.maximum(nominal, MIN_SPEED)
-    x = np.clip((cut - (1.0 - STALL_START)) / (STALL_START - STALL_FULL), 0.0, 1.0)
+    x = CLIP((cut - (1.0 - STALL_START)) / (STALL_START - STALL_FULL), 0.0, 1.0)
     ramp = x * x * (3.0 - 2.0 * x)
     return angle * ramp * np.minimum(nominal / STALL_SPEED, 1.0)
 
@@ -579,13 +581,13 @@ def _pass_right(
     turn = stall_turn(z0, z, state.pass_right)
     if hold is not None:
         turn[holds(hold[0], hold[1], mat, off, z)] = 0.0
-    rows = np.flatnonzero(turn > 0)
+    rows = (turn > 0).nonzero()[0]
     if len(rows) == 0:
         return z, slack
     c, s = np.cos(turn[rows]), np.sin(turn[rows])
     zr = z0[rows]
     # clockwise by the turn: (v1, l v2) rotated toward (0, -|z0|), the right
-    nominal = np.stack((c * zr[:, 0] + s * zr[:, 1], c * zr[:, 1] - s * zr[:, 0]), -1)
+    nominal = columns(c * zr[:, 0] + s * zr[:, 1], c * zr[:, 1] - s * zr[:, 0])
     z, slack = z.copy(), slack.copy()
     z[rows], slack[rows] = solve(nominal, mat[rows], off[rows], soft[rows])
     return z, slack
@@ -632,10 +634,10 @@ def filter_commands(
         filtered &= ~ctx.commanded
     v1 = np.array(ctx.v1, dtype=float)
     v2 = np.array(ctx.v2, dtype=float)
-    z0 = np.stack((v1, look * v2), -1)
+    z0 = columns(v1, look * v2)
     slack = np.zeros(n)
     active = np.zeros(n, dtype=bool)
-    who = np.flatnonzero(filtered)
+    who = filtered.nonzero()[0]
     if len(who) == 0:
         return v1, v2, FilterStep(active, slack, 0, np.inf, np.zeros(n, dtype=bool))
     lo1, hi1, lo2, hi2 = (np.zeros(n) for _ in range(4))
@@ -643,7 +645,7 @@ def filter_commands(
     if ctx.v1_prev is None:
         z_hat = np.zeros((n, 2))
     else:
-        z_hat = np.stack((ctx.v1_prev, look * ctx.v2_prev), -1)
+        z_hat = columns(ctx.v1_prev, look * ctx.v2_prev)
     reach = np.hypot(
         np.maximum(np.abs(lo1 - z_hat[:, 0]), np.abs(hi1 - z_hat[:, 0])),
         np.maximum(np.abs(lo2 - z_hat[:, 1]), np.abs(hi2 - z_hat[:, 1])),
@@ -671,12 +673,12 @@ def filter_commands(
     wall = np.arange(len(veh)) >= len(veh) - (walls or 0)  # rows of obstacles last
     # In z = (v1, l v2): w = R(x3) z, so a . w = (R^T a) . z and |w - w0| = |z - z0|.
     c, s = np.cos(ctx.theta[veh]), np.sin(ctx.theta[veh])
-    a = np.stack((c * a_w[:, 0] + s * a_w[:, 1], -s * a_w[:, 0] + c * a_w[:, 1]), -1)
+    a = columns(c * a_w[:, 0] + s * a_w[:, 1], -s * a_w[:, 0] + c * a_w[:, 1])
     # Conditions no input within the bounds can violate are dropped.
     reach = np.maximum(a[:, 0] * lo1[veh], a[:, 0] * hi1[veh]) + np.maximum(
         a[:, 1] * lo2[veh], a[:, 1] * hi2[veh]
     )
-    keep = np.flatnonzero(reach > b - TOLERANCE)
+    keep = (reach > b - TOLERANCE).nonzero()[0]
     veh, a, b, wall, src = veh[keep], a[keep], b[keep], wall[keep], keep
     # At most max_rows per vehicle, the most restrictive (smallest b) first.
     order = np.lexsort((b, veh))
@@ -684,23 +686,23 @@ def filter_commands(
     counts = np.bincount(veh, minlength=n)
     start = np.concatenate(([0], np.cumsum(counts)[:-1]))
     rank = np.arange(len(veh)) - start[veh]
-    keep = np.flatnonzero(rank < state.max_rows)
+    keep = (rank < state.max_rows).nonzero()[0]
     veh, a, b, rank, wall = veh[keep], a[keep], b[keep], rank[keep], wall[keep]
     src = src[keep]  # each kept row's place among the rows as made
     counts = np.minimum(counts, state.max_rows)
 
     z = z0.copy()
     bare = who[counts[who] == 0]  # the bounds only: a clip
-    z[bare, 0] = np.clip(z0[bare, 0], lo1[bare], hi1[bare])
-    z[bare, 1] = np.clip(z0[bare, 1], lo2[bare], hi2[bare])
-    for m in np.unique(counts[who]):
+    z[bare, 0] = CLIP(z0[bare, 0], lo1[bare], hi1[bare])
+    z[bare, 1] = CLIP(z0[bare, 1], lo2[bare], hi2[bare])
+    for m in np.bincount(counts[who]).nonzero()[0]:  # the counts, sorted
         if m == 0:
             continue
         group = who[counts[who] == m]
         k = len(group)
         slot = np.full(n, -1, dtype=np.intp)
         slot[group] = np.arange(k)
-        mine = np.flatnonzero(slot[veh] >= 0)
+        mine = (slot[veh] >= 0).nonzero()[0]
         box = (lo1[group], hi1[group], lo2[group], hi2[group])
         mat, off, soft = bounded_problems(
             box, slot[veh[mine]], a[mine], b[mine], rank[mine], m
@@ -730,11 +732,11 @@ def filter_commands(
             bad = running & ~passes(state, ctx, pending["check"], z)
             if bad.any():
                 return filter_commands(state, ctx, prune, braked | bad)
-    braking = np.flatnonzero(fallback)
+    braking = fallback.nonzero()[0]
     if len(braking):
         z[braking] = braking_fallback(state, ctx, braking)
     changed = np.any(z != z0, axis=1)
-    rows = np.flatnonzero(changed)
+    rows = changed.nonzero()[0]
     v1[rows] = z[rows, 0]
     if not state.speed_only:  # else v2 is the controller's, exactly
         v2[rows] = z[rows, 1] / look
