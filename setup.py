@@ -28,54 +28,33 @@ from setuptools import Extension, find_packages, setup
 from setuptools.command.build_ext import build_ext
 
 CSTEP = Extension("sandbox.physics._cstep", ["sandbox/physics/_cstep.c"], optional=True)
-#: The extensions whose loops must give numpy's numbers to the bit.
-RULES = ["sandbox/numpy_rules.h"]
-KERNELS = Extension(
-    "sandbox.model._kernels",
-    ["sandbox/model/_kernels.c"],
-    include_dirs=["sandbox"],
-    depends=RULES,
-    optional=True,
-)
-PAIR_FIELD = Extension(
-    "sandbox.behaviour._pair_field",
-    ["sandbox/behaviour/_pair_field.c"],
-    include_dirs=["sandbox"],
-    depends=RULES,
-    optional=True,
-)
-MOTORS = Extension(
-    "sandbox.physics._motors",
-    ["sandbox/physics/_motors.c"],
-    include_dirs=["sandbox"],
-    depends=RULES,
-    optional=True,
-)
 
-QP = Extension(
-    "sandbox.behaviour.safety._qp",
-    ["sandbox/behaviour/safety/_qp.c"],
-    include_dirs=["sandbox"],
-    depends=RULES,
-    optional=True,
-)
 
-PERIOD = Extension(
-    "sandbox.loop._period",
-    ["sandbox/loop/_period.c"],
-    include_dirs=["sandbox"],
-    depends=RULES,
-    optional=True,
+def _exact(source: str) -> Extension:
+    """An optional extension of the C loop ``source`` that gives numpy's numbers."""
+    name = source.removesuffix(".c").replace("/", ".")
+    return Extension(
+        name,
+        [source],
+        include_dirs=["sandbox"],
+        depends=["sandbox/numpy_rules.h"],
+        optional=True,
+    )
+
+
+#: The extensions whose loops give numpy's numbers to the bit, compiled with no fused
+#: multiply-add.
+EXACT = tuple(
+    _exact(source)
+    for source in (
+        "sandbox/model/_kernels.c",
+        "sandbox/behaviour/_pair_field.c",
+        "sandbox/physics/_motors.c",
+        "sandbox/behaviour/safety/_qp.c",
+        "sandbox/loop/_period.c",
+        "sandbox/behaviour/_fits.c",
+    )
 )
-FITS = Extension(
-    "sandbox.behaviour._fits",
-    ["sandbox/behaviour/_fits.c"],
-    include_dirs=["sandbox"],
-    depends=RULES,
-    optional=True,
-)
-#: The extensions compiled with no fused multiply-add.
-EXACT = (KERNELS, PAIR_FIELD, MOTORS, QP, PERIOD, FITS)
 
 
 class BuildExt(build_ext):
