@@ -53,6 +53,7 @@ EXACT = tuple(
         "sandbox/behaviour/safety/_qp.c",
         "sandbox/loop/_period.c",
         "sandbox/behaviour/_fits.c",
+        "sandbox/behaviour/_draws.c",
     )
 )
 

@@ -15,7 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sandbox.behaviour import tracks
+from sandbox.behaviour import sensing, tracks
 from sandbox.behaviour.safety import qp
 from sandbox.loop import divergence, tally
 from sandbox.loop.simulation import Simulation
@@ -199,3 +199,47 @@ def test_the_loop_metrics_buffers_in_c_equal_numpy(monkeypatch, batch):
     assert calls
     monkeypatch.setattr(tally, "USE_KERNEL", False)
     assert metrics() == with_c
+
+
+@pytest.mark.skipif(sensing._draws is None, reason="_draws not built")
+def test_the_worlds_uniform_draws_in_c_equal_each_generators(monkeypatch):
+    def runs():
+        scenarios = [
+            load_scenario(
+                "failures/follower_stop",
+                overrides=[
+                    "duration=4",
+                    "sensing.position_noise=0.02",
+                    "sensing.loss=0.3",
+                    f"seed={s}",
+                ],
+            )
+            for s in range(4)
+        ]
+        return [
+            r.pose.tobytes() + r.target.tobytes() for r in Simulation.batch(scenarios)
+        ]
+
+    gens = [np.random.default_rng(s) for s in range(3)]
+    fill = sensing.uniform_rows(gens)
+    assert fill is not None
+    out = np.empty((3, 5))
+    fill(out)
+    for w, g in enumerate(np.random.default_rng(s) for s in range(3)):
+        assert np.array_equal(out[w], g.random(5))
+    with_c = runs()
+    monkeypatch.setattr(sensing, "USE_KERNEL", False)
+    assert sensing.uniform_rows(gens) is None
+    assert runs() == with_c
+
+
+@pytest.mark.skipif(sensing._draws is None, reason="_draws not built")
+def test_the_uniform_draws_check_refuses_other_numbers(monkeypatch):
+    real = sensing._draws.uniform_rows
+
+    def off_by_one_ulp(states, functions, out):
+        real(states, functions, out)
+        out[0, 0] = np.nextafter(out[0, 0], np.inf)
+
+    monkeypatch.setattr(sensing, "_draws", SimpleNamespace(uniform_rows=off_by_one_ulp))
+    assert sensing.uniform_rows([np.random.default_rng(0)]) is None

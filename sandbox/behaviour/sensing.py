@@ -20,8 +20,11 @@ section.
 
 from __future__ import annotations
 
+import copy
+import ctypes
 import zlib
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 
@@ -151,14 +154,21 @@ class StackedBroadcast:
             (b.rng.standard_normal, self._noise[w], b.rng.random, self._draws[w])
             for w, b in enumerate(broadcasts)
         ]
+        # The uniform draws of all worlds in one C call, where it gives the same.
+        self._uniforms = uniform_rows([b.rng for b in broadcasts]) if n else None
         for w, b in enumerate(broadcasts):
             b.stack = (self, slice(w * n, (w + 1) * n))
 
     def update(self, pos: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """:meth:`Broadcast.update` of every world, shape (K n, 3)."""
-        for normal, noise, uniform, draws in self._calls:
-            normal(out=noise)
-            uniform(out=draws)
+        if self._uniforms is not None:  # each world: its normals, then its uniforms
+            for normal, noise, _, _ in self._calls:
+                normal(out=noise)
+            self._uniforms(self._draws)
+        else:
+            for normal, noise, uniform, draws in self._calls:
+                normal(out=noise)
+                uniform(out=draws)
         lost = self._draws.reshape(-1) < self.loss
         noise = self._noise.reshape(-1, 3) * self.sigma
         pose = np.column_stack((pos, theta)) + noise
@@ -171,6 +181,55 @@ class StackedBroadcast:
             self.seen = np.where(lost[:, None], self.seen, arrived)
             self.fresh = ~lost
         return self.seen
+
+
+try:
+    from sandbox.behaviour import _draws
+except ImportError:  # pragma: no cover - built without a C compiler
+    _draws = None
+
+#: Draw the worlds' uniforms in one C call where that extension is built (False: each
+#: world's ``Generator.random``).
+USE_KERNEL = True
+
+
+def uniform_rows(
+    generators: list[np.random.Generator],
+) -> Callable[[np.ndarray], None] | None:
+    """A function filling row w of a (K, n) array as ``generators[w].random`` would.
+
+    One C call through each bit generator's own ``next_double`` (numpy's ctypes
+    interface), checked first on a copy of the first generator: None where the
+    extension is not built, :data:`USE_KERNEL` is False, a generator has no such
+    interface, or the check finds another number.
+    """
+    if _draws is None or not USE_KERNEL or not generators:
+        return None
+    try:
+        faces = [g.bit_generator.ctypes for g in generators]
+        states = np.array([f.state_address for f in faces], dtype=np.uintp)
+        functions = np.array(
+            [ctypes.cast(f.next_double, ctypes.c_void_p).value for f in faces],
+            dtype=np.uintp,
+        )
+    except (AttributeError, TypeError):  # pragma: no cover - another bit generator
+        return None
+    # The check: a copy of the first generator, drawn both ways.
+    probe = copy.deepcopy(generators[0])
+    face = probe.bit_generator.ctypes
+    one = np.array([face.state_address], dtype=np.uintp)
+    fn = np.array([ctypes.cast(face.next_double, ctypes.c_void_p).value], np.uintp)
+    got = np.empty((1, 64))
+    _draws.uniform_rows(one, fn, got)
+    want = copy.deepcopy(generators[0]).random(64)
+    if not np.array_equal(got[0].view(np.uint64), want.view(np.uint64)):
+        return None
+
+    def fill(out: np.ndarray) -> None:
+        _draws.uniform_rows(states, functions, out)
+
+    fill.keep = (generators, faces)  # the states stay alive with the function
+    return fill
 
 
 def make_broadcast(spec, dt: float, seed: int) -> Broadcast | None:
