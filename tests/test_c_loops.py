@@ -202,7 +202,7 @@ def test_the_loop_metrics_buffers_in_c_equal_numpy(monkeypatch, batch):
 
 
 @pytest.mark.skipif(sensing._draws is None, reason="_draws not built")
-def test_the_worlds_uniform_draws_in_c_equal_each_generators(monkeypatch):
+def test_the_worlds_draws_in_c_equal_each_generators(monkeypatch):
     def runs():
         scenarios = [
             load_scenario(
@@ -220,26 +220,29 @@ def test_the_worlds_uniform_draws_in_c_equal_each_generators(monkeypatch):
             r.pose.tobytes() + r.target.tobytes() for r in Simulation.batch(scenarios)
         ]
 
-    gens = [np.random.default_rng(s) for s in range(3)]
-    fill = sensing.uniform_rows(gens)
-    assert fill is not None
-    out = np.empty((3, 5))
-    fill(out)
-    for w, g in enumerate(np.random.default_rng(s) for s in range(3)):
-        assert np.array_equal(out[w], g.random(5))
+    draw = sensing.stacked_draws([np.random.default_rng(s) for s in range(3)], 5)
+    assert draw is not None
+    noise, lost = np.empty((3, 5, 3)), np.empty((3, 5))
+    for _ in range(2):  # two periods: each stream goes on where it stopped
+        draw(noise, lost)
+    for w in range(3):
+        g = np.random.default_rng(w)
+        g.standard_normal((5, 3)), g.random(5)
+        assert np.array_equal(noise[w], g.standard_normal((5, 3)))
+        assert np.array_equal(lost[w], g.random(5))
     with_c = runs()
     monkeypatch.setattr(sensing, "USE_KERNEL", False)
-    assert sensing.uniform_rows(gens) is None
+    assert sensing.stacked_draws([np.random.default_rng(0)], 5) is None
     assert runs() == with_c
 
 
 @pytest.mark.skipif(sensing._draws is None, reason="_draws not built")
-def test_the_uniform_draws_check_refuses_other_numbers(monkeypatch):
-    real = sensing._draws.uniform_rows
+def test_the_draws_check_refuses_other_numbers(monkeypatch):
+    real = sensing._draws.fill_rows
 
-    def off_by_one_ulp(states, functions, out):
-        real(states, functions, out)
-        out[0, 0] = np.nextafter(out[0, 0], np.inf)
+    def off_by_one_ulp(fill, bitgens, out):
+        real(fill, bitgens, out)
+        out.reshape(-1)[0] = np.nextafter(out.reshape(-1)[0], np.inf)
 
-    monkeypatch.setattr(sensing, "_draws", SimpleNamespace(uniform_rows=off_by_one_ulp))
-    assert sensing.uniform_rows([np.random.default_rng(0)]) is None
+    monkeypatch.setattr(sensing, "_draws", SimpleNamespace(fill_rows=off_by_one_ulp))
+    assert sensing.stacked_draws([np.random.default_rng(0)], 4) is None

@@ -154,17 +154,15 @@ class StackedBroadcast:
             (b.rng.standard_normal, self._noise[w], b.rng.random, self._draws[w])
             for w, b in enumerate(broadcasts)
         ]
-        # The uniform draws of all worlds in one C call, where it gives the same.
-        self._uniforms = uniform_rows([b.rng for b in broadcasts]) if n else None
+        # Every world's draws in two C calls, where they give the same numbers.
+        self._stacked = stacked_draws([b.rng for b in broadcasts], n)
         for w, b in enumerate(broadcasts):
             b.stack = (self, slice(w * n, (w + 1) * n))
 
     def update(self, pos: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """:meth:`Broadcast.update` of every world, shape (K n, 3)."""
-        if self._uniforms is not None:  # each world: its normals, then its uniforms
-            for normal, noise, _, _ in self._calls:
-                normal(out=noise)
-            self._uniforms(self._draws)
+        if self._stacked is not None:  # each world: its normals, then its uniforms
+            self._stacked(self._noise, self._draws)
         else:
             for normal, noise, uniform, draws in self._calls:
                 normal(out=noise)
@@ -188,48 +186,77 @@ try:
 except ImportError:  # pragma: no cover - built without a C compiler
     _draws = None
 
-#: Draw the worlds' uniforms in one C call where that extension is built (False: each
-#: world's ``Generator.random``).
+#: Draw the worlds' noise and losses in two C calls where that extension is built and
+#: numpy's fill functions are found (False: each world's Generator methods).
 USE_KERNEL = True
 
 
-def uniform_rows(
-    generators: list[np.random.Generator],
-) -> Callable[[np.ndarray], None] | None:
-    """A function filling row w of a (K, n) array as ``generators[w].random`` would.
-
-    One C call through each bit generator's own ``next_double`` (numpy's ctypes
-    interface), checked first on a copy of the first generator: None where the
-    extension is not built, :data:`USE_KERNEL` is False, a generator has no such
-    interface, or the check finds another number.
-    """
-    if _draws is None or not USE_KERNEL or not generators:
-        return None
+def _fill_functions() -> tuple[int, int] | None:
+    """The addresses of numpy's normal and uniform fill functions, or None."""
     try:
-        faces = [g.bit_generator.ctypes for g in generators]
-        states = np.array([f.state_address for f in faces], dtype=np.uintp)
-        functions = np.array(
-            [ctypes.cast(f.next_double, ctypes.c_void_p).value for f in faces],
-            dtype=np.uintp,
-        )
-    except (AttributeError, TypeError):  # pragma: no cover - another bit generator
+        from numpy.random import _generator
+
+        lib = ctypes.CDLL(_generator.__file__)
+        normal = lib.random_standard_normal_fill
+        uniform = lib.random_standard_uniform_fill
+    except (ImportError, OSError, AttributeError):  # another numpy build
         return None
-    # The check: a copy of the first generator, drawn both ways.
-    probe = copy.deepcopy(generators[0])
-    face = probe.bit_generator.ctypes
-    one = np.array([face.state_address], dtype=np.uintp)
-    fn = np.array([ctypes.cast(face.next_double, ctypes.c_void_p).value], np.uintp)
-    got = np.empty((1, 64))
-    _draws.uniform_rows(one, fn, got)
-    want = copy.deepcopy(generators[0]).random(64)
-    if not np.array_equal(got[0].view(np.uint64), want.view(np.uint64)):
+    address = ctypes.c_void_p
+    return ctypes.cast(normal, address).value, ctypes.cast(uniform, address).value
+
+
+def _bitgens(generators: list[np.random.Generator]) -> np.ndarray:
+    """Each generator's ``bitgen_t`` (the address its bit generator's capsule holds)."""
+    pointer = ctypes.pythonapi.PyCapsule_GetPointer
+    pointer.restype = ctypes.c_void_p
+    pointer.argtypes = [ctypes.py_object, ctypes.c_char_p]
+    return np.array(
+        [pointer(g.bit_generator.capsule, b"BitGenerator") for g in generators],
+        dtype=np.uintp,
+    )
+
+
+def stacked_draws(
+    generators: list[np.random.Generator], n: int
+) -> Callable[[np.ndarray, np.ndarray], None] | None:
+    """A function drawing every world's ``(n, 3)`` normals, then its ``n`` uniforms.
+
+    ``draw(noise, lost)`` fills ``noise`` (K, n, 3) and ``lost`` (K, n) as each
+    world's ``standard_normal(out=noise[w])`` then ``random(out=lost[w])`` would, in
+    two C calls through numpy's own fill functions. None where the extension is not
+    built, :data:`USE_KERNEL` is False, the functions are not found, or a check on
+    copies of the first generator finds another number.
+    """
+    if _draws is None or not USE_KERNEL or not generators or not n:
+        return None
+    functions = _fill_functions()
+    if functions is None:
+        return None
+    normal, uniform = functions
+    try:
+        bitgens = _bitgens(generators)
+    except (AttributeError, TypeError, ValueError):  # pragma: no cover
         return None
 
-    def fill(out: np.ndarray) -> None:
-        _draws.uniform_rows(states, functions, out)
+    def draw(noise: np.ndarray, lost: np.ndarray) -> None:
+        _draws.fill_rows(normal, bitgens, noise)
+        _draws.fill_rows(uniform, bitgens, lost)
 
-    fill.keep = (generators, faces)  # the states stay alive with the function
-    return fill
+    # The check: copies of the first generator, drawn both ways, twice.
+    probe, twin = copy.deepcopy(generators[0]), copy.deepcopy(generators[0])
+    probe_bitgens = _bitgens([probe])
+    for _ in range(2):
+        got_noise, got_lost = np.empty((1, n, 3)), np.empty((1, n))
+        _draws.fill_rows(normal, probe_bitgens, got_noise)
+        _draws.fill_rows(uniform, probe_bitgens, got_lost)
+        want_noise, want_lost = twin.standard_normal((n, 3)), twin.random(n)
+        if not (
+            np.array_equal(got_noise[0].view(np.uint64), want_noise.view(np.uint64))
+            and np.array_equal(got_lost[0].view(np.uint64), want_lost.view(np.uint64))
+        ):
+            return None
+    draw.keep = (generators, probe)  # the bit generators stay alive with it
+    return draw
 
 
 def make_broadcast(spec, dt: float, seed: int) -> Broadcast | None:
