@@ -60,7 +60,8 @@ side_distance(double x, double y)
 }
 
 PyDoc_STRVAR(pair_field_doc,
-"pair_field(pos, seen, i, j, radius, R, r, kind, shift, active, d2) -> None\n"
+"pair_field(pos, seen, i, j, radius, R, r, kind, shift, active, d2, beta, avoid)\n"
+"    -> None\n"
 "\n"
 "The vehicles' terms of the avoidance field of the candidate pairs ``(i[k], j[k])``\n"
 "(intp, in order) of the positions ``pos`` (n, 2): the pairs with ``d2 < radius^2``\n"
@@ -68,23 +69,28 @@ PyDoc_STRVAR(pair_field_doc,
 "added to ``shift`` (n, 2), which must hold zeros; ``active`` (n,) bool set where\n"
 "a term weighs above zero; every candidate's squared distance written to ``d2``.\n"
 "``seen`` (n, 2): each vehicle sees the other's broadcast position (None: the\n"
-"true positions).");
+"true positions). With ``avoid`` (n,) bool (else None) the field is finished as\n"
+"weighted_shift finishes it without static obstacles: ``shift *= beta``, zero and\n"
+"inactive where not ``avoid``.");
 
 static PyObject *
 pair_field(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 11) {
-        PyErr_SetString(PyExc_TypeError, "pair_field takes 11 arguments");
+    if (nargs != 13) {
+        PyErr_SetString(PyExc_TypeError, "pair_field takes 13 arguments");
         return NULL;
     }
     double radius = PyFloat_AsDouble(args[4]);
     double R = PyFloat_AsDouble(args[5]);
     double r = PyFloat_AsDouble(args[6]);
     long kind = PyLong_AsLong(args[7]);
+    int finish = args[12] != Py_None;
+    double beta = finish ? PyFloat_AsDouble(args[11]) : 0.0;
     if (PyErr_Occurred()) {
         return NULL;
     }
     int with_seen = args[1] != Py_None;
+    Py_buffer avoid;
     Rows pos, seen, shift, d2;
     Indices ci, cj;
     Py_buffer active;
@@ -105,9 +111,12 @@ pair_field(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     stage = 6;
     if (get_rows(args[10], &d2, 1) < 0) goto done;
     stage = 7;
+    if (finish && PyObject_GetBuffer(args[12], &avoid, PyBUF_C_CONTIGUOUS) < 0) goto done;
+    stage = 8;
     Py_ssize_t n = shift.len / 2, m = ci.len;
     if (pos.len != 2 * n || (with_seen && seen.len != 2 * n) || cj.len != m ||
-        d2.len != m || active.len != n || active.itemsize != 1) {
+        d2.len != m || active.len != n || active.itemsize != 1 ||
+        (finish && (avoid.len != n || avoid.itemsize != 1))) {
         PyErr_SetString(PyExc_ValueError, "pair_field: shapes differ");
         goto done;
     }
@@ -169,9 +178,22 @@ pair_field(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             }
         }
     }
+    if (finish) { /* shift *= beta; shift[~avoid] = 0; active &= avoid */
+        const unsigned char *may = (const unsigned char *)avoid.buf;
+        for (Py_ssize_t v = 0; v < n; v++) {
+            out[2 * v] = out[2 * v] * beta;
+            out[2 * v + 1] = out[2 * v + 1] * beta;
+            if (!may[v]) {
+                out[2 * v] = 0.0;
+                out[2 * v + 1] = 0.0;
+                on[v] = 0;
+            }
+        }
+    }
     result = Py_None;
     Py_INCREF(result);
 done:
+    if (stage >= 8 && finish) PyBuffer_Release(&avoid);
     if (stage >= 7) PyBuffer_Release(&d2.view);
     if (stage >= 6) PyBuffer_Release(&active);
     if (stage >= 5) PyBuffer_Release(&shift.view);

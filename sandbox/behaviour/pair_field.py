@@ -63,8 +63,15 @@ def add_pair_terms(
     kind: int,
     shift: np.ndarray,
     active: np.ndarray,
+    beta: float | None = None,
+    avoiders: np.ndarray | None = None,
 ) -> None:
     """Write the pairs' terms of the field (before ``beta``) into ``shift``, ``active``.
+
+    With ``beta`` and ``avoiders`` the field is finished as
+    :func:`~sandbox.behaviour.recovery.weighted_shift` finishes it without static
+    obstacles: multiplied by ``beta``, zero and inactive for the vehicles that do
+    not avoid.
 
     Parameters
     ----------
@@ -81,6 +88,10 @@ def add_pair_terms(
     shift : ndarray, shape (n, 2), float64, C-contiguous, zeros
     active : ndarray, shape (n,), bool, C-contiguous
         Set where a term weighs above zero.
+    beta : float, optional
+        The aggressiveness [m^2], with ``avoiders``.
+    avoiders : ndarray, shape (n,), bool, optional
+        The vehicles that apply the strategy.
     """
     i, j = neighbours.candidates(pos)
     d2 = np.empty(len(i))
@@ -96,6 +107,8 @@ def add_pair_terms(
         shift,
         active,
         d2,
+        0.0 if beta is None else float(beta),
+        None if avoiders is None else np.ascontiguousarray(avoiders, dtype=bool),
     )
     neighbours.remember(pos, d2)
 

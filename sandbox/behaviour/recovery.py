@@ -322,7 +322,14 @@ def weighted_shift(
     goal = slot_directions(pos, ctx.slot) if kappa > 0 else None
     kind = _C_KINDS.get(weight) if goal is None and neighbours is not None else None
     if kind is not None and pair_field.usable():
-        # The pairs' terms in one C call (the numpy below, bit for bit).
+        # The pairs' terms in one C call (the numpy below, bit for bit), and without
+        # static obstacles, for one beta of all rows, the field finished there too.
+        if obstacles.empty and np.ndim(beta) == 0:
+            pair_field.add_pair_terms(
+                pos, ctx.seen_pos, neighbours, R, r, kind, shift, active, beta,
+                avoiders,
+            )  # fmt: skip
+            return shift, active
         pair_field.add_pair_terms(
             pos, ctx.seen_pos, neighbours, R, r, kind, shift, active
         )

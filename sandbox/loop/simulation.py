@@ -533,8 +533,15 @@ class Simulation(StepAPI, Ending, WorldStages):
             shift, active = self.strategy(
                 self._strategy_context(t, slot, may_avoid, known)
             )
-        # a strategy never moves a vehicle that may not avoid
-        shift = np.where(may_avoid[:, None], shift, 0.0)
+        # a strategy never moves a vehicle that may not avoid (where every vehicle
+        # may, a float (N, 2) shift is kept as it is: the same values)
+        if not (
+            type(shift) is np.ndarray
+            and shift.dtype == np.float64
+            and shift.shape == (self.N, 2)
+            and np.count_nonzero(may_avoid) == self.N
+        ):
+            shift = np.where(may_avoid[:, None], shift, 0.0)
         active = np.asarray(active, dtype=bool) & may_avoid
         target = slot + shift  # eq. (22) / (26)
         if self.rec.target_derivatives == "estimate":
