@@ -1,9 +1,9 @@
-/* numpy's rules for the C kernels, and float64 arrays through the buffer interface.
+/* numpy's rules for the C kernels, and numpy's arrays through the buffer interface.
  *
  * Included by the optional extensions whose loops must give numpy's numbers to the
- * bit (sandbox/model/_kernels.c, sandbox/behaviour/_pair_field.c): numpy's maximum
- * and clip on ties and NaN, and a contiguous float64 array (or one value for every
- * row) read from any object with the buffer interface.
+ * bit (see setup.py): numpy's maximum and clip on ties and NaN, a contiguous float64
+ * array (or one value for every row) and a contiguous intp index array, read from any
+ * object with the buffer interface.
  */
 
 #ifndef SANDBOX_NUMPY_RULES_H
@@ -73,6 +73,31 @@ release(Rows *rows, int count)
     for (int k = 0; k < count; k++) {
         PyBuffer_Release(&rows[k].view);
     }
+}
+
+/* An index array (numpy's intp) and its length. */
+typedef struct {
+    Py_buffer view;
+    const Py_ssize_t *data;
+    Py_ssize_t len;
+} Indices;
+
+static inline int
+get_indices(PyObject *obj, Indices *out)
+{
+    if (PyObject_GetBuffer(obj, &out->view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        return -1;
+    }
+    const char *f = out->view.format;
+    if (out->view.itemsize != (Py_ssize_t)sizeof(Py_ssize_t) || f == NULL ||
+        (strcmp(f, "l") != 0 && strcmp(f, "q") != 0 && strcmp(f, "n") != 0)) {
+        PyBuffer_Release(&out->view);
+        PyErr_SetString(PyExc_TypeError, "expected a contiguous intp array");
+        return -1;
+    }
+    out->data = (const Py_ssize_t *)out->view.buf;
+    out->len = out->view.len / (Py_ssize_t)sizeof(Py_ssize_t);
+    return 0;
 }
 
 #endif

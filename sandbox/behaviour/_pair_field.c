@@ -17,31 +17,6 @@
 /* sandbox.model.obstacle_field.MIN_DIST: the least distance of eq. (25) [m]. */
 #define MIN_DIST 1e-6
 
-/* An index array (numpy's intp) and its length. */
-typedef struct {
-    Py_buffer view;
-    const Py_ssize_t *data;
-    Py_ssize_t len;
-} Indices;
-
-static int
-get_indices(PyObject *obj, Indices *out)
-{
-    if (PyObject_GetBuffer(obj, &out->view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
-        return -1;
-    }
-    const char *f = out->view.format;
-    if (out->view.itemsize != (Py_ssize_t)sizeof(Py_ssize_t) || f == NULL ||
-        (strcmp(f, "l") != 0 && strcmp(f, "q") != 0 && strcmp(f, "n") != 0)) {
-        PyBuffer_Release(&out->view);
-        PyErr_SetString(PyExc_TypeError, "expected a contiguous intp array");
-        return -1;
-    }
-    out->data = (const Py_ssize_t *)out->view.buf;
-    out->len = out->view.len / (Py_ssize_t)sizeof(Py_ssize_t);
-    return 0;
-}
-
 /* alpha of eq. (22) (kind 0: 1 within R) or eq. (27) (kind 1: continuous). */
 static inline double
 weight(int kind, double dist, double R, double r)

@@ -86,7 +86,8 @@ buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     /* float arrays: pos, v1, v2, vel, theta, d2, v, vel_out, cmd */
     static const int at[] = {0, 3, 4, 5, 7, 9, 10, 11, 13};
     Rows r[9];
-    Py_buffer ib, jb, cb, fb;
+    Indices ib, jb;
+    Py_buffer cb, fb;
     int got = 0, got_i = 0, got_j = 0, got_c = 0, got_f = 0;
     PyObject *result = NULL;
     for (int k = 0; k < 9; k++) {
@@ -101,17 +102,12 @@ buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         got++;
     }
     if (pairs) {
-        if (PyObject_GetBuffer(args[1], &ib, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
-            goto done;
+        if (get_indices(args[1], &ib) < 0) goto done;
         got_i = 1;
-        if (PyObject_GetBuffer(args[2], &jb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
-            goto done;
+        if (get_indices(args[2], &jb) < 0) goto done;
         got_j = 1;
-        if (ib.itemsize != (Py_ssize_t)sizeof(Py_ssize_t) ||
-            jb.itemsize != (Py_ssize_t)sizeof(Py_ssize_t) || ib.len != jb.len ||
-            ib.format == NULL || strchr("lqn", ib.format[0]) == NULL ||
-            jb.format == NULL || strchr("lqn", jb.format[0]) == NULL) {
-            PyErr_SetString(PyExc_TypeError, "buffer_period: pairs must be intp");
+        if (ib.len != jb.len) {
+            PyErr_SetString(PyExc_ValueError, "buffer_period: shapes differ");
             goto done;
         }
     }
@@ -123,7 +119,7 @@ buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Rows *pos = &r[0], *v1 = &r[1], *v2 = &r[2], *vel = &r[3], *theta = &r[4];
     Rows *d2 = &r[5], *v = &r[6], *vel_out = &r[7], *cmd = &r[8];
     Py_ssize_t N = v1->len;
-    Py_ssize_t P = pairs ? ib.len / (Py_ssize_t)sizeof(Py_ssize_t) : 0;
+    Py_ssize_t P = pairs ? ib.len : 0;
     if (pos->len != 2 * N || v2->len != N || vel->len != 2 * N || theta->len != N ||
         v->len != 2 * N || vel_out->len != 2 * N || cmd->len != 2 * N ||
         cb.len != N || cb.itemsize != 1 || fb.len != N || fb.itemsize != 1 ||
@@ -132,7 +128,7 @@ buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         goto done;
     }
     if (pairs) {
-        const Py_ssize_t *ii = ib.buf, *jj = jb.buf;
+        const Py_ssize_t *ii = ib.data, *jj = jb.data;
         Py_ssize_t K = d2->len / P, n = K ? N / K : 0;
         if (K * n != N) {
             PyErr_SetString(PyExc_ValueError, "buffer_period: shapes differ");
@@ -176,8 +172,8 @@ done:
             PyBuffer_Release(&r[k].view);
         }
     }
-    if (got_i) PyBuffer_Release(&ib);
-    if (got_j) PyBuffer_Release(&jb);
+    if (got_i) PyBuffer_Release(&ib.view);
+    if (got_j) PyBuffer_Release(&jb.view);
     if (got_c) PyBuffer_Release(&cb);
     if (got_f) PyBuffer_Release(&fb);
     return result;
