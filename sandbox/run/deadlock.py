@@ -128,15 +128,25 @@ def no_headway(
         with np.errstate(invalid="ignore"):
             stalled = error[:, i] > error[j, i] - progress * distance
         ends = np.flatnonzero(full & always_far & stalled)
-        spans: list[tuple[float, float]] = []
-        for k in ends:
-            a, b = float(t[j[k]]), float(t[k])
-            if spans and a <= spans[-1][1]:
-                spans[-1] = (spans[-1][0], b)
-            else:
-                spans.append((a, b))
-        out[i] = spans
+        out[i] = _union(t[j[ends]], t[ends])
     return out
+
+
+def _union(a: np.ndarray, b: np.ndarray) -> list[tuple[float, float]]:
+    """The union of the windows ``[a_k, b_k]``, ``b`` increasing, as ``(start, end)``.
+
+    A window that starts no later than the one before it ends joins it (the stretch
+    so far ends at the last window's end, ``b`` increasing); the others start a new
+    stretch.
+
+    >>> _union(np.array([0.0, 1.0, 5.0]), np.array([2.0, 3.0, 6.0]))
+    [(0.0, 3.0), (5.0, 6.0)]
+    """
+    if not len(a):
+        return []
+    first = np.concatenate(([True], a[1:] > b[:-1])).nonzero()[0]
+    last = np.concatenate((first[1:] - 1, [len(b) - 1]))
+    return list(zip(a[first].tolist(), b[last].tolist(), strict=True))
 
 
 def _stretches(stuck: np.ndarray) -> list[tuple[int, int]]:
