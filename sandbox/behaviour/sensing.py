@@ -15,7 +15,10 @@ The draws come from a generator of their own, ``numpy.random.default_rng([seed,
 crc32("sensing")])``: adding sensing changes no other draw of a scenario, and the same
 scenario and seed give the same copies. With every value 0 no broadcast is made at all
 (:func:`make_broadcast` returns None) and runs are bit-identical to runs without the
-section.
+section. The worlds of a batch (:class:`StackedBroadcast`) draw, each from its own
+generator, in two C calls for all of them where the optional extension
+``sandbox.behaviour._draws`` is built (:func:`stacked_draws`: numpy's own fill
+functions on each world's bit generator, the same numbers).
 """
 
 from __future__ import annotations
@@ -205,11 +208,13 @@ def _fill_functions() -> tuple[int, int] | None:
     return ctypes.cast(normal, address).value, ctypes.cast(uniform, address).value
 
 
+#: ``PyCapsule_GetPointer``'s prototype (not the one ``ctypes.pythonapi`` shares).
+_CAPSULE_POINTER = ctypes.PYFUNCTYPE(ctypes.c_void_p, ctypes.py_object, ctypes.c_char_p)
+
+
 def _bitgens(generators: list[np.random.Generator]) -> np.ndarray:
     """Each generator's ``bitgen_t`` (the address its bit generator's capsule holds)."""
-    pointer = ctypes.pythonapi.PyCapsule_GetPointer
-    pointer.restype = ctypes.c_void_p
-    pointer.argtypes = [ctypes.py_object, ctypes.c_char_p]
+    pointer = _CAPSULE_POINTER(("PyCapsule_GetPointer", ctypes.pythonapi))
     return np.array(
         [pointer(g.bit_generator.capsule, b"BitGenerator") for g in generators],
         dtype=np.uintp,
