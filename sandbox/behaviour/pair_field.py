@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.model.kernels import c_float64
+
 try:
     from sandbox.behaviour import _pair_field
 except ImportError:  # pragma: no cover - built without a C compiler
@@ -46,12 +48,6 @@ def kernel_agrees() -> bool:
     if _agreed is None:
         _agreed = _pair_field is not None and _check()
     return _agreed
-
-
-def _contiguous(a: np.ndarray) -> np.ndarray:
-    if a.dtype == np.float64 and a.flags.c_contiguous:
-        return a
-    return np.ascontiguousarray(a, dtype=float)
 
 
 def add_pair_terms(
@@ -96,8 +92,8 @@ def add_pair_terms(
     i, j = neighbours.candidates(pos)
     d2 = np.empty(len(i))
     _pair_field.pair_field(
-        _contiguous(pos),
-        None if seen is None else _contiguous(seen),
+        c_float64(pos),
+        None if seen is None else c_float64(seen),
         i,
         j,
         float(neighbours.radius),

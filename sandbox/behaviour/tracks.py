@@ -40,6 +40,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from sandbox.model.kernels import c_float64
+
 #: The speeds of the grid, from 0 to 1.5 times the fastest speed observed [1].
 SPEEDS = 61
 #: A row's estimate is trusted within MARGIN times its bound W [1] (see the module).
@@ -281,8 +283,9 @@ def _stop_estimates_c(
     m = len(t)
     s1, s2 = float(s.sum()), float(s @ s)
     est = np.empty((len(v), m))
-    tc, sc, vc = (np.ascontiguousarray(a, dtype=float) for a in (t, s, v))
-    _fits.stop_estimates(tc, sc, vc, float(brake), s1, s2, est)
+    _fits.stop_estimates(
+        c_float64(t), c_float64(s), c_float64(v), float(brake), s1, s2, est
+    )
     vv = v[:, None]
     span = float(np.max(np.abs(t)))
     reach = 2.0 * brake * span * span + vv * (2.0 * span + vv / brake)

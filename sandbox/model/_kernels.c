@@ -366,7 +366,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_kernels",
-    "The flatness controller of one period in C (see sandbox/model/kernels.py).", -1,
+    "The controller and the motor model of one period in C (see kernels.py).", -1,
     methods,
 };
 

@@ -119,7 +119,12 @@ def _rows(value: float | np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.atleast_1d(np.asarray(value, dtype=float)))
 
 
-def _contiguous(a: np.ndarray) -> np.ndarray:
+def c_float64(a: np.ndarray) -> np.ndarray:
+    """``a`` as a C-contiguous float64 array for a C loop: itself where it is one.
+
+    ``np.ascontiguousarray(a, dtype=float)``, without its call where there is nothing
+    to convert (the C loops' callers pass mostly such arrays, every period).
+    """
     if a.dtype == np.float64 and a.flags.c_contiguous:
         return a
     return np.ascontiguousarray(a, dtype=float)
@@ -219,11 +224,11 @@ class Controller:
 
     def _step_c(self, pos, chi, theta, target, v_ref, a_ref):
         n = len(theta)
-        pos, chi, theta = _contiguous(pos), _contiguous(chi), _contiguous(theta)
+        pos, chi, theta = c_float64(pos), c_float64(chi), c_float64(theta)
         target, v_ref, a_ref = (
-            _contiguous(target),
-            _contiguous(v_ref),
-            _contiguous(a_ref),
+            c_float64(target),
+            c_float64(v_ref),
+            c_float64(a_ref),
         )
         nxt, norm = np.empty((n, 2)), np.empty(n)
         k1, k2, k3, k4 = self._k
@@ -274,7 +279,7 @@ def motor_model(
         return None
     vel, rate = np.array(vel, dtype=float), np.array(rate, dtype=float)
     _kernels.motor_model(
-        pose, vel, rate, _contiguous(commands), _contiguous(accel),
-        _contiguous(turn_accel), float(h), int(substeps), travel,
+        pose, vel, rate, c_float64(commands), c_float64(accel),
+        c_float64(turn_accel), float(h), int(substeps), travel,
     )  # fmt: skip
     return vel, rate

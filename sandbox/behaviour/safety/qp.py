@@ -28,6 +28,8 @@ from itertools import combinations
 
 import numpy as np
 
+from sandbox.model.kernels import c_float64
+
 #: Feasibility tolerance of a half-plane [m/s] (rows are unit vectors).
 TOLERANCE = 1e-9
 #: Below this |determinant| two or three constraints are taken as dependent.
@@ -72,7 +74,7 @@ def project(
     [[1.0, 1.0], [True]]
     """
     if USE_KERNEL and kernel_agrees():
-        z0c, ac, bc = _contiguous(z0), _contiguous(a), _contiguous(b)
+        z0c, ac, bc = c_float64(z0), c_float64(a), c_float64(b)
         z, feasible = np.empty(z0c.shape), np.empty(len(z0c), dtype=bool)
         _qp.project(z0c, ac, bc, float(tol), z, feasible)
         return z, feasible
@@ -123,12 +125,6 @@ except ImportError:  # pragma: no cover - built without a C compiler
 #: Project in C where that extension is built and agrees with numpy (False: numpy).
 USE_KERNEL = True
 _agreed: bool | None = None
-
-
-def _contiguous(x: np.ndarray) -> np.ndarray:
-    if x.dtype == np.float64 and x.flags.c_contiguous:
-        return x
-    return np.ascontiguousarray(x, dtype=float)
 
 
 def kernel_agrees() -> bool:
