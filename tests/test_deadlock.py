@@ -185,3 +185,19 @@ def test_expect_deadlocks_checks_the_count_and_names_the_vehicles() -> None:
     assert sc.expect.to_dict()["deadlocks"] == {"at_most": 2}
     with pytest.raises(ScenarioError, match="expect.deadlocks"):
         load_scenario(SWAP, overrides=["expect.deadlocks=-1"])
+
+
+@pytest.mark.parametrize("shape", [(1, 2), (7, 3, 2), (801, 4, 2), (40, 33, 3)])
+def test_norms_are_numpys_norm_to_the_bit(shape):
+    # The deadlocks and metrics read distances through norms(); a rounding of their
+    # own would move a settling time or a stall by a sample.
+    from sandbox.geometry.planar import norms
+
+    rng = np.random.default_rng(7)
+    v = rng.normal(size=shape) * 10.0 ** rng.integers(-8, 8, size=shape)
+    v[rng.random(shape) < 0.05] = np.nan
+    v[rng.random(shape) < 0.05] = np.inf
+    planar = v[..., :2]  # strided when the last axis is longer
+    want = np.linalg.norm(planar, axis=-1)
+    assert norms(planar).tobytes() == want.tobytes()
+    assert not np.shares_memory(norms(planar), planar)

@@ -1,1 +1,1 @@
-"""Geometry of the plane shared by every stage: neighbour search (pure numpy)."""
+"""Geometry of the plane shared by every stage: neighbour search, vector lengths."""

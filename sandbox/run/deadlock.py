@@ -37,6 +37,8 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.geometry.planar import norms
+
 #: Defaults of the ``metrics:`` keys that define a deadlock.
 DEADLOCK_SPEED = 0.01  # [m/s]
 DEADLOCK_TIME = 2.0  # [s]
@@ -54,6 +56,7 @@ def stuck_samples(
     failed: np.ndarray,
     speed: float = DEADLOCK_SPEED,
     distance: float = DEADLOCK_DISTANCE,
+    error: np.ndarray | None = None,
 ) -> np.ndarray:
     """Whether each vehicle is stuck at each recorded sample, shape (T, n) bool.
 
@@ -70,16 +73,19 @@ def stuck_samples(
         Vehicles with an active failure (never stuck).
     speed : float [m/s]
     distance : float [m]
+    error : ndarray (T, n) [m], optional
+        The distances ``|pos - slot|``, where the caller has them already.
     """
     T = len(t)
     if T < 2:
         return np.zeros(pos.shape[:2], dtype=bool)
-    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1)
+    step = norms(np.diff(pos, axis=0))
     dt = np.diff(t)[:, None]
     v = np.empty(pos.shape[:2])
     v[:-1] = step / np.where(dt > 0, dt, np.inf)
     v[-1] = v[-2]
-    error = np.linalg.norm(pos - slot, axis=-1)
+    if error is None:
+        error = norms(pos - slot)
     with np.errstate(invalid="ignore"):
         far = error > distance  # NaN (no slot) compares False
     return (v < speed) & far & ~failed
@@ -93,6 +99,7 @@ def no_headway(
     duration: float = DEADLOCK_TIME,
     distance: float = DEADLOCK_DISTANCE,
     progress: float = DEADLOCK_PROGRESS,
+    error: np.ndarray | None = None,
 ) -> list[list[tuple[float, float]]]:
     """Per vehicle, the ``(t start, t end)`` stretches where it makes no headway.
 
@@ -111,24 +118,29 @@ def no_headway(
     progress : float
         The headway expected over ``duration``, as a fraction of ``distance``; 0 turns
         the rule off.
+    error : ndarray (T, n) [m], optional
+        As for :func:`stuck_samples`.
     """
     T, n = pos.shape[:2]
     out: list[list[tuple[float, float]]] = [[] for _ in range(n)]
     if T < 2 or progress <= 0:  # 0: the headway rule is off (stopped vehicles only)
         return out
-    error = np.linalg.norm(pos - slot, axis=-1)
+    if error is None:
+        error = norms(pos - slot)
     with np.errstate(invalid="ignore"):
         far = (error > distance) & ~failed  # NaN (no slot) compares False
     start = np.searchsorted(t, t - duration - 1e-9)  # first sample of each window
     full = t - t[0] >= duration - 1e-9
     bad = np.concatenate((np.zeros((1, n), dtype=np.int64), np.cumsum(~far, axis=0)))
-    for i in range(n):
-        j = start
-        always_far = bad[np.arange(T) + 1, i] - bad[j, i] == 0
-        with np.errstate(invalid="ignore"):
-            stalled = error[:, i] > error[j, i] - progress * distance
-        ends = np.flatnonzero(full & always_far & stalled)
-        out[i] = _union(t[j[ends]], t[ends])
+    # Every vehicle's windows at once: far at every sample of the window, and the
+    # distance at its end more than at its start less the headway.
+    always_far = bad[1:] - bad[start] == 0
+    with np.errstate(invalid="ignore"):
+        stalled = error > error[start] - progress * distance
+    ending = full[:, None] & always_far & stalled
+    for i in np.count_nonzero(ending, axis=0).nonzero()[0]:
+        ends = np.flatnonzero(ending[:, i])
+        out[i] = _union(t[start[ends]], t[ends])
     return out
 
 
@@ -206,9 +218,10 @@ def find_deadlocks(
     >>> find_deadlocks(t, pos, slot, np.zeros((len(t), 2), bool), ["a", "b"])
     [{'vehicles': ['a', 'b'], 't': 1.0, 'duration': 4.0}]
     """
-    stuck = stuck_samples(t, pos, slot, failed, speed, distance)
+    error = norms(pos - slot)
+    stuck = stuck_samples(t, pos, slot, failed, speed, distance, error)
     stalls = []  # (t start, t end, vehicle)
-    for i in range(stuck.shape[1]):
+    for i in np.count_nonzero(stuck, axis=0).nonzero()[0].tolist():
         for a, b in _stretches(stuck[:, i]):
             if t[b] - t[a] >= duration - 1e-9:
                 stalls.append((float(t[a]), float(t[b]), i))
@@ -216,7 +229,7 @@ def find_deadlocks(
         raise ValueError(f"creeping: expected one of {CREEPING}, got {creeping!r}")
     end = float(t[-1]) if len(t) else 0.0
     for i, spans in enumerate(
-        no_headway(t, pos, slot, failed, duration, distance, progress)
+        no_headway(t, pos, slot, failed, duration, distance, progress, error)
     ):
         if creeping == "to_end":
             spans = [(a, b) for a, b in spans if b >= end]

@@ -65,6 +65,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.geometry.planar import norms
 from sandbox.model.tunnelling import SUBSTEP_FRACTION
 from sandbox.plugins.registration import metric_contributions
 from sandbox.run.deadlock import find_deadlocks
@@ -266,11 +267,14 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
             cols = slice(i, i + block)
             pose = np.asarray(run.pose[:, cols, :2])
             offset = pose - np.asarray(run.slot[:, cols])
-            error = np.linalg.norm(offset, axis=-1)
+            error = norms(offset)
             cmd = np.asarray(run.cmd[:, cols])
             mode = np.asarray(run.mode[:, cols])
+            # a slot at every sample; the largest error (exact in any order)
+            slotted = np.isfinite(error).all(axis=0) if T else np.zeros(0, bool)
+            largest = error.max(axis=0) if T else np.zeros(0)
         e = error[:, i % block]
-        has_slot = T > 0 and bool(np.all(np.isfinite(e)))
+        has_slot = T > 0 and bool(slotted[i % block])
         settle = settling_time(t, e, settle_tol, dwell) if has_slot else None
         if settle is not None and span > 0:
             moved = offset[-1, i % block] - offset[window, i % block]
@@ -283,7 +287,7 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
                 "rms_last_quarter": _finite(np.sqrt(np.mean(e[last_quarter] ** 2)))
                 if has_slot
                 else None,
-                "max": _finite(np.max(e)) if has_slot else None,
+                "max": _finite(largest[i % block]) if has_slot else None,
             },
             "settling_time": settle,
             **_effort(loop, i, cmd[:, i % block], float(run.diameter[i])),
@@ -359,7 +363,7 @@ def _deadlocks(run: Run, spec: Any) -> list[dict[str, Any]]:
         }
     return find_deadlocks(
         np.asarray(run.t),
-        np.asarray(run.pose[:, :, :2]),
+        np.ascontiguousarray(run.pose[:, :, :2]),
         np.asarray(run.slot),
         np.asarray(run.failed, dtype=bool),
         list(run.names),
