@@ -210,8 +210,9 @@ def test_interrupted_sweep_resumes(tmp_path, base, monkeypatch, capsys):
 
 @pytest.mark.slow
 def test_sigint_to_a_running_sweep_then_resume(tmp_path):
-    # two groups of 20 runs of 30 s, about a second each on an idle machine: the
-    # signal comes once the first is stored, long before the second is done
+    # 200 runs of 30 s (several seconds: not a short sweep, which is one batch), the
+    # first group of 25 about a second on an idle machine: the signal comes once it
+    # is stored, long before the rest is done
     base = write_yaml(tmp_path, base_doc(duration=30.0), "base.yaml")
     out = tmp_path / "out"
     cmd = [
@@ -221,7 +222,7 @@ def test_sigint_to_a_running_sweep_then_resume(tmp_path):
         "sweep",
         str(base),
         "--seeds",
-        "0:40",
+        "0:200",
         "--out",
         str(out),
     ]
@@ -236,7 +237,7 @@ def test_sigint_to_a_running_sweep_then_resume(tmp_path):
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     kept = len(read_csv(out / "results.csv"))
-    assert 2 <= kept < 40
+    assert 2 <= kept < 200
     assert not list((out / "runs").glob(".*.tmp"))  # nothing half-written
     done = subprocess.run(
         [*cmd, "--seeds", f"0:{kept}"], env=env, capture_output=True, text=True

@@ -133,20 +133,22 @@ def rows(out: Path) -> int:
 @pytest.mark.slow
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_ctrl_c_returns_at_once_and_keeps_every_finished_run(tmp_path, jobs):
-    # 64 runs of 12 s in groups of 32 (--jobs 1) or 16 (--jobs 2), each about half a
-    # second or more: the first runs are stored after the first group, and a Ctrl-C
-    # returns within 2 s with every finished run stored and in the table.
+    # 512 runs of 12 s (a sweep of several seconds: not a short one, which would be
+    # one batch) in first groups of 64 (--jobs 1) or 32 (--jobs 2), each about half
+    # a second or more: the first runs are stored after the first group, and a
+    # Ctrl-C returns within 2 s with every finished run stored and in the table.
     base = write_yaml(tmp_path, base_doc(duration=12.0), "base.yaml")
     out = tmp_path / "out"
+    seeds = "0:512"
     proc = start(
-        ["sweep", str(base), "--seeds", "0:64", "--jobs", str(jobs), "--out", str(out)]
+        ["sweep", str(base), "--seeds", seeds, "--jobs", str(jobs), "--out", str(out)]
     )
     try:
         took, kept, err = interrupt_when_stored(proc, out)
         assert took < 2, f"Ctrl-C took {took:.1f} s"
-        assert kept == rows(out) and f"{kept} of 64 runs stored" in err
+        assert kept == rows(out) and f"{kept} of 512 runs stored" in err
         # whole groups of 16 or more, finished before the signal and all kept
-        assert 16 <= kept < 64 and kept % 8 == 0, kept
+        assert 16 <= kept < 512 and kept % 8 == 0, kept
         assert wait_for(lambda: session(proc.pid) == [], 1), session(proc.pid)
         assert not list((out / "runs").glob(".*.tmp"))
     finally:
@@ -278,3 +280,34 @@ def test_a_pool_forks_a_single_thread_and_serves_a_threaded_parent(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout) == ["fork", "forkserver", True, True]
+
+
+def test_a_short_sweep_is_one_batch_in_process():
+    import yaml
+
+    from sandbox.study import engine, groups
+
+    path = "failures/follower_stop.yaml"
+    doc = yaml.safe_load((REPO / "scenarios" / path).read_text())
+
+    def sizes(runs: int, seconds: float, workers: int = 1) -> list[int]:
+        jobs = [
+            (f"r{s}", (doc, path, [f"duration={seconds}", f"seed={s}"]))
+            for s in range(runs)
+        ]
+        return [len(g) for g in engine.Groups(jobs, workers)]
+
+    # four vehicles for 8 s: 3,200 vehicle-periods a run. 128 runs, 409,600 in
+    # all, take about 1.2 s at FIRST_WORK in FIRST_SECONDS: one batch, not the two
+    # halves a longer sweep starts with for its progress
+    assert groups.short_sweep(128, 3200)
+    assert sizes(128, 8) == [128]
+    assert sizes(200, 8) == [100, 100]  # as equal as BATCH_WORLDS allows
+    # 600 of them (about 5.8 s): groups of at most FIRST_WORK (72 runs) until timed,
+    # the 600 in nine equal ones of 67
+    assert not groups.short_sweep(600, 3200)
+    assert engine.FIRST_WORK // 3200 == 72 and sizes(600, 8)[0] == 67
+    # a pool keeps its rounds of groups per worker
+    assert sizes(128, 8, workers=2) == [32, 32, 32, 32]
+    # the work unknown (an unreadable scenario): never short
+    assert not groups.short_sweep(10, None)

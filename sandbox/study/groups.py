@@ -29,15 +29,20 @@ MIN_WORLDS = 8
 Job = tuple[str, tuple[Any, ...]]
 
 
-def chunks(jobs: list[Job], workers: int, size: int | None = None) -> list[list[Job]]:
+def chunks(
+    jobs: list[Job], workers: int, size: int | None = None, short: bool = False
+) -> list[list[Job]]:
     """The tasks in groups of at most ``size`` (default :data:`BATCH_WORLDS`).
 
     Groups are smaller where needed so that a sweep comes in at least
     :data:`MIN_GROUPS` groups in-process (an interrupted sweep keeps the groups
     finished so far, and progress moves) or :data:`MIN_GROUPS_PER_WORKER` per worker
-    of a pool, of at least :data:`MIN_WORLDS` runs each.
+    of a pool, of at least :data:`MIN_WORLDS` runs each; not a ``short`` sweep
+    in-process (:func:`short_sweep`: over within one group's time).
     """
     size = BATCH_WORLDS if size is None else size
+    if short and workers <= 1:
+        return [jobs[k : k + size] for k in range(0, len(jobs), size)]
     groups = MIN_GROUPS if workers <= 1 else MIN_GROUPS_PER_WORKER * workers
     share = -(-len(jobs) // groups)
     size = max(1, min(size, max(MIN_WORLDS, share)))
@@ -58,6 +63,8 @@ FIRST_GROUP = 32
 #: below 64 worlds a batch's fixed cost a period weighs: 32 worlds ran at 1.5 times
 #: the cost per run of 128).
 FIRST_WORK = 64 * 3 * 1200
+#: What :data:`FIRST_WORK` takes in one process on an idle machine [s].
+FIRST_SECONDS = 0.7
 #: Most a group grows from one timed group to the next.
 MAX_GROWTH = 8
 
@@ -65,18 +72,20 @@ MAX_GROWTH = 8
 class Groups:
     """The groups of a sweep's tasks, sized by how long the last ones took.
 
-    The first groups have :func:`first_group` runs; then each group is as large as
-    the last timed group says fits in :data:`GROUP_SECONDS` (the time per run of a
-    small group overestimates that of a larger one, whose batch shares the step's
-    fixed cost: the estimate errs on the small side), from :data:`MIN_WORLDS` up to
-    the size :func:`chunks` gives and at most :data:`MAX_GROWTH` times the last. Runs
-    of a few milliseconds reach the full batch size with the second group; runs of
+    A short sweep in-process (:func:`short_sweep`: expected to be over within one
+    group's time) comes in groups of :data:`BATCH_WORLDS` from the start, as equal as
+    they can be. Otherwise the first groups have :func:`first_group` runs; then each
+    group is as large as the last timed group says fits in :data:`GROUP_SECONDS` (the
+    time per run of a small group overestimates that of a larger one, whose batch shares
+    the step's fixed cost: the estimate errs on the small side), from :data:`MIN_WORLDS`
+    up to the size :func:`chunks` gives and at most :data:`MAX_GROWTH` times the last.
+    Runs of a few milliseconds reach the full batch size with the second group; runs of
     seconds stay in small groups, so that finished runs are stored early and an
     interrupt loses little. The runs left are cut into whole rounds of one group per
-    worker, of about equal sizes up to that size (so the last round keeps every
-    worker busy, and no small group trails), and a remainder smaller than
-    :data:`MIN_WORLDS` joins the group before it. Cutting groups changes no result (a
-    batch is bit-identical to single runs).
+    worker, of about equal sizes up to that size (so the last round keeps every worker
+    busy, and no small group trails), and a remainder smaller than :data:`MIN_WORLDS`
+    joins the group before it. Cutting groups changes no result (a batch is
+    bit-identical to single runs).
 
     Parameters
     ----------
@@ -90,9 +99,11 @@ class Groups:
         self.jobs = jobs
         self.workers = max(1, workers)
         self.next_at = 0
-        full = chunks(jobs, workers) if jobs else [[]]
+        work = run_work(jobs)
+        short = workers <= 1 and short_sweep(len(jobs), work)
+        full = chunks(jobs, workers, short=short) if jobs else [[]]
         self.cap = max(1, len(full[0]))
-        self.size = min(self.cap, first_group(jobs))
+        self.size = self.cap if short else min(self.cap, first_group(jobs, work))
         self._round_size = self.size  # the size of the groups of the current round
         self._round_left = 0  # groups still to cut in the current round
 
@@ -127,28 +138,54 @@ class Groups:
         self.size = min(self.size, self.cap)
 
 
-def first_group(jobs: list[Job]) -> int:
+def first_group(jobs: list[Job], work: int | None = None) -> int:
     """Runs in the first groups: :data:`FIRST_WORK` over the first run's work.
 
-    The work of a run is its vehicles times its control periods, read from the
-    first run's scenario (all runs of a sweep share the base; a grid may change
-    their size, which the timed groups then follow); at least :data:`MIN_WORLDS`,
-    and :data:`FIRST_GROUP` where the scenario cannot be read or lists plug-ins.
+    The work of a run is its vehicles times its control periods (``work``, or read
+    by :func:`run_work`); at least :data:`MIN_WORLDS`, and :data:`FIRST_GROUP` where
+    the scenario cannot be read or lists plug-ins.
+    """
+    if work is None:
+        work = run_work(jobs)
+    if work is None:
+        return FIRST_GROUP
+    return max(MIN_WORLDS, FIRST_WORK // work)
+
+
+def run_work(jobs: list[Job]) -> int | None:
+    """The work of a sweep's run [vehicle-periods], read from its first run.
+
+    Its vehicles times its control periods, from the first run's scenario (all
+    runs of a sweep share the base; a grid may change their size, which the timed
+    groups then follow); None where there is no run, the scenario cannot be read,
+    or it lists plug-ins (their code is loaded where the runs run only).
     """
     if not jobs:
-        return FIRST_GROUP
+        return None
     base_doc, _, overrides = jobs[0][1][:3]
     if not isinstance(base_doc, dict) or "plugins" in base_doc:
-        return FIRST_GROUP  # a plug-in's code is loaded where the runs run only
+        return None
     if any(o.strip().startswith("plugins") for o in overrides):
-        return FIRST_GROUP
+        return None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sc = _first_scenario(base_doc, jobs[0][1][1], overrides)
     if sc is None:
-        return FIRST_GROUP
-    work = len(sc.vehicles) * max(1, round(sc.duration / sc.dt))
-    return max(MIN_WORLDS, FIRST_WORK // work)
+        return None
+    return len(sc.vehicles) * max(1, round(sc.duration / sc.dt))
+
+
+def short_sweep(runs: int, work: int | None) -> bool:
+    """Whether ``runs`` runs of ``work`` each take less than a group's time in all.
+
+    At the rate of :data:`FIRST_WORK` in :data:`FIRST_SECONDS`, a sweep expected to
+    be over within :data:`GROUP_SECONDS` is not cut into more groups for its progress
+    or an interrupt's sake: an interrupt loses no more than one group's time, and a
+    batch of more worlds shares each period's fixed cost among more runs.
+    """
+    if work is None:
+        return False
+    return runs * work * FIRST_SECONDS <= GROUP_SECONDS * FIRST_WORK
 
 
 def _first_scenario(base_doc: Any, source: str, overrides: list[str]) -> Any:
