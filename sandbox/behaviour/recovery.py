@@ -324,7 +324,8 @@ def weighted_shift(
     if kind is not None and pair_field.usable():
         # The pairs' terms in one C call (the numpy below, bit for bit), and without
         # static obstacles, for one beta of all rows, the field finished there too.
-        if obstacles.empty and np.ndim(beta) == 0:
+        one_beta = not isinstance(beta, np.ndarray) or beta.ndim == 0
+        if obstacles.empty and one_beta:
             pair_field.add_pair_terms(
                 pos, ctx.seen_pos, neighbours, R, r, kind, shift, active, beta,
                 avoiders,

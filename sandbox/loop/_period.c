@@ -111,10 +111,9 @@ buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             goto done;
         }
     }
-    if (PyObject_GetBuffer(args[6], &cb, PyBUF_C_CONTIGUOUS) < 0) goto done;
+    if (get_bytes(args[6], &cb, 0) < 0) goto done;
     got_c = 1;
-    if (PyObject_GetBuffer(args[12], &fb, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0)
-        goto done;
+    if (get_bytes(args[12], &fb, 1) < 0) goto done;
     got_f = 1;
     Rows *pos = &r[0], *v1 = &r[1], *v2 = &r[2], *vel = &r[3], *theta = &r[4];
     Rows *d2 = &r[5], *v = &r[6], *vel_out = &r[7], *cmd = &r[8];

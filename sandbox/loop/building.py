@@ -10,6 +10,7 @@ apart for its length.
 
 from __future__ import annotations
 
+import inspect
 import time
 
 import numpy as np
@@ -220,6 +221,12 @@ class Building:
                 if not per_world:
                     self._stacked_law = StackedLaw(self)
         self._law_per_world = per_world
+        # A built-in law class reads the leader and the reference only (LawInputs).
+        self._law_inputs = (
+            spec is not None
+            and plugin.origin.startswith("built-in")
+            and inspect.isclass(plugin.obj)
+        )
         self.leader = first.leader_index
         if self._stacked_law is not None:
             self.law = self._stacked_law.law
@@ -238,6 +245,9 @@ class Building:
         self.strategy = s0.strategy
         plugin = get("strategy", s0.scenario.recovery.strategy)
         self._strategy_per_world = not plugin.options.get("batched", False)
+        # A built-in strategy keeps no context: one serves every period.
+        self._strategy_keeps_context = plugin.origin.startswith("built-in")
+        self._strategy_ctx = None
         params = dict(s0.strategy_params)
         if "beta" in params:
             betas = [s.strategy_params["beta"] for s in self.states]

@@ -49,21 +49,19 @@ from sandbox.loop.collector import collector_off, frozen_heap
 from sandbox.loop.divergence import RowsView, diverged
 from sandbox.loop.ending import Ending
 from sandbox.loop.plan import Plan, structure_key
-from sandbox.loop.stacked_law import stacked_law_context
+from sandbox.loop.stacked_law import stacked_law_context, stacked_law_inputs
 from sandbox.loop.step_api import StepAPI
 from sandbox.loop.world_stages import WorldStages
 from sandbox.model.dynamics import CLIP
-from sandbox.model.laws import spread
+from sandbox.model.laws import LawInputs, spread
 from sandbox.physics.interface import Physics
 from sandbox.plugins.registration import (
     LawContext,
     StrategyContext,
 )
 from sandbox.run.record import (
-    MODE_AVOID,
     MODE_EXTERNAL,
     MODE_FAILED,
-    MODE_FORMATION,
     STATUS_DIVERGED,
     STATUS_INTERRUPTED,
     Run,
@@ -221,7 +219,8 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             return self._platoon_targets(t)
         K, n, N = self.K, self.n, self.N
         if self._ref_table is not None:
-            ref = tuple(a[self.k] for a in self._ref_table)
+            k, (p, dp, ddp) = self.k, self._ref_table
+            ref = (p[k], dp[k], ddp[k])
         elif self.reference is not None:
             ref = self.reference.evaluate(t)
         else:
@@ -233,24 +232,36 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         elif self._stacked_law is not None:
             triple = self._stacked_law.targets(self, t, ref)
         else:
+            shape = (K, n, 2)
+            slot, v_ref, a_ref = self.law.targets(self._law_context(t, ref))
             triple = [
-                (a if a.shape == (K, n, 2) else spread(a, (K, n, 2))).reshape(N, 2)
-                for a in map(np.asarray, self.law.targets(self._law_context(t, ref)))
+                _world_rows(slot, shape),
+                _world_rows(v_ref, shape),
+                _world_rows(a_ref, shape),
             ]
         tr, cmd = self._track_rows, self._commanded_rows
         if (ref is not None and len(tr)) or len(cmd):
             # Copies: the law may keep (or broadcast) what it returned.
-            slot, v_ref, a_ref = (np.array(a, dtype=float) for a in triple)
+            slot = np.array(triple[0], dtype=float)
+            v_ref = np.array(triple[1], dtype=float)
+            a_ref = np.array(triple[2], dtype=float)
             if ref is not None:
                 slot[tr], v_ref[tr], a_ref[tr] = ref[0], ref[1], ref[2]
             slot[cmd] = np.nan
         else:  # nothing to overwrite: read-only use downstream, no copies needed
-            slot, v_ref, a_ref = (np.asarray(a, dtype=float) for a in triple)
+            slot = np.asarray(triple[0], dtype=float)
+            v_ref = np.asarray(triple[1], dtype=float)
+            a_ref = np.asarray(triple[2], dtype=float)
         point = ref[0] if ref is not None else np.full(2, np.nan)
         return slot, v_ref, a_ref, point
 
-    def _law_context(self, t: float, ref: tuple | None) -> LawContext:
-        """What the one law of all worlds sees: arrays with a leading world axis."""
+    def _law_context(self, t: float, ref: tuple | None) -> LawContext | LawInputs:
+        """What the one law of all worlds sees: arrays with a leading world axis.
+
+        A built-in law class gets the part it reads (its leader and the reference).
+        """
+        if self._law_inputs:
+            return stacked_law_inputs(self, ref, self.leader)
         return stacked_law_context(
             self, t, ref, self.leader, self.law_params, self.law_memory
         )
@@ -316,8 +327,24 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         self.plan = Plan(slot, target, v_ref, a_ref, point, active, failing)
 
     def _strategy_context(self, t, slot, may_avoid, known) -> StrategyContext:
+        """The strategy's context of ``t``: a new one, or a built-in's one, updated.
+
+        A built-in strategy reads its context during its call only, so one context
+        serves it every period, its fields of the period set anew.
+        """
         fl = self.fleet
-        return StrategyContext(
+        ctx = self._strategy_ctx
+        if ctx is not None:
+            ctx.t, ctx.slot, ctx.may_avoid, ctx.failed = t, slot, may_avoid, known
+            ctx.pos, ctx.theta, ctx.vel = fl.pos, fl.theta, fl.vel
+            ctx.obstacle_field, ctx.neighbours = self._avoid_field, self.neighbours
+            ctx.params, ctx.R = self.strategy_params, self.rec.R
+            ctx.seen_pos = None if self.believed is None else self.believed[:, :2]
+            if self.range_sensor is not None:
+                ctx.ranges = self.range_sensor.ranges
+                ctx.beam_angles = self.range_sensor.beam_angles
+            return ctx
+        ctx = StrategyContext(
             t=t,
             dt=self.h,
             pos=fl.pos,
@@ -334,6 +361,9 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             seen_pos=None if self.believed is None else self.believed[:, :2],
             **context_fields(self.range_sensor),
         )
+        if self._strategy_keeps_context:
+            self._strategy_ctx = ctx
+        return ctx
 
     def _act(
         self,
@@ -404,20 +434,22 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             frozen = frozen & ~self.failures.active_vehicles(t + h, self.live)
         # chi follows the applied velocity of passive vehicles, so that the law resumes
         # without a jump when the failure or the override ends.
-        passive = frozen | passive
-        if np.count_nonzero(passive):
+        if len(self.failures):  # else no vehicle is frozen
+            passive = frozen | passive
+        if (passive is not fleet.commanded or len(self._commanded_rows)) and (
+            np.count_nonzero(passive)
+        ):
             rows = passive.nonzero()[0]
             theta, speed = fleet.theta[rows], v1[rows]
             chi_next[rows, 0] = speed * np.cos(theta)
             chi_next[rows, 1] = speed * np.sin(theta)
         fleet.v1, fleet.v2, fleet.failed = v1, v2, failed
         self.physics.failed[:] = failed  # an episode starting now is not healthy
-        mode = np.empty(self.N, dtype=np.int8)
-        mode.fill(MODE_FORMATION)
-        mode[plan.active] = MODE_AVOID
+        mode = plan.active.astype(np.int8)  # MODE_FORMATION 0, MODE_AVOID 1
         if external is not None:
             mode[external] = MODE_EXTERNAL
-        mode[failed] = MODE_FAILED
+        if len(self.failures):  # else no vehicle has failed
+            mode[failed] = MODE_FAILED
         fleet.mode = mode
         if external is not None:
             self._recorded_target = target
@@ -467,7 +499,7 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             fleet.v1,
             fleet.v2,
             commanded,
-            None if contact is None else ~contact,
+            self.physics.free_of(contact),
             self.k * h,
             h,
             first=self.k == 0,
@@ -557,6 +589,15 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
                 if progress is not None and k % report_every == 0 and k < self.k:
                     progress(k, self.steps)
         return False
+
+
+def _world_rows(a: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray:
+    """A law's array of every world, shape (K, n, 2) or broadcasting to it, as rows.
+
+    Shape (K n, 2): a view where it has the shape, else a new array of its values.
+    """
+    a = np.asarray(a)
+    return (a if a.shape == shape else spread(a, shape)).reshape(-1, 2)
 
 
 def simulate(scenario: Scenario, **kwargs) -> Run:

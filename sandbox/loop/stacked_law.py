@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sandbox.behaviour.ranges import context_fields
-from sandbox.model.laws import BackwardDifference, VirtualLeaderFormation
+from sandbox.model.laws import BackwardDifference, LawInputs, VirtualLeaderFormation
 from sandbox.plugins.registration import LawContext, make_law
 
 if TYPE_CHECKING:
@@ -121,7 +121,7 @@ class StackedLaw:
     def targets(self, sim: Simulation, t: float, ref: tuple | None) -> list:
         """Every world's slots, ``x_ref'`` and ``x_ref''``, each of shape (K n, 2)."""
         K, n, N = sim.K, sim.n, sim.N
-        ctx = stacked_law_context(sim, t, ref, self.leaders, self.params, self.memory)
+        ctx = stacked_law_inputs(sim, ref, self.leaders)  # built-in laws only
         triple = [
             np.broadcast_to(a, (K, n, 2)).reshape(N, 2) for a in self.law.targets(ctx)
         ]
@@ -205,22 +205,7 @@ def stacked_law_context(
     sensing.
     """
     K, n, fl = sim.K, sim.n, sim.fleet
-    src = fl.pos if sim.believed is None else sim.believed[:, :2]
-    heading = fl.theta if sim.believed is None else sim.believed[:, 2]
-    if np.ndim(leaders) == 0:
-        lead = int(leaders)
-        if lead < 0:
-            leader_pos = leader_theta = None
-        else:
-            leader_pos = np.ascontiguousarray(src.reshape(K, n, 2)[:, lead : lead + 1])
-            leader_theta = np.ascontiguousarray(
-                heading.reshape(K, n)[:, lead : lead + 1]
-            )
-    else:  # each world's own leader (-1, for a law without one: any row)
-        lead = leaders
-        worlds, rows = np.arange(K), np.maximum(leaders, 0)
-        leader_pos = src.reshape(K, n, 2)[worlds, rows][:, None, :]
-        leader_theta = heading.reshape(K, n)[worlds, rows][:, None]
+    lead, leader_pos, leader_theta = leader_pose(sim, leaders)
     return LawContext(
         t=t,
         dt=sim.h,
@@ -236,3 +221,40 @@ def stacked_law_context(
         memory=memory,
         **context_fields(sim.range_sensor),
     )
+
+
+def stacked_law_inputs(
+    sim: Simulation, ref: tuple | None, leaders: np.ndarray | int
+) -> LawInputs:
+    """The part of :func:`stacked_law_context` a built-in law reads, as LawInputs.
+
+    The leader's pose and the reference (:class:`~sandbox.model.laws.LawInputs`),
+    the same arrays: a built-in law reads nothing else, and the loop spares it the
+    rest of the context every period.
+    """
+    _, leader_pos, leader_theta = leader_pose(sim, leaders)
+    return LawInputs(leader_pos, leader_theta, ref)
+
+
+def leader_pose(
+    sim: Simulation, leaders: np.ndarray | int
+) -> tuple[np.ndarray | int, np.ndarray | None, np.ndarray | None]:
+    """The leader's index, and every world's leader's believed position and heading.
+
+    ``leaders`` as for :func:`stacked_law_context`; the pose None without a leader.
+    """
+    K, n, fl = sim.K, sim.n, sim.fleet
+    src = fl.pos if sim.believed is None else sim.believed[:, :2]
+    heading = fl.theta if sim.believed is None else sim.believed[:, 2]
+    if not isinstance(leaders, np.ndarray) or leaders.ndim == 0:
+        lead = int(leaders)
+        if lead < 0:
+            return lead, None, None
+        leader_pos = np.ascontiguousarray(src.reshape(K, n, 2)[:, lead : lead + 1])
+        leader_theta = np.ascontiguousarray(heading.reshape(K, n)[:, lead : lead + 1])
+        return lead, leader_pos, leader_theta
+    # each world's own leader (-1, for a law without one: any row)
+    worlds, rows = np.arange(K), np.maximum(leaders, 0)
+    leader_pos = src.reshape(K, n, 2)[worlds, rows][:, None, :]
+    leader_theta = heading.reshape(K, n)[worlds, rows][:, None]
+    return leaders, leader_pos, leader_theta

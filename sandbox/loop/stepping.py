@@ -78,6 +78,13 @@ class WorldsPhysics:
             if self._bound[k]:
                 world.bind_commands(self._out[k * n : (k + 1) * n])
         self._episodes = [w._open for w in self.worlds]
+        # Where the motors' limits of a period are written (read at once).
+        self._limits = (np.empty(self.N), np.empty(self.N), np.empty(self.N, bool))
+        # The contact flags of a period without any open episode, and their negation
+        # (read-only: every period shares them).
+        self._no_contact = np.zeros(self.N, dtype=bool)
+        self._all_free = np.ones(self.N, dtype=bool)
+        self._no_contact.flags.writeable = self._all_free.flags.writeable = False
         # The motors' joints as Chipmunk's handles, row by row (max_force's setter).
         self._set_max_force = MAX_FORCE_SETTER
         self._joint_handles = [h for w in self.worlds for h in w.joint_handles()]
@@ -109,7 +116,10 @@ class WorldsPhysics:
         return rows[:, 0:2].copy(), rows[:, 2].copy(), rows[:, 3:5].copy()
 
     def in_contact(self) -> np.ndarray | None:
-        """Rows in an open contact episode (N,) bool; None if a world cannot say."""
+        """Rows in an open contact episode (N,) bool; None if a world cannot say.
+
+        Read-only where no episode is open (the same array every such period).
+        """
         if not self.pymunk:
             parts = []
             for world in self.worlds:
@@ -118,14 +128,25 @@ class WorldsPhysics:
                     return None
                 parts.append(contact())
             return np.concatenate(parts)
-        out = np.zeros(self.N, dtype=bool)
         if not any(self._episodes):  # no open contact episode in any world
-            return out
+            return self._no_contact  # read-only
+        out = np.zeros(self.N, dtype=bool)
         n = self.n
         for w, world in enumerate(self.worlds):
             if world._open:
                 out[w * n : (w + 1) * n] = world.in_contact()
         return out
+
+    def free_of(self, contact: np.ndarray | None) -> np.ndarray | None:
+        """The rows in no open contact episode: ``~contact`` (None for None).
+
+        Read-only where ``contact`` is :meth:`in_contact`'s array of no episode.
+        """
+        if contact is None:
+            return None
+        if self.pymunk and contact is self._no_contact:
+            return self._all_free
+        return ~contact
 
     # ------------------------------------------------------------------ writing
     def advance(
@@ -164,7 +185,7 @@ class WorldsPhysics:
         out[:, 2] = v2
         if np.count_nonzero(self._tracking):
             rows, force, torque = motor_limits(
-                out, self._measured, free, h / substeps, self
+                out, self._measured, free, h / substeps, self, self._limits
             )
             if len(rows):
                 self._force[rows], self._torque[rows] = force[rows], torque[rows]

@@ -223,13 +223,15 @@ class Controller:
         return chi_next, v1, CLIP(v2, -self.v2_max, self.v2_max)
 
     def _step_c(self, pos, chi, theta, target, v_ref, a_ref):
+        try:
+            return self._step_arrays(pos, chi, theta, target, v_ref, a_ref)
+        except (BufferError, TypeError, ValueError):  # not C float64 arrays: made so
+            arrays = (pos, chi, theta, target, v_ref, a_ref)
+            return self._step_arrays(*map(c_float64, arrays))
+
+    def _step_arrays(self, pos, chi, theta, target, v_ref, a_ref):
+        """The two C calls on C-contiguous float64 arrays (else an error, no write)."""
         n = len(theta)
-        pos, chi, theta = c_float64(pos), c_float64(chi), c_float64(theta)
-        target, v_ref, a_ref = (
-            c_float64(target),
-            c_float64(v_ref),
-            c_float64(a_ref),
-        )
         nxt, norm = np.empty((n, 2)), np.empty(n)
         k1, k2, k3, k4 = self._k
         _kernels.extension_step(

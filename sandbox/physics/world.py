@@ -197,6 +197,7 @@ def motor_limits(
     free: np.ndarray,
     substep: float,
     motors: World,
+    out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The tracking motors' force limits for a period (see :meth:`World._size_motors`).
 
@@ -212,6 +213,10 @@ def motor_limits(
     motors : World or any object with the arrays ``_mass``, ``_moment``,
         ``_least_force``, ``_least_torque``, ``_force``, ``_torque`` and
         ``_tracking``, shape (n,)
+    out : tuple of ndarray, optional
+        Float64 ``(n,)``, float64 ``(n,)`` and bool ``(n,)`` arrays the C loop may
+        write the limits and the changed rows into (returned in their place: valid
+        until the next call with them); default new ones.
 
     Returns
     -------
@@ -223,7 +228,9 @@ def motor_limits(
     m = motors
     if USE_MOTOR_KERNEL and (_motors_agreed or motor_kernel_agrees()):
         n = len(m._mass)
-        force, torque, change = np.empty(n), np.empty(n), np.empty(n, bool)
+        if out is None:
+            out = np.empty(n), np.empty(n), np.empty(n, bool)
+        force, torque, change = out
         try:
             _motors.motor_limits(
                 command, measured, free, substep, MOTOR_HEADROOM, m._mass, m._moment,
@@ -233,7 +240,7 @@ def motor_limits(
         except (BufferError, TypeError, ValueError):  # not float64 C arrays: numpy
             pass
         else:
-            return np.flatnonzero(change), force, torque
+            return change.nonzero()[0], force, torque
     return motor_limits_numpy(command, measured, free, substep, motors)
 
 
