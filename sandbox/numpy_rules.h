@@ -2,8 +2,9 @@
  *
  * Included by the optional extensions whose loops must give numpy's numbers to the
  * bit (see setup.py): numpy's maximum and clip on ties and NaN, a contiguous float64
- * array (or one value for every row) and a contiguous intp index array, read from any
- * object with the buffer interface.
+ * array (or one value for every row), a contiguous intp index array and a contiguous
+ * bool array, read from any object with the buffer interface (an ndarray through
+ * numpy's C API where the build has its headers).
  */
 
 #ifndef SANDBOX_NUMPY_RULES_H
@@ -13,6 +14,41 @@
 #include <Python.h>
 #include <math.h>
 #include <string.h>
+
+/* With numpy's headers (setup.py defines SANDBOX_NUMPY_API where numpy is there at
+ * build time) an ndarray's data is read through numpy's C API: a few field reads,
+ * where the buffer interface makes and frees a description of the array at every
+ * call (most of a small loop's cost, on the new arrays of every period). Any other
+ * object, or a build without the headers, takes the buffer interface as before. The
+ * API is imported at the first array read (_import_array), once per extension. */
+#ifdef SANDBOX_NUMPY_API
+#define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
+#include <numpy/arrayobject.h>
+
+/* The ndarray ``obj``'s data if it is a C-contiguous, aligned array of ``type``
+ * (and writable if asked), else NULL with no error set (the buffer path decides). */
+static inline void *
+numpy_data(PyObject *obj, int type, int writable, Py_ssize_t *count)
+{
+    if (PyArray_API == NULL) {
+        if (_import_array() < 0) {
+            PyErr_Clear();
+            return NULL;
+        }
+    }
+    if (!PyArray_CheckExact(obj)) {
+        return NULL;
+    }
+    PyArrayObject *a = (PyArrayObject *)obj;
+    int need = NPY_ARRAY_C_CONTIGUOUS | NPY_ARRAY_ALIGNED |
+               (writable ? NPY_ARRAY_WRITEABLE : 0);
+    if ((PyArray_FLAGS(a) & need) != need || PyArray_TYPE(a) != type) {
+        return NULL;
+    }
+    *count = PyArray_SIZE(a);
+    return PyArray_DATA(a);
+}
+#endif
 
 /* numpy.maximum(a, b): a where a > b or a is NaN, else b (b on a tie). */
 static inline double
@@ -51,6 +87,17 @@ typedef struct {
 static inline int
 get_rows(PyObject *obj, Rows *rows, int writable)
 {
+#ifdef SANDBOX_NUMPY_API
+    Py_ssize_t count;
+    double *data = (double *)numpy_data(obj, NPY_DOUBLE, writable, &count);
+    if (data != NULL) {
+        memset(&rows->view, 0, sizeof(Py_buffer)); /* nothing to release */
+        rows->data = data;
+        rows->len = count;
+        rows->step = count == 1 ? 0 : 1;
+        return 0;
+    }
+#endif
     int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
     if (PyObject_GetBuffer(obj, &rows->view, flags) < 0) {
         return -1;
@@ -75,6 +122,28 @@ release(Rows *rows, int count)
     }
 }
 
+/* A contiguous array of one-byte elements (numpy's bool) in ``view``: through
+ * numpy's C API where it can (``view->obj`` NULL: nothing to release), else the
+ * buffer interface (C-contiguous, and writable if asked). */
+static inline int
+get_bytes(PyObject *obj, Py_buffer *view, int writable)
+{
+#ifdef SANDBOX_NUMPY_API
+    Py_ssize_t count;
+    void *data = numpy_data(obj, NPY_BOOL, writable, &count);
+    if (data != NULL) {
+        memset(view, 0, sizeof(Py_buffer));
+        view->buf = data;
+        view->len = count;
+        view->itemsize = 1;
+        view->readonly = !writable;
+        return 0;
+    }
+#endif
+    return PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS |
+                                             (writable ? PyBUF_WRITABLE : 0));
+}
+
 /* An index array (numpy's intp) and its length. */
 typedef struct {
     Py_buffer view;
@@ -85,6 +154,17 @@ typedef struct {
 static inline int
 get_indices(PyObject *obj, Indices *out)
 {
+#ifdef SANDBOX_NUMPY_API
+    Py_ssize_t count;
+    const Py_ssize_t *data =
+        (const Py_ssize_t *)numpy_data(obj, NPY_INTP, 0, &count);
+    if (data != NULL) {
+        memset(&out->view, 0, sizeof(Py_buffer)); /* nothing to release */
+        out->data = data;
+        out->len = count;
+        return 0;
+    }
+#endif
     if (PyObject_GetBuffer(obj, &out->view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
         return -1;
     }

@@ -81,12 +81,11 @@ pair_field(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     stage = 4;
     if (get_rows(args[8], &shift, 1) < 0) goto done;
     stage = 5;
-    if (PyObject_GetBuffer(args[9], &active, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0)
-        goto done;
+    if (get_bytes(args[9], &active, 1) < 0) goto done;
     stage = 6;
     if (get_rows(args[10], &d2, 1) < 0) goto done;
     stage = 7;
-    if (finish && PyObject_GetBuffer(args[12], &avoid, PyBUF_C_CONTIGUOUS) < 0) goto done;
+    if (finish && get_bytes(args[12], &avoid, 0) < 0) goto done;
     stage = 8;
     Py_ssize_t n = shift.len / 2, m = ci.len;
     if (pos.len != 2 * n || (with_seen && seen.len != 2 * n) || cj.len != m ||

@@ -15,8 +15,7 @@
 static int
 get_flags(PyObject *obj, Py_buffer *view, int writable)
 {
-    int flags = PyBUF_C_CONTIGUOUS | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) < 0) {
+    if (get_bytes(obj, view, writable) < 0) {
         return -1;
     }
     if (view->itemsize != 1) {
