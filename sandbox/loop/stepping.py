@@ -104,9 +104,7 @@ class WorldsPhysics:
                 np.concatenate([s.vel for s in states]),
             )
         rows = self._rows
-        measured = self._measured.reshape(K, n, 3)
-        measured[..., :2] = rows[..., 3:5]
-        measured[..., 2] = rows[..., 5]
+        self._measured.reshape(K, n, 3)[...] = rows[..., 3:6]  # (v_x1, v_x2, omega)
         if len(self.live) < K:
             rows = rows.copy()
             dead = np.ones(K, dtype=bool)

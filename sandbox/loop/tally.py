@@ -179,12 +179,15 @@ class LoopTally:
             first = 1
         prev = np.concatenate((np.stack(self._prev)[None], v[:-1]))
         step = np.abs(v - prev)
-        for r in range(first, m):  # period after period, as the loop adds them
-            self.effort_v1 += step[r, 0]
-            self.effort_v2 += step[r, 1]
+        if first < m:  # period after period, as the loop adds them: an accumulation
+            total = np.empty((m - first + 1, 2, step.shape[2]))
+            total[0, 0], total[0, 1] = self.effort_v1, self.effort_v2
+            total[1:] = step[first:]
+            np.add.accumulate(total, axis=0, out=total)
+            self.effort_v1[:], self.effort_v2[:] = total[-1, 0], total[-1, 1]
         self._prev = (v[m - 1, 0].copy(), v[m - 1, 1].copy())
-        for r in range(m):
-            np.fmax(self.peak_v1, np.abs(v[r, 0]), out=self.peak_v1)
+        # the largest |v1| (fmax: NaN left out, in any order)
+        np.fmax(self.peak_v1, np.fmax.reduce(np.abs(v[:, 0]), axis=0), out=self.peak_v1)
         free, vel, cmd_now = self._buf_free[:m], self._buf_vel[:m], self._buf_cmd[:m]
         if self._commanded is not None:
             cmd = np.concatenate((self._commanded[None], cmd_now[:-1]))
