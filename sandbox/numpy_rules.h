@@ -122,15 +122,18 @@ release(Rows *rows, int count)
     }
 }
 
-/* A contiguous array of one-byte elements (numpy's bool) in ``view``: through
- * numpy's C API where it can (``view->obj`` NULL: nothing to release), else the
- * buffer interface (C-contiguous, and writable if asked). */
+/* A contiguous array of one-byte elements (numpy's bool or int8) in ``view``:
+ * through numpy's C API where it can (``view->obj`` NULL: nothing to release), else
+ * the buffer interface (C-contiguous, and writable if asked). */
 static inline int
 get_bytes(PyObject *obj, Py_buffer *view, int writable)
 {
 #ifdef SANDBOX_NUMPY_API
     Py_ssize_t count;
     void *data = numpy_data(obj, NPY_BOOL, writable, &count);
+    if (data == NULL) {
+        data = numpy_data(obj, NPY_INT8, writable, &count);
+    }
     if (data != NULL) {
         memset(view, 0, sizeof(Py_buffer));
         view->buf = data;

@@ -52,7 +52,8 @@ class Counted:
     def advance(self, *args):
         self.calls += 1
         done = self.module.advance(*args)
-        if ctypes.c_double.from_address(args[-1] + 8).value:  # clock[1] raised
+        clock = args[12]  # the clock's address, after the 12 arguments before it
+        if ctypes.c_double.from_address(clock + 8).value:  # clock[1] raised
             self.early += 1
         return done
 

@@ -1,4 +1,4 @@
-/* Two pieces of the loop's period in one C call each.
+/* Three pieces of the loop's period in one C call each.
  *
  * healthy: the divergence check's fast path (sandbox/loop/divergence.py), whether a
  * fleet is clearly healthy: every position within the bound, every heading finite,
@@ -12,6 +12,9 @@
  * mean heading, the same operations in numpy's order (compiled without fused
  * multiply-adds), with the C library's sin and cos, which sandbox/model/kernels.py
  * checks give numpy's numbers before the loop uses this.
+ *
+ * record_sample: a sample of every world into the record's buffers
+ * (sandbox/loop/recording.py, WorldsRecorder.append): copies only.
  */
 
 #include "numpy_rules.h"
@@ -178,16 +181,93 @@ done:
     return result;
 }
 
+PyDoc_STRVAR(record_sample_doc,
+"record_sample(c, pos, theta, v1, v2, chi, slot, target, mode, failed, pose_out,\n"
+"              cmd_out, chi_out, slot_out, target_out, mode_out, failed_out) -> None\n"
+"\n"
+"Sample ``c`` of every world into the record's buffers (a copy): ``pos``, ``chi``,\n"
+"``slot``, ``target`` (N, 2), ``theta``, ``v1``, ``v2`` (N,) float64, ``mode`` (N,)\n"
+"int8 and ``failed`` (N,) bool into ``pose_out`` (T, N, 3) as (x, y, theta),\n"
+"``cmd_out`` (T, N, 2) as (v1, v2), ``chi_out``, ``slot_out``, ``target_out``\n"
+"(T, N, 2), ``mode_out`` and ``failed_out`` (T, N), at row ``c``.");
+
+static PyObject *
+record_sample(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 17) {
+        PyErr_SetString(PyExc_TypeError, "record_sample takes 17 arguments");
+        return NULL;
+    }
+    Py_ssize_t c = PyLong_AsSsize_t(args[0]);
+    if (c == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    /* float64: pos, theta, v1, v2, chi, slot, target, then the five buffers */
+    static const int at[] = {1, 2, 3, 4, 5, 6, 7, 10, 11, 12, 13, 14};
+    Rows r[12];
+    Py_buffer b[4]; /* mode, failed, mode_out, failed_out */
+    static const int bytes_at[] = {8, 9, 15, 16};
+    int got = 0, got_b = 0;
+    PyObject *result = NULL;
+    for (int k = 0; k < 12; k++) {
+        if (get_rows(args[at[k]], &r[k], at[k] >= 10) < 0) goto done;
+        got++;
+    }
+    for (int k = 0; k < 4; k++) {
+        if (get_bytes(args[bytes_at[k]], &b[k], bytes_at[k] >= 15) < 0) goto done;
+        got_b++;
+    }
+    Rows *pos = &r[0], *theta = &r[1], *v1 = &r[2], *v2 = &r[3], *chi = &r[4];
+    Rows *slot = &r[5], *target = &r[6];
+    Py_ssize_t N = theta->len;
+    int fits = pos->len == 2 * N && v1->len == N && v2->len == N &&
+               chi->len == 2 * N && slot->len == 2 * N && target->len == 2 * N &&
+               b[0].len == N && b[1].len == N && b[0].itemsize == 1 &&
+               b[1].itemsize == 1 && b[2].itemsize == 1 && b[3].itemsize == 1 &&
+               c >= 0 && (c + 1) * 3 * N <= r[7].len && (c + 1) * 2 * N <= r[8].len &&
+               (c + 1) * 2 * N <= r[9].len && (c + 1) * 2 * N <= r[10].len &&
+               (c + 1) * 2 * N <= r[11].len && (c + 1) * N <= b[2].len &&
+               (c + 1) * N <= b[3].len;
+    if (!fits) {
+        PyErr_SetString(PyExc_ValueError, "record_sample: shapes differ");
+        goto done;
+    }
+    double *pose = r[7].data + c * 3 * N, *cmd = r[8].data + c * 2 * N;
+    for (Py_ssize_t k = 0; k < N; k++) {
+        pose[3 * k] = pos->data[2 * k];
+        pose[3 * k + 1] = pos->data[2 * k + 1];
+        pose[3 * k + 2] = theta->data[k];
+        cmd[2 * k] = v1->data[k];
+        cmd[2 * k + 1] = v2->data[k];
+    }
+    memcpy(r[9].data + c * 2 * N, chi->data, 2 * N * sizeof(double));
+    memcpy(r[10].data + c * 2 * N, slot->data, 2 * N * sizeof(double));
+    memcpy(r[11].data + c * 2 * N, target->data, 2 * N * sizeof(double));
+    memcpy((char *)b[2].buf + c * N, b[0].buf, (size_t)N);
+    memcpy((char *)b[3].buf + c * N, b[1].buf, (size_t)N);
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    release(r, got);
+    for (int k = 0; k < got_b; k++) {
+        PyBuffer_Release(&b[k]);
+    }
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"healthy", (PyCFunction)(void (*)(void))healthy, METH_FASTCALL, healthy_doc},
     {"buffer_period", (PyCFunction)(void (*)(void))buffer_period, METH_FASTCALL,
      buffer_period_doc},
+    {"record_sample", (PyCFunction)(void (*)(void))record_sample, METH_FASTCALL,
+     record_sample_doc},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_period",
-    "Two pieces of the loop's period in C (see sandbox/loop/divergence.py, tally.py).", -1,
+    "Three pieces of the loop's period in C (see sandbox/loop/divergence.py, tally.py, "
+    "recording.py).", -1,
     methods,
 };
 

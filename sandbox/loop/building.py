@@ -245,8 +245,9 @@ class Building:
         self.strategy = s0.strategy
         plugin = get("strategy", s0.scenario.recovery.strategy)
         self._strategy_per_world = not plugin.options.get("batched", False)
-        # A built-in strategy keeps no context: one serves every period.
-        self._strategy_keeps_context = plugin.origin.startswith("built-in")
+        # A built-in strategy keeps no context (one serves every period) and moves no
+        # vehicle that may not avoid (its shift and flags need no mask).
+        self._strategy_built_in = plugin.origin.startswith("built-in")
         self._strategy_ctx = None
         params = dict(s0.strategy_params)
         if "beta" in params:

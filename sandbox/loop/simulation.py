@@ -305,15 +305,17 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
                 self._strategy_context(t, slot, may_avoid, known)
             )
         # a strategy never moves a vehicle that may not avoid (where every vehicle
-        # may, a float (N, 2) shift is kept as it is: the same values)
-        if not (
-            type(shift) is np.ndarray
-            and shift.dtype == np.float64
-            and shift.shape == (self.N, 2)
-            and np.count_nonzero(may_avoid) == self.N
-        ):
-            shift = np.where(may_avoid[:, None], shift, 0.0)
-        active = np.asarray(active, dtype=bool) & may_avoid
+        # may, a float (N, 2) shift is kept as it is: the same values; a built-in
+        # one's stacked shift and flags are masked already)
+        if self._strategy_per_world or not self._strategy_built_in:
+            if not (
+                type(shift) is np.ndarray
+                and shift.dtype == np.float64
+                and shift.shape == (self.N, 2)
+                and np.count_nonzero(may_avoid) == self.N
+            ):
+                shift = np.where(may_avoid[:, None], shift, 0.0)
+            active = np.asarray(active, dtype=bool) & may_avoid
         target = slot + shift  # eq. (22) / (26)
         if self.rec.target_derivatives == "estimate":
             d_shift, dd_shift = self.shift_motion.update(shift)
@@ -321,7 +323,7 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             a_ref = a_ref + dd_shift
         self._failing = failing
         if self.K > 1:
-            point = np.broadcast_to(point, (self.K, 2))
+            point = spread(point, (self.K, 2))
         if self.K == 1 and not self.live[0]:
             return  # a plug-in failed: the plan stays undefined
         self.plan = Plan(slot, target, v_ref, a_ref, point, active, failing)
@@ -361,7 +363,7 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             seen_pos=None if self.believed is None else self.believed[:, :2],
             **context_fields(self.range_sensor),
         )
-        if self._strategy_keeps_context:
+        if self._strategy_built_in:
             self._strategy_ctx = ctx
         return ctx
 

@@ -40,31 +40,44 @@ each_body(each_fn each, body_fn func, void *const *spaces, void *const *data,
 
 PyDoc_STRVAR(advance_doc,
 "advance(step, each, set, get, spaces, controls, writes, reads, count, substeps,\n"
-"        t0, dt, clock) -> int\n"
+"        t0, dt, clock, write_arrays, read_arrays, arrays, size, num_at) -> int\n"
 "\n"
 "One control period of ``count`` worlds; every pointer argument is an address\n"
 "(int). ``step``: cpSpaceStep; ``each``: cpSpaceEachBody; ``set``, ``get``:\n"
 "pymunk's batched body iterators; ``spaces``, ``controls``, ``writes``, ``reads``:\n"
 "arrays of ``count`` addresses (the worlds' spaces, control spaces and the\n"
-"iterators' pmBatchedData); ``clock``: two doubles. Substep s starts at\n"
-"``t0 + s * dt``, computed as Python computes it. Returns the substeps stepped:\n"
-"``substeps``, the state read, unless ``clock[1]`` was raised after one (then\n"
-"the substeps stepped so far, the state not read).");
+"iterators' pmBatchedData); ``clock``: two doubles. First the ``num`` field (an\n"
+"int at byte ``num_at``) of each of the ``arrays`` pmFloatArray records of\n"
+"``size`` bytes at ``write_arrays`` and at ``read_arrays`` is set to 0, and\n"
+"``clock[1]`` to 0. Substep s starts at ``t0 + s * dt``, computed as Python\n"
+"computes it. Returns the substeps stepped: ``substeps``, the state read, unless\n"
+"``clock[1]`` was raised after one (then the substeps stepped so far, the state\n"
+"not read).");
+
+/* The ``num`` field of ``arrays`` records of ``size`` bytes from ``block``, to 0. */
+static void
+clear_nums(uintptr_t block, Py_ssize_t arrays, Py_ssize_t size, Py_ssize_t num_at)
+{
+    for (Py_ssize_t i = 0; i < arrays; i++) {
+        *(int *)(block + (uintptr_t)(i * size + num_at)) = 0;
+    }
+}
 
 static PyObject *
 advance(PyObject *self, PyObject *args)
 {
     unsigned long long step_addr, each_addr, set_addr, get_addr;
     unsigned long long spaces_addr, controls_addr, writes_addr, reads_addr;
-    unsigned long long clock_addr;
-    Py_ssize_t count;
+    unsigned long long clock_addr, write_block, read_block;
+    Py_ssize_t count, arrays, size, num_at;
     int substeps;
     double t0, dt;
 
-    if (!PyArg_ParseTuple(args, "KKKKKKKKniddK:advance", &step_addr, &each_addr,
+    if (!PyArg_ParseTuple(args, "KKKKKKKKniddKKKnnn:advance", &step_addr, &each_addr,
                           &set_addr, &get_addr, &spaces_addr, &controls_addr,
                           &writes_addr, &reads_addr, &count, &substeps, &t0, &dt,
-                          &clock_addr)) {
+                          &clock_addr, &write_block, &read_block, &arrays, &size,
+                          &num_at)) {
         return NULL;
     }
     step_fn step = (step_fn)(uintptr_t)step_addr;
@@ -77,6 +90,9 @@ advance(PyObject *self, PyObject *args)
     void *const *reads = (void *const *)(uintptr_t)reads_addr;
     double *clock = (double *)(uintptr_t)clock_addr;
 
+    clear_nums((uintptr_t)write_block, arrays, size, num_at);
+    clear_nums((uintptr_t)read_block, arrays, size, num_at);
+    clock[1] = 0.0;
     each_body(each, set, controls, writes, count);
     for (int s = 0; s < substeps; s++) {
         /* t0 + s * dt rounded after each operation, as Python does: the volatile

@@ -236,7 +236,16 @@ class WorldStepper:
                 len(worlds),
                 self.substeps,
             )
-            self._clock_address = int(self._clock.ctypes.data)
+            # the clock, and the pmFloatArray records whose num the call resets
+            ffi = self._ffi
+            self._tail = (
+                int(self._clock.ctypes.data),
+                self._address(self._write_arrays),
+                self._address(self._read_arrays),
+                len(ws),
+                ffi.sizeof("pmFloatArray"),
+                ffi.offsetof("pmFloatArray", "num"),
+            )
 
     def advance(self, t0: float, h: float) -> None:
         """One control period ``h`` [s] of every live world from ``t0`` [s].
@@ -246,15 +255,13 @@ class WorldStepper:
         C call while no world has an open contact episode, else in Python.
         """
         each, c_step, spaces = self._each, self._c_step, self._spaces
-        self._write_num[:] = 0
         substeps = self.substeps
         step = h / substeps
         opens, clock = self._opens, self._clock
         first = 0
         if self._one_call is not None and not any(opens):
-            self._read_num[:] = 0
-            clock[1] = 0.0
-            first = self._one_call(*self._args, t0, step, self._clock_address)
+            # the counters and clock[1] reset by the call itself
+            first = self._one_call(*self._args, t0, step, *self._tail)
             if not clock[1]:  # every substep stepped, the state read
                 if self._order is not None:
                     self._state[:] = self._read[:, self._order]
@@ -262,6 +269,7 @@ class WorldStepper:
             # A contact episode opened in substep first - 1: its end as below.
             self._update_episodes(t0 + first * step)
         else:
+            self._write_num[:] = 0
             _exhaust(map(each, self._controls, repeat(self._set), self._writes))
         for s in range(first, substeps):
             clock[0] = t0 + s * step

@@ -1,0 +1,125 @@
+"""The loop's own C pieces and numpy's C API under them give the bytes of numpy.
+
+The record's samples copied in one C call (``sandbox.loop._period.record_sample``),
+the C loops reading arrays through numpy's C API or, for any other object with the
+buffer interface, through that interface, and the loop metrics' flush (its periods
+accumulated at once) each give the bytes of the path they replace. Where an
+extension is not built the assertions about it are skipped.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from sandbox.loop import _period, recording, tally
+from sandbox.loop.simulation import Simulation
+from sandbox.run.metrics import compute_metrics
+from sandbox.scenario import load_scenario
+
+needs_period = pytest.mark.skipif(_period is None, reason="_period not built")
+
+NAMES = ("failures/follower_crash", "paper/fig16_leader_avoids_discontinuous_beta1")
+
+
+def records(batch: int) -> list[bytes]:
+    """Every recorded array and the metrics of two scenes, alone or batched."""
+    out = []
+    for name in NAMES:
+        scenarios = [
+            load_scenario(name, overrides=["duration=4", f"seed={s}"])
+            for s in range(max(batch, 1))
+        ]
+        runs = (
+            Simulation.batch(scenarios) if batch else [Simulation(scenarios[0]).run()]
+        )
+        for run in runs:
+            for name in ("t", "pose", "cmd", "chi", "slot", "target", "mode", "failed"):
+                out.append(np.ascontiguousarray(getattr(run, name)).tobytes())
+            out.append(json.dumps(compute_metrics(run), sort_keys=True).encode())
+    return out
+
+
+@needs_period
+@pytest.mark.parametrize("batch", [0, 3])
+def test_samples_recorded_in_c_are_numpys(monkeypatch, batch):
+    calls = []
+    real = _period.record_sample
+
+    def counted(*args):
+        calls.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(_period, "record_sample", counted)
+    with_c = records(batch)
+    assert calls  # the C path ran
+    monkeypatch.setattr(recording, "USE_KERNEL", False)
+    assert records(batch) == with_c
+
+
+@needs_period
+def test_a_sample_the_c_copy_refuses_is_written_by_numpy():
+    K, n = 2, 3
+    rng = np.random.default_rng(0)
+    made = [recording.WorldsRecorder(4, K, n) for _ in range(2)]
+    N = K * n
+    args = dict(
+        pos=rng.normal(size=(N, 2)),
+        theta=rng.normal(size=N),
+        v1=rng.normal(size=N),
+        v2=rng.normal(size=N),
+        chi=rng.normal(size=(N, 2)),
+        slot=rng.normal(size=(N, 4))[:, :2],  # not contiguous: refused by C
+        target=rng.normal(size=(N, 2)),
+        mode=rng.integers(0, 4, N).astype(np.int8),
+        failed=rng.random(N) < 0.5,
+        point=rng.normal(size=(K, 2)),
+        worlds=[0, 1],
+    )
+    made[0].append(0.5, **args)
+    recording.USE_KERNEL, saved = False, recording.USE_KERNEL
+    try:
+        made[1].append(0.5, **args)
+    finally:
+        recording.USE_KERNEL = saved
+    for w in range(K):
+        a, b = made[0].arrays(w), made[1].arrays(w)
+        assert a.keys() == b.keys()
+        assert all(a[k].tobytes() == b[k].tobytes() for k in a)
+    assert made[0].arrays(1)["slot"][0].tolist() == args["slot"][n:].tolist()
+
+
+@needs_period
+def test_any_buffer_is_read_like_an_ndarray():
+    # numpy's C API reads ndarrays; any other object with the buffer interface
+    # (here memoryviews of the same arrays) takes the buffer interface: one answer
+    rng = np.random.default_rng(1)
+    pos, vel, chi = (rng.normal(size=(5, 2)) for _ in range(3))
+    theta = rng.normal(size=5)
+    for bound in (0.5, 10.0):
+        arrays = _period.healthy(pos, theta, vel, chi, bound, 4.0)
+        views = _period.healthy(*map(memoryview, (pos, theta, vel, chi)), bound, 4.0)
+        assert arrays == views
+    with pytest.raises((BufferError, TypeError, ValueError)):
+        _period.healthy(pos.astype(np.float32), theta, vel, chi, 1.0, 1.0)
+    with pytest.raises((BufferError, TypeError, ValueError)):
+        _period.healthy(pos[:, ::-1], theta, vel, chi, 1.0, 1.0)  # not contiguous
+
+
+def test_a_flush_of_many_periods_sums_as_period_after_period(monkeypatch):
+    # The loop metrics flush CHUNK buffered periods at once; one period a flush is
+    # the loop's own order of additions: the same efforts to the bit.
+    def metrics() -> list[str]:
+        scenarios = [
+            load_scenario(
+                "failures/follower_stop", overrides=["duration=5", f"seed={s}"]
+            )
+            for s in range(3)
+        ]
+        return [json.dumps(compute_metrics(r)) for r in Simulation.batch(scenarios)]
+
+    many = metrics()
+    monkeypatch.setattr(tally, "CHUNK", 1)
+    assert metrics() == many
