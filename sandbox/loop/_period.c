@@ -181,6 +181,165 @@ done:
     return result;
 }
 
+/* numpy.minimum(a, b): a where a < b or a is NaN, else b (b on a tie). */
+static inline double
+np_minimum(double a, double b)
+{
+    return (a < b || a != a) ? a : b;
+}
+
+PyDoc_STRVAR(flush_periods_doc,
+"flush_periods(m, K, n, rel_tol, abs_tol, has_prev, has_cmd, d2, v, vel, cmd,\n"
+"              free, best, effort_v1, effort_v2, peak_v1, prev, commanded,\n"
+"              was_free, max_velocity_error, max_speed_error, free_periods,\n"
+"              saturated_periods) -> None\n"
+"\n"
+"LoopTally.flush of ``m`` buffered periods of K worlds of n vehicles (N = K n):\n"
+"``d2`` (m, K, P) (P = 0: no pairs), ``v`` (m, 2, N), ``vel``, ``cmd`` (m, N, 2),\n"
+"``free`` (m, N) bool; updates ``best`` (K,), the efforts and ``peak_v1`` (N,),\n"
+"``prev`` (2, N), ``commanded`` (N, 2) and ``was_free`` (N,) (the last period's,\n"
+"read where ``has_prev``, ``has_cmd``), the errors (K,) and the counts (K,) int64,\n"
+"numpy's operations in numpy's order.");
+
+static PyObject *
+flush_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 23) {
+        PyErr_SetString(PyExc_TypeError, "flush_periods takes 23 arguments");
+        return NULL;
+    }
+    Py_ssize_t m = PyLong_AsSsize_t(args[0]);
+    Py_ssize_t K = PyLong_AsSsize_t(args[1]);
+    Py_ssize_t n = PyLong_AsSsize_t(args[2]);
+    double rel_tol = PyFloat_AsDouble(args[3]);
+    double abs_tol = PyFloat_AsDouble(args[4]);
+    int has_prev = PyObject_IsTrue(args[5]);
+    int has_cmd = PyObject_IsTrue(args[6]);
+    if (PyErr_Occurred() || has_prev < 0 || has_cmd < 0) {
+        return NULL;
+    }
+    /* float64: d2, v, vel, cmd, best, effort_v1, effort_v2, peak_v1, prev,
+       commanded, max_velocity_error, max_speed_error */
+    static const int at[] = {7, 8, 9, 10, 12, 13, 14, 15, 16, 17, 19, 20};
+    Rows r[12];
+    Py_buffer fb, wb, cb_free, cb_sat;
+    int got = 0, got_f = 0, got_w = 0, got_cf = 0, got_cs = 0;
+    PyObject *result = NULL;
+    for (int k = 0; k < 12; k++) {
+        if (get_rows(args[at[k]], &r[k], at[k] >= 12) < 0) goto done;
+        got++;
+    }
+    if (get_bytes(args[11], &fb, 0) < 0) goto done;
+    got_f = 1;
+    if (get_bytes(args[18], &wb, 1) < 0) goto done;
+    got_w = 1;
+    /* the counts: int64 (numpy's default integer here, checked by the caller) */
+    if (PyObject_GetBuffer(args[21], &cb_free, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0)
+        goto done;
+    got_cf = 1;
+    if (PyObject_GetBuffer(args[22], &cb_sat, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0)
+        goto done;
+    got_cs = 1;
+    Py_ssize_t N = K * n;
+    Rows *d2 = &r[0], *v = &r[1], *vel = &r[2], *cmd = &r[3], *best = &r[4];
+    Rows *e1 = &r[5], *e2 = &r[6], *peak = &r[7], *prev = &r[8], *commanded = &r[9];
+    Rows *mve = &r[10], *mse = &r[11];
+    Py_ssize_t P = K > 0 && m > 0 ? d2->len / (m * K) : 0;
+    if (m < 1 || K < 1 || n < 1 || d2->len != m * K * P || v->len != m * 2 * N ||
+        vel->len != m * 2 * N || cmd->len != m * 2 * N || fb.len != m * N ||
+        fb.itemsize != 1 || best->len != K || e1->len != N || e2->len != N ||
+        peak->len != N || prev->len != 2 * N || commanded->len != 2 * N ||
+        wb.len != N || wb.itemsize != 1 || mve->len != K || mse->len != K ||
+        cb_free.len != K * 8 || cb_free.itemsize != 8 || cb_sat.len != K * 8 ||
+        cb_sat.itemsize != 8) {
+        PyErr_SetString(PyExc_ValueError, "flush_periods: shapes differ");
+        goto done;
+    }
+    const unsigned char *free_ = fb.buf;
+    unsigned char *was_free = wb.buf;
+    long long *free_periods = cb_free.buf, *saturated = cb_sat.buf;
+    /* closest approach: each period's least squared distance of each world, its
+       root, the least over the periods, then against the best so far */
+    if (P > 0) {
+        for (Py_ssize_t w = 0; w < K; w++) {
+            double least = 0.0;
+            for (Py_ssize_t t = 0; t < m; t++) {
+                const double *row = d2->data + (t * K + w) * P;
+                double low = row[0];
+                for (Py_ssize_t c = 1; c < P; c++) {
+                    low = np_minimum(low, row[c]);
+                }
+                low = sqrt(low);
+                least = t == 0 ? low : np_minimum(least, low);
+            }
+            best->data[w] = np_minimum(best->data[w], least);
+        }
+    }
+    /* control effort, period after period as the loop adds them, and |v1|'s peak */
+    const double *v0 = v->data;
+    if (!has_prev) {
+        memcpy(prev->data, v0, 2 * N * sizeof(double));
+    }
+    for (Py_ssize_t t = has_prev ? 0 : 1; t < m; t++) {
+        const double *now = v->data + t * 2 * N;
+        const double *before = t == 0 ? prev->data : now - 2 * N;
+        for (Py_ssize_t i = 0; i < N; i++) {
+            e1->data[i] = e1->data[i] + fabs(now[i] - before[i]);
+            e2->data[i] = e2->data[i] + fabs(now[N + i] - before[N + i]);
+        }
+    }
+    for (Py_ssize_t i = 0; i < N; i++) {
+        /* np.fmax: the non-NaN one, the first where both are NaN */
+        double top = fabs(v0[i]);
+        for (Py_ssize_t t = 1; t < m; t++) {
+            double x = fabs(v->data[t * 2 * N + i]);
+            top = (x > top || top != top) ? x : top;
+        }
+        double p = peak->data[i];
+        peak->data[i] = (top > p || p != p) ? top : p;
+    }
+    memcpy(prev->data, v->data + (m - 1) * 2 * N, 2 * N * sizeof(double));
+    /* the motor check: each period's velocities read against the last commanded */
+    for (Py_ssize_t w = 0; w < K; w++) {
+        double worst_v = -INFINITY, worst_s = -INFINITY;
+        long long checked = 0, over = 0;
+        for (Py_ssize_t t = has_cmd ? 0 : 1; t < m; t++) {
+            const double *c_at = t == 0 ? commanded->data : cmd->data + (t - 1) * 2 * N;
+            const unsigned char *f_at = t == 0 ? was_free : free_ + (t - 1) * N;
+            for (Py_ssize_t j = 0; j < n; j++) {
+                Py_ssize_t i = w * n + j;
+                const double *got_v = vel->data + (t * N + i) * 2, *c = c_at + 2 * i;
+                if (!(free_[t * N + i] && f_at[i] && isfinite(got_v[0]) &&
+                      isfinite(got_v[1]))) {
+                    continue;
+                }
+                double want = hypot(c[0], c[1]);
+                double err = hypot(got_v[0] - c[0], got_v[1] - c[1]);
+                double speed_err = fabs(hypot(got_v[0], got_v[1]) - want);
+                worst_v = np_maximum(worst_v, err);
+                worst_s = np_maximum(worst_s, speed_err);
+                checked++;
+                over += err > np_maximum(rel_tol * want, abs_tol);
+            }
+        }
+        mve->data[w] = np_maximum(mve->data[w], worst_v);
+        mse->data[w] = np_maximum(mse->data[w], worst_s);
+        free_periods[w] += checked;
+        saturated[w] += over;
+    }
+    memcpy(commanded->data, cmd->data + (m - 1) * 2 * N, 2 * N * sizeof(double));
+    memcpy(was_free, free_ + (m - 1) * N, (size_t)N);
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    release(r, got);
+    if (got_f) PyBuffer_Release(&fb);
+    if (got_w) PyBuffer_Release(&wb);
+    if (got_cf) PyBuffer_Release(&cb_free);
+    if (got_cs) PyBuffer_Release(&cb_sat);
+    return result;
+}
+
 PyDoc_STRVAR(record_sample_doc,
 "record_sample(c, pos, theta, v1, v2, chi, slot, target, mode, failed, pose_out,\n"
 "              cmd_out, chi_out, slot_out, target_out, mode_out, failed_out) -> None\n"
@@ -261,6 +420,8 @@ static PyMethodDef methods[] = {
      buffer_period_doc},
     {"record_sample", (PyCFunction)(void (*)(void))record_sample, METH_FASTCALL,
      record_sample_doc},
+    {"flush_periods", (PyCFunction)(void (*)(void))flush_periods, METH_FASTCALL,
+     flush_periods_doc},
     {NULL, NULL, 0, NULL},
 };
 

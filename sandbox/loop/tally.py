@@ -14,9 +14,10 @@ period whose error exceeds ``MOTOR_REL_TOL`` of the commanded speed and
 :class:`~sandbox.run.metrics.ClosestApproach` (a Verlet list) per world. A period only
 copies what these need (commands, pair distances, velocities, contact flags) into
 buffers of :data:`CHUNK` periods; :meth:`LoopTally.flush` then accounts for the
-buffered periods at once, in arrays over periods and vehicles: the same elementwise
-operations, the sums taken period after period in the order of the loop, and minima,
-maxima and counts (exact whatever the order). Reductions over a world's vehicles run
+buffered periods at once, in arrays over periods and vehicles (in one C call where
+``sandbox.loop._period`` is built): the same elementwise operations, the sums taken
+period after period in the order of the loop, and minima, maxima and counts (exact
+whatever the order). Reductions over a world's vehicles run
 column by column (:func:`row_reduce`), the same values as numpy's reductions over a
 short axis at a fraction of their cost.
 """
@@ -73,7 +74,7 @@ class LoopTally:
         self.max_velocity_error = np.zeros(K)
         self.free_periods = np.zeros(K, dtype=np.int64)
         self.saturated_periods = np.zeros(K, dtype=np.int64)
-        self._prev: tuple[np.ndarray, np.ndarray] | None = None
+        self._prev: np.ndarray | None = None  # (2, N): the last v1, v2
         self._commanded: np.ndarray | None = None
         self._was_free: np.ndarray | None = None
         i, j = np.triu_indices(n, 1)
@@ -168,6 +169,8 @@ class LoopTally:
         if not m:
             return
         self._m = 0
+        if _period is not None and USE_KERNEL and kernels_agree() and self._flush_c(m):
+            return
         if n >= 2 and self._closest is None:
             d2 = self._buf_d2[:m].reshape(m * K, -1)
             best = np.sqrt(row_reduce(np.minimum, d2)).reshape(m, K)
@@ -175,9 +178,9 @@ class LoopTally:
         v = self._buf_v[:m]
         first = 0
         if self._prev is None:
-            self._prev = (v[0, 0].copy(), v[0, 1].copy())
+            self._prev = v[0].copy()
             first = 1
-        prev = np.concatenate((np.stack(self._prev)[None], v[:-1]))
+        prev = np.concatenate((self._prev[None], v[:-1]))
         step = np.abs(v - prev)
         if first < m:  # period after period, as the loop adds them: an accumulation
             total = np.empty((m - first + 1, 2, step.shape[2]))
@@ -185,7 +188,7 @@ class LoopTally:
             total[1:] = step[first:]
             np.add.accumulate(total, axis=0, out=total)
             self.effort_v1[:], self.effort_v2[:] = total[-1, 0], total[-1, 1]
-        self._prev = (v[m - 1, 0].copy(), v[m - 1, 1].copy())
+        self._prev = v[m - 1].copy()
         # the largest |v1| (fmax: NaN left out, in any order)
         np.fmax(self.peak_v1, np.fmax.reduce(np.abs(v[:, 0]), axis=0), out=self.peak_v1)
         free, vel, cmd_now = self._buf_free[:m], self._buf_vel[:m], self._buf_cmd[:m]
@@ -197,6 +200,30 @@ class LoopTally:
             self._account_motors(free[1:] & free[:-1], vel[1:], cmd_now[:-1], m - 1)
         self._commanded = cmd_now[m - 1].copy()
         self._was_free = free[m - 1].copy()
+
+    def _flush_c(self, m: int) -> bool:
+        """:meth:`flush` of ``m`` periods in one C call (the same numbers).
+
+        False where the call refuses the arrays (nothing is changed then).
+        """
+        K, n = self.K, self.n
+        has_prev, has_cmd = self._prev is not None, self._commanded is not None
+        prev = self._prev if has_prev else np.empty((2, K * n))
+        commanded = self._commanded if has_cmd else np.empty((K * n, 2))
+        was_free = self._was_free if has_cmd else np.empty(K * n, dtype=bool)
+        try:
+            _period.flush_periods(
+                m, K, n, MOTOR_REL_TOL, MOTOR_ABS_TOL, has_prev, has_cmd,
+                self._buf_d2[:m], self._buf_v[:m], self._buf_vel[:m],
+                self._buf_cmd[:m], self._buf_free[:m], self.best, self.effort_v1,
+                self.effort_v2, self.peak_v1, prev, commanded, was_free,
+                self.max_velocity_error, self.max_speed_error, self.free_periods,
+                self.saturated_periods,
+            )  # fmt: skip
+        except (BufferError, TypeError, ValueError):
+            return False
+        self._prev, self._commanded, self._was_free = prev, commanded, was_free
+        return True
 
     def _account_motors(
         self, check: np.ndarray, vel: np.ndarray, cmd: np.ndarray, m: int
@@ -252,7 +279,7 @@ class LoopTally:
             self.effort_v1[vs] += np.abs(v1 - self._prev[0][vs])
             self.effort_v2[vs] += np.abs(v2 - self._prev[1][vs])
         if self._prev is None:
-            self._prev = (np.array(b.v1, dtype=float), np.array(b.v2, dtype=float))
+            self._prev = np.array((b.v1, b.v2), dtype=float)
         else:
             self._prev[0][vs] = v1
             self._prev[1][vs] = v2
