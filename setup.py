@@ -37,7 +37,7 @@ def _exact(source: str) -> Extension:
         name,
         [source],
         include_dirs=["sandbox"],
-        depends=["sandbox/numpy_rules.h"],
+        depends=["sandbox/numpy_rules.h", "sandbox/motor_model.h"],
         optional=True,
     )
 
@@ -54,6 +54,7 @@ EXACT = tuple(
         "sandbox/loop/_period.c",
         "sandbox/behaviour/_fits.c",
         "sandbox/behaviour/_draws.c",
+        "sandbox/behaviour/_residual.c",
     )
 )
 

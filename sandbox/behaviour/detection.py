@@ -87,6 +87,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.behaviour import residual_kernel
 from sandbox.behaviour.tracks import TrackHistory, stop_fits
 from sandbox.model.kernels import motor_model
 from sandbox.plugins.registration import (
@@ -384,6 +385,24 @@ def oracle(ctx: DetectorContext) -> np.ndarray:
     return ctx.failing.copy()
 
 
+def _read_kinds(st: DetectorState, ctx: DetectorContext, events: tuple) -> None:
+    """The kinds of the rows a pass in C names, as :func:`residual` reads them.
+
+    ``events`` is :data:`~sandbox.behaviour.residual_kernel.QUIET` or the rows read
+    on while isolating, cleared and alarming: each reads only its own row's state,
+    which the pass left as the numpy path leaves it when it reads the kind.
+    """
+    if events is residual_kernel.QUIET:
+        return
+    read, cleared, alarms = events
+    for i in read:  # the kind from more residuals, before a clearing
+        st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+    for i in cleared:
+        st.kinds[i] = ""
+    for i in alarms:
+        st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+
+
 @register_detector("residual", params=RESIDUAL_PARAMS, batched=True)
 def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     """Residuals of the observed motion against the commands, and a CUSUM."""
@@ -396,6 +415,13 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     if st.history is None:
         st.history = shape_history(ctx)
     st.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
+    if residual_kernel.usable():  # the same numbers in one C call
+        events = residual_kernel.ResidualPass.of(ctx).run(
+            st, ctx.t, ctx.seen, ctx.fresh, ctx.in_contact, ctx.commands,
+            ctx.memory.get("trace"),
+        )  # fmt: skip
+        _read_kinds(st, ctx, events)
+        return st.detected.copy(), list(st.kinds)
     mu, lam = float(p["shift"]), float(p["lambda"])
     window = max(1, int(round(p["window"] / ctx.dt)))
     sp = np.sqrt(2.0 * ctx.position_noise**2 + p["noise_floor"] ** 2)
@@ -537,6 +563,9 @@ class Detection:
         self._known = np.zeros(n, dtype=bool)
         self._open: dict[int, dict] = {}
         self.events: list[dict] = []
+        # The built-in residual, whose periods may take its pass in C.
+        self._builtin = self.func is residual
+        self._kernel: residual_kernel.ResidualPass | None = None
         # Where detections are written: each world's names and events (one world).
         self._world_size = n
         self._world_names = [self.names]
@@ -567,6 +596,7 @@ class Detection:
         out._sent = deque(maxlen=first._sent.maxlen)
         out._known = np.zeros(len(out.motor_accel), dtype=bool)
         out._open = {}
+        out._kernel = None
         out._world_size = len(first.names)
         out._world_names = [d.names for d in detections]
         out._world_events = [d.events for d in detections]
@@ -606,9 +636,30 @@ class Detection:
         if self.intended is not None:
             self._sent.append(self.intended)
             self.intended = None
-        full = len(self._sent) == self._sent.maxlen
+        commands = self._sent[0] if len(self._sent) == self._sent.maxlen else None
+        st = self.memory.get("state") if self._builtin else None
+        if (
+            st is not None
+            and commands is not None
+            and st.history is not None
+            and residual_kernel.usable()
+        ):
+            return self._residual_pass(
+                st, t, dt, fleet, seen, fresh, contact, failing, commands
+            )
+        ctx = self._context(t, dt, fleet, seen, fresh, contact, failing, commands)
+        out = self.func(ctx)
+        kinds = None
+        if isinstance(out, tuple):
+            out, kinds = out
+        return self._note(t, np.asarray(out, dtype=bool).copy(), kinds)
+
+    def _context(
+        self, t, dt, fleet, seen, fresh, contact, failing, commands
+    ) -> DetectorContext:
+        """What the detector sees at ``t`` (see :meth:`update_rows`)."""
         n = len(fleet.theta)
-        ctx = DetectorContext(
+        return DetectorContext(
             t=t,
             dt=dt,
             pos=fleet.pos,
@@ -616,7 +667,7 @@ class Detection:
             vel=fleet.vel,
             seen=seen,
             fresh=np.ones(n, dtype=bool) if fresh is None else fresh,
-            commands=self._sent[0] if full else None,
+            commands=commands,
             in_contact=np.zeros(n, dtype=bool) if contact is None else contact,
             failing=failing,
             position_noise=self.position_noise,
@@ -628,11 +679,35 @@ class Detection:
             memory=self.memory,
             brake_accel=self.brake_accel,
         )
-        out = self.func(ctx)
-        kinds = None
-        if isinstance(out, tuple):
-            out, kinds = out
-        known = np.asarray(out, dtype=bool).copy()
+
+    def _residual_pass(
+        self, st, t, dt, fleet, seen, fresh, contact, failing, commands
+    ) -> np.ndarray:
+        """The built-in ``residual`` of a period by its pass in C, without a context.
+
+        The same state, kinds and events as :func:`residual` called through
+        :meth:`_context`: the context is built only when a kind is to be read.
+        """
+        kernel = self._kernel
+        if kernel is None or kernel.dt != dt:
+            kernel = self._kernel = residual_kernel.ResidualPass(
+                len(fleet.theta), dt, self.substeps, self.params,
+                self.position_noise, self.heading_noise, self.motor_accel,
+                self.turn_accel, self.brake_accel,
+            )  # fmt: skip
+        st.history.append(t, seen[:, :2], True if fresh is None else fresh)
+        events = kernel.run(
+            st, t, seen, fresh, contact, commands, self.memory.get("trace")
+        )
+        if events is residual_kernel.QUIET:  # no kind read: nothing detected or not
+            self._known = known = self._known.copy()
+            return known
+        ctx = self._context(t, dt, fleet, seen, fresh, contact, failing, commands)
+        _read_kinds(st, ctx, events)
+        return self._note(t, st.detected.copy(), st.kinds)
+
+    def _note(self, t: float, known: np.ndarray, kinds: list | None) -> np.ndarray:
+        """Record the detections made, re-read and withdrawn at ``t``; ``known``."""
         for i in np.flatnonzero(known & ~self._known):
             kind = kinds[i] if kinds is not None and kinds[i] else "unknown"
             w, j = divmod(int(i), self._world_size)
