@@ -411,7 +411,6 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         # The first poses (or, with a delay, the first copies held): start from them.
         st = ctx.memory["state"] = _start(ctx)
         return st.detected.copy(), list(st.kinds)
-    p = ctx.params
     if st.history is None:
         st.history = shape_history(ctx)
     st.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
@@ -420,8 +419,28 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
             st, ctx.t, ctx.seen, ctx.fresh, ctx.in_contact, ctx.commands,
             ctx.memory.get("trace"),
         )  # fmt: skip
-        _read_kinds(st, ctx, events)
-        return st.detected.copy(), list(st.kinds)
+    else:
+        events = residual_pass(st, ctx)
+    _read_kinds(st, ctx, events)
+    return st.detected.copy(), list(st.kinds)
+
+
+def residual_pass(st: DetectorState, ctx: DetectorContext) -> tuple:
+    """:func:`residual`'s period after the history's append, up to reading kinds.
+
+    The motor model, the windows, the contact gate, the due windows' residuals and
+    CUSUMs, the sums for isolation, the latch of an alarm and a clearing: the
+    definition of :meth:`~sandbox.behaviour.residual_kernel.ResidualPass.run`, which
+    returns the same. Each row's kind is read after (:func:`_read_kinds`), from its
+    own row alone.
+
+    Returns
+    -------
+    tuple
+        :data:`~sandbox.behaviour.residual_kernel.QUIET`, or the rows read on while
+        isolating, cleared and alarming (ndarray of intp, increasing).
+    """
+    p = ctx.params
     mu, lam = float(p["shift"]), float(p["lambda"])
     window = max(1, int(round(p["window"] / ctx.dt)))
     sp = np.sqrt(2.0 * ctx.position_noise**2 + p["noise_floor"] ** 2)
@@ -443,7 +462,7 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     st.gate = np.where(contact, 2 * window, np.maximum(st.gate - 1, 0))
     due = (st.age >= window) & ctx.fresh & ~st.pending
     if not np.any(due):
-        return st.detected.copy(), list(st.kinds)
+        return residual_kernel.QUIET
     rows = np.flatnonzero(due)
     seen = ctx.seen[rows]
     pred = st.pose[rows]
@@ -477,19 +496,16 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     used = np.flatnonzero(~gated)
     held = st.detected[rows[used]]
     k_det, k_new = used[held], used[~held]
-    for k in k_det[ctx.t <= st.isolating[rows[k_det]] + 1e-9]:
-        i = rows[k]  # the kind from more residuals
-        _accumulate(st, np.array([i]), np.array([k]), window_sums)
-        # The kind from all residuals so far: a vehicle still braking (a stop or a
-        # spin) or a runaway whose speed is near the commanded one is plain only
-        # once its drive has reached its faulty command.
-        st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+    k_read = k_det[ctx.t <= st.isolating[rows[k_det]] + 1e-9]
+    # The kind from more residuals: a vehicle still braking (a stop or a spin) or a
+    # runaway whose speed is near the commanded one is plain only once its drive has
+    # reached its faulty command.
+    _accumulate(st, rows[k_read], k_read, window_sums)
     i_det = rows[k_det]
     st.clear[i_det] = _floored(st.clear[i_det] - inc[k_det])
-    for i in i_det[st.clear[i_det] >= lam]:
-        st.detected[i] = False
-        st.kinds[i] = ""
-        st.clear[i] = 0.0
+    cleared = i_det[st.clear[i_det] >= lam]
+    st.detected[cleared] = False
+    st.clear[cleared] = 0.0
     i_new = rows[k_new]
     restart = i_new[st.g[i_new] <= 0.0]  # g left 0: new sums
     st.acc[restart] = 0.0
@@ -501,18 +517,20 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     st.g[i_new] = _floored(st.g[i_new] + inc[k_new])
     rising = st.g[i_new] > 0.0
     _accumulate(st, i_new[rising], k_new[rising], window_sums)
-    for i in i_new[st.g[i_new] >= lam]:
-        st.detected[i] = True
-        st.kinds[i] = _isolate(st, i, ctx.t, ctx)
-        # Read on at least until a failed drive could have braked to rest from the
-        # commanded speed, and one window more.
-        brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
+    alarms = i_new[st.g[i_new] >= lam]
+    st.detected[alarms] = True
+    # Read on at least until a failed drive could have braked to rest from the
+    # commanded speed, and one window more.
+    brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
+    for i in alarms:
         braking = float(np.hypot(*st.vel[i])) / float(brakes[i])
         st.isolating[i] = ctx.t + max(float(p["isolation"]), braking + window * ctx.dt)
-        st.g[i] = 0.0
-        st.clear[i] = 0.0
+    st.g[alarms] = 0.0
+    st.clear[alarms] = 0.0
     st.pending[rows] = True  # the next window starts at the next observation
-    return st.detected.copy(), list(st.kinds)
+    if not (len(k_read) or len(cleared) or len(alarms)):
+        return residual_kernel.QUIET
+    return rows[k_read], cleared, alarms
 
 
 class Detection:

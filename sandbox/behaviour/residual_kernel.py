@@ -189,7 +189,11 @@ class ResidualPass:
             )
         if not (n_read or n_cleared or n_alarms):
             return QUIET
-        return read[:n_read].copy(), cleared[:n_cleared].copy(), alarms[:n_alarms].copy()
+        return (
+            read[:n_read].copy(),
+            cleared[:n_cleared].copy(),
+            alarms[:n_alarms].copy(),
+        )
 
 
 def same_numbers(x: np.ndarray, y: np.ndarray) -> bool:
@@ -243,23 +247,30 @@ def _functions_agree(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 def _passes_agree() -> bool:
-    """A synthetic platoon by both paths: the same state and trace, bit for bit."""
-    runs = [synthetic_run(kernel) for kernel in (True, False)]
-    return _same_states(*runs)
+    """A synthetic platoon by both passes: the same state, trace and rows, bitwise."""
+    return _same_runs(synthetic_run(True), synthetic_run(False))
 
 
-def synthetic_run(kernel: bool, n: int = 48, periods: int = 120) -> dict:
-    """The detector's memory after a synthetic platoon, by the C pass or numpy.
+def synthetic_run(kernel: bool, n: int = 36, periods: int = 64) -> tuple:
+    """A synthetic platoon's detector passes, by :meth:`ResidualPass.run` or numpy.
 
     ``n`` unicycles follow smooth random commands, observed with noise and lost
-    packets; a third of them stop turning on the spot for a while (alarms, readings
-    while isolating, clearings after), some touch (the contact gate), one is seen
-    at NaN once, and the substeps and the drives' limits vary.
+    packets; a third of them stop and turn on the spot for a while (alarms, windows
+    read while isolating, clearings after), some touch (the contact gate), one is
+    seen at NaN for a while, and the substeps and the drives' limits vary.
+
+    Returns
+    -------
+    state : DetectorState
+        After the last period.
+    trace : list
+        ``(t, vehicle, l)`` of every window used.
+    events : list
+        Each period's rows read on, cleared and alarming (as lists).
     """
     from sandbox.behaviour import detection
     from sandbox.plugins.contexts import DetectorContext
 
-    global _agreed, USE_KERNEL
     rng = np.random.default_rng(20261207)
     accel = np.where(rng.random(n) < 0.25, np.inf, rng.uniform(2.0, 8.0, n))
     params = {
@@ -270,33 +281,32 @@ def synthetic_run(kernel: bool, n: int = 48, periods: int = 120) -> dict:
         "noise_floor": 0.001,
         "heading_floor": 0.001,
     }
-    memory: dict = {"trace": []}
     truth = np.column_stack((rng.normal(0.0, 3.0, (n, 2)), rng.uniform(-3, 3, n)))
     commands = np.column_stack((rng.uniform(0.2, 1.5, n), rng.normal(0.0, 0.5, n)))
-    onset = np.where(np.arange(n) % 3 == 0, rng.integers(10, 40, n), periods)
-    end = onset + rng.integers(10, 50, n)
-    saved = USE_KERNEL, _agreed
+    onset = np.where(np.arange(n) % 3 == 0, rng.integers(5, 20, n), periods)
+    end = onset + rng.integers(8, 30, n)
+    st, trace, events = None, [], []
     for k in range(periods):
         commands = commands + rng.normal(0.0, 0.05, (n, 2))
         faulty = (onset <= k) & (k < end)
         v1 = np.where(faulty, 0.0, commands[:, 0])
         v2 = np.where(faulty, 2.0, commands[:, 1])
-        truth[:, 0] += 0.01 * v1 * np.cos(truth[:, 2])
-        truth[:, 1] += 0.01 * v1 * np.sin(truth[:, 2])
+        heading = np.column_stack((np.cos(truth[:, 2]), np.sin(truth[:, 2])))
+        truth[:, :2] += 0.01 * v1[:, None] * heading
         truth[:, 2] += 0.01 * v2
         seen = truth + rng.normal(0.0, 0.002, (n, 3))
-        if periods // 2 <= k < periods // 2 + 15:
+        if periods // 2 <= k < periods // 2 + 10:
             seen[n - 1] = np.nan  # diverged observations
         ctx = DetectorContext(
             t=0.01 * k,
             dt=0.01,
             pos=truth[:, :2],
             theta=truth[:, 2],
-            vel=v1[:, None] * np.column_stack((np.cos(truth[:, 2]), np.sin(truth[:, 2]))),
+            vel=v1[:, None] * heading,
             seen=seen,
-            fresh=rng.random(n) > 0.05,
-            commands=None if k == 0 else commands.copy(),
-            in_contact=rng.random(n) < 0.01,
+            fresh=rng.random(n) > 0.08,
+            commands=commands.copy(),
+            in_contact=rng.random(n) < 0.015,
             failing=faulty,
             position_noise=0.002,
             heading_noise=0.002,
@@ -304,21 +314,28 @@ def synthetic_run(kernel: bool, n: int = 48, periods: int = 120) -> dict:
             motor_accel=accel,
             turn_accel=4.0 * accel / 0.15,
             params=params,
-            memory=memory,
+            memory={"trace": trace},
             brake_accel=np.minimum(accel, 5.0),
         )
-        USE_KERNEL, _agreed = kernel, kernel  # the path taken within the check
-        try:
-            detection.residual(ctx)
-        finally:
-            USE_KERNEL, _agreed = saved
-    return memory
+        if st is None:
+            st = detection._start(ctx)
+            continue
+        if kernel:
+            out = ResidualPass.of(ctx).run(
+                st, ctx.t, ctx.seen, ctx.fresh, ctx.in_contact, ctx.commands, trace
+            )
+        else:
+            out = detection.residual_pass(st, ctx)
+        events.append([list(rows) for rows in out])
+    return st, trace, events
 
 
-def _same_states(a: dict, b: dict) -> bool:
-    """Whether two memories of the detector hold the same state and trace, bitwise."""
-    sa, sb = a["state"], b["state"]
-    if sa.kinds != sb.kinds:
+def _same_runs(a: tuple, b: tuple) -> bool:
+    """Whether two :func:`synthetic_run` results are the same, bit for bit."""
+    (sa, ta, ea), (sb, tb, eb) = a, b
+    if ea != eb or [x[:2] for x in ta] != [x[:2] for x in tb]:
+        return False
+    if not same_numbers(np.array([x[2] for x in ta]), np.array([x[2] for x in tb])):
         return False
     for name, value in vars(sa).items():
         other = getattr(sb, name)
@@ -329,7 +346,4 @@ def _same_states(a: dict, b: dict) -> bool:
         same = same_numbers if value.dtype == np.float64 else np.array_equal
         if not same(value, other):
             return False
-    ta, tb = a["trace"], b["trace"]
-    return [x[:2] for x in ta] == [x[:2] for x in tb] and same_numbers(
-        np.array([x[2] for x in ta]), np.array([x[2] for x in tb])
-    )
+    return True
