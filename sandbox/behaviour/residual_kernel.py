@@ -11,7 +11,7 @@ extension ``sandbox.behaviour._residual`` (``_residual.c``) is built,
 operations element by element in its order, with the same double operations, so
 every number is numpy's to the bit. What is rare stays in Python, vehicle by
 vehicle, as the numpy path does it: the kind read at an alarm and while isolating
-(:func:`~sandbox.behaviour.detection._isolate`), the kind cleared with a detection,
+(:func:`~sandbox.behaviour.isolation.isolate`), the kind cleared with a detection,
 and the ``trace`` of a study; :meth:`ResidualPass.run` returns the rows concerned.
 
 The loop takes ``sqrt``, ``hypot``, ``sin``, ``cos``, ``exp``, ``log`` and ``log1p``
