@@ -223,56 +223,86 @@ least_candidate(const double *t, const double *s, Py_ssize_t m, const double *v,
                 Py_ssize_t speeds, double brake, int crash, const double *est,
                 const double *margin, double most, double *r)
 {
-    Py_ssize_t best = 0, count = 0;
-    int all = est == NULL;
-    for (Py_ssize_t a = 0; a < speeds && !all; a++) {
-        const double *row = est + a * m;
-        all = !isfinite(margin[a]);
-        for (Py_ssize_t j = 0; j < m && !all; j++) {
-            all = !isfinite(row[j]);
-            best = row[j] < est[best] ? a * m + j : best;
+    Py_ssize_t size = speeds * m, best = 0, count = 0;
+    int finite = est != NULL, bad = 0;
+    double low = INFINITY;
+    for (Py_ssize_t k = 0; k < size && est != NULL; k++) { /* the first least */
+        double e = est[k];
+        bad |= e - e != 0.0;
+        if (e < low) {
+            low = e;
+            best = k;
         }
     }
-    double ceiling = 0.0;
-    if (!all) {
+    finite &= !bad;
+    for (Py_ssize_t a = 0; a < speeds && finite; a++) {
+        finite &= margin[a] - margin[a] == 0.0;
+    }
+    double least = INFINITY, nan = 0.0, ceiling = 0.0;
+    int has_nan = 0;
+    if (finite) { /* the candidates, evaluated as they are counted */
         ceiling = est[best] + margin[best / m];
         for (Py_ssize_t a = 0; a < speeds; a++) {
             const double *row = est + a * m;
             for (Py_ssize_t j = 0; j < m; j++) {
-                count += row[j] - margin[a] <= ceiling;
+                if (!(row[j] - margin[a] <= ceiling)) {
+                    continue;
+                }
+                count++;
+                double x = row_ssr(t, s, m, v[a], t[j], brake, crash, r);
+                has_nan |= x != x;
+                nan = x != x ? x : nan;
+                least = x < least ? x : least;
             }
         }
-        all = (double)count > most;
     }
-    double least = INFINITY, nan = 0.0;
-    int has_nan = 0;
-    for (Py_ssize_t a = 0; a < speeds; a++) {
-        for (Py_ssize_t j = 0; j < m; j++) {
-            if (!all && !(est[a * m + j] - margin[a] <= ceiling)) {
-                continue;
-            }
-            double x = row_ssr(t, s, m, v[a], t[j], brake, crash, r);
-            if (x != x) {
-                has_nan = 1;
-                nan = x;
-            }
-            else if (x < least) {
-                least = x;
-            }
+    if (!finite || (double)count > most) { /* every row */
+        least = INFINITY;
+        has_nan = 0;
+        for (Py_ssize_t k = 0; k < size; k++) {
+            double x = row_ssr(t, s, m, v[k / m], t[k % m], brake, crash, r);
+            has_nan |= x != x;
+            nan = x != x ? x : nan;
+            least = x < least ? x : least;
         }
     }
     return has_nan ? nan : least;
 }
 
 PyDoc_STRVAR(fits_doc,
-"fits(t, s, v, brake, most, margin) -> (crash, stop)\n"
+"fits(t, s, brake, speeds, most_rows, margin) -> (crash, stop)\n"
 "\n"
-"tracks.stop_fits after its grid of speeds: ``t``, ``s`` (m,) the track (times from\n"
-"0), ``v`` (S,) the speeds, ``brake`` the braking limit, ``most`` the most rows\n"
-"evaluated from the estimates (else every row), ``margin`` tracks.MARGIN. The least\n"
-"sums of squares of the crash and the braked stop, each as numpy's rows give it;\n"
-"the estimates (where the track is finite, in order, and brake > 0) only choose\n"
-"the rows.");
+"tracks.stop_fits: ``t``, ``s`` (m,) the track, ``brake`` the braking limit,\n"
+"``speeds`` the grid's speeds (tracks.SPEEDS), ``most_rows`` the share of the grid's\n"
+"rows evaluated from the estimates at most (else every row, tracks.MOST_ROWS),\n"
+"``margin`` tracks.MARGIN. The least sums of squares of the crash and the braked\n"
+"stop, each as numpy's rows give it; the estimates (where the track is finite, in\n"
+"order, and brake > 0) only choose the rows.");
+
+/* The grid's speeds as stop_fits takes them: np.linspace(0, 1.5 max(speed), S) of
+ * the speeds over ``lag`` samples, the largest NaN where one is. */
+static void
+speed_grid(const double *t, const double *s, Py_ssize_t m, double *v, Py_ssize_t speeds)
+{
+    Py_ssize_t lag = m - 1 < 10 ? m - 1 : 10;
+    double fastest = 0.0;
+    int has_nan = 0;
+    for (Py_ssize_t k = 0; k + lag < m; k++) {
+        double speed = fabs(s[k + lag] - s[k]) / np_maximum(t[k + lag] - t[k], 1e-9);
+        has_nan |= speed != speed;
+        fastest = (k == 0 || speed > fastest) ? speed : fastest;
+    }
+    double stop = 1.5 * (has_nan ? NAN : fastest);
+    /* linspace: delta / div, each k times it (k / div times delta where that is
+     * 0), plus the start 0.0; the last is the stop itself */
+    double div = (double)(speeds - 1), step = (stop - 0.0) / div;
+    for (Py_ssize_t k = 0; k < speeds; k++) {
+        double y = (double)k;
+        y = step == 0 ? y / div * (stop - 0.0) : y * step;
+        v[k] = y + 0.0;
+    }
+    v[speeds - 1] = stop;
+}
 
 static PyObject *
 fits(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -281,37 +311,44 @@ fits(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         PyErr_SetString(PyExc_TypeError, "fits takes 6 arguments");
         return NULL;
     }
-    double brake = PyFloat_AsDouble(args[3]);
-    double most = PyFloat_AsDouble(args[4]);
+    double brake = PyFloat_AsDouble(args[2]);
+    Py_ssize_t speeds = PyLong_AsSsize_t(args[3]);
+    double most_rows = PyFloat_AsDouble(args[4]);
     double factor = PyFloat_AsDouble(args[5]);
     if (PyErr_Occurred()) {
         return NULL;
     }
-    Rows r[3];
+    Rows r[2];
     int got = 0;
-    for (int k = 0; k < 3; k++) {
+    for (int k = 0; k < 2; k++) {
         if (get_rows(args[k], &r[k], 0) < 0) {
             release(r, got);
             return NULL;
         }
         got++;
     }
-    Py_ssize_t m = r[0].len, speeds = r[2].len;
-    if (r[1].len != m || m < 1 || speeds < 1) {
+    Py_ssize_t m = r[0].len;
+    if (r[1].len != m || m < 2 || speeds < 2) {
         release(r, got);
-        PyErr_SetString(PyExc_ValueError, "fits: shapes differ");
+        PyErr_SetString(PyExc_ValueError, "fits: shapes differ, or too few samples");
         return NULL;
     }
-    const double *t = r[0].data, *s = r[1].data, *v = r[2].data;
-    /* scratch: est (speeds, m), margin (speeds), prefix (8, m + 1), a row (m) */
-    size_t need = (size_t)(speeds * m + speeds + 8 * (m + 1) + m);
+    const double *s = r[1].data;
+    /* scratch: t (m), v (speeds), est (speeds, m), margin (speeds), prefix
+     * (8, m + 1), rows (3 m) */
+    size_t need = (size_t)(m + speeds + speeds * m + speeds + 8 * (m + 1) + 3 * m);
     double *work = PyMem_Malloc(sizeof(double) * need);
     if (work == NULL) {
         release(r, got);
         return PyErr_NoMemory();
     }
-    double *est = work, *margin = est + speeds * m, *prefix = margin + speeds;
-    double *row = prefix + 8 * (m + 1);
+    double *t = work, *v = t + m, *est = v + speeds, *margin = est + speeds * m;
+    double *prefix = margin + speeds, *row = prefix + 8 * (m + 1);
+    for (Py_ssize_t k = 0; k < m; k++) { /* the times from the first */
+        t[k] = r[0].data[k] - r[0].data[0];
+    }
+    speed_grid(t, s, m, v, speeds);
+    double most = most_rows * (double)speeds * (double)m;
     /* whether the estimates may be trusted, as stop_fits decides */
     int trusted = brake > 0.0;
     double span = 0.0, s1 = 0.0, s2 = 0.0;
@@ -340,17 +377,22 @@ fits(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         if (trusted && crash) {
             /* tracks.crash_estimates with g = min(t, t_j) summed by the prefixes */
 #define P(q, k) prefix[(k) * 8 + (q)]
+            /* each onset's sums of g, g^2 and s g (the row of scratch, 3 m) */
+            double *g1 = row, *g2 = row + m, *sg = row + 2 * m;
+            for (Py_ssize_t j = 0; j < m; j++) {
+                double tj = t[j], after = (double)(m - 1 - j);
+                g1[j] = P(1, j + 1) + after * tj;
+                g2[j] = P(2, j + 1) + after * tj * tj;
+                sg[j] = P(6, j + 1) + tj * (s1 - P(5, j + 1));
+            }
+            double inverse = 1.0 / (double)m;
             for (Py_ssize_t a = 0; a < speeds; a++) {
-                double vv = v[a], reach = vv * span;
+                double vv = v[a], reach = vv * span, *e = est + a * m;
                 margin[a] = factor * (s2 + (double)m * reach * reach);
                 for (Py_ssize_t j = 0; j < m; j++) {
-                    double tj = t[j], after = (double)(m - 1 - j);
-                    double g1 = P(1, j + 1) + after * tj;
-                    double g2 = P(2, j + 1) + after * tj * tj;
-                    double sg = P(6, j + 1) + tj * (s1 - P(5, j + 1));
-                    double miss = s1 - vv * g1;
-                    est[a * m + j] =
-                        s2 - 2.0 * vv * sg + vv * vv * g2 - miss * miss / (double)m;
+                    double miss = s1 - vv * g1[j];
+                    e[j] = s2 - 2.0 * vv * sg[j] + vv * vv * g2[j] -
+                           miss * miss * inverse;
                 }
             }
 #undef P

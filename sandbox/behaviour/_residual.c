@@ -106,14 +106,23 @@ get_buf(PyObject *obj, Buf *b, int type, int writable)
     return 0;
 }
 
-/* The arguments: their position, type, whether written, and columns (0: optional
- * rows of bools, None for "all" or "none"). */
+/* The arrays: the state's fields (read by name), then the arguments after the state;
+ * each one's type, whether written, and columns (0: optional rows of bools, None for
+ * "all" or "none"). */
 enum {
     POSE, START, VEL, RATE, TRAVEL, LAST_CONTACT, G, CLEAR, ACC, ACC_ABS, ACC_RAW,
     ACC_OBS, ACC_PRED, ACC_T, ACC_ROT, ACC_ROT0, ISOLATING, AGE, GATE, ACC_N,
-    PENDING, DETECTED, SEEN, FRESH, CONTACT, COMMANDS, MOTOR_ACCEL, TURN_ACCEL,
-    BRAKE, READ, CLEARED, ALARMS, TRACE_ROWS, TRACE_INC, N_ARRAYS
+    PENDING, DETECTED, N_FIELDS = DETECTED + 1,
+    SEEN = N_FIELDS, FRESH, CONTACT, COMMANDS, MOTOR_ACCEL, TURN_ACCEL, BRAKE, READ,
+    CLEARED, ALARMS, TRACE_ROWS, TRACE_INC, RING_VALUES, RING_FRESH, N_ARRAYS
 };
+
+static const char *FIELDS[N_FIELDS] = {
+    "pose", "start", "vel", "rate", "travel", "last_contact", "g", "clear", "acc",
+    "acc_abs", "acc_raw", "acc_obs", "acc_pred", "acc_t", "acc_rot", "acc_rot0",
+    "isolating", "age", "gate", "acc_n", "pending", "detected",
+};
+static PyObject *field_names[N_FIELDS]; /* interned at the module's import */
 
 static const struct {
     int type, writable, columns;
@@ -129,41 +138,56 @@ static const struct {
     [CONTACT] = {BOOL, 0, 0}, [COMMANDS] = {F64, 0, 2}, [MOTOR_ACCEL] = {F64, 0, 1},
     [TURN_ACCEL] = {F64, 0, 1}, [BRAKE] = {F64, 0, 1}, [READ] = {I64, 1, 1},
     [CLEARED] = {I64, 1, 1}, [ALARMS] = {I64, 1, 1}, [TRACE_ROWS] = {I64, 1, 1},
-    [TRACE_INC] = {F64, 1, 1},
+    [TRACE_INC] = {F64, 1, 1}, [RING_VALUES] = {F64, 1, 2}, [RING_FRESH] = {BOOL, 1, 1},
 };
 
 /* The scalars, after the arrays. */
-enum { T, H, SUBSTEPS, WINDOW, SP, SH, HEADING_NOISE, MU, LAMBDA, ISOLATION, N_ARGS };
+enum {
+    SLOT, T, H, SUBSTEPS, WINDOW, SP, SH, HEADING_NOISE, MU, LAMBDA, ISOLATION, N_ARGS
+};
+/* The arguments: the state, the arrays after its fields, the scalars. */
+#define N_PASSED (1 + N_ARRAYS - N_FIELDS + N_ARGS)
+
+static void
+release_bufs(Buf *b, const int *present, int count)
+{
+    for (int j = 0; j < count; j++) {
+        if (present[j]) {
+            PyBuffer_Release(&b[j].view);
+        }
+    }
+}
 
 PyDoc_STRVAR(residual_period_doc,
-"residual_period(pose, start, vel, rate, travel, last_contact, g, clear, acc,\n"
-"                acc_abs, acc_raw, acc_obs, acc_pred, acc_t, acc_rot, acc_rot0,\n"
-"                isolating, age, gate, acc_n, pending, detected, seen, fresh,\n"
-"                contact, commands, motor_accel, turn_accel, brake, read, cleared,\n"
-"                alarms, trace_rows, trace_inc, t, h, substeps, window, sp, sh,\n"
-"                heading_noise, mu, lam, isolation) -> (reads, clears, alarms, used)\n"
+"residual_period(state, seen, fresh, contact, commands, motor_accel, turn_accel,\n"
+"                brake, read, cleared, alarms, trace_rows, trace_inc, ring_values,\n"
+"                ring_fresh, slot, t, h, substeps, window, sp, sh, heading_noise,\n"
+"                mu, lam, isolation) -> (reads, clears, alarms, used)\n"
 "\n"
-"One period of the residual detector for n rows: the DetectorState's arrays\n"
-"(float64, the ages, gates and counts int64, ``pending`` and ``detected`` bool)\n"
-"advance in place from the observations ``seen`` (n, 3), ``fresh`` and\n"
-"``contact`` (n,) bool or None (every row fresh, none in contact), the commands\n"
-"(n, 2) and the drives' limits (n,). Writes the rows read on while isolating, the\n"
-"cleared rows and the alarms to ``read``, ``cleared`` and ``alarms`` (int64, n),\n"
-"and where ``trace_rows`` is not None the rows of every window used and their\n"
-"log-likelihood ratios to it and ``trace_inc`` (n); returns how many of each.\n"
-"``window`` [periods], ``sp``, ``sh`` the residuals' standard deviations, ``mu``\n"
-"the shift, ``lam`` the threshold, ``isolation`` [s].");
+"Stores the observed positions and fresh flags in row ``slot`` of the track\n"
+"history's rings ``ring_values`` (L, n, 2) and ``ring_fresh`` (L, n) (None: no\n"
+"history), then does"
+"one period of the residual detector for n rows: the arrays of the DetectorState\n"
+"``state`` (float64, the ages, gates and counts int64, ``pending`` and\n"
+"``detected`` bool) advance in place from the observations ``seen`` (n, 3),\n"
+"``fresh`` and ``contact`` (n,) bool or None (every row fresh, none in contact),\n"
+"the commands (n, 2) and the drives' limits (n,). Writes the rows read on while\n"
+"isolating, the cleared rows and the alarms to ``read``, ``cleared`` and\n"
+"``alarms`` (int64, n), and where ``trace_rows`` is not None the rows of every\n"
+"window used and their log-likelihood ratios to it and ``trace_inc`` (n); returns\n"
+"how many of each. ``window`` [periods], ``sp``, ``sh`` the residuals' standard\n"
+"deviations, ``mu`` the shift, ``lam`` the threshold, ``isolation`` [s].");
 
 static PyObject *
 residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != N_ARRAYS + N_ARGS) {
-        PyErr_SetString(PyExc_TypeError, "residual_period takes 44 arguments");
+    if (nargs != N_PASSED) {
+        PyErr_Format(PyExc_TypeError, "residual_period takes %d arguments", N_PASSED);
         return NULL;
     }
     double s[N_ARGS];
     for (int k = 0; k < N_ARGS; k++) {
-        s[k] = PyFloat_AsDouble(args[N_ARRAYS + k]);
+        s[k] = PyFloat_AsDouble(args[N_PASSED - N_ARGS + k]);
     }
     if (PyErr_Occurred()) {
         return NULL;
@@ -176,35 +200,55 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     Buf b[N_ARRAYS];
     int present[N_ARRAYS];
-    int got = 0;
     for (int k = 0; k < N_ARRAYS; k++) {
-        int optional = SPEC[k].columns == 0 || k == TRACE_ROWS || k == TRACE_INC;
-        present[k] = !(optional && args[k] == Py_None);
-        if (present[k] &&
-            get_buf(args[k], &b[k], SPEC[k].type, SPEC[k].writable) < 0) {
-            for (int j = 0; j < k; j++) {
-                if (present[j]) {
-                    PyBuffer_Release(&b[j].view);
-                }
+        PyObject *obj;
+        if (k < N_FIELDS) { /* the state's field: a reference while it is read */
+            obj = PyObject_GetAttr(args[0], field_names[k]);
+            if (obj == NULL) {
+                release_bufs(b, present, k);
+                return NULL;
             }
+        }
+        else {
+            obj = args[1 + k - N_FIELDS];
+        }
+        int optional = SPEC[k].columns == 0 || k == TRACE_ROWS || k == TRACE_INC ||
+                       k == RING_VALUES || k == RING_FRESH;
+        present[k] = !(optional && obj == Py_None);
+        int failed =
+            present[k] && get_buf(obj, &b[k], SPEC[k].type, SPEC[k].writable) < 0;
+        if (k < N_FIELDS) {
+            Py_DECREF(obj); /* the buffer holds the array */
+        }
+        if (failed) {
+            release_bufs(b, present, k);
             return NULL;
         }
-        got = k + 1;
     }
     Py_ssize_t n = b[RATE].len;
     int shapes = present[TRACE_ROWS] == present[TRACE_INC];
-    for (int k = 0; k < N_ARRAYS && shapes; k++) {
+    for (int k = 0; k < RING_VALUES && shapes; k++) {
         if (present[k]) {
             Py_ssize_t columns = SPEC[k].columns ? SPEC[k].columns : 1;
             shapes = b[k].len == columns * n;
         }
     }
-    if (!shapes) {
-        for (int j = 0; j < got; j++) {
-            if (present[j]) {
-                PyBuffer_Release(&b[j].view);
-            }
+    /* the rings: L rows of n positions and flags, the slot one of them */
+    Py_ssize_t slot = (Py_ssize_t)s[SLOT];
+    double *ring = NULL;
+    char *ring_fresh = NULL;
+    if (shapes && (present[RING_VALUES] || present[RING_FRESH])) {
+        Py_ssize_t rows = n ? b[RING_FRESH].len / n : 0;
+        shapes = present[RING_VALUES] && present[RING_FRESH] && n > 0 &&
+                 b[RING_FRESH].len == rows * n && b[RING_VALUES].len == 2 * rows * n &&
+                 (double)slot == s[SLOT] && slot >= 0 && slot < rows;
+        if (shapes) {
+            ring = (double *)b[RING_VALUES].data + 2 * n * slot;
+            ring_fresh = (char *)b[RING_FRESH].data + n * slot;
         }
+    }
+    if (!shapes) {
+        release_bufs(b, present, N_ARRAYS);
         PyErr_SetString(PyExc_ValueError, "residual_period: shapes differ");
         return NULL;
     }
@@ -240,6 +284,11 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         double *p = pose + 3 * i, *st = start + 3 * i;
         const double *o = seen + 3 * i;
         int is_fresh = fresh == NULL || fresh[i];
+        if (ring != NULL) { /* the history's row of this period */
+            ring[2 * i] = o[0];
+            ring[2 * i + 1] = o[1];
+            ring_fresh[i] = (char)is_fresh;
+        }
         motor_period(p, vel + 2 * i, rate + i, travel + i, cmd[2 * i],
                      cmd[2 * i + 1], accel[i], turn[i], h, dts, substeps);
         age[i] += 1;
@@ -333,11 +382,7 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             alarms[n_alarms++] = i;
         }
     }
-    for (int j = 0; j < got; j++) {
-        if (present[j]) {
-            PyBuffer_Release(&b[j].view);
-        }
-    }
+    release_bufs(b, present, N_ARRAYS);
     return Py_BuildValue("(nnnn)", n_read, n_cleared, n_alarms, n_used);
 }
 
@@ -412,5 +457,11 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC
 PyInit__residual(void)
 {
+    for (int k = 0; k < N_FIELDS; k++) {
+        field_names[k] = PyUnicode_InternFromString(FIELDS[k]);
+        if (field_names[k] == NULL) {
+            return NULL;
+        }
+    }
     return PyModule_Create(&module);
 }

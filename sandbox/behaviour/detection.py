@@ -311,13 +311,13 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         return st.detected.copy(), list(st.kinds)
     if st.history is None:
         st.history = shape_history(ctx)
-    st.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
     if residual_kernel.usable():  # the same numbers in one C call
         events = residual_kernel.ResidualPass.of(ctx).run(
             st, ctx.t, ctx.seen, ctx.fresh, ctx.in_contact, ctx.commands,
             ctx.memory.get("trace"),
         )  # fmt: skip
     else:
+        st.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
         events = residual_pass(st, ctx)
     read_kinds(st, ctx, events)
     return st.detected.copy(), list(st.kinds)
@@ -611,7 +611,6 @@ class Detection:
                 self.position_noise, self.heading_noise, self.motor_accel,
                 self.turn_accel, self.brake_accel,
             )  # fmt: skip
-        st.history.append(t, seen[:, :2], True if fresh is None else fresh)
         events = kernel.run(
             st, t, seen, fresh, contact, commands, self.memory.get("trace")
         )

@@ -43,9 +43,12 @@ def recent_speed(st: DetectorState, i: int) -> float | None:
     t, xy = history.track(i, history.newest - RECENT_SPEED_WINDOW - 1e-9)
     if len(t) < 5:
         return None
-    t = t - t.mean()
-    slope = (t[:, None] * (xy - xy.mean(axis=0))).sum(axis=0) / (t * t).sum()
-    return float(np.hypot(*slope))
+    # The means as ndarray.mean takes them: the sums divided by the count.
+    count = len(t)
+    t = t - np.add.reduce(t) / count
+    centred = xy - np.add.reduce(xy, axis=0) / count
+    slope = np.add.reduce(t[:, None] * centred, axis=0) / np.add.reduce(t * t)
+    return float(np.hypot(slope[0], slope[1]))
 
 
 def stopped_by_impact(st: DetectorState, i: int, brake: float) -> bool:
@@ -58,8 +61,8 @@ def stopped_by_impact(st: DetectorState, i: int, brake: float) -> bool:
     t, xy = st.history.track(i)
     if len(t) < 10:
         return False
-    chord = xy[-5:].mean(axis=0) - xy[:5].mean(axis=0)
-    norm = float(np.hypot(*chord))
+    chord = np.add.reduce(xy[-5:], axis=0) / 5 - np.add.reduce(xy[:5], axis=0) / 5
+    norm = float(np.hypot(chord[0], chord[1]))
     if norm < 1e-9:
         return False
     crash, stop = stop_fits(t, (xy - xy[0]) @ (chord / norm), brake)

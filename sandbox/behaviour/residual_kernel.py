@@ -146,13 +146,14 @@ class ResidualPass:
         commands: np.ndarray,
         trace: list | None = None,
     ) -> tuple:
-        """One period of the detector ``st`` after its history's append.
+        """One period of the detector ``st``, its history's row included.
 
         Parameters
         ----------
         st : DetectorState
             Advanced in place, as :func:`~sandbox.behaviour.detection.residual`
-            advances it before it reads kinds.
+            advances it before it reads kinds (its history's append and
+            :func:`~sandbox.behaviour.detection.residual_pass`).
         t : float [s]
         seen : ndarray (n, 3) [m, m, rad]
             The observed poses.
@@ -173,14 +174,21 @@ class ResidualPass:
         """
         read, cleared, alarms = self._out
         rows, inc = self._trace if trace is not None else (None, None)
-        counts = _residual.residual_period(
-            st.pose, st.start, st.vel, st.rate, st.travel, st.last_contact, st.g,
-            st.clear, st.acc, st.acc_abs, st.acc_raw, st.acc_obs, st.acc_pred,
-            st.acc_t, st.acc_rot, st.acc_rot0, st.isolating, st.age, st.gate,
-            st.acc_n, st.pending, st.detected, c_float64(seen), _bools(fresh),
-            _bools(contact), c_float64(commands), *self._limits, read, cleared,
-            alarms, rows, inc, t, *self._scalars,
-        )  # fmt: skip
+        history = st.history
+        ring = (None, None, 0)
+        if history is not None:  # its row of this period is filled in C
+            ring = (history.values, history.fresh, history.advance(t))
+        try:
+            counts = _residual.residual_period(
+                st, seen, fresh, contact, commands, *self._limits, read, cleared,
+                alarms, rows, inc, *ring, t, *self._scalars,
+            )  # fmt: skip
+        except TypeError:  # an observation not a contiguous float64 or bool array
+            counts = _residual.residual_period(
+                st, c_float64(seen), _bools(fresh), _bools(contact),
+                c_float64(commands), *self._limits, read, cleared, alarms, rows, inc,
+                *ring, t, *self._scalars,
+            )  # fmt: skip
         n_read, n_cleared, n_alarms, n_used = counts
         if trace is not None and n_used:  # (t, vehicle, l) of every window used
             trace.extend(
@@ -262,7 +270,7 @@ def synthetic_run(kernel: bool, n: int = 36, periods: int = 64) -> tuple:
     Returns
     -------
     state : DetectorState
-        After the last period.
+        After the last period, with its history.
     trace : list
         ``(t, vehicle, l)`` of every window used.
     events : list
@@ -319,12 +327,14 @@ def synthetic_run(kernel: bool, n: int = 36, periods: int = 64) -> tuple:
         )
         if st is None:
             st = detection._start(ctx)
+            st.history = detection.shape_history(ctx)
             continue
         if kernel:
             out = ResidualPass.of(ctx).run(
                 st, ctx.t, ctx.seen, ctx.fresh, ctx.in_contact, ctx.commands, trace
             )
         else:
+            st.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
             out = detection.residual_pass(st, ctx)
         events.append([list(rows) for rows in out])
     return st, trace, events
@@ -336,6 +346,14 @@ def _same_runs(a: tuple, b: tuple) -> bool:
     if ea != eb or [x[:2] for x in ta] != [x[:2] for x in tb]:
         return False
     if not same_numbers(np.array([x[2] for x in ta]), np.array([x[2] for x in tb])):
+        return False
+    ha, hb = sa.history, sb.history
+    if not (
+        (ha.count, ha._next) == (hb.count, hb._next)
+        and np.array_equal(ha.fresh, hb.fresh)
+        and same_numbers(ha.times, hb.times)
+        and same_numbers(ha.values, hb.values)
+    ):
         return False
     for name, value in vars(sa).items():
         other = getattr(sb, name)

@@ -79,12 +79,8 @@ def _fits_check() -> bool:
     with np.errstate(all="ignore"):
         for k in range(24):
             t, s, brake = sample_track(rng, k)
-            lag = min(10, len(t) - 1)
-            speed = np.abs(s[lag:] - s[:-lag]) / np.maximum(t[lag:] - t[:-lag], 1e-9)
-            v = np.linspace(0.0, 1.5 * float(speed.max()), SPEEDS)
-            most = MOST_ROWS * v.size * t.size
-            got = _fits.fits(t, s, v, float(brake), most, MARGIN)
-            want = fits_numpy(t, s, v, brake)
+            got = _fits.fits(t, s, brake, SPEEDS, MOST_ROWS, MARGIN)
+            want = fits_numpy(*_numpy_grid(t, s), brake)
             for x, y in zip(got, want, strict=True):
                 if not (x == y or (np.isnan(x) and np.isnan(y))):
                     return False
@@ -96,13 +92,14 @@ def _fits_check() -> bool:
 def sample_track(
     rng: np.random.Generator, k: int
 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Track ``k`` of the check: times from 0 [s], positions [m], a braking limit."""
+    """Track ``k`` of the check: times [s], positions [m], a braking limit."""
     # short where every row of the grid is evaluated (untrusted or still)
     short = k % 12 in (5, 7, 9) or k % 8 == 3
     m = [10, 11, 37][k % 3] if short else [101, 10, 37, 129, 101, 300][k % 6]
     t = np.sort(rng.uniform(0.0, 1.5, m))
     t -= t[0]
     onset, v0 = rng.uniform(0.0, 1.2), rng.uniform(0.1, 2.0)
+    start = [0.0, 3.01, 117.3][k % 3]  # the times of a run, from its start
     brake = [0.5, 2.0, 5.0, 50.0][k % 4] if m < 100 else 5.0
     braked = v0 * v0 / (2.0 * brake) * (1.0 - np.exp(-3.0 * (t - onset)))
     s = np.where(t < onset, v0 * t, v0 * onset + (braked if k % 2 else 0.0))
@@ -115,7 +112,7 @@ def sample_track(
         t[[1, 2]] = t[[2, 1]] + 1e-3  # out of order
     if k % 12 == 9:
         brake = [0.0, np.inf][k // 12 % 2]
-    return t, s, brake
+    return t + start, s, brake
 
 
 class TrackHistory:
@@ -140,18 +137,28 @@ class TrackHistory:
         self.fresh = np.zeros((self.length, n), dtype=bool)
         self.count = 0  # periods stored, at most length
         self._next = 0  # the slot of the next period
+        self._orders: dict[tuple[int, int], np.ndarray] = {}  # _order's, kept
 
     def __len__(self) -> int:
         return self.count
 
     def append(self, t: float, values: np.ndarray, fresh: np.ndarray) -> None:
         """Store one period's observations (copied), dropping the oldest when full."""
-        k = self._next
-        self.times[k] = t
+        k = self.advance(t)
         self.values[k] = values
         self.fresh[k] = fresh
+
+    def advance(self, t: float) -> int:
+        """Start storing one period at ``t``, dropping the oldest when full.
+
+        Returns the slot whose ``values[slot]`` and ``fresh[slot]`` the caller fills
+        (:meth:`append` does).
+        """
+        k = self._next
+        self.times[k] = t
         self._next = (k + 1) % self.length
         self.count = min(self.count + 1, self.length)
+        return k
 
     @property
     def newest(self) -> float:
@@ -159,9 +166,13 @@ class TrackHistory:
         return float(self.times[(self._next - 1) % self.length])
 
     def _order(self) -> np.ndarray:
-        """The slots of the stored periods, oldest first."""
+        """The slots of the stored periods, oldest first (kept: not to be written)."""
         start = (self._next - self.count) % self.length
-        return (start + np.arange(self.count)) % self.length
+        order = self._orders.get((start, self.count))
+        if order is None:
+            order = (start + np.arange(self.count)) % self.length
+            self._orders[start, self.count] = order
+        return order
 
     def track(self, i: int, since: float = -np.inf) -> tuple[np.ndarray, np.ndarray]:
         """Vehicle ``i``'s fresh observations at or after ``since``, oldest first.
@@ -200,15 +211,21 @@ def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]
     >>> bool(crash < stop)
     True
     """
+    if _fits is not None and USE_KERNEL and fits_agree():  # the same numbers in C
+        return _fits.fits(
+            c_float64(t), c_float64(s), float(brake), SPEEDS, MOST_ROWS, MARGIN
+        )
+    return fits_numpy(*_numpy_grid(t, s), brake)
+
+
+def _numpy_grid(t: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The times from the first [s], the positions [m] and the grid's speeds [m/s]."""
     t = np.asarray(t, dtype=float) - t[0]
     s = np.asarray(s, dtype=float)
     lag = min(10, len(t) - 1)
     speed = np.abs(s[lag:] - s[:-lag]) / np.maximum(t[lag:] - t[:-lag], 1e-9)
     v = np.linspace(0.0, 1.5 * float(speed.max()), SPEEDS)
-    if _fits is not None and USE_KERNEL and fits_agree():  # the same numbers in C
-        most = MOST_ROWS * v.size * t.size
-        return _fits.fits(t, c_float64(s), v, float(brake), most, MARGIN)
-    return fits_numpy(t, s, v, brake)
+    return t, s, v
 
 
 def fits_numpy(
