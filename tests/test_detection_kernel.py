@@ -43,6 +43,7 @@ class Counted:
         real = residual_kernel._residual
         if real is None:
             return
+        residual_kernel.kernel_agrees()  # its check's passes are not counted
 
         def period(*args):
             self.calls += 1
