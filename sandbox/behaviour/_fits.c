@@ -1,12 +1,19 @@
-/* The closed-form estimates of the braked-stop fits (sandbox/behaviour/tracks.py).
+/* The crash-or-stop fits of sandbox/behaviour/tracks.py in C.
  *
- * tracks.stop_estimates calls this where this optional extension is built: every
- * row's sum of squares of the braked-stop model over the grid of speeds and onsets,
- * from prefix sums of t^q and s t^q, as the numpy function computes it (the same
- * formula in the same order). The estimates only choose which rows the fit
- * evaluates: each is trusted within a margin 10^5 times its rounding bound, so any
- * rounding of the same formula chooses rows among which the least sum is the same
- * (tracks.py's module docstring).
+ * stop_estimates: tracks.stop_estimates calls this where this optional extension is
+ * built: every row's sum of squares of the braked-stop model over the grid of speeds
+ * and onsets, from prefix sums of t^q and s t^q, as the numpy function computes it
+ * (the same formula in the same order). The estimates only choose which rows the
+ * fit evaluates: each is trusted within a margin 10^5 times its rounding bound, so
+ * any rounding of the same formula chooses rows among which the least sum is the
+ * same (tracks.py's module docstring).
+ *
+ * fits: tracks.stop_fits whole, where its first-use check passes (tracks.fits_agree):
+ * the grid of speeds (numpy's linspace), both models' estimates by prefix sums (any
+ * rounding), the candidate rows, and each candidate's sum of squares as numpy takes
+ * it in tracks.least_row: the same elementwise operations (numpy's minimum and clip,
+ * numpy_rules.h) and numpy's pairwise summation of a contiguous row, compiled
+ * without fused multiply-adds.
  */
 
 #include "numpy_rules.h"

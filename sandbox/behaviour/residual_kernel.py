@@ -12,15 +12,19 @@ operations element by element in its order, with the same double operations, so
 every number is numpy's to the bit. What is rare stays in Python, vehicle by
 vehicle, as the numpy path does it: the kind read at an alarm and while isolating
 (:func:`~sandbox.behaviour.isolation.isolate`), the kind cleared with a detection,
-and the ``trace`` of a study; :meth:`ResidualPass.run` returns the rows concerned.
+and the ``trace`` of a study; :meth:`ResidualPass.run` returns the rows concerned
+(:data:`QUIET` in a period without any, most periods). The same call stores the
+period's row of the observed track history.
 
 The loop takes ``sqrt``, ``hypot``, ``sin``, ``cos``, ``exp``, ``log`` and ``log1p``
 from the C library, whose results may differ from numpy's by a unit in the last
 place. At the first use :func:`kernel_agrees` compares each with numpy on a few
-thousand arguments (special values included), and a whole pass with the numpy path
-on a synthetic platoon of a hundred periods (noise, lost packets, contacts, alarms,
-isolation and clearings); the C loop is used only if every result has the same bits
-(``tests/test_detection_kernel.py`` compares whole runs). :data:`USE_KERNEL` False
+thousand arguments (special values included), and whole passes with
+:func:`~sandbox.behaviour.detection.residual_pass` on a synthetic platoon of 36
+vehicles over 64 periods (noise, lost packets, contacts, a NaN observation, alarms,
+windows read while isolating, clearings; :func:`synthetic_run`); the C loop is used
+only if every result has the same bits (:func:`same_numbers`;
+``tests/test_detection_kernel.py`` compares whole runs). :data:`USE_KERNEL` False
 forces the numpy path.
 """
 

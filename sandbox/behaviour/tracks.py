@@ -34,6 +34,14 @@ the same reduction of a contiguous row): the fit returns the very numbers of the
 whole grid, in about 0.5 ms. Where the estimates cannot be trusted (a non-finite
 sample, times not in order, a braking limit that is not a positive number) or leave
 too many rows, the whole grid is evaluated, a block of rows at a time.
+
+Where the optional extension ``sandbox.behaviour._fits`` (``_fits.c``) is built, the
+whole fit is one C call (about 0.05 ms): the grid of speeds, both models' estimates
+(any rounding of them chooses rows among which the least sum is the same), the
+candidate rows, and each candidate's sum of squares as numpy takes it (its minimum,
+its clip, its pairwise sums of a row). :func:`fits_agree` compares it with
+:func:`fits_numpy` on a few tracks at the first use, and the C fit is used only if
+every result is the same number; :data:`USE_KERNEL` False forces numpy.
 """
 
 from __future__ import annotations
