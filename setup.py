@@ -53,7 +53,7 @@ def _exact(source: str) -> Extension:
     return Extension(
         name,
         [source],
-        depends=["sandbox/numpy_rules.h"],
+        depends=["sandbox/numpy_rules.h", "sandbox/motor_model.h"],
         optional=True,
         **_numpy_api(),
     )
@@ -71,6 +71,7 @@ EXACT = tuple(
         "sandbox/loop/_period.c",
         "sandbox/behaviour/_fits.c",
         "sandbox/behaviour/_draws.c",
+        "sandbox/behaviour/_residual.c",
     )
 )
 

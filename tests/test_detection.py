@@ -9,7 +9,8 @@ import pytest
 from helpers import SCENARIOS, run_scenario
 
 from sandbox import Simulation, load_scenario, simulate
-from sandbox.behaviour.detection import llr, stop_fits
+from sandbox.behaviour.detection import llr
+from sandbox.behaviour.tracks import stop_fits
 from sandbox.errors import ScenarioError
 
 FAILURES = SCENARIOS / "failures"

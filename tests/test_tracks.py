@@ -57,8 +57,17 @@ def track(rng, kind: int, m: int):
     return t, s + rng.normal(0.0, noise, m) + rng.uniform(-3.0, 3.0), brake
 
 
+@pytest.fixture(params=[True, False], ids=["c", "numpy"])
+def kernel(request, monkeypatch):
+    """The fits in C (where built) and by numpy."""
+    if request.param and tracks._fits is None:
+        pytest.skip("behaviour._fits not built")
+    monkeypatch.setattr(tracks, "USE_KERNEL", request.param)
+    return request.param
+
+
 @pytest.mark.parametrize("seed", range(6))
-def test_fit_equals_the_whole_grid(seed):
+def test_fit_equals_the_whole_grid(seed, kernel):
     rng = np.random.default_rng(seed)
     for k in range(40):
         t, s, brake = track(rng, k % 5, int(rng.integers(10, 102)))
@@ -76,7 +85,9 @@ def test_crash_and_stop_told_apart():
 
 
 def test_few_rows_are_evaluated(monkeypatch):
-    # The closed forms leave a handful of the 61 x 101 rows on a clean track.
+    # The closed forms leave a handful of the 61 x 101 rows on a clean track (the
+    # numpy fits, whose rows are seen).
+    monkeypatch.setattr(tracks, "USE_KERNEL", False)
     seen = []
     least_row = tracks.least_row
 
@@ -95,7 +106,7 @@ def test_few_rows_are_evaluated(monkeypatch):
     "case",
     ["nan sample", "unsorted times", "zero brake", "standing still", "few samples"],
 )
-def test_hostile_tracks_as_the_grid(case):
+def test_hostile_tracks_as_the_grid(case, kernel):
     # Where the closed forms cannot be trusted, the whole grid is evaluated.
     t = np.arange(0.0, 0.5, 0.01)
     s = np.minimum(t, 0.2)

@@ -87,7 +87,9 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.behaviour.tracks import TrackHistory, stop_fits
+from sandbox.behaviour import residual_kernel
+from sandbox.behaviour.isolation import SHAPE_HISTORY, read_kinds
+from sandbox.behaviour.tracks import TrackHistory
 from sandbox.model.kernels import motor_model
 from sandbox.plugins.registration import (
     DetectorContext,
@@ -98,14 +100,6 @@ from sandbox.plugins.registration import (
 
 #: The kinds a detection names (failure kinds of :mod:`sandbox.model.failures`).
 KINDS = ("stop", "spin", "stuck_steering", "uncontrolled", "crash")
-#: Speed below which a vehicle counts as still, for isolation [m/s].
-STILL_SPEED = 0.1
-#: How long after a contact a stop counts as a crash [s].
-CRASH_CONTACT_WINDOW = 1.0
-#: Over how long the speed observed lately is fitted, for isolation [s].
-RECENT_SPEED_WINDOW = 0.2
-#: How much of the observed track the crash-or-stop fit reads [s].
-SHAPE_HISTORY = 1.0
 #: Angular motor limit as a multiple of ``motor_accel / radius`` (as the physics).
 ANGULAR_MOTOR_FACTOR = 4.0
 
@@ -301,83 +295,6 @@ def _floored(x: np.ndarray) -> np.ndarray:
     return np.where(x > 0.0, x, 0.0)
 
 
-def _recent_speed(st: DetectorState, i: int) -> float | None:
-    """Vehicle ``i``'s speed over the last :data:`RECENT_SPEED_WINDOW` s [m/s].
-
-    The slope of a straight line fitted to its fresh broadcast positions; None with
-    fewer than 5 of them.
-    """
-    history = st.history
-    if history is None or not len(history):
-        return None
-    t, xy = history.track(i, history.newest - RECENT_SPEED_WINDOW - 1e-9)
-    if len(t) < 5:
-        return None
-    t = t - t.mean()
-    slope = (t[:, None] * (xy - xy.mean(axis=0))).sum(axis=0) / (t * t).sum()
-    return float(np.hypot(*slope))
-
-
-def _stopped_by_impact(st: DetectorState, i: int, brake: float) -> bool:
-    """Whether vehicle ``i``'s observed track fits a crash better than a stop.
-
-    Without a finite braking limit the two move alike: no.
-    """
-    if not np.isfinite(brake) or st.history is None:
-        return False
-    t, xy = st.history.track(i)
-    if len(t) < 10:
-        return False
-    chord = xy[-5:].mean(axis=0) - xy[:5].mean(axis=0)
-    norm = float(np.hypot(*chord))
-    if norm < 1e-9:
-        return False
-    crash, stop = stop_fits(t, (xy - xy[0]) @ (chord / norm), brake)
-    return crash < stop
-
-
-def _isolate(st: DetectorState, i: int, t: float, ctx: DetectorContext) -> str:
-    """The kind of the alarm of vehicle ``i`` from its accumulated residuals."""
-    # Which component dominates: summed magnitudes (a spinning vehicle's heading
-    # residual changes sign as its controller turns against it); the sign of the
-    # along-track sum says deficit or excess.
-    za, zc, zh = st.acc_abs[i]
-    duration = max(st.acc_t[i], ctx.dt)
-    windows = max(1.0, st.acc_t[i] / max(ctx.params["window"], ctx.dt))
-    brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
-    brake = float(brakes[i])
-    # Slow: the speed observed lately (a line fitted to the last RECENT_SPEED_WINDOW s
-    # of broadcast positions) is below half the model's, the commanded one: a
-    # stopped or spinning vehicle once its drive has braked (an integral over the
-    # sums would count the travel before the onset, and the braking, as moving).
-    recent = _recent_speed(st, i)
-    commanded = float(np.hypot(*st.vel[i]))
-    if recent is None:  # too few observations: the sums since g left 0
-        slow = st.acc_obs[i] < max(STILL_SPEED * duration, 0.5 * st.acc_pred[i])
-    else:
-        slow = recent < max(STILL_SPEED, 0.5 * commanded)
-    # Whether the observed heading turns, beyond 4 standard deviations of the sum of
-    # the windows' noisy heading differences: after the first window once there are
-    # more (the first one holds the turn the vehicle made before the fault).
-    sh = np.sqrt(2.0 * ctx.heading_noise**2 + ctx.params["heading_floor"] ** 2)
-    late = int(st.acc_n[i]) - 1
-    rot = st.acc_rot[i] - st.acc_rot0[i] if late > 0 else st.acc_rot[i]
-    turned = abs(rot) > 4.0 * sh * np.sqrt(max(late, 1))
-    if slow and turned:
-        return "spin"
-    if slow and st.acc[i, 0] < 0 and (za >= zc or zh >= zc):
-        # At rest without turning: the commanded turn did not happen either.
-        if t - st.last_contact[i] <= CRASH_CONTACT_WINDOW:
-            return "crash"
-        # Stopped harder than the drive can brake: an impact.
-        return "crash" if _stopped_by_impact(st, i, brake) else "stop"
-    if zh >= max(za, zc):
-        # Moving: the speed is off the commands too (beyond 2 sigma) when uncontrolled.
-        speed_off = abs(st.acc[i, 0]) > 2.0 * np.sqrt(windows)
-        return "uncontrolled" if speed_off else "stuck_steering"
-    return "uncontrolled"
-
-
 @register_detector("oracle")
 def oracle(ctx: DetectorContext) -> np.ndarray:
     """The truth, known at once (v0.1's behaviour)."""
@@ -392,10 +309,36 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         # The first poses (or, with a delay, the first copies held): start from them.
         st = ctx.memory["state"] = _start(ctx)
         return st.detected.copy(), list(st.kinds)
-    p = ctx.params
     if st.history is None:
         st.history = shape_history(ctx)
-    st.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
+    if residual_kernel.usable():  # the same numbers in one C call
+        events = residual_kernel.ResidualPass.of(ctx).run(
+            st, ctx.t, ctx.seen, ctx.fresh, ctx.in_contact, ctx.commands,
+            ctx.memory.get("trace"),
+        )  # fmt: skip
+    else:
+        st.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
+        events = residual_pass(st, ctx)
+    read_kinds(st, ctx, events)
+    return st.detected.copy(), list(st.kinds)
+
+
+def residual_pass(st: DetectorState, ctx: DetectorContext) -> tuple:
+    """:func:`residual`'s period after the history's append, up to reading kinds.
+
+    The motor model, the windows, the contact gate, the due windows' residuals and
+    CUSUMs, the sums for isolation, the latch of an alarm and a clearing: the
+    definition of :meth:`~sandbox.behaviour.residual_kernel.ResidualPass.run`, which
+    returns the same. Each row's kind is read after (:func:`_read_kinds`), from its
+    own row alone.
+
+    Returns
+    -------
+    tuple
+        :data:`~sandbox.behaviour.residual_kernel.QUIET`, or the rows read on while
+        isolating, cleared and alarming (ndarray of intp, increasing).
+    """
+    p = ctx.params
     mu, lam = float(p["shift"]), float(p["lambda"])
     window = max(1, int(round(p["window"] / ctx.dt)))
     sp = np.sqrt(2.0 * ctx.position_noise**2 + p["noise_floor"] ** 2)
@@ -417,7 +360,7 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     st.gate = np.where(contact, 2 * window, np.maximum(st.gate - 1, 0))
     due = (st.age >= window) & ctx.fresh & ~st.pending
     if not np.any(due):
-        return st.detected.copy(), list(st.kinds)
+        return residual_kernel.QUIET
     rows = np.flatnonzero(due)
     seen = ctx.seen[rows]
     pred = st.pose[rows]
@@ -451,19 +394,16 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     used = np.flatnonzero(~gated)
     held = st.detected[rows[used]]
     k_det, k_new = used[held], used[~held]
-    for k in k_det[ctx.t <= st.isolating[rows[k_det]] + 1e-9]:
-        i = rows[k]  # the kind from more residuals
-        _accumulate(st, np.array([i]), np.array([k]), window_sums)
-        # The kind from all residuals so far: a vehicle still braking (a stop or a
-        # spin) or a runaway whose speed is near the commanded one is plain only
-        # once its drive has reached its faulty command.
-        st.kinds[i] = _isolate(st, i, ctx.t, ctx)
+    k_read = k_det[ctx.t <= st.isolating[rows[k_det]] + 1e-9]
+    # The kind from more residuals: a vehicle still braking (a stop or a spin) or a
+    # runaway whose speed is near the commanded one is plain only once its drive has
+    # reached its faulty command.
+    _accumulate(st, rows[k_read], k_read, window_sums)
     i_det = rows[k_det]
     st.clear[i_det] = _floored(st.clear[i_det] - inc[k_det])
-    for i in i_det[st.clear[i_det] >= lam]:
-        st.detected[i] = False
-        st.kinds[i] = ""
-        st.clear[i] = 0.0
+    cleared = i_det[st.clear[i_det] >= lam]
+    st.detected[cleared] = False
+    st.clear[cleared] = 0.0
     i_new = rows[k_new]
     restart = i_new[st.g[i_new] <= 0.0]  # g left 0: new sums
     st.acc[restart] = 0.0
@@ -475,18 +415,20 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     st.g[i_new] = _floored(st.g[i_new] + inc[k_new])
     rising = st.g[i_new] > 0.0
     _accumulate(st, i_new[rising], k_new[rising], window_sums)
-    for i in i_new[st.g[i_new] >= lam]:
-        st.detected[i] = True
-        st.kinds[i] = _isolate(st, i, ctx.t, ctx)
-        # Read on at least until a failed drive could have braked to rest from the
-        # commanded speed, and one window more.
-        brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
+    alarms = i_new[st.g[i_new] >= lam]
+    st.detected[alarms] = True
+    # Read on at least until a failed drive could have braked to rest from the
+    # commanded speed, and one window more.
+    brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
+    for i in alarms:
         braking = float(np.hypot(*st.vel[i])) / float(brakes[i])
         st.isolating[i] = ctx.t + max(float(p["isolation"]), braking + window * ctx.dt)
-        st.g[i] = 0.0
-        st.clear[i] = 0.0
+    st.g[alarms] = 0.0
+    st.clear[alarms] = 0.0
     st.pending[rows] = True  # the next window starts at the next observation
-    return st.detected.copy(), list(st.kinds)
+    if not (len(k_read) or len(cleared) or len(alarms)):
+        return residual_kernel.QUIET
+    return rows[k_read], cleared, alarms
 
 
 class Detection:
@@ -537,6 +479,9 @@ class Detection:
         self._known = np.zeros(n, dtype=bool)
         self._open: dict[int, dict] = {}
         self.events: list[dict] = []
+        # The built-in residual, whose periods may take its pass in C.
+        self._builtin = self.func is residual
+        self._kernel: residual_kernel.ResidualPass | None = None
         # Where detections are written: each world's names and events (one world).
         self._world_size = n
         self._world_names = [self.names]
@@ -567,6 +512,7 @@ class Detection:
         out._sent = deque(maxlen=first._sent.maxlen)
         out._known = np.zeros(len(out.motor_accel), dtype=bool)
         out._open = {}
+        out._kernel = None
         out._world_size = len(first.names)
         out._world_names = [d.names for d in detections]
         out._world_events = [d.events for d in detections]
@@ -606,9 +552,30 @@ class Detection:
         if self.intended is not None:
             self._sent.append(self.intended)
             self.intended = None
-        full = len(self._sent) == self._sent.maxlen
+        commands = self._sent[0] if len(self._sent) == self._sent.maxlen else None
+        st = self.memory.get("state") if self._builtin else None
+        if (
+            st is not None
+            and commands is not None
+            and st.history is not None
+            and residual_kernel.usable()
+        ):
+            return self._residual_pass(
+                st, t, dt, fleet, seen, fresh, contact, failing, commands
+            )
+        ctx = self._context(t, dt, fleet, seen, fresh, contact, failing, commands)
+        out = self.func(ctx)
+        kinds = None
+        if isinstance(out, tuple):
+            out, kinds = out
+        return self._note(t, np.asarray(out, dtype=bool).copy(), kinds)
+
+    def _context(
+        self, t, dt, fleet, seen, fresh, contact, failing, commands
+    ) -> DetectorContext:
+        """What the detector sees at ``t`` (see :meth:`update_rows`)."""
         n = len(fleet.theta)
-        ctx = DetectorContext(
+        return DetectorContext(
             t=t,
             dt=dt,
             pos=fleet.pos,
@@ -616,7 +583,7 @@ class Detection:
             vel=fleet.vel,
             seen=seen,
             fresh=np.ones(n, dtype=bool) if fresh is None else fresh,
-            commands=self._sent[0] if full else None,
+            commands=commands,
             in_contact=np.zeros(n, dtype=bool) if contact is None else contact,
             failing=failing,
             position_noise=self.position_noise,
@@ -628,11 +595,34 @@ class Detection:
             memory=self.memory,
             brake_accel=self.brake_accel,
         )
-        out = self.func(ctx)
-        kinds = None
-        if isinstance(out, tuple):
-            out, kinds = out
-        known = np.asarray(out, dtype=bool).copy()
+
+    def _residual_pass(
+        self, st, t, dt, fleet, seen, fresh, contact, failing, commands
+    ) -> np.ndarray:
+        """The built-in ``residual`` of a period by its pass in C, without a context.
+
+        The same state, kinds and events as :func:`residual` called through
+        :meth:`_context`: the context is built only when a kind is to be read.
+        """
+        kernel = self._kernel
+        if kernel is None or kernel.dt != dt:
+            kernel = self._kernel = residual_kernel.ResidualPass(
+                len(fleet.theta), dt, self.substeps, self.params,
+                self.position_noise, self.heading_noise, self.motor_accel,
+                self.turn_accel, self.brake_accel,
+            )  # fmt: skip
+        events = kernel.run(
+            st, t, seen, fresh, contact, commands, self.memory.get("trace")
+        )
+        if events is residual_kernel.QUIET:  # no kind read: nothing detected or not
+            self._known = known = self._known.copy()
+            return known
+        ctx = self._context(t, dt, fleet, seen, fresh, contact, failing, commands)
+        read_kinds(st, ctx, events)
+        return self._note(t, st.detected.copy(), st.kinds)
+
+    def _note(self, t: float, known: np.ndarray, kinds: list | None) -> np.ndarray:
+        """Record the detections made, re-read and withdrawn at ``t``; ``known``."""
         for i in np.flatnonzero(known & ~self._known):
             kind = kinds[i] if kinds is not None and kinds[i] else "unknown"
             w, j = divmod(int(i), self._world_size)

@@ -60,7 +60,7 @@ Contacts, isolation, clearing
     at the maximising ``tau`` and the observed track, again at every observation for
     ``isolation`` seconds (and until a failed drive could have braked to rest from
     the commanded speed, plus 0.1 s), with the rules of ``residual``'s
-    :func:`~sandbox.behaviour.detection._isolate` for a slow vehicle (spin, stop or
+    :func:`~sandbox.behaviour.isolation.isolate` for a slow vehicle (spin, stop or
     crash, the crash-or-stop fit of the track) and, for a moving one, the fit: an
     along-track rate beyond ``SPEED_Z`` standard errors is ``uncontrolled``, else a
     turn-rate beyond ``SPEED_Z`` and the cross-track one a ``stuck_steering``, else
@@ -76,17 +76,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from sandbox.behaviour.detection import (
-    CRASH_CONTACT_WINDOW,
-    RECENT_SPEED_WINDOW,
     RESIDUAL_PARAMS,
-    STILL_SPEED,
     DetectorState,
     _advance_model,
-    _recent_speed,
     _start,
-    _stopped_by_impact,
     _wrap,
     shape_history,
+)
+from sandbox.behaviour.isolation import (
+    CRASH_CONTACT_WINDOW,
+    RECENT_SPEED_WINDOW,
+    STILL_SPEED,
+    recent_speed,
+    stopped_by_impact,
 )
 from sandbox.behaviour.tracks import TrackHistory
 from sandbox.plugins.registration import DetectorContext, Param, register_detector
@@ -377,7 +379,7 @@ def _kind(st: GlrState, i: int, t: float, ctx: DetectorContext, fit: tuple) -> s
     z_h = mu[2] / se[2]
     brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
     brake = float(brakes[i])
-    recent = _recent_speed(model, i)
+    recent = recent_speed(model, i)
     commanded = float(np.hypot(*model.vel[i]))
     slow = recent is not None and recent < max(STILL_SPEED, 0.5 * commanded)
     if slow:
@@ -389,7 +391,7 @@ def _kind(st: GlrState, i: int, t: float, ctx: DetectorContext, fit: tuple) -> s
             return "spin"
         if t - model.last_contact[i] <= CRASH_CONTACT_WINDOW:
             return "crash"
-        return "crash" if _stopped_by_impact(model, i, brake) else "stop"
+        return "crash" if stopped_by_impact(model, i, brake) else "stop"
     if abs(z_a) > SPEED_Z:
         return "uncontrolled"
     if abs(z_h) > SPEED_Z and abs(z_h) >= abs(z_c):

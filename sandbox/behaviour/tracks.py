@@ -34,6 +34,14 @@ the same reduction of a contiguous row): the fit returns the very numbers of the
 whole grid, in about 0.5 ms. Where the estimates cannot be trusted (a non-finite
 sample, times not in order, a braking limit that is not a positive number) or leave
 too many rows, the whole grid is evaluated, a block of rows at a time.
+
+Where the optional extension ``sandbox.behaviour._fits`` (``_fits.c``) is built, the
+whole fit is one C call (about 0.05 ms): the grid of speeds, both models' estimates
+(any rounding of them chooses rows among which the least sum is the same), the
+candidate rows, and each candidate's sum of squares as numpy takes it (its minimum,
+its clip, its pairwise sums of a row). :func:`fits_agree` compares it with
+:func:`fits_numpy` on a few tracks at the first use, and the C fit is used only if
+every result is the same number; :data:`USE_KERNEL` False forces numpy.
 """
 
 from __future__ import annotations
@@ -56,8 +64,63 @@ try:
 except ImportError:  # pragma: no cover - built without a C compiler
     _fits = None
 
-#: The braked stop's estimates in C where that extension is built (False: numpy).
+#: The fits in C where that extension is built (False: numpy).
 USE_KERNEL = True
+_fits_agreed: bool | None = None
+
+
+def fits_agree() -> bool:
+    """Whether the whole fit in C gives :func:`fits_numpy`'s numbers here (once).
+
+    On 24 random tracks: braked stops and crashes with and without noise, of 10 to
+    150 samples (numpy's sums of up to 128 terms and of more), still and constant
+    ones, and untrusted ones (a NaN, times out of order, no braking limit).
+    """
+    global _fits_agreed
+    if _fits_agreed is None:
+        _fits_agreed = _fits is not None and _fits_check()
+    return _fits_agreed
+
+
+def _fits_check() -> bool:
+    rng = np.random.default_rng(20261209)
+    with np.errstate(all="ignore"):
+        for k in range(24):
+            t, s, brake = sample_track(rng, k)
+            got = _fits.fits(t, s, brake, SPEEDS, MOST_ROWS, MARGIN)
+            want = fits_numpy(*_numpy_grid(t, s), brake)
+            for x, y in zip(got, want, strict=True):
+                if not (x == y or (np.isnan(x) and np.isnan(y))):
+                    return False
+                if np.signbit(x) != np.signbit(y) and not np.isnan(x):
+                    return False
+    return True
+
+
+def sample_track(
+    rng: np.random.Generator, k: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Track ``k`` of the check: times [s], positions [m], a braking limit."""
+    # short where every row of the grid is evaluated (untrusted or still)
+    short = k % 12 in (5, 7, 9) or k % 8 == 3
+    m = [10, 11, 19][k % 3] if short else [101, 10, 37, 130, 23, 150][k % 6]
+    t = np.sort(rng.uniform(0.0, 1.5, m))
+    t -= t[0]
+    onset, v0 = rng.uniform(0.0, 1.2), rng.uniform(0.1, 2.0)
+    start = [0.0, 3.01, 117.3][k % 3]  # the times of a run, from its start
+    brake = [0.5, 2.0, 5.0, 50.0][k % 4] if m < 100 else 5.0
+    braked = v0 * v0 / (2.0 * brake) * (1.0 - np.exp(-3.0 * (t - onset)))
+    s = np.where(t < onset, v0 * t, v0 * onset + (braked if k % 2 else 0.0))
+    s = s + rng.normal(0.0, 0.01 * (k % 3), m)
+    if k % 8 == 3:
+        s = np.zeros(m) if k % 16 == 3 else np.full(m, -0.0)  # still
+    if k % 12 == 5:
+        s[m // 2] = np.nan
+    if k % 12 == 7:
+        t[[1, 2]] = t[[2, 1]] + 1e-3  # out of order
+    if k % 12 == 9:
+        brake = [0.0, np.inf][k // 12 % 2]
+    return t + start, s, brake
 
 
 class TrackHistory:
@@ -82,18 +145,28 @@ class TrackHistory:
         self.fresh = np.zeros((self.length, n), dtype=bool)
         self.count = 0  # periods stored, at most length
         self._next = 0  # the slot of the next period
+        self._orders: dict[tuple[int, int], np.ndarray] = {}  # _order's, kept
 
     def __len__(self) -> int:
         return self.count
 
     def append(self, t: float, values: np.ndarray, fresh: np.ndarray) -> None:
         """Store one period's observations (copied), dropping the oldest when full."""
-        k = self._next
-        self.times[k] = t
+        k = self.advance(t)
         self.values[k] = values
         self.fresh[k] = fresh
+
+    def advance(self, t: float) -> int:
+        """Start storing one period at ``t``, dropping the oldest when full.
+
+        Returns the slot whose ``values[slot]`` and ``fresh[slot]`` the caller fills
+        (:meth:`append` does).
+        """
+        k = self._next
+        self.times[k] = t
         self._next = (k + 1) % self.length
         self.count = min(self.count + 1, self.length)
+        return k
 
     @property
     def newest(self) -> float:
@@ -101,9 +174,13 @@ class TrackHistory:
         return float(self.times[(self._next - 1) % self.length])
 
     def _order(self) -> np.ndarray:
-        """The slots of the stored periods, oldest first."""
+        """The slots of the stored periods, oldest first (kept: not to be written)."""
         start = (self._next - self.count) % self.length
-        return (start + np.arange(self.count)) % self.length
+        order = self._orders.get((start, self.count))
+        if order is None:
+            order = (start + np.arange(self.count)) % self.length
+            self._orders[start, self.count] = order
+        return order
 
     def track(self, i: int, since: float = -np.inf) -> tuple[np.ndarray, np.ndarray]:
         """Vehicle ``i``'s fresh observations at or after ``since``, oldest first.
@@ -142,11 +219,31 @@ def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]
     >>> bool(crash < stop)
     True
     """
+    if _fits is not None and USE_KERNEL and fits_agree():  # the same numbers in C
+        return _fits.fits(
+            c_float64(t), c_float64(s), float(brake), SPEEDS, MOST_ROWS, MARGIN
+        )
+    return fits_numpy(*_numpy_grid(t, s), brake)
+
+
+def _numpy_grid(t: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The times from the first [s], the positions [m] and the grid's speeds [m/s]."""
     t = np.asarray(t, dtype=float) - t[0]
     s = np.asarray(s, dtype=float)
     lag = min(10, len(t) - 1)
     speed = np.abs(s[lag:] - s[:-lag]) / np.maximum(t[lag:] - t[:-lag], 1e-9)
     v = np.linspace(0.0, 1.5 * float(speed.max()), SPEEDS)
+    return t, s, v
+
+
+def fits_numpy(
+    t: np.ndarray, s: np.ndarray, v: np.ndarray, brake: float
+) -> tuple[float, float]:
+    """:func:`stop_fits` after its grid of speeds ``v``, by numpy (the definition).
+
+    ``t`` (m,) from 0 [s], ``s`` (m,) [m]; the braked stop's estimates in C where
+    that loop is built (they only choose rows).
+    """
     trusted = (
         bool(np.all(np.isfinite(t)) and np.all(np.isfinite(s)))
         and bool(np.all(np.diff(t) >= 0.0))

@@ -417,7 +417,9 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             passive = passive | mask
             external = mask if external is None else external | mask
         if self._detection is not None:  # what the controllers ask for, broadcast
-            self._detection.intended = np.column_stack((v1, v2))
+            intended = np.empty((len(v1), 2))  # np.column_stack's, in two copies
+            intended[:, 0], intended[:, 1] = v1, v2
+            self._detection.intended = intended
         elif self._detecting:
             for w in self._live_worlds():
                 rows = self._rows(w)

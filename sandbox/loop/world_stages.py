@@ -135,8 +135,9 @@ class WorldStages:
     def _detect_batched(self, t: float, failing: np.ndarray) -> np.ndarray:
         """One call of a batched detector on the rows of all worlds."""
         fl, n = self.fleet, self.n
-        if self.seen is None:
-            seen, fresh = np.column_stack((fl.pos, fl.theta)), None
+        if self.seen is None:  # the true poses: np.column_stack's, in two copies
+            seen, fresh = np.empty((len(fl.theta), 3)), None
+            seen[:, :2], seen[:, 2] = fl.pos, fl.theta
         elif self._broadcast is not None:  # every world's, stacked
             seen, fresh = self.seen, self._broadcast.fresh
         else:

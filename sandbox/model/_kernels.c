@@ -19,6 +19,7 @@
  */
 
 #include "numpy_rules.h"
+#include "motor_model.h"
 
 /* The controller's constants (sandbox/model/flatness.py). */
 #define CHI_HOLD 1e-3
@@ -325,28 +326,9 @@ motor_model(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     double dts = h / (double)substeps;
     for (Py_ssize_t i = 0; i < n; i++) {
-        double *p = pose->data + 3 * i, *v = vel->data + 2 * i;
-        double v1 = cmd->data[2 * i], v2 = cmd->data[2 * i + 1];
-        double heading = p[2] + 0.5 * v2 * h;
-        double t0 = v1 * cos(heading), t1 = v1 * sin(heading);
-        double lin = accel->data[i] * dts, ang = turn->data[i] * dts;
-        double sx = p[0], sy = p[1];
-        double vx = v[0], vy = v[1], w = rate->data[i];
-        for (long s = 0; s < substeps; s++) {
-            p[0] = p[0] + vx * dts;
-            p[1] = p[1] + vy * dts;
-            p[2] = p[2] + w * dts;
-            double d0 = t0 - vx, d1 = t1 - vy;
-            double norm = hypot(d0, d1);
-            double scale = norm > lin ? lin / np_maximum(norm, 1e-300) : 1.0;
-            vx = vx + d0 * scale;
-            vy = vy + d1 * scale;
-            w = w + clip_rows(v2 - w, -ang, ang);
-        }
-        v[0] = vx;
-        v[1] = vy;
-        rate->data[i] = w;
-        travel->data[i] = travel->data[i] + hypot(p[0] - sx, p[1] - sy);
+        motor_period(pose->data + 3 * i, vel->data + 2 * i, rate->data + i,
+                     travel->data + i, cmd->data[2 * i], cmd->data[2 * i + 1],
+                     accel->data[i], turn->data[i], h, dts, substeps);
     }
     release(r, got);
     Py_RETURN_NONE;
