@@ -8,20 +8,19 @@ the folder in place (see ``sandbox/scenario/bundled.py``). The replay page's
 templates, style and script (``sandbox/render/replay/assets/``) are package data too.
 Everything else is declared in ``pyproject.toml``.
 
-Three optional C extensions: ``sandbox.physics._cstep``, the loop that steps a batch
-of pymunk worlds through a whole control period in one call (see
-``sandbox/physics/stepping.py``); ``sandbox.model._kernels``, the flatness controller
-of a period in two calls (see ``sandbox/model/kernels.py``); and
-``sandbox.behaviour._pair_field``, the vehicles' terms of the avoidance field in one
-(see ``sandbox/behaviour/pair_field.py``). They need a C compiler and Python's
-headers, nothing of Chipmunk or numpy (the first calls pymunk's functions through
-their addresses, the others read arrays through the buffer interface and share
-``sandbox/numpy_rules.h``). They are optional: where one cannot be compiled the
-install goes on without it (setuptools prints the error) and the Python path runs
-instead, with the same results. An editable install (``pip install -e .``) compiles
-them next to their sources. The last two are compiled without contracting a
-multiplication and an addition into one fused operation, which rounds once instead
-of twice and would change the numbers.
+Optional C extensions take the per-period work whose numpy calls are too small to
+pay for themselves (``ARCHITECTURE.md``, "The optional C loops"): ``_cstep``, the loop
+that steps a batch of pymunk worlds through a whole control period in one call, which
+calls pymunk's functions through their addresses (nothing of Chipmunk is linked); and
+the loops of ``EXACT`` below, which give numpy's numbers to the bit beside their numpy
+definitions and share ``sandbox/numpy_rules.h``. They read an ndarray's data through
+numpy's C API where numpy's headers are there at build time (``pyproject.toml`` asks
+for numpy in the build), else through the buffer interface. They are optional: where
+one cannot be compiled the install goes on without it (setuptools prints the error)
+and the numpy path runs instead, with the same results. An editable install (``pip
+install -e .``) compiles them next to their sources. The exact loops are compiled
+without contracting a multiplication and an addition into one fused operation, which
+rounds once instead of twice and would change the numbers.
 """
 
 from setuptools import Extension, find_packages, setup
@@ -31,7 +30,7 @@ CSTEP = Extension("sandbox.physics._cstep", ["sandbox/physics/_cstep.c"], option
 
 
 def _numpy_api() -> dict:
-    """numpy's headers, where numpy is there at build time (pyproject.toml asks).
+    """The compile options for numpy's headers, where numpy is there at build time.
 
     With them the C loops read an ndarray's data through numpy's C API, much
     cheaper per array than the buffer interface (``sandbox/numpy_rules.h``); without
