@@ -52,7 +52,11 @@ def _exact(source: str) -> Extension:
     return Extension(
         name,
         [source],
-        depends=["sandbox/numpy_rules.h", "sandbox/motor_model.h"],
+        depends=[
+            "sandbox/numpy_rules.h",
+            "sandbox/motor_model.h",
+            "sandbox/behaviour/safety/qp_project.h",
+        ],
         optional=True,
         **_numpy_api(),
     )
@@ -67,6 +71,7 @@ EXACT = tuple(
         "sandbox/behaviour/_pair_field.c",
         "sandbox/physics/_motors.c",
         "sandbox/behaviour/safety/_qp.c",
+        "sandbox/behaviour/safety/_filter.c",
         "sandbox/loop/_period.c",
         "sandbox/behaviour/_fits.c",
         "sandbox/behaviour/_draws.c",

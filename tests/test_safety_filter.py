@@ -20,9 +20,9 @@ from sandbox.behaviour.safety.cbf import (
     CBFState,
     barrier_rows,
     filter_commands,
-    stall_turn,
 )
 from sandbox.behaviour.safety.qp import min_violation, solve
+from sandbox.behaviour.safety.right_hand import stall_turn
 from sandbox.cli import main
 from sandbox.loop.simulation import Simulation
 from sandbox.model.obstacle_field import ObstacleField

@@ -1,22 +1,67 @@
 """The CBF filter's counters of each world (``metrics.json`` ``safety``).
 
-Split from :mod:`sandbox.behaviour.safety.cbf`, which adds each step of the filter to
-the counters of its one world through :func:`account`, or of its K stacked worlds
-through :func:`account_worlds` (the same counters, each world's reductions taken at
-once over a ``(K, n)`` view of the rows).
+Split from :mod:`sandbox.behaviour.safety.cbf`, which adds each step of the filter
+(:class:`FilterStep`) to the counters of its one world through :func:`account`, or of
+its K stacked worlds through :func:`account_worlds` (the same counters, each world's
+reductions taken at once over a ``(K, n)`` view of the rows).
+
+Where the optional extension ``sandbox.behaviour.safety._filter`` is built, the
+reductions of :func:`account_worlds` and the choice of the worlds it writes are one
+C loop over the rows (``world_counts`` in ``_filter.c``: counts, numpy's max and
+min reductions with their NaN), and only the worlds whose counters change are
+touched from Python; :func:`account_worlds_numpy` is the definition, against which
+:func:`counts_agree` compares it on random steps at the first use.
+:data:`USE_KERNEL` False forces the numpy path.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
 
 import numpy as np
 
 from sandbox.behaviour.safety.qp import TOLERANCE
 
-if TYPE_CHECKING:
-    from sandbox.behaviour.safety.cbf import FilterStep
+try:
+    from sandbox.behaviour.safety import _filter
+except ImportError:  # pragma: no cover - built without a C compiler
+    _filter = None
+
+#: Reduce the worlds' counters in C where that is built and agrees (False: numpy).
+USE_KERNEL = True
+_agreed: bool | None = None
+
+
+@dataclass
+class FilterStep:
+    """What the filter did at one step (kept in the filter's memory as ``last``).
+
+    Attributes
+    ----------
+    active : ndarray, shape (n,), bool
+        Vehicles whose commands it changed.
+    slack : ndarray, shape (n,) [m/s]
+        The least largest violation of a barrier condition (0: feasible).
+    rows : int
+        Barrier conditions that could bind (after pruning).
+    min_barrier : float
+        The least barrier value of the step (``inf`` with none): [m] for
+        ``braking`` (the least clearance if every vehicle brakes); [m^2] for
+        ``velocity``.
+    fallback : ndarray, shape (n,), bool
+        Vehicles whose braking conditions had no common point (rounding only: the
+        braking command keeps them all), which brake.
+    by_vehicle : ndarray, shape (n,), or None
+        Each vehicle's least barrier value (a batched call of several worlds only).
+    """
+
+    active: np.ndarray
+    slack: np.ndarray
+    rows: int
+    min_barrier: float = np.inf
+    fallback: np.ndarray | None = None
+    by_vehicle: np.ndarray | None = None
 
 
 def account(
@@ -79,6 +124,8 @@ class WorldCounters:
         known = [s.get("min_barrier") for s in world_stats]
         self.min_barrier = np.array([np.inf if m is None else m for m in known])
         self.started = False
+        #: The C loop's outputs of a step (made at its first step).
+        self.out: tuple[np.ndarray, ...] | None = None
 
 
 def account_worlds(
@@ -110,6 +157,24 @@ def account_worlds(
     counters : WorldCounters
         The worlds' largest slack and least barrier so far (updated).
     """
+    if (
+        USE_KERNEL
+        and counts_agree()
+        and _account_c(world_stats, t, braking, step, counters)
+    ):
+        return
+    account_worlds_numpy(world_stats, t, braking, step, n, counters)
+
+
+def account_worlds_numpy(
+    world_stats: list[dict],
+    t: float,
+    braking: bool,
+    step: FilterStep,
+    n: int,
+    counters: WorldCounters,
+) -> None:
+    """:func:`account_worlds` by numpy (the definition)."""
     k = len(world_stats)
     active = step.active.reshape(k, n).sum(axis=1)
     slack = step.slack.reshape(k, n)
@@ -141,3 +206,107 @@ def account_worlds(
             world_stats[w], t, braking, active[w], bad[w], worst[w], least[w], fallen[w]
         )
     counters.started = True
+
+
+def _account_c(
+    world_stats: list[dict],
+    t: float,
+    braking: bool,
+    step: FilterStep,
+    counters: WorldCounters,
+) -> bool:
+    """:func:`account_worlds` with its reductions in C; False where it cannot run.
+
+    It cannot where an array is not C-contiguous of its type or the counters are
+    not float64 (the numpy path takes them as they are).
+    """
+    k = len(world_stats)
+    arrays = (step.active, step.slack, step.by_vehicle, step.fallback)
+    if not all(a is None or a.flags.c_contiguous for a in arrays) or not (
+        step.active.dtype == np.bool_
+        and step.slack.dtype == np.float64
+        and (step.by_vehicle is None or step.by_vehicle.dtype == np.float64)
+        and (not braking or step.fallback.dtype == np.bool_)
+        and counters.max_slack.dtype == counters.min_barrier.dtype == np.float64
+    ):
+        return False
+    if counters.out is None or len(counters.out[0]) != k:
+        counts = tuple(np.zeros(k, dtype=np.intp) for _ in range(4))
+        counters.out = (*counts, np.zeros(k), np.zeros(k))
+    active, bad, fallen, touched, worst, least = counters.out
+    count = _filter.world_counts(
+        k, step.active, step.slack, step.by_vehicle,
+        step.fallback if braking else None, counters.max_slack,
+        counters.min_barrier, counters.started, active, bad, worst, least, fallen,
+        touched, TOLERANCE,
+    )  # fmt: skip
+    counters.started = True
+    if count:
+        rows = touched[:count]
+        for w, *values in zip(
+            rows.tolist(),
+            active[rows].tolist(),
+            bad[rows].tolist(),
+            worst[rows].tolist(),
+            least[rows].tolist(),
+            fallen[rows].tolist(),
+            strict=True,
+        ):
+            _add(world_stats[w], t, braking, *values)
+    return True
+
+
+def counts_agree() -> bool:
+    """Whether the C reductions give :func:`account_worlds_numpy`'s (checked once).
+
+    Three steps of random counters of one to five worlds (slack at and beyond the
+    tolerance, NaN and infinite barriers, with and without the braking's fallback),
+    each world's counters compared value for value.
+    """
+    global _agreed
+    if _agreed is None:
+        _agreed = _filter is not None and _check()
+    return _agreed
+
+
+def _check() -> bool:
+    global _agreed
+    rng = np.random.default_rng(20261208)
+    special = np.array([0.0, TOLERANCE, 2 * TOLERANCE, np.nan, np.inf, -np.inf, -1.0])
+    _agreed = True  # provisionally: the C path runs within the check
+    try:
+        for trial in range(16):
+            k, n = int(rng.integers(1, 6)), int(rng.integers(1, 5))
+            braking, by = trial % 2 == 1, trial % 3 != 0
+            start = {} if trial % 4 else {"max_slack": 0.5, "min_barrier": 0.1}
+            stats = ([dict(start) for _ in range(k)], [dict(start) for _ in range(k)])
+            counters = (WorldCounters(stats[0]), WorldCounters(stats[1]))
+            for t in (0.0, 0.01, 0.02):
+                slack = np.where(
+                    rng.random(k * n) < 0.5,
+                    0.0,
+                    rng.choice(special[:4], k * n) * rng.uniform(0.5, 2.0, k * n),
+                )
+                least = rng.normal(0.0, 1.0, k * n)
+                least[rng.random(k * n) < 0.2] = rng.choice(special[3:], 1)
+                step = FilterStep(
+                    rng.random(k * n) < 0.2,
+                    slack,
+                    0,
+                    fallback=rng.random(k * n) < 0.2,
+                    by_vehicle=least if by else None,
+                )
+                if not _account_c(stats[0], t, braking, step, counters[0]):
+                    return False
+                account_worlds_numpy(stats[1], t, braking, step, n, counters[1])
+            if repr(stats[0]) != repr(stats[1]) or not all(
+                np.array_equal(a.view(np.uint64), b.view(np.uint64))
+                for a, b in (
+                    (counters[0].max_slack, counters[1].max_slack),
+                    (counters[0].min_barrier, counters[1].min_barrier),
+                )
+            ):
+                return False
+    finally:
+        _agreed = None
+    return True

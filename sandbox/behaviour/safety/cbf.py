@@ -111,12 +111,13 @@ It needs every vehicle's finite ``max_accel`` and ``v1_max`` (a loader error) an
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
 from sandbox.behaviour.estimation import BroadcastEstimate
 from sandbox.behaviour.safety.accounting import (
+    FilterStep,
     WorldCounters,
     account,
     account_worlds,
@@ -131,13 +132,14 @@ from sandbox.behaviour.safety.braking import (
     pair_geometry,
 )
 from sandbox.behaviour.safety.braking_check import Solved, check_commands, passes
-from sandbox.behaviour.safety.priority import PRIORITY, holding, holds
+from sandbox.behaviour.safety.filter_kernel import covers, usable, velocity_step
+from sandbox.behaviour.safety.priority import PRIORITY, holding
 from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
+from sandbox.behaviour.safety.right_hand import pass_right
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
 from sandbox.model.barriers import (
     ESTIMATE_GAIN,
     MIN_DIST,
-    MIN_SPEED,
     sensing_margin,
 )
 from sandbox.model.dynamics import CLIP
@@ -147,13 +149,6 @@ from sandbox.plugins.registration import Param, register_filter
 #: The speed bound used where a vehicle has no ``v1_max`` [m/s] (the loop's bound of a
 #: diverged run).
 UNLIMITED_SPEED = 1e3
-#: The right-hand rule (``pass_right``): a vehicle is stalled when its filtered
-#: look-ahead speed keeps less than STALL_START of its nominal speed, fully at
-#: STALL_FULL [1]; the turn fades in proportion below a nominal speed STALL_SPEED
-#: [m/s].
-STALL_START = 0.5
-STALL_FULL = 0.1
-STALL_SPEED = 0.2
 
 PARAMS = {
     "barrier": Param(
@@ -258,37 +253,6 @@ PARAMS = {
 }
 
 
-@dataclass
-class FilterStep:
-    """What the filter did at one step (kept in the filter's memory as ``last``).
-
-    Attributes
-    ----------
-    active : ndarray, shape (n,), bool
-        Vehicles whose commands it changed.
-    slack : ndarray, shape (n,) [m/s]
-        The least largest violation of a barrier condition (0: feasible).
-    rows : int
-        Barrier conditions that could bind (after pruning).
-    min_barrier : float
-        The least barrier value of the step (``inf`` with none): [m] for
-        ``braking`` (the least clearance if every vehicle brakes); [m^2] for
-        ``velocity``.
-    fallback : ndarray, shape (n,), bool
-        Vehicles whose braking conditions had no common point (rounding only: the
-        braking command keeps them all), which brake.
-    by_vehicle : ndarray, shape (n,), or None
-        Each vehicle's least barrier value (a batched call of several worlds only).
-    """
-
-    active: np.ndarray
-    slack: np.ndarray
-    rows: int
-    min_barrier: float = np.inf
-    fallback: np.ndarray | None = None
-    by_vehicle: np.ndarray | None = None
-
-
 def _per_vehicle(value: float | np.ndarray, n: int) -> np.ndarray:
     return np.broadcast_to(np.asarray(value, dtype=float), (n,))
 
@@ -388,6 +352,8 @@ class CBFState:
             self.neighbours = WorldPairs(ctx.worlds, n // ctx.worlds, self.range)
         else:
             self.neighbours = NeighbourList(self.range)
+        #: The C loop's arguments kept between steps (filter_kernel.Arguments).
+        self.c_args = None
 
 
 def _box(
@@ -528,71 +494,6 @@ def barrier_rows(
     return np.concatenate(out_v), np.concatenate(out_a), np.concatenate(out_b)
 
 
-def stall_turn(z0: np.ndarray, z: np.ndarray, angle: float) -> np.ndarray:
-    """The right-hand rule's turn [rad] of each nominal velocity, from the cut.
-
-    A vehicle is stalled by the filter when the filtered velocity of its look-ahead
-    point keeps less than :data:`STALL_START` of the nominal speed: the turn ramps
-    smoothly (a smoothstep) from 0 there to ``angle`` at :data:`STALL_FULL`, and in
-    proportion to the nominal speed below :data:`STALL_SPEED` (a vehicle at its slot,
-    whose nominal speed vanishes, is never turned).
-
-    Parameters
-    ----------
-    z0, z : ndarray, shape (k, 2) [m/s]
-        Nominal and filtered ``(v1, l v2)``.
-    angle : float [rad]
-        The largest turn (``pass_right``).
-
-    Returns
-    -------
-    ndarray, shape (k,) [rad]
-
-    >>> z0 = np.array([[1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.1, 0.0]])
-    >>> z = np.array([[0.6, 0.0], [0.3, 0.0], [0.0, 0.0], [0.0, 0.0]])
-    >>> np.round(stall_turn(z0, z, np.pi / 2), 4).tolist()
-    [0.0, 0.7854, 1.5708, 0.7854]
-    """
-    nominal = np.hypot(z0[:, 0], z0[:, 1])
-    kept = np.hypot(z[:, 0], z[:, 1])
-    cut = 1.0 - kept / np.maximum(nominal, MIN_SPEED)
-    x = CLIP((cut - (1.0 - STALL_START)) / (STALL_START - STALL_FULL), 0.0, 1.0)
-    ramp = x * x * (3.0 - 2.0 * x)
-    return angle * ramp * np.minimum(nominal / STALL_SPEED, 1.0)
-
-
-def _pass_right(
-    state: CBFState,
-    z0: np.ndarray,
-    z: np.ndarray,
-    slack: np.ndarray,
-    mat: np.ndarray,
-    off: np.ndarray,
-    soft: np.ndarray,
-    hold: tuple[np.ndarray, np.ndarray] | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Filter again, toward the nominal velocities turned right where stalled.
-
-    The barriers and bounds are the same (``mat``, ``off``, ``soft``), so is safety;
-    only the point the nearest safe velocity is sought to moves. ``hold``: the
-    vehicles whose priority outranks every near vehicle's, and which rows are of
-    obstacles; those not pressed on an obstacle's condition are not turned.
-    """
-    turn = stall_turn(z0, z, state.pass_right)
-    if hold is not None:
-        turn[holds(hold[0], hold[1], mat, off, z)] = 0.0
-    rows = (turn > 0).nonzero()[0]
-    if len(rows) == 0:
-        return z, slack
-    c, s = np.cos(turn[rows]), np.sin(turn[rows])
-    zr = z0[rows]
-    # clockwise by the turn: (v1, l v2) rotated toward (0, -|z0|), the right
-    nominal = columns(c * zr[:, 0] + s * zr[:, 1], c * zr[:, 1] - s * zr[:, 0])
-    z, slack = z.copy(), slack.copy()
-    z[rows], slack[rows] = solve(nominal, mat[rows], off[rows], soft[rows])
-    return z, slack
-
-
 def filter_commands(
     state: CBFState,
     ctx: FilterContext,
@@ -623,6 +524,8 @@ def filter_commands(
     v2 : ndarray, shape (n,) [rad/s]
     step : FilterStep
     """
+    if prune and braked is None and covers(state) and usable():
+        return velocity_step(state, ctx)  # the same step in one C call
     n, look = len(ctx.pos), state.look
     if braked is None and state.estimate is not None and ctx.seen is not None:
         seen = state.estimate.update(ctx.seen, ctx.v1_prev, ctx.v2_prev)
@@ -712,7 +615,7 @@ def filter_commands(
             held = None if hold is None else (hold[group], np.zeros((k, 4 + m), bool))
             if held is not None:
                 held[1][slot[veh[mine]], 4 + rank[mine]] = wall[mine]
-            zg, sg = _pass_right(state, z0[group], zg, sg, mat, off, soft, held)
+            zg, sg = pass_right(state, z0[group], zg, sg, mat, off, soft, held)
         z[group], slack[group] = zg, sg
         if state.braking:  # no command keeps every condition: brake
             fallback[group[sg > TOLERANCE]] = True

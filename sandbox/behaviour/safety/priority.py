@@ -1,14 +1,15 @@
 """An ordering for the CBF filter's right-hand rule (``safety.priority``).
 
-The right-hand rule (``pass_right``, :func:`sandbox.behaviour.safety.cbf.stall_turn`)
-treats every vehicle the same, so two vehicles in a standoff that is symmetric under
-the half turn about its centre (the door of ``scenarios/safety/door.yaml``: a gap one
-vehicle wide, passed in both directions) turn alike and stall alike: only the rounding
-of the arithmetic breaks the tie. A priority orders the two: a stalled vehicle whose
-near vehicles all rank below it *holds its course* (it is not turned, and waits for
-the way to clear), while a stalled vehicle outranked by a near one *yields* (it turns
-right, as before). The barriers and bounds are untouched, so is safety; only where the
-nearest safe velocity is sought moves, for the vehicles that yield.
+The right-hand rule (``pass_right``,
+:func:`sandbox.behaviour.safety.right_hand.stall_turn`) treats every vehicle the same,
+so two vehicles in a standoff that is symmetric under the half turn about its centre
+(the door of ``scenarios/safety/door.yaml``: a gap one vehicle wide, passed in both
+directions) turn alike and stall alike: only the rounding of the arithmetic breaks the
+tie. A priority orders the two: a stalled vehicle whose near vehicles all rank below
+it *holds its course* (it is not turned, and waits for the way to clear), while a
+stalled vehicle outranked by a near one *yields* (it turns right, as before). The
+barriers and bounds are untouched, so is safety; only where the nearest safe velocity
+is sought moves, for the vehicles that yield.
 
 Orders (``priority``):
 

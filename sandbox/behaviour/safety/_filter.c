@@ -1,0 +1,664 @@
+/* The velocity barrier's step of the CBF filter in one C call, and its counters.
+ *
+ * sandbox/behaviour/safety/filter_kernel.py calls velocity_step where this optional
+ * extension is built and its check passes; it does, for the rows of every world at
+ * once, what cbf.filter_commands does with numpy for ``barrier: velocity`` without a
+ * priority: the boxes of the inputs (_box) and each vehicle's reach, the pairs of
+ * the neighbour search's candidates closer than the range, the exact pruning of the
+ * pairs that cannot bind, both directions of the rest (braking.pair_geometry) and
+ * their half-planes (cbf.barrier_rows), the obstacles' rows (made by numpy, handed
+ * in), the rotation into z = (v1, l v2) and the prune by reach, each vehicle's
+ * rows in np.lexsort((b, veh))'s order cut at max_rows, the exact projection of its
+ * bounded problem (qp_project.h), the right-hand rule's second projection
+ * (right_hand.pass_right), and the commands written back where they changed. A
+ * vehicle whose problem, or whose turned problem, has no point (which needs
+ * qp.min_violation, LAPACK's) is handed back to numpy with its problem.
+ *
+ * world_counts does the reductions of accounting.account_worlds.
+ *
+ * The same IEEE-754 double operations in numpy's order (compiled without fused
+ * multiply-adds), numpy's rules for maximum, minimum and clip on ties and NaN, its
+ * min reduction's NaN, its sort's order of NaN, einsum's sum from 0; the C library's
+ * sin, cos and hypot, which the check compares with numpy's.
+ */
+
+#include "numpy_rules.h"
+#include "qp_project.h"
+
+/* numpy.minimum(a, b): a where a < b or a is NaN, else b (b on a tie). */
+static inline double
+np_minimum(double a, double b)
+{
+    return (a < b || a != a) ? a : b;
+}
+
+/* numpy's sort order of doubles: NaN after every number. */
+static inline int
+sorts_before(double a, double b)
+{
+    return a < b || (b != b && a == a);
+}
+
+/* A min reduction as numpy takes it (NaN if any is NaN), then Python's
+ * ``min(least, that)``, which keeps ``least`` unless the new value is smaller. */
+typedef struct {
+    double value;
+    int any;
+} Least;
+
+static inline void
+least_add(Least *l, double x)
+{
+    if (!l->any) {
+        l->value = x;
+        l->any = 1;
+    }
+    else if (l->value == l->value && (x != x || x < l->value)) {
+        l->value = x;
+    }
+}
+
+static inline double
+least_merge(double least, const Least *l)
+{
+    return (l->any && l->value < least) ? l->value : least;
+}
+
+/* The float parameters, in filter_kernel.py's order. */
+enum {
+    P_GAMMA,
+    P_LOOK,
+    P_MARGIN,
+    P_RADIUS,
+    P_DT,
+    P_PASS_RIGHT,
+    P_TOLERANCE,
+    P_MIN_DIST,
+    P_MIN_SPEED,
+    P_STALL_START,
+    P_STALL_FULL,
+    P_STALL_SPEED,
+    P_COUNT
+};
+
+/* The flags. */
+#define F_REVERSE 1
+#define F_SPEED_ONLY 2
+#define F_BROADCAST 4
+
+/* Buffers held for one call, released together. */
+typedef struct {
+    Py_buffer views[32];
+    int count;
+} Held;
+
+static void
+let_go(Held *h)
+{
+    for (int k = 0; k < h->count; k++) {
+        PyBuffer_Release(&h->views[k]);
+    }
+    h->count = 0;
+}
+
+/* A C-contiguous buffer of ``len`` items (any length if len < 0) of the kind 'd'
+ * (float64), 'b' (one byte: bool) or 'n' (intp); None gives NULL if optional. */
+static int
+hold(Held *h, PyObject *obj, char kind, Py_ssize_t len, int writable, int optional,
+     void **out, Py_ssize_t *got_len)
+{
+    *out = NULL;
+    if (obj == Py_None && optional) {
+        if (got_len) *got_len = 0;
+        return 0;
+    }
+    Py_buffer *v = &h->views[h->count];
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, v, flags) < 0) {
+        return -1;
+    }
+    h->count++;
+    const char *f = v->format ? v->format : "B";
+    int ok;
+    if (kind == 'd') {
+        ok = v->itemsize == 8 && strcmp(f, "d") == 0;
+    }
+    else if (kind == 'n') {
+        ok = v->itemsize == (Py_ssize_t)sizeof(Py_ssize_t) &&
+             (strcmp(f, "l") == 0 || strcmp(f, "q") == 0 || strcmp(f, "n") == 0);
+    }
+    else {
+        ok = v->itemsize == 1 && (strcmp(f, "?") == 0 || strcmp(f, "B") == 0 ||
+                                  strcmp(f, "b") == 0);
+    }
+    if (!ok) {
+        PyErr_Format(PyExc_TypeError, "expected a contiguous array of kind '%c'", kind);
+        return -1;
+    }
+    Py_ssize_t n = v->len / v->itemsize;
+    if (len >= 0 && n != len) {
+        PyErr_Format(PyExc_ValueError, "expected %zd items, got %zd", len, n);
+        return -1;
+    }
+    if (got_len) *got_len = n;
+    *out = v->buf;
+    return 0;
+}
+
+/* One half-plane a . w <= b of vehicle ``veh`` (a turned into z once kept). */
+typedef struct {
+    Py_ssize_t veh;
+    double a0, a1, b;
+} Row;
+
+PyDoc_STRVAR(velocity_step_doc,
+"velocity_step(pos, theta, vel, v1, v2, diameter, v1_prev, v2_prev, known_failed,\n"
+"    commanded, seen, v1_max, lateral, accel, cand_i, cand_j, obs_rows, obs_signed,\n"
+"    obs_away, params, flags, max_rows, v1_out, v2_out, active, slack, by_vehicle,\n"
+"    pending, pending_m, pending_mat, pending_off) -> (rows, least, n_pending)\n"
+"\n"
+"The velocity barrier's filtered commands of n vehicles (see filter_kernel.py):\n"
+"``v1_out``, ``v2_out``, ``active``, ``slack`` and ``by_vehicle`` (or None) written;\n"
+"``rows`` is -1 where no vehicle is filtered. The vehicles whose problems have no\n"
+"point are listed in ``pending`` (their row count in ``pending_m``, their problems\n"
+"(4 + max_rows, 2) and (4 + max_rows,) in ``pending_mat`` and ``pending_off``), their\n"
+"commands left as given, for numpy to solve.");
+
+static PyObject *
+velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 31) {
+        PyErr_SetString(PyExc_TypeError, "velocity_step takes 31 arguments");
+        return NULL;
+    }
+    long flags = PyLong_AsLong(args[20]);
+    Py_ssize_t max_rows = PyLong_AsSsize_t(args[21]);
+    if (PyErr_Occurred()) {
+        return NULL;
+    }
+    if (max_rows < 1) {
+        PyErr_SetString(PyExc_ValueError, "velocity_step: max_rows < 1");
+        return NULL;
+    }
+    Held h = {.count = 0};
+    PyObject *result = NULL;
+    char *scratch = NULL;
+    double *pos, *theta, *vel, *v1, *v2, *diam, *v1p, *v2p, *seen, *v1_max, *lateral;
+    double *accel, *signed_d, *away, *par, *v1_out, *v2_out, *slack, *by, *pmat, *poff;
+    unsigned char *failed, *commanded, *active;
+    Py_ssize_t *ci, *cj, *orow, *pend, *pend_m;
+    Py_ssize_t N, nc, no, width = 4 + max_rows;
+    if (hold(&h, args[1], 'd', -1, 0, 0, (void **)&theta, &N) < 0) goto done;
+    if (hold(&h, args[0], 'd', 2 * N, 0, 0, (void **)&pos, NULL) < 0 ||
+        hold(&h, args[2], 'd', 2 * N, 0, 0, (void **)&vel, NULL) < 0 ||
+        hold(&h, args[3], 'd', N, 0, 0, (void **)&v1, NULL) < 0 ||
+        hold(&h, args[4], 'd', N, 0, 0, (void **)&v2, NULL) < 0 ||
+        hold(&h, args[5], 'd', N, 0, 0, (void **)&diam, NULL) < 0 ||
+        hold(&h, args[6], 'd', N, 0, 1, (void **)&v1p, NULL) < 0 ||
+        hold(&h, args[7], 'd', N, 0, 1, (void **)&v2p, NULL) < 0 ||
+        hold(&h, args[8], 'b', N, 0, 1, (void **)&failed, NULL) < 0 ||
+        hold(&h, args[9], 'b', N, 0, 1, (void **)&commanded, NULL) < 0 ||
+        hold(&h, args[10], 'd', 3 * N, 0, 1, (void **)&seen, NULL) < 0 ||
+        hold(&h, args[11], 'd', N, 0, 0, (void **)&v1_max, NULL) < 0 ||
+        hold(&h, args[12], 'd', N, 0, 0, (void **)&lateral, NULL) < 0 ||
+        hold(&h, args[13], 'd', N, 0, 0, (void **)&accel, NULL) < 0 ||
+        hold(&h, args[14], 'n', -1, 0, 0, (void **)&ci, &nc) < 0 ||
+        hold(&h, args[15], 'n', nc, 0, 0, (void **)&cj, NULL) < 0 ||
+        hold(&h, args[16], 'n', -1, 0, 1, (void **)&orow, &no) < 0 ||
+        hold(&h, args[17], 'd', no, 0, 1, (void **)&signed_d, NULL) < 0 ||
+        hold(&h, args[18], 'd', 2 * no, 0, 1, (void **)&away, NULL) < 0 ||
+        hold(&h, args[19], 'd', P_COUNT, 0, 0, (void **)&par, NULL) < 0 ||
+        hold(&h, args[22], 'd', N, 1, 0, (void **)&v1_out, NULL) < 0 ||
+        hold(&h, args[23], 'd', N, 1, 0, (void **)&v2_out, NULL) < 0 ||
+        hold(&h, args[24], 'b', N, 1, 0, (void **)&active, NULL) < 0 ||
+        hold(&h, args[25], 'd', N, 1, 0, (void **)&slack, NULL) < 0 ||
+        hold(&h, args[26], 'd', N, 1, 1, (void **)&by, NULL) < 0 ||
+        hold(&h, args[27], 'n', N, 1, 0, (void **)&pend, NULL) < 0 ||
+        hold(&h, args[28], 'n', N, 1, 0, (void **)&pend_m, NULL) < 0 ||
+        hold(&h, args[29], 'd', 2 * N * width, 1, 0, (void **)&pmat, NULL) < 0 ||
+        hold(&h, args[30], 'd', N * width, 1, 0, (void **)&poff, NULL) < 0)
+        goto done;
+    if ((v1p == NULL) != (v2p == NULL) ||
+        (orow != NULL && (signed_d == NULL || away == NULL))) {
+        PyErr_SetString(PyExc_ValueError, "velocity_step: arrays missing");
+        goto done;
+    }
+    for (Py_ssize_t k = 0; k < nc; k++) {
+        if (ci[k] < 0 || ci[k] >= N || cj[k] < 0 || cj[k] >= N) {
+            PyErr_SetString(PyExc_IndexError, "velocity_step: a pair out of range");
+            goto done;
+        }
+    }
+    for (Py_ssize_t k = 0; k < no; k++) {
+        if (orow[k] < 0 || orow[k] >= N) {
+            PyErr_SetString(PyExc_IndexError, "velocity_step: an obstacle row out of range");
+            goto done;
+        }
+    }
+    const double gamma = par[P_GAMMA], look = par[P_LOOK], margin = par[P_MARGIN];
+    const double radius = par[P_RADIUS], dt = par[P_DT], angle = par[P_PASS_RIGHT];
+    const double tol = par[P_TOLERANCE], min_dist = par[P_MIN_DIST];
+    const double min_speed = par[P_MIN_SPEED], start = par[P_STALL_START];
+    const double full = par[P_STALL_FULL], slow = par[P_STALL_SPEED];
+    const int reverse = (flags & F_REVERSE) != 0, speed_only = (flags & F_SPEED_ONLY) != 0;
+    const int broadcast = (flags & F_BROADCAST) != 0, prev = v1p != NULL;
+
+    /* One block for the call: per vehicle 17 doubles and 3 counts, per candidate
+     * pair its place, rows for both directions of every pair and every obstacle
+     * (and their order), per vehicle a flag. */
+    Py_ssize_t cap = 2 * nc + no;
+    size_t doubles = 17 * (size_t)N, counts = 3 * (size_t)N + (size_t)nc + (size_t)cap;
+    size_t bytes = sizeof(double) * doubles + sizeof(Py_ssize_t) * counts +
+                   sizeof(Row) * (size_t)cap + (size_t)N + 1;
+    scratch = PyMem_Malloc(bytes);
+    if (scratch == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    double *cos_t = (double *)scratch, *sin_t = cos_t + N, *p = sin_t + N;
+    double *ps = p + 2 * N, *cs = ps + 2 * N, *w = cs + 2 * N, *z0 = w + 2 * N;
+    double *lo1 = z0 + 2 * N, *hi1 = lo1 + N, *lo2 = hi1 + N, *hi2 = lo2 + N;
+    double *reach = hi2 + N; /* 17 N doubles up to here */
+    Row *rows = (Row *)(reach + N);
+    Py_ssize_t *count = (Py_ssize_t *)(rows + cap), *first = count + N;
+    Py_ssize_t *fill = first + N, *near = fill + N, *order = near + nc;
+    unsigned char *filt = (unsigned char *)(order + cap);
+
+    /* The vehicles: look_ahead_points, w_hat, the filtered ones, z0, _box, reach. */
+    Py_ssize_t who = 0;
+    for (Py_ssize_t v = 0; v < N; v++) {
+        double c = cos(theta[v]), s = sin(theta[v]);
+        cos_t[v] = c;
+        sin_t[v] = s;
+        p[2 * v] = pos[2 * v] + look * c;
+        p[2 * v + 1] = pos[2 * v + 1] + look * s;
+        if (seen != NULL) {
+            const double *q = seen + 3 * v;
+            cs[2 * v] = q[0];
+            cs[2 * v + 1] = q[1];
+            ps[2 * v] = q[0] + look * cos(q[2]);
+            ps[2 * v + 1] = q[1] + look * sin(q[2]);
+        }
+        else {
+            cs[2 * v] = pos[2 * v];
+            cs[2 * v + 1] = pos[2 * v + 1];
+            ps[2 * v] = p[2 * v];
+            ps[2 * v + 1] = p[2 * v + 1];
+        }
+        if (prev) { /* heading v1^ + (-(l v2^ sin), l v2^ cos) */
+            double t = look * v2p[v];
+            w[2 * v] = c * v1p[v] + -(t * s);
+            w[2 * v + 1] = s * v1p[v] + t * c;
+        }
+        filt[v] = !(failed != NULL && failed[v]) && !(commanded != NULL && commanded[v]);
+        who += filt[v];
+        z0[2 * v] = v1[v];
+        z0[2 * v + 1] = look * v2[v];
+        double l1 = 0.0, h1 = 0.0, l2 = 0.0, h2 = 0.0;
+        if (filt[v]) {
+            l1 = reverse ? -v1_max[v] : 0.0;
+            h1 = v1_max[v];
+            if (prev) {
+                double step = accel[v] * dt;
+                l1 = np_maximum(l1, v1p[v] - step);
+                h1 = np_minimum(h1, v1p[v] + step);
+                l1 = np_minimum(l1, h1);
+            }
+            if (speed_only) {
+                l2 = h2 = z0[2 * v + 1];
+            }
+            else {
+                l2 = -lateral[v];
+                h2 = lateral[v];
+            }
+        }
+        lo1[v] = l1;
+        hi1[v] = h1;
+        lo2[v] = l2;
+        hi2[v] = h2;
+        double zh0 = prev ? v1p[v] : 0.0, zh1 = prev ? look * v2p[v] : 0.0;
+        double r = hypot(np_maximum(fabs(l1 - zh0), fabs(h1 - zh0)),
+                         np_maximum(fabs(l2 - zh1), fabs(h2 - zh1)));
+        reach[v] = r * (1.0 + 1e-9) + 1e-9;
+        if (by != NULL) {
+            by[v] = INFINITY;
+        }
+        v1_out[v] = v1[v];
+        v2_out[v] = v2[v];
+        active[v] = 0;
+        slack[v] = 0.0;
+    }
+    if (who == 0) {
+        result = Py_BuildValue("(ndn)", (Py_ssize_t)-1, INFINITY, (Py_ssize_t)0);
+        goto done;
+    }
+    double least = INFINITY;
+
+    /* The neighbour search's filter on the seen look-ahead points, then (without
+     * sensing) the pairs that cannot bind dropped. */
+    Py_ssize_t kept = 0;
+    double r2 = radius * radius;
+    for (Py_ssize_t k = 0; k < nc; k++) {
+        Py_ssize_t i = ci[k], j = cj[k];
+        double x = ps[2 * i] - ps[2 * j], y = ps[2 * i + 1] - ps[2 * j + 1];
+        if (x * x + y * y < r2) {
+            near[kept++] = k;
+        }
+    }
+    if (kept && seen == NULL) {
+        Least pair = {0.0, 0};
+        Py_ssize_t out = 0;
+        for (Py_ssize_t q = 0; q < kept; q++) {
+            Py_ssize_t k = near[q], i = ci[k], j = cj[k];
+            double x = p[2 * i] - p[2 * j], y = p[2 * i + 1] - p[2 * j + 1];
+            double dist = np_maximum(hypot(x, y), min_dist);
+            double big_d = 0.5 * (diam[i] + diam[j]) + 2.0 * look + margin;
+            double hh = dist * dist - big_d * big_d;
+            int both = filt[i] && filt[j];
+            if (filt[i] || filt[j]) {
+                least_add(&pair, hh);
+                if (by != NULL) {
+                    by[i] = np_minimum(by[i], hh);
+                }
+            }
+            double base = 0.25 * gamma * hh / dist, slack_i = base, slack_j = base;
+            if (prev) {
+                double ux = x / dist, uy = y / dist;
+                double along_i = ux * w[2 * i] + uy * w[2 * i + 1];
+                double along_j = ux * w[2 * j] + uy * w[2 * j + 1];
+                if (broadcast) { /* a quarter budget less closing, the same for both */
+                    slack_i = slack_j = base + 0.5 * (along_i - along_j);
+                }
+                else {
+                    slack_i = base + along_i;
+                    slack_j = base - along_j;
+                }
+            }
+            if (slack_i < reach[i] || slack_j < reach[j] || !both) {
+                near[out++] = k;
+            }
+        }
+        least = least_merge(least, &pair);
+        kept = out;
+    }
+
+    /* Both directions of each pair (pair_geometry), then the obstacles' rows. */
+    Py_ssize_t made = 0;
+    Least made_least = {0.0, 0};
+    for (int side = 0; side < 2; side++) {
+        for (Py_ssize_t q = 0; q < kept; q++) {
+            Py_ssize_t k = near[q];
+            Py_ssize_t me = side ? cj[k] : ci[k], other = side ? ci[k] : cj[k];
+            if (!filt[me]) {
+                continue;
+            }
+            int coop = filt[other];
+            const double *target = coop ? ps + 2 * other : cs + 2 * other;
+            double x = p[2 * me] - target[0], y = p[2 * me + 1] - target[1];
+            double dist = np_maximum(hypot(x, y), min_dist);
+            double big_d =
+                0.5 * (diam[me] + diam[other]) + (coop ? 2.0 * look : look) + margin;
+            double hh = dist * dist - big_d * big_d;
+            least_add(&made_least, hh);
+            if (by != NULL) {
+                by[me] = np_minimum(by[me], hh);
+            }
+            double share = 0.0; /* einsum("kd,kd->k"): the products summed from 0 */
+            if (prev && broadcast) {
+                double s0 = w[2 * me] + w[2 * other], s1 = w[2 * me + 1] + w[2 * other + 1];
+                share = 0.0 + x * s0 + y * s1;
+            }
+            double moving = 0.0 + x * vel[2 * other] + y * vel[2 * other + 1];
+            double rhs = coop ? -0.5 * gamma * hh + share : -gamma * hh + 2.0 * moving;
+            Row *r = rows + made++;
+            r->veh = me;
+            r->a0 = -x / dist;
+            r->a1 = -y / dist;
+            r->b = -rhs / (2.0 * dist);
+        }
+    }
+    least = least_merge(least, &made_least);
+    Least wall = {0.0, 0};
+    for (Py_ssize_t k = 0; k < no; k++) {
+        Py_ssize_t v = orow[k];
+        double clearance = 0.5 * diam[v] + look + margin;
+        double g = signed_d[k] - clearance;
+        least_add(&wall, g);
+        if (by != NULL) {
+            by[v] = np_minimum(by[v], g);
+        }
+        Row *r = rows + made++;
+        r->veh = v;
+        r->a0 = -away[2 * k];
+        r->a1 = -away[2 * k + 1];
+        r->b = gamma * (signed_d[k] - clearance);
+    }
+    least = least_merge(least, &wall);
+
+    /* In z = (v1, l v2): a . w = (R^T a) . z; the rows no input within the bounds
+     * can violate dropped, the rest counted per vehicle in their order. */
+    for (Py_ssize_t v = 0; v < N; v++) {
+        count[v] = 0;
+    }
+    Py_ssize_t live = 0;
+    for (Py_ssize_t k = 0; k < made; k++) {
+        Row *r = rows + k;
+        Py_ssize_t v = r->veh;
+        double c = cos_t[v], s = sin_t[v];
+        double a0 = c * r->a0 + s * r->a1, a1 = -s * r->a0 + c * r->a1;
+        double most = np_maximum(a0 * lo1[v], a0 * hi1[v]) +
+                      np_maximum(a1 * lo2[v], a1 * hi2[v]);
+        if (most > r->b - tol) {
+            r->a0 = a0;
+            r->a1 = a1;
+            rows[live++] = *r;
+            count[v]++;
+        }
+    }
+    /* np.lexsort((b, veh)): by vehicle (a stable bucket), then by b (a stable
+     * insertion sort: ties keep the order the rows were made in). */
+    Py_ssize_t total = 0;
+    for (Py_ssize_t v = 0; v < N; v++) {
+        first[v] = total;
+        fill[v] = total;
+        total += count[v];
+    }
+    for (Py_ssize_t k = 0; k < live; k++) {
+        order[fill[rows[k].veh]++] = k;
+    }
+    Py_ssize_t kept_rows = 0;
+    for (Py_ssize_t v = 0; v < N; v++) {
+        Py_ssize_t *o = order + first[v];
+        for (Py_ssize_t a = 1; a < count[v]; a++) {
+            Py_ssize_t cur = o[a], b = a;
+            while (b > 0 && sorts_before(rows[cur].b, rows[o[b - 1]].b)) {
+                o[b] = o[b - 1];
+                b--;
+            }
+            o[b] = cur;
+        }
+        if (count[v] > max_rows) {
+            count[v] = max_rows;
+        }
+        kept_rows += count[v];
+    }
+
+    /* Each filtered vehicle's problem: the bounds only (a clip), or the four bounds
+     * and its rows (qp.bounded_problems), projected exactly, then the right-hand
+     * rule's turn and second projection. */
+    Py_ssize_t pending = 0;
+    double mat[2 * (4 + 16)], off[4 + 16];
+    for (Py_ssize_t v = 0; v < N; v++) {
+        if (!filt[v]) {
+            continue;
+        }
+        double x0 = z0[2 * v], y0 = z0[2 * v + 1], z[2];
+        Py_ssize_t m = count[v];
+        if (m == 0) {
+            z[0] = clip_rows(x0, lo1[v], hi1[v]);
+            z[1] = clip_rows(y0, lo2[v], hi2[v]);
+        }
+        else {
+            double *a = m <= 16 ? mat : pmat + 2 * width * pending;
+            double *b = m <= 16 ? off : poff + width * pending;
+            for (int q = 0; q < 8; q++) {
+                a[q] = 0.0;
+            }
+            a[0] = 1.0;
+            b[0] = hi1[v];
+            a[2] = -1.0;
+            b[1] = -lo1[v];
+            a[5] = 1.0;
+            b[2] = hi2[v];
+            a[7] = -1.0;
+            b[3] = -lo2[v];
+            const Py_ssize_t *o = order + first[v];
+            for (Py_ssize_t q = 0; q < m; q++) {
+                a[2 * (4 + q)] = rows[o[q]].a0;
+                a[2 * (4 + q) + 1] = rows[o[q]].a1;
+                b[4 + q] = rows[o[q]].b;
+            }
+            int ok = project_one(a, b, 4 + m, x0, y0, tol, z);
+            if (ok && angle > 0 && !speed_only) {
+                double nominal = hypot(x0, y0), kept_speed = hypot(z[0], z[1]);
+                double cut = 1.0 - kept_speed / np_maximum(nominal, min_speed);
+                double x = clip_scalars((cut - (1.0 - start)) / (start - full), 0.0, 1.0);
+                double ramp = x * x * (3.0 - 2.0 * x);
+                double turn = angle * ramp * np_minimum(nominal / slow, 1.0);
+                if (turn > 0) { /* clockwise by the turn */
+                    double c = cos(turn), s = sin(turn);
+                    ok = project_one(a, b, 4 + m, c * x0 + s * y0, c * y0 - s * x0, tol, z);
+                }
+            }
+            if (!ok) { /* no point: numpy's min_violation, by the caller */
+                if (a != pmat + 2 * width * pending) {
+                    memcpy(pmat + 2 * width * pending, a, sizeof(double) * 2 * (4 + m));
+                    memcpy(poff + width * pending, b, sizeof(double) * (4 + m));
+                }
+                pend[pending] = v;
+                pend_m[pending] = m;
+                pending++;
+                continue;
+            }
+        }
+        if (z[0] != x0 || z[1] != y0) { /* changed: the commands written back */
+            v1_out[v] = z[0];
+            if (!speed_only) {
+                v2_out[v] = z[1] / look;
+            }
+            active[v] = 1;
+        }
+    }
+    result = Py_BuildValue("(ndn)", kept_rows, least, pending);
+done:
+    PyMem_Free(scratch);
+    let_go(&h);
+    return result;
+}
+
+PyDoc_STRVAR(world_counts_doc,
+"world_counts(worlds, active, slack, by_vehicle, fallback, max_slack, min_barrier,\n"
+"    started, out_active, out_bad, out_worst, out_least, out_fallen, touched,\n"
+"    tolerance) -> count\n"
+"\n"
+"accounting.account_worlds' reductions of one step over ``worlds`` worlds of n rows:\n"
+"each world's active count, count of slack above ``tolerance``, largest slack, least\n"
+"barrier (inf without ``by_vehicle``) and fallback count (0 without ``fallback``);\n"
+"``max_slack`` and ``min_barrier`` raised and lowered; the worlds whose counters\n"
+"change (every world unless ``started``) listed in ``touched``, their count returned.");
+
+static PyObject *
+world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 15) {
+        PyErr_SetString(PyExc_TypeError, "world_counts takes 15 arguments");
+        return NULL;
+    }
+    Py_ssize_t K = PyLong_AsSsize_t(args[0]);
+    int started = PyObject_IsTrue(args[7]);
+    double tol = PyFloat_AsDouble(args[14]);
+    if (PyErr_Occurred() || started < 0) {
+        return NULL;
+    }
+    Held h = {.count = 0};
+    PyObject *result = NULL;
+    unsigned char *active, *fallback;
+    double *slack, *by, *max_slack, *min_barrier, *worst, *least;
+    Py_ssize_t *n_active, *n_bad, *n_fallen, *touched, N;
+    if (hold(&h, args[1], 'b', -1, 0, 0, (void **)&active, &N) < 0) goto done;
+    if (K <= 0 || N % K != 0) {
+        PyErr_SetString(PyExc_ValueError, "world_counts: rows not a multiple of worlds");
+        goto done;
+    }
+    if (hold(&h, args[2], 'd', N, 0, 0, (void **)&slack, NULL) < 0 ||
+        hold(&h, args[3], 'd', N, 0, 1, (void **)&by, NULL) < 0 ||
+        hold(&h, args[4], 'b', N, 0, 1, (void **)&fallback, NULL) < 0 ||
+        hold(&h, args[5], 'd', K, 1, 0, (void **)&max_slack, NULL) < 0 ||
+        hold(&h, args[6], 'd', K, 1, 0, (void **)&min_barrier, NULL) < 0 ||
+        hold(&h, args[8], 'n', K, 1, 0, (void **)&n_active, NULL) < 0 ||
+        hold(&h, args[9], 'n', K, 1, 0, (void **)&n_bad, NULL) < 0 ||
+        hold(&h, args[10], 'd', K, 1, 0, (void **)&worst, NULL) < 0 ||
+        hold(&h, args[11], 'd', K, 1, 0, (void **)&least, NULL) < 0 ||
+        hold(&h, args[12], 'n', K, 1, 0, (void **)&n_fallen, NULL) < 0 ||
+        hold(&h, args[13], 'n', K, 1, 0, (void **)&touched, NULL) < 0)
+        goto done;
+    Py_ssize_t n = N / K, out = 0;
+    for (Py_ssize_t w = 0; w < K; w++) {
+        Py_ssize_t on = 0, bad = 0, fallen = 0;
+        double big = slack[w * n], small = by != NULL ? by[w * n] : INFINITY;
+        for (Py_ssize_t k = w * n; k < (w + 1) * n; k++) {
+            on += active[k] != 0;
+            bad += slack[k] > tol;
+            if (fallback != NULL) {
+                fallen += fallback[k] != 0;
+            }
+            double s = slack[k]; /* numpy's max and min reductions: NaN wins */
+            if (big == big && (s != s || s > big)) {
+                big = s;
+            }
+            if (by != NULL && small == small && (by[k] != by[k] || by[k] < small)) {
+                small = by[k];
+            }
+        }
+        n_active[w] = on;
+        n_bad[w] = bad;
+        n_fallen[w] = fallen;
+        worst[w] = big;
+        least[w] = small;
+        int raised = big > max_slack[w];
+        int lowered = isfinite(small) && small < min_barrier[w];
+        if (!started || on > 0 || bad > 0 || raised || lowered || fallen > 0) {
+            touched[out++] = w;
+        }
+        if (raised) {
+            max_slack[w] = big;
+        }
+        if (lowered) {
+            min_barrier[w] = small;
+        }
+    }
+    result = PyLong_FromSsize_t(out);
+done:
+    let_go(&h);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"velocity_step", (PyCFunction)(void (*)(void))velocity_step, METH_FASTCALL,
+     velocity_step_doc},
+    {"world_counts", (PyCFunction)(void (*)(void))world_counts, METH_FASTCALL,
+     world_counts_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_filter",
+    "The CBF filter's velocity barrier and its counters in C (see filter_kernel.py).",
+    -1, methods,
+};
+
+PyMODINIT_FUNC
+PyInit__filter(void)
+{
+    return PyModule_Create(&module);
+}
