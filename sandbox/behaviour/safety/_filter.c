@@ -244,10 +244,11 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     const int broadcast = (flags & F_BROADCAST) != 0, prev = v1p != NULL;
 
     /* One block for the call: per vehicle 17 doubles and 3 counts, per candidate
-     * pair its place, rows for both directions of every pair and every obstacle
-     * (and their order), per vehicle a flag. */
+     * pair its place, distance and barrier, rows for both directions of every pair
+     * and every obstacle (and their order), per vehicle a flag. */
     Py_ssize_t cap = 2 * nc + no;
-    size_t doubles = 17 * (size_t)N, counts = 3 * (size_t)N + (size_t)nc + (size_t)cap;
+    size_t doubles = 17 * (size_t)N + 2 * (size_t)nc;
+    size_t counts = 3 * (size_t)N + (size_t)nc + (size_t)cap;
     size_t bytes = sizeof(double) * doubles + sizeof(Py_ssize_t) * counts +
                    sizeof(Row) * (size_t)cap + (size_t)N + 1;
     scratch = PyMem_Malloc(bytes);
@@ -258,8 +259,8 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     double *cos_t = (double *)scratch, *sin_t = cos_t + N, *p = sin_t + N;
     double *ps = p + 2 * N, *cs = ps + 2 * N, *w = cs + 2 * N, *z0 = w + 2 * N;
     double *lo1 = z0 + 2 * N, *hi1 = lo1 + N, *lo2 = hi1 + N, *hi2 = lo2 + N;
-    double *reach = hi2 + N; /* 17 N doubles up to here */
-    Row *rows = (Row *)(reach + N);
+    double *reach = hi2 + N, *pair_dist = reach + N, *pair_h = pair_dist + nc;
+    Row *rows = (Row *)(pair_h + nc);
     Py_ssize_t *count = (Py_ssize_t *)(rows + cap), *first = count + N;
     Py_ssize_t *fill = first + N, *near = fill + N, *order = near + nc;
     unsigned char *filt = (unsigned char *)(order + cap);
@@ -316,10 +317,12 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         hi1[v] = h1;
         lo2[v] = l2;
         hi2[v] = h2;
-        double zh0 = prev ? v1p[v] : 0.0, zh1 = prev ? look * v2p[v] : 0.0;
-        double r = hypot(np_maximum(fabs(l1 - zh0), fabs(h1 - zh0)),
-                         np_maximum(fabs(l2 - zh1), fabs(h2 - zh1)));
-        reach[v] = r * (1.0 + 1e-9) + 1e-9;
+        if (filt[v] && seen == NULL) { /* the pruning's reach (of filtered ones) */
+            double zh0 = prev ? v1p[v] : 0.0, zh1 = prev ? look * v2p[v] : 0.0;
+            double r = hypot(np_maximum(fabs(l1 - zh0), fabs(h1 - zh0)),
+                             np_maximum(fabs(l2 - zh1), fabs(h2 - zh1)));
+            reach[v] = r * (1.0 + 1e-9) + 1e-9;
+        }
         if (by != NULL) {
             by[v] = INFINITY;
         }
@@ -374,7 +377,9 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                     slack_j = base - along_j;
                 }
             }
-            if (slack_i < reach[i] || slack_j < reach[j] || !both) {
+            if (!both || slack_i < reach[i] || slack_j < reach[j]) {
+                pair_dist[out] = dist; /* the same for both directions' rows */
+                pair_h[out] = hh;
                 near[out++] = k;
             }
         }
@@ -395,10 +400,17 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             int coop = filt[other];
             const double *target = coop ? ps + 2 * other : cs + 2 * other;
             double x = p[2 * me] - target[0], y = p[2 * me + 1] - target[1];
-            double dist = np_maximum(hypot(x, y), min_dist);
-            double big_d =
-                0.5 * (diam[me] + diam[other]) + (coop ? 2.0 * look : look) + margin;
-            double hh = dist * dist - big_d * big_d;
+            double dist, hh;
+            if (coop && seen == NULL) { /* the pruning's: rel is +-(p_i - p_j) */
+                dist = pair_dist[q];
+                hh = pair_h[q];
+            }
+            else {
+                dist = np_maximum(hypot(x, y), min_dist);
+                double big_d =
+                    0.5 * (diam[me] + diam[other]) + (coop ? 2.0 * look : look) + margin;
+                hh = dist * dist - big_d * big_d;
+            }
             least_add(&made_least, hh);
             if (by != NULL) {
                 by[me] = np_minimum(by[me], hh);
@@ -520,7 +532,8 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             }
             int ok = project_one(a, b, 4 + m, x0, y0, tol, z);
             if (ok && angle > 0 && !speed_only) {
-                double nominal = hypot(x0, y0), kept_speed = hypot(z[0], z[1]);
+                double nominal = hypot(x0, y0);
+                double kept_speed = z[0] == x0 && z[1] == y0 ? nominal : hypot(z[0], z[1]);
                 double cut = 1.0 - kept_speed / np_maximum(nominal, min_speed);
                 double x = clip_scalars((cut - (1.0 - start)) / (start - full), 0.0, 1.0);
                 double ramp = x * x * (3.0 - 2.0 * x);

@@ -30,7 +30,8 @@ the numpy path, as does every run where the extension is not built (no C compile
 The loop takes the C library's ``sin``, ``cos`` and ``hypot``: at the first use
 :func:`kernel_agrees` requires :func:`~sandbox.model.kernels.kernels_agree` (those
 functions against numpy's), that ``np.einsum("kd,kd->k")`` sums its two products from
-0 as the loop does, and then compares the two paths of ``filter_commands`` on a few
+0 as the loop does and that ``np.hypot`` is even (a pair's two directions share one
+distance), and then compares the two paths of ``filter_commands`` on a few
 dozen random steps (every option above, infeasible and stalled vehicles, rows beyond
 the cut) bit for bit; the C loop is used only if every result is the same.
 """
@@ -266,7 +267,7 @@ def _check() -> bool:
     from sandbox.behaviour.safety.cbf import CBFState, filter_commands
 
     global USE_KERNEL
-    if not _einsum_sums_from_zero():
+    if not _numpy_as_assumed():
         return False
     saved = USE_KERNEL
     try:
@@ -362,16 +363,27 @@ def random_steps(rng: np.random.Generator, count: int) -> list[FilterContext]:
     return out
 
 
-def _einsum_sums_from_zero() -> bool:
-    """Whether ``einsum("kd,kd->k")`` is ``0 + a0 b0 + a1 b1`` here, as the loop's."""
+def _numpy_as_assumed() -> bool:
+    """Whether numpy here does what the loop assumes beyond the C library's functions.
+
+    ``einsum("kd,kd->k")`` is ``0 + a0 b0 + a1 b1``, and ``hypot(-x, -y)`` is
+    ``hypot(x, y)`` (a pair's two directions share one distance).
+    """
     rng = np.random.default_rng(7)
     a = rng.normal(0.0, 1.0, (512, 2))
     b = rng.normal(0.0, 1.0, (512, 2))
     a[:64] = np.where(rng.random((64, 2)) < 0.5, -0.0, 0.0)
     b[32:96] = np.where(rng.random((64, 2)) < 0.5, -0.0, 0.0)
+    a[96:128] *= np.exp(rng.uniform(-700.0, 700.0, (32, 1)))
     want = 0.0 + a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]
     got = np.einsum("kd,kd->k", a, b)
-    return bool(np.array_equal(got.view(np.uint64), want.view(np.uint64)))
+    turned = np.hypot(-a[:, 0], -a[:, 1])
+    return bool(
+        np.array_equal(got.view(np.uint64), want.view(np.uint64))
+        and np.array_equal(
+            turned.view(np.uint64), np.hypot(a[:, 0], a[:, 1]).view(np.uint64)
+        )
+    )
 
 
 def same_step(
