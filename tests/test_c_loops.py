@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from sandbox.behaviour import sensing, tracks
-from sandbox.behaviour.safety import qp
+from sandbox.behaviour.safety import filter_kernel, qp
 from sandbox.loop import divergence, tally
 from sandbox.loop.simulation import Simulation
 from sandbox.physics import world
@@ -75,6 +75,9 @@ def test_project_in_c_equals_numpy_on_bounded_problems(m):
 
 @needs_qp
 def test_filtered_runs_with_the_c_projection_equal_numpy(monkeypatch):
+    # the filter's numpy path, whose QPs go through qp.project (the C filter's own
+    # projection is tested in test_filter_kernel.py)
+    monkeypatch.setattr(filter_kernel, "USE_KERNEL", False)
     scenarios = [
         load_scenario(
             "failures/follower_stop",

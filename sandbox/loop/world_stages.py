@@ -287,8 +287,15 @@ class WorldStages:
             **context_fields(self.range_sensor),
         )
         out = self._filter(ctx)  # a PluginRunError ends every world (_guarded)
-        N = self.N
-        return (
-            np.broadcast_to(np.asarray(out[0], dtype=float), (N,)).copy(),
-            np.broadcast_to(np.asarray(out[1], dtype=float), (N,)).copy(),
-        )
+        return _rows_of(out[0], self.N), _rows_of(out[1], self.N)
+
+
+def _rows_of(value: object, n: int) -> np.ndarray:
+    """A filter's command as a new float array of ``n`` rows (a scalar broadcast).
+
+    An array of ``n`` floats is copied as it is (what the broadcast gives it, without
+    its cost).
+    """
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (n,):
+        return value.copy()
+    return np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()

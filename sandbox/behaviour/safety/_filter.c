@@ -102,7 +102,8 @@ let_go(Held *h)
 }
 
 /* A C-contiguous buffer of ``len`` items (any length if len < 0) of the kind 'd'
- * (float64), 'b' (one byte: bool) or 'n' (intp); None gives NULL if optional. */
+ * (float64), 'b' (bool) or 'n' (intp); None gives NULL if optional. A buffer of
+ * another kind raises TypeError, of another length ValueError, before any write. */
 static int
 hold(Held *h, PyObject *obj, char kind, Py_ssize_t len, int writable, int optional,
      void **out, Py_ssize_t *got_len)
@@ -128,8 +129,7 @@ hold(Held *h, PyObject *obj, char kind, Py_ssize_t len, int writable, int option
              (strcmp(f, "l") == 0 || strcmp(f, "q") == 0 || strcmp(f, "n") == 0);
     }
     else {
-        ok = v->itemsize == 1 && (strcmp(f, "?") == 0 || strcmp(f, "B") == 0 ||
-                                  strcmp(f, "b") == 0);
+        ok = v->itemsize == 1 && strcmp(f, "?") == 0;
     }
     if (!ok) {
         PyErr_Format(PyExc_TypeError, "expected a contiguous array of kind '%c'", kind);

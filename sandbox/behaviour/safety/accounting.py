@@ -217,29 +217,23 @@ def _account_c(
 ) -> bool:
     """:func:`account_worlds` with its reductions in C; False where it cannot run.
 
-    It cannot where an array is not C-contiguous of its type or the counters are
-    not float64 (the numpy path takes them as they are).
+    It cannot where an array is not C-contiguous of its type (bool, float64), the
+    counters' included (the numpy path takes them as they are).
     """
     k = len(world_stats)
-    arrays = (step.active, step.slack, step.by_vehicle, step.fallback)
-    if not all(a is None or a.flags.c_contiguous for a in arrays) or not (
-        step.active.dtype == np.bool_
-        and step.slack.dtype == np.float64
-        and (step.by_vehicle is None or step.by_vehicle.dtype == np.float64)
-        and (not braking or step.fallback.dtype == np.bool_)
-        and counters.max_slack.dtype == counters.min_barrier.dtype == np.float64
-    ):
-        return False
     if counters.out is None or len(counters.out[0]) != k:
         counts = tuple(np.zeros(k, dtype=np.intp) for _ in range(4))
         counters.out = (*counts, np.zeros(k), np.zeros(k))
     active, bad, fallen, touched, worst, least = counters.out
-    count = _filter.world_counts(
-        k, step.active, step.slack, step.by_vehicle,
-        step.fallback if braking else None, counters.max_slack,
-        counters.min_barrier, counters.started, active, bad, worst, least, fallen,
-        touched, TOLERANCE,
-    )  # fmt: skip
+    try:  # the C loop holds every buffer before it writes any
+        count = _filter.world_counts(
+            k, step.active, step.slack, step.by_vehicle,
+            step.fallback if braking else None, counters.max_slack,
+            counters.min_barrier, counters.started, active, bad, worst, least,
+            fallen, touched, TOLERANCE,
+        )  # fmt: skip
+    except (TypeError, ValueError, BufferError):
+        return False
     counters.started = True
     if count:
         rows = touched[:count]

@@ -153,16 +153,32 @@ def _floats(a: Any) -> Any:
     return np.ascontiguousarray(a, dtype=float)
 
 
+def _filtered(ctx: FilterContext) -> np.ndarray:
+    """The vehicles the filter drives (``filter_commands``' ``filtered``)."""
+    filtered = np.ones(len(ctx.pos), dtype=bool)
+    if ctx.known_failed is not None:
+        filtered &= ~ctx.known_failed
+    if ctx.commanded is not None:
+        filtered &= ~ctx.commanded
+    return filtered
+
+
+def _any_filtered(ctx: FilterContext) -> bool:
+    return bool(_filtered(ctx).any())
+
+
 def _candidates(state: CBFState, ctx: FilterContext) -> tuple[np.ndarray, ...]:
     """The neighbour search's candidate pairs, those ``near`` filters by distance.
 
     Every pair of each world up to :data:`BRUTE_FORCE_MAX` vehicles (whatever the
     positions given); a larger single world's kept list is brought up to date on
-    the seen look-ahead points, as ``near`` does.
+    the seen look-ahead points, as ``near`` does (when some vehicle is filtered).
     """
     search = state.neighbours
     if isinstance(search, WorldPairs) or len(ctx.pos) <= BRUTE_FORCE_MAX:
         return search.candidates(ctx.pos)
+    if not _any_filtered(ctx):
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
     return search.candidates(look_ahead_points(ctx, state.look)[3])
 
 
@@ -187,33 +203,33 @@ def velocity_step(
     args = state.c_args
     if args is None or args.n != n or args.dt != ctx.dt:
         args = state.c_args = Arguments(state, n, ctx.dt)
-    failed, commanded = _bools(ctx.known_failed), _bools(ctx.commanded)
     rows = signed = away = None
     field = ctx.obstacle_field
-    if field is not None and not field.empty:
-        filtered = np.ones(n, dtype=bool)
-        if failed is not None:
-            filtered &= ~failed
-        if commanded is not None:
-            filtered &= ~commanded
-        if filtered.any():  # numpy's step makes no rows when none is filtered
-            p = look_ahead_points(ctx, look)[1]
-            near = obstacle_normals(state, ctx, p, filtered)
-            if near is not None:
-                rows = np.ascontiguousarray(near[0], dtype=np.intp)
-                signed, away = c_float64(near[1]), c_float64(near[2])
+    if field is not None and not field.empty and _any_filtered(ctx):
+        p = look_ahead_points(ctx, look)[1]  # (numpy's step makes no rows for none)
+        near = obstacle_normals(state, ctx, p, _filtered(ctx))
+        if near is not None:
+            rows = np.ascontiguousarray(near[0], dtype=np.intp)
+            signed, away = c_float64(near[1]), c_float64(near[2])
     i, j = _candidates(state, ctx)
     v1, v2, slack = np.empty(n), np.empty(n), np.empty(n)
     active = np.empty(n, dtype=bool)
     by_vehicle = np.empty(n) if ctx.worlds > 1 else None
-    count, least, pending = _filter.velocity_step(
-        c_float64(ctx.pos), c_float64(ctx.theta), c_float64(ctx.vel),
-        _floats(ctx.v1), _floats(ctx.v2), c_float64(ctx.diameter),
-        _floats(ctx.v1_prev), _floats(ctx.v2_prev), failed, commanded,
-        _floats(ctx.seen), *args.limits, i, j, rows, signed, away, args.params,
-        args.flags, state.max_rows, v1, v2, active, slack, by_vehicle,
-        args.pending, args.pending_m, args.pending_mat, args.pending_off,
+    given = (
+        ctx.pos, ctx.theta, ctx.vel, ctx.v1, ctx.v2, ctx.diameter, ctx.v1_prev,
+        ctx.v2_prev, ctx.known_failed, ctx.commanded, ctx.seen,
     )  # fmt: skip
+    rest = (
+        *args.limits, i, j, rows, signed, away, args.params, args.flags,
+        state.max_rows, v1, v2, active, slack, by_vehicle, args.pending,
+        args.pending_m, args.pending_mat, args.pending_off,
+    )  # fmt: skip
+    try:  # the arrays as they are, where each is C-contiguous of its type
+        count, least, pending = _filter.velocity_step(*given, *rest)
+    except (TypeError, ValueError, BufferError):
+        floats = [_floats(a) for a in given]
+        floats[8], floats[9] = _bools(given[8]), _bools(given[9])
+        count, least, pending = _filter.velocity_step(*floats, *rest)
     fallback = np.zeros(n, dtype=bool)
     if count < 0:  # no vehicle is filtered
         return v1, v2, FilterStep(active, slack, 0, np.inf, fallback)
