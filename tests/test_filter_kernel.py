@@ -121,15 +121,19 @@ def test_the_c_path_covers_the_velocity_barrier_without_a_priority():
 
 
 @needs_filter
-def test_the_counts_check_passes_and_fails_on_one_changed_bit(monkeypatch):
+@pytest.mark.parametrize("what", ["worst", "lowered"])
+def test_the_counts_check_passes_and_fails_on_one_changed_bit(monkeypatch, what):
     assert accounting.counts_agree()
     real = accounting._filter
 
     def off_by_one(*args):
-        count = real.world_counts(*args)
-        worst = args[10]
-        worst[0] = _next(worst[0])
-        return count
+        count, fell = real.world_counts(*args)
+        worst, least, lowered = args[10], args[11], args[14]
+        if what == "worst":
+            worst[0] = _next(worst[0])
+        elif fell:  # a world whose least barrier alone fell
+            least[lowered[0]] = _next(least[lowered[0]])
+        return count, fell
 
     fake = SimpleNamespace(world_counts=off_by_one)
     monkeypatch.setattr(accounting, "_filter", fake)

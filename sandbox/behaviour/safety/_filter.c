@@ -572,24 +572,25 @@ done:
 PyDoc_STRVAR(world_counts_doc,
 "world_counts(worlds, active, slack, by_vehicle, fallback, max_slack, min_barrier,\n"
 "    started, out_active, out_bad, out_worst, out_least, out_fallen, touched,\n"
-"    tolerance) -> count\n"
+"    lowered, tolerance) -> (n_touched, n_lowered)\n"
 "\n"
 "accounting.account_worlds' reductions of one step over ``worlds`` worlds of n rows:\n"
 "each world's active count, count of slack above ``tolerance``, largest slack, least\n"
 "barrier (inf without ``by_vehicle``) and fallback count (0 without ``fallback``);\n"
-"``max_slack`` and ``min_barrier`` raised and lowered; the worlds whose counters\n"
-"change (every world unless ``started``) listed in ``touched``, their count returned.");
+"``max_slack`` and ``min_barrier`` raised and lowered. The worlds whose counters\n"
+"change are listed: in ``lowered`` those (once ``started``) whose least barrier\n"
+"alone fell, in ``touched`` the others (every world unless ``started``).");
 
 static PyObject *
 world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 15) {
-        PyErr_SetString(PyExc_TypeError, "world_counts takes 15 arguments");
+    if (nargs != 16) {
+        PyErr_SetString(PyExc_TypeError, "world_counts takes 16 arguments");
         return NULL;
     }
     Py_ssize_t K = PyLong_AsSsize_t(args[0]);
     int started = PyObject_IsTrue(args[7]);
-    double tol = PyFloat_AsDouble(args[14]);
+    double tol = PyFloat_AsDouble(args[15]);
     if (PyErr_Occurred() || started < 0) {
         return NULL;
     }
@@ -597,7 +598,7 @@ world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     PyObject *result = NULL;
     unsigned char *active, *fallback;
     double *slack, *by, *max_slack, *min_barrier, *worst, *least;
-    Py_ssize_t *n_active, *n_bad, *n_fallen, *touched, N;
+    Py_ssize_t *n_active, *n_bad, *n_fallen, *touched, *lowered, N;
     if (hold(&h, args[1], 'b', -1, 0, 0, (void **)&active, &N) < 0) goto done;
     if (K <= 0 || N % K != 0) {
         PyErr_SetString(PyExc_ValueError, "world_counts: rows not a multiple of worlds");
@@ -613,9 +614,10 @@ world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         hold(&h, args[10], 'd', K, 1, 0, (void **)&worst, NULL) < 0 ||
         hold(&h, args[11], 'd', K, 1, 0, (void **)&least, NULL) < 0 ||
         hold(&h, args[12], 'n', K, 1, 0, (void **)&n_fallen, NULL) < 0 ||
-        hold(&h, args[13], 'n', K, 1, 0, (void **)&touched, NULL) < 0)
+        hold(&h, args[13], 'n', K, 1, 0, (void **)&touched, NULL) < 0 ||
+        hold(&h, args[14], 'n', K, 1, 0, (void **)&lowered, NULL) < 0)
         goto done;
-    Py_ssize_t n = N / K, out = 0;
+    Py_ssize_t n = N / K, out = 0, low = 0;
     for (Py_ssize_t w = 0; w < K; w++) {
         Py_ssize_t on = 0, bad = 0, fallen = 0;
         double big = slack[w * n], small = by != NULL ? by[w * n] : INFINITY;
@@ -639,18 +641,21 @@ world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         worst[w] = big;
         least[w] = small;
         int raised = big > max_slack[w];
-        int lowered = isfinite(small) && small < min_barrier[w];
-        if (!started || on > 0 || bad > 0 || raised || lowered || fallen > 0) {
+        int fell = isfinite(small) && small < min_barrier[w];
+        if (!started || on > 0 || bad > 0 || raised || fallen > 0) {
             touched[out++] = w;
+        }
+        else if (fell) {
+            lowered[low++] = w;
         }
         if (raised) {
             max_slack[w] = big;
         }
-        if (lowered) {
+        if (fell) {
             min_barrier[w] = small;
         }
     }
-    result = PyLong_FromSsize_t(out);
+    result = Py_BuildValue("(nn)", out, low);
 done:
     let_go(&h);
     return result;

@@ -218,23 +218,31 @@ def _account_c(
     """:func:`account_worlds` with its reductions in C; False where it cannot run.
 
     It cannot where an array is not C-contiguous of its type (bool, float64), the
-    counters' included (the numpy path takes them as they are).
+    counters' included (the numpy path takes them as they are). A world whose least
+    barrier alone changes (after the first step, which writes every counter of every
+    world: nothing active, infeasible or fallen back, its largest slack not raised)
+    gets from :func:`_add` only its new ``min_barrier``, ``least < min_barrier``
+    (``counters.min_barrier`` is the world's), and so gets only that.
     """
     k = len(world_stats)
     if counters.out is None or len(counters.out[0]) != k:
-        counts = tuple(np.zeros(k, dtype=np.intp) for _ in range(4))
+        counts = tuple(np.zeros(k, dtype=np.intp) for _ in range(5))
         counters.out = (*counts, np.zeros(k), np.zeros(k))
-    active, bad, fallen, touched, worst, least = counters.out
+    active, bad, fallen, touched, lowered, worst, least = counters.out
     try:  # the C loop holds every buffer before it writes any
-        count = _filter.world_counts(
+        count, fell = _filter.world_counts(
             k, step.active, step.slack, step.by_vehicle,
             step.fallback if braking else None, counters.max_slack,
             counters.min_barrier, counters.started, active, bad, worst, least,
-            fallen, touched, TOLERANCE,
+            fallen, touched, lowered, TOLERANCE,
         )  # fmt: skip
     except (TypeError, ValueError, BufferError):
         return False
     counters.started = True
+    if fell:  # what _add does where the least barrier alone changes
+        rows = lowered[:fell]
+        for w, value in zip(rows.tolist(), least[rows].tolist(), strict=True):
+            world_stats[w]["min_barrier"] = value
     if count:
         rows = touched[:count]
         for w, *values in zip(
@@ -253,7 +261,7 @@ def _account_c(
 def counts_agree() -> bool:
     """Whether the C reductions give :func:`account_worlds_numpy`'s (checked once).
 
-    Three steps of random counters of one to five worlds (slack at and beyond the
+    Four steps of random counters of one to five worlds (slack at and beyond the
     tolerance, NaN and infinite barriers, with and without the braking's fallback),
     each world's counters compared value for value.
     """
@@ -275,19 +283,19 @@ def _check() -> bool:
             start = {} if trial % 4 else {"max_slack": 0.5, "min_barrier": 0.1}
             stats = ([dict(start) for _ in range(k)], [dict(start) for _ in range(k)])
             counters = (WorldCounters(stats[0]), WorldCounters(stats[1]))
-            for t in (0.0, 0.01, 0.02):
+            for t in (0.0, 0.01, 0.02, 0.03):
                 slack = np.where(
-                    rng.random(k * n) < 0.5,
+                    rng.random(k * n) < 0.8,
                     0.0,
                     rng.choice(special[:4], k * n) * rng.uniform(0.5, 2.0, k * n),
                 )
                 least = rng.normal(0.0, 1.0, k * n)
                 least[rng.random(k * n) < 0.2] = rng.choice(special[3:], 1)
                 step = FilterStep(
-                    rng.random(k * n) < 0.2,
+                    rng.random(k * n) < 0.1,
                     slack,
                     0,
-                    fallback=rng.random(k * n) < 0.2,
+                    fallback=rng.random(k * n) < 0.05,
                     by_vehicle=least if by else None,
                 )
                 if not _account_c(stats[0], t, braking, step, counters[0]):
