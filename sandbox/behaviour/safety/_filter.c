@@ -231,7 +231,7 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     for (Py_ssize_t k = 0; k < no; k++) {
         if (orow[k] < 0 || orow[k] >= N) {
-            PyErr_SetString(PyExc_IndexError, "velocity_step: an obstacle row out of range");
+            PyErr_SetString(PyExc_IndexError, "velocity_step: a row out of range");
             goto done;
         }
     }
@@ -240,7 +240,8 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     const double tol = par[P_TOLERANCE], min_dist = par[P_MIN_DIST];
     const double min_speed = par[P_MIN_SPEED], start = par[P_STALL_START];
     const double full = par[P_STALL_FULL], slow = par[P_STALL_SPEED];
-    const int reverse = (flags & F_REVERSE) != 0, speed_only = (flags & F_SPEED_ONLY) != 0;
+    const int reverse = (flags & F_REVERSE) != 0;
+    const int speed_only = (flags & F_SPEED_ONLY) != 0;
     const int broadcast = (flags & F_BROADCAST) != 0, prev = v1p != NULL;
 
     /* One block for the call: per vehicle 17 doubles and 3 counts, per candidate
@@ -291,7 +292,8 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             w[2 * v] = c * v1p[v] + -(t * s);
             w[2 * v + 1] = s * v1p[v] + t * c;
         }
-        filt[v] = !(failed != NULL && failed[v]) && !(commanded != NULL && commanded[v]);
+        filt[v] = !(failed != NULL && failed[v]) &&
+                  !(commanded != NULL && commanded[v]);
         who += filt[v];
         z0[2 * v] = v1[v];
         z0[2 * v + 1] = look * v2[v];
@@ -407,8 +409,8 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             }
             else {
                 dist = np_maximum(hypot(x, y), min_dist);
-                double big_d =
-                    0.5 * (diam[me] + diam[other]) + (coop ? 2.0 * look : look) + margin;
+                double big_d = 0.5 * (diam[me] + diam[other]) +
+                               (coop ? 2.0 * look : look) + margin;
                 hh = dist * dist - big_d * big_d;
             }
             least_add(&made_least, hh);
@@ -417,7 +419,8 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             }
             double share = 0.0; /* einsum("kd,kd->k"): the products summed from 0 */
             if (prev && broadcast) {
-                double s0 = w[2 * me] + w[2 * other], s1 = w[2 * me + 1] + w[2 * other + 1];
+                double s0 = w[2 * me] + w[2 * other];
+                double s1 = w[2 * me + 1] + w[2 * other + 1];
                 share = 0.0 + x * s0 + y * s1;
             }
             double moving = 0.0 + x * vel[2 * other] + y * vel[2 * other + 1];
@@ -533,14 +536,17 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             int ok = project_one(a, b, 4 + m, x0, y0, tol, z);
             if (ok && angle > 0 && !speed_only) {
                 double nominal = hypot(x0, y0);
-                double kept_speed = z[0] == x0 && z[1] == y0 ? nominal : hypot(z[0], z[1]);
+                double kept_speed =
+                    z[0] == x0 && z[1] == y0 ? nominal : hypot(z[0], z[1]);
                 double cut = 1.0 - kept_speed / np_maximum(nominal, min_speed);
-                double x = clip_scalars((cut - (1.0 - start)) / (start - full), 0.0, 1.0);
+                double x =
+                    clip_scalars((cut - (1.0 - start)) / (start - full), 0.0, 1.0);
                 double ramp = x * x * (3.0 - 2.0 * x);
                 double turn = angle * ramp * np_minimum(nominal / slow, 1.0);
                 if (turn > 0) { /* clockwise by the turn */
                     double c = cos(turn), s = sin(turn);
-                    ok = project_one(a, b, 4 + m, c * x0 + s * y0, c * y0 - s * x0, tol, z);
+                    ok = project_one(a, b, 4 + m, c * x0 + s * y0, c * y0 - s * x0,
+                                     tol, z);
                 }
             }
             if (!ok) { /* no point: numpy's min_violation, by the caller */
@@ -601,7 +607,7 @@ world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_ssize_t *n_active, *n_bad, *n_fallen, *touched, *lowered, N;
     if (hold(&h, args[1], 'b', -1, 0, 0, (void **)&active, &N) < 0) goto done;
     if (K <= 0 || N % K != 0) {
-        PyErr_SetString(PyExc_ValueError, "world_counts: rows not a multiple of worlds");
+        PyErr_SetString(PyExc_ValueError, "world_counts: rows not K n");
         goto done;
     }
     if (hold(&h, args[2], 'd', N, 0, 0, (void **)&slack, NULL) < 0 ||
