@@ -577,15 +577,15 @@ done:
 
 PyDoc_STRVAR(world_counts_doc,
 "world_counts(worlds, active, slack, by_vehicle, fallback, max_slack, min_barrier,\n"
-"    started, out_active, out_bad, out_worst, out_least, out_fallen, touched,\n"
-"    lowered, tolerance) -> (n_touched, n_lowered)\n"
+"    started, out_active, out_bad, out_worst, out_least, out_fallen, out_changes,\n"
+"    touched, tolerance) -> count\n"
 "\n"
 "accounting.account_worlds' reductions of one step over ``worlds`` worlds of n rows:\n"
 "each world's active count, count of slack above ``tolerance``, largest slack, least\n"
 "barrier (inf without ``by_vehicle``) and fallback count (0 without ``fallback``);\n"
-"``max_slack`` and ``min_barrier`` raised and lowered. The worlds whose counters\n"
-"change are listed: in ``lowered`` those (once ``started``) whose least barrier\n"
-"alone fell, in ``touched`` the others (every world unless ``started``).");
+"``max_slack`` and ``min_barrier`` raised and lowered, and where (``out_changes``:\n"
+"1 raised, 2 lowered). The worlds whose counters change (every world unless\n"
+"``started``) are listed in ``touched``, their count returned.");
 
 static PyObject *
 world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -604,7 +604,7 @@ world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     PyObject *result = NULL;
     unsigned char *active, *fallback;
     double *slack, *by, *max_slack, *min_barrier, *worst, *least;
-    Py_ssize_t *n_active, *n_bad, *n_fallen, *touched, *lowered, N;
+    Py_ssize_t *n_active, *n_bad, *n_fallen, *changes, *touched, N;
     if (hold(&h, args[1], 'b', -1, 0, 0, (void **)&active, &N) < 0) goto done;
     if (K <= 0 || N % K != 0) {
         PyErr_SetString(PyExc_ValueError, "world_counts: rows not K n");
@@ -620,10 +620,10 @@ world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         hold(&h, args[10], 'd', K, 1, 0, (void **)&worst, NULL) < 0 ||
         hold(&h, args[11], 'd', K, 1, 0, (void **)&least, NULL) < 0 ||
         hold(&h, args[12], 'n', K, 1, 0, (void **)&n_fallen, NULL) < 0 ||
-        hold(&h, args[13], 'n', K, 1, 0, (void **)&touched, NULL) < 0 ||
-        hold(&h, args[14], 'n', K, 1, 0, (void **)&lowered, NULL) < 0)
+        hold(&h, args[13], 'n', K, 1, 0, (void **)&changes, NULL) < 0 ||
+        hold(&h, args[14], 'n', K, 1, 0, (void **)&touched, NULL) < 0)
         goto done;
-    Py_ssize_t n = N / K, out = 0, low = 0;
+    Py_ssize_t n = N / K, out = 0;
     for (Py_ssize_t w = 0; w < K; w++) {
         Py_ssize_t on = 0, bad = 0, fallen = 0;
         double big = slack[w * n], small = by != NULL ? by[w * n] : INFINITY;
@@ -648,11 +648,9 @@ world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         least[w] = small;
         int raised = big > max_slack[w];
         int fell = isfinite(small) && small < min_barrier[w];
-        if (!started || on > 0 || bad > 0 || raised || fallen > 0) {
+        changes[w] = raised | (fell << 1);
+        if (!started || on > 0 || bad > 0 || raised || fell || fallen > 0) {
             touched[out++] = w;
-        }
-        else if (fell) {
-            lowered[low++] = w;
         }
         if (raised) {
             max_slack[w] = big;
@@ -661,7 +659,7 @@ world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             min_barrier[w] = small;
         }
     }
-    result = Py_BuildValue("(nn)", out, low);
+    result = PyLong_FromSsize_t(out);
 done:
     let_go(&h);
     return result;

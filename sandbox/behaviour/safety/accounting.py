@@ -31,6 +31,8 @@ except ImportError:  # pragma: no cover - built without a C compiler
 #: Reduce the worlds' counters in C where that is built and agrees (False: numpy).
 USE_KERNEL = True
 _agreed: bool | None = None
+#: What a step changed of a world's counters (``world_counts``' flags).
+RAISED, LOWERED = 1, 2
 
 
 @dataclass
@@ -218,43 +220,56 @@ def _account_c(
     """:func:`account_worlds` with its reductions in C; False where it cannot run.
 
     It cannot where an array is not C-contiguous of its type (bool, float64), the
-    counters' included (the numpy path takes them as they are). A world whose least
-    barrier alone changes (after the first step, which writes every counter of every
-    world: nothing active, infeasible or fallen back, its largest slack not raised)
-    gets from :func:`_add` only its new ``min_barrier``, ``least < min_barrier``
-    (``counters.min_barrier`` is the world's), and so gets only that.
+    counters' included (the numpy path takes them as they are). After the first
+    step, which writes every counter of every world (:func:`_add`), a world's
+    counters all exist, and ``counters`` holds its largest slack and least barrier:
+    what :func:`_add` then changes is the sums it adds to and the slack and barrier
+    the step raised or lowered, and so the C path changes only those.
     """
     k = len(world_stats)
     if counters.out is None or len(counters.out[0]) != k:
         counts = tuple(np.zeros(k, dtype=np.intp) for _ in range(5))
         counters.out = (*counts, np.zeros(k), np.zeros(k))
-    active, bad, fallen, touched, lowered, worst, least = counters.out
+    active, bad, fallen, changes, touched, worst, least = counters.out
     try:  # the C loop holds every buffer before it writes any
-        count, fell = _filter.world_counts(
+        count = _filter.world_counts(
             k, step.active, step.slack, step.by_vehicle,
             step.fallback if braking else None, counters.max_slack,
             counters.min_barrier, counters.started, active, bad, worst, least,
-            fallen, touched, lowered, TOLERANCE,
+            fallen, changes, touched, TOLERANCE,
         )  # fmt: skip
     except (TypeError, ValueError, BufferError):
         return False
-    counters.started = True
-    if fell:  # what _add does where the least barrier alone changes
-        rows = lowered[:fell]
-        for w, value in zip(rows.tolist(), least[rows].tolist(), strict=True):
-            world_stats[w]["min_barrier"] = value
-    if count:
-        rows = touched[:count]
-        for w, *values in zip(
-            rows.tolist(),
-            active[rows].tolist(),
-            bad[rows].tolist(),
-            worst[rows].tolist(),
-            least[rows].tolist(),
-            fallen[rows].tolist(),
-            strict=True,
-        ):
-            _add(world_stats[w], t, braking, *values)
+    started, counters.started = counters.started, True
+    if not count:
+        return True
+    rows = touched[:count]
+    each = zip(
+        rows.tolist(),
+        active[rows].tolist(),
+        bad[rows].tolist(),
+        worst[rows].tolist(),
+        least[rows].tolist(),
+        fallen[rows].tolist(),
+        changes[rows].tolist(),
+        strict=True,
+    )
+    if not started:
+        for w, on, failed, big, small, fell, _ in each:
+            _add(world_stats[w], t, braking, on, failed, big, small, fell)
+        return True
+    for w, on, failed, big, small, fell, changed in each:
+        stats = world_stats[w]
+        if on:
+            stats["active_steps"] += on
+        if failed:
+            stats["infeasible_steps"] += failed
+        if changed & RAISED:
+            stats["max_slack"] = big
+        if changed & LOWERED:
+            stats["min_barrier"] = small
+        if fell:
+            stats["fallback_steps"] += fell
     return True
 
 
