@@ -67,7 +67,9 @@ vehicles, and a stalled vehicle outranking every one in range holds its course.
 
 Only vehicles driven by the controller are filtered (not the open-loop ones, not those
 believed failed); the filter acts before the step API's command overrides and the
-failures (which replace the commands of the vehicles they hit).
+failures (which replace the commands of the vehicles they hit). All of the above
+without a ``priority`` is also one C loop over the vehicles of every world
+(:mod:`sandbox.behaviour.safety.filter_kernel`), with numpy's numbers.
 
 **The braking barrier** (``barrier: braking``; ``velocity``, all of the above, stays
 the default). The velocity barrier asks ``h' >= -gamma h`` of a velocity the drive
@@ -504,7 +506,10 @@ def filter_commands(
 
     Under sensing with the braking barrier the step first takes the period's copies
     into the estimate (``state.estimate``), and the rest of the step sees the
-    estimate in place of ``ctx.seen``: call it once a period.
+    estimate in place of ``ctx.seen``: call it once a period. The velocity barrier
+    without a priority runs as one C call where that is built and agrees
+    (:func:`~sandbox.behaviour.safety.filter_kernel.velocity_step`, the same
+    numbers); the numpy below is its definition.
 
     Parameters
     ----------
