@@ -101,9 +101,11 @@ let_go(Held *h)
     h->count = 0;
 }
 
-/* A C-contiguous buffer of ``len`` items (any length if len < 0) of the kind 'd'
- * (float64), 'b' (bool) or 'n' (intp); None gives NULL if optional. A buffer of
- * another kind raises TypeError, of another length ValueError, before any write. */
+/* A C-contiguous array of ``len`` items (any length if len < 0) of the kind 'd'
+ * (float64), 'b' (bool) or 'n' (intp): an ndarray's data through numpy's C API where
+ * the build has it (numpy_rules.h), else the buffer interface (held in ``h`` for the
+ * release); None gives NULL if optional. An array of another kind raises TypeError,
+ * of another length ValueError, before any write. */
 static int
 hold(Held *h, PyObject *obj, char kind, Py_ssize_t len, int writable, int optional,
      void **out, Py_ssize_t *got_len)
@@ -113,35 +115,45 @@ hold(Held *h, PyObject *obj, char kind, Py_ssize_t len, int writable, int option
         if (got_len) *got_len = 0;
         return 0;
     }
-    Py_buffer *v = &h->views[h->count];
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, v, flags) < 0) {
-        return -1;
+    Py_ssize_t n;
+    void *data = NULL;
+#ifdef SANDBOX_NUMPY_API
+    int type = kind == 'd' ? NPY_DOUBLE : (kind == 'n' ? NPY_INTP : NPY_BOOL);
+    data = numpy_data(obj, type, writable, &n);
+#endif
+    if (data == NULL) {
+        Py_buffer *v = &h->views[h->count];
+        int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+        if (PyObject_GetBuffer(obj, v, flags) < 0) {
+            return -1;
+        }
+        h->count++;
+        const char *f = v->format ? v->format : "B";
+        int ok;
+        if (kind == 'd') {
+            ok = v->itemsize == 8 && strcmp(f, "d") == 0;
+        }
+        else if (kind == 'n') {
+            ok = v->itemsize == (Py_ssize_t)sizeof(Py_ssize_t) &&
+                 (strcmp(f, "l") == 0 || strcmp(f, "q") == 0 || strcmp(f, "n") == 0);
+        }
+        else {
+            ok = v->itemsize == 1 && strcmp(f, "?") == 0;
+        }
+        if (!ok) {
+            PyErr_Format(PyExc_TypeError, "expected a contiguous array of kind '%c'",
+                         kind);
+            return -1;
+        }
+        n = v->len / v->itemsize;
+        data = v->buf;
     }
-    h->count++;
-    const char *f = v->format ? v->format : "B";
-    int ok;
-    if (kind == 'd') {
-        ok = v->itemsize == 8 && strcmp(f, "d") == 0;
-    }
-    else if (kind == 'n') {
-        ok = v->itemsize == (Py_ssize_t)sizeof(Py_ssize_t) &&
-             (strcmp(f, "l") == 0 || strcmp(f, "q") == 0 || strcmp(f, "n") == 0);
-    }
-    else {
-        ok = v->itemsize == 1 && strcmp(f, "?") == 0;
-    }
-    if (!ok) {
-        PyErr_Format(PyExc_TypeError, "expected a contiguous array of kind '%c'", kind);
-        return -1;
-    }
-    Py_ssize_t n = v->len / v->itemsize;
     if (len >= 0 && n != len) {
         PyErr_Format(PyExc_ValueError, "expected %zd items, got %zd", len, n);
         return -1;
     }
     if (got_len) *got_len = n;
-    *out = v->buf;
+    *out = data;
     return 0;
 }
 
