@@ -162,6 +162,37 @@ def test_random_steps_in_c_equal_numpy(monkeypatch):
     assert 0 in rows and max(rows) > 8  # none at all, and more than one cut
 
 
+@needs_filter
+def test_the_buffer_interface_reads_what_numpys_c_api_reads(monkeypatch):
+    # each argument of the C loop once as an ndarray (numpy's C API), once as a
+    # memoryview of a copy (the buffer interface): the same outputs, bit for bit
+    calls = []
+    real = filter_kernel._filter
+
+    def keep(*args):
+        calls.append(args)
+        return real.velocity_step(*args)
+
+    fake = SimpleNamespace(velocity_step=keep, world_counts=real.world_counts)
+    monkeypatch.setattr(filter_kernel, "_filter", fake)
+    for ctx in filter_kernel.random_steps(np.random.default_rng(12), 24):
+        filter_kernel.velocity_step(CBFState(ctx), ctx)
+    assert calls
+    for args in calls:
+        outs = []
+        for wrap in (lambda a: a, memoryview):
+            copies = [np.array(a) if isinstance(a, np.ndarray) else a for a in args]
+            wrapped = [wrap(a) if isinstance(a, np.ndarray) else a for a in copies]
+            rows, least, pending = real.velocity_step(*wrapped)
+            written = [
+                np.asarray(a).view(np.uint8) for a in copies[22:31] if a is not None
+            ]
+            outs.append((rows, _bits(np.array([least])).tolist(), pending, written))
+        (rows, least, pending, written), (rows2, least2, pending2, written2) = outs
+        assert (rows, least, pending) == (rows2, least2, pending2)
+        assert all(np.array_equal(a, b) for a, b in zip(written, written2, strict=True))
+
+
 # ------------------------------------------------------------------ whole runs
 def _runs(name: str, sets: list[str], seeds: int) -> list[tuple]:
     """Poses, commands and metrics of one run (seeds 0) or a batch of ``seeds``."""
