@@ -86,6 +86,42 @@ def test_a_controller_step_in_c_equals_numpy_to_the_bit(n):
 
 
 @needs_c
+@pytest.mark.parametrize("n", [1, 3, 10, 64])
+def test_the_period_in_one_call_equals_two_calls_and_numpy(monkeypatch, n):
+    # the one call takes the angles of chi from the C library's atan2; two calls
+    # take them from numpy's arctan2 between them: every bit the same
+    assert kernels.atan2_agrees()
+    rng = np.random.default_rng(100 + n)
+    for controller in _controllers(rng, n):
+        for _ in range(40):
+            args = _state(rng, n)
+            one = controller._step_c(*args)
+            monkeypatch.setattr(kernels, "_atan2_agreed", False)
+            two = controller._step_c(*args)
+            monkeypatch.setattr(kernels, "_atan2_agreed", True)
+            want = controller.step_numpy(*args)
+            for a, b, w in zip(one, two, want, strict=True):
+                np.testing.assert_array_equal(_bits(a), _bits(w))
+                np.testing.assert_array_equal(_bits(b), _bits(w))
+
+
+@needs_c
+def test_the_atan2_check_fails_on_one_changed_bit(monkeypatch):
+    real = kernels._kernels
+
+    class OneUlpOff:
+        """The extension with one arctangent moved by one ulp."""
+
+        def elementwise(self, code, a, b, out):
+            real.elementwise(code, a, b, out)
+            if code == 8:
+                out[11] = np.nextafter(out[11], np.inf)
+
+    monkeypatch.setattr(kernels, "_kernels", OneUlpOff())
+    assert not kernels._atan2_check()
+
+
+@needs_c
 def test_the_loop_takes_the_c_path(monkeypatch):
     calls = []
     original = Controller._step_c

@@ -1,4 +1,4 @@
-/* Three pieces of the loop's period in one C call each.
+/* Pieces of the loop's period in one C call each.
  *
  * healthy: the divergence check's fast path (sandbox/loop/divergence.py), whether a
  * fleet is clearly healthy: every position within the bound, every heading finite,
@@ -15,6 +15,13 @@
  *
  * record_sample: a sample of every world into the record's buffers
  * (sandbox/loop/recording.py, WorldsRecorder.append): copies only.
+ *
+ * read_state: the bodies' rows split into positions, headings, velocities and the
+ * motors' measured velocities (sandbox/loop/stepping.py, WorldsPhysics.read):
+ * copies only.
+ *
+ * flush_periods: the loop metrics' buffered periods accounted for at once
+ * (sandbox/loop/tally.py, LoopTally.flush), numpy's operations in its order.
  */
 
 #include "numpy_rules.h"
@@ -340,6 +347,54 @@ done:
     return result;
 }
 
+PyDoc_STRVAR(read_state_doc,
+"read_state(rows, measured, pos, theta, vel) -> None\n"
+"\n"
+"The bodies' rows (N, 6) as read, (x1, x2, x3, v_x1, v_x2, omega), split (copies):\n"
+"``measured`` (N, 3) the velocities, ``pos`` (N, 2), ``theta`` (N,), ``vel``\n"
+"(N, 2).");
+
+static PyObject *
+read_state(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "read_state takes 5 arguments");
+        return NULL;
+    }
+    Rows r[5];
+    int got = 0;
+    for (int k = 0; k < 5; k++) {
+        if (get_rows(args[k], &r[k], k >= 1) < 0) {
+            release(r, got);
+            return NULL;
+        }
+        got++;
+    }
+    Py_ssize_t N = r[3].len;
+    if (r[0].len != 6 * N || r[1].len != 3 * N || r[2].len != 2 * N ||
+        r[4].len != 2 * N) {
+        release(r, got);
+        PyErr_SetString(PyExc_ValueError, "read_state: shapes differ");
+        return NULL;
+    }
+    const double *rows = r[0].data;
+    double *measured = r[1].data, *pos = r[2].data, *theta = r[3].data;
+    double *vel = r[4].data;
+    for (Py_ssize_t i = 0; i < N; i++) {
+        const double *row = rows + 6 * i;
+        pos[2 * i] = row[0];
+        pos[2 * i + 1] = row[1];
+        theta[i] = row[2];
+        vel[2 * i] = row[3];
+        vel[2 * i + 1] = row[4];
+        measured[3 * i] = row[3];
+        measured[3 * i + 1] = row[4];
+        measured[3 * i + 2] = row[5];
+    }
+    release(r, got);
+    Py_RETURN_NONE;
+}
+
 PyDoc_STRVAR(record_sample_doc,
 "record_sample(c, pos, theta, v1, v2, chi, slot, target, mode, failed, pose_out,\n"
 "              cmd_out, chi_out, slot_out, target_out, mode_out, failed_out) -> None\n"
@@ -422,13 +477,15 @@ static PyMethodDef methods[] = {
      record_sample_doc},
     {"flush_periods", (PyCFunction)(void (*)(void))flush_periods, METH_FASTCALL,
      flush_periods_doc},
+    {"read_state", (PyCFunction)(void (*)(void))read_state, METH_FASTCALL,
+     read_state_doc},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_period",
-    "Three pieces of the loop's period in C (see sandbox/loop/divergence.py, tally.py, "
-    "recording.py).", -1,
+    "Pieces of the loop's period in C (see sandbox/loop/divergence.py, tally.py, "
+    "recording.py, stepping.py).", -1,
     methods,
 };
 

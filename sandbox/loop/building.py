@@ -91,6 +91,7 @@ class Building:
         self.fleet = Fleet.stack(fleets)
         self.physics = WorldsPhysics(physics, n, self.substeps)
         self.live = np.ones(K, dtype=bool)
+        self._n_live = K  # worlds live (what np.count_nonzero(self.live) counts)
         s0 = self.states[0]
         self.rec = s0.rec
         self.reference = s0.reference

@@ -64,6 +64,7 @@ class Ending:
         else:
             arrays = self.recorder.arrays(w)
         self.live[w] = False
+        self._n_live -= 1
         self.physics.stop(w)
         self._runs[w] = self._make_run(w, arrays)
         if self.K == 1:
@@ -94,6 +95,7 @@ class Ending:
         for w in self._live_worlds():
             status = self.states[w].status
             self.live[w] = False
+            self._n_live -= 1
             self._runs[w] = self._make_run(w, self.recorder.arrays(w), status)
         self._closed = True
 

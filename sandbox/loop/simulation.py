@@ -191,7 +191,7 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
                 }
                 self._end_world(w, STATUS_DIVERGED)
             self.finite = self.live.all() and diverged(fleet) is None
-        if not np.count_nonzero(self.live):
+        if not self._n_live:
             return False
         if self._broadcast is not None:  # every world's copies, each its own draws
             self.seen = self._broadcast.update(pos, theta).copy()
@@ -232,13 +232,16 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         elif self._stacked_law is not None:
             triple = self._stacked_law.targets(self, t, ref)
         else:
-            shape = (K, n, 2)
             slot, v_ref, a_ref = self.law.targets(self._law_context(t, ref))
-            triple = [
-                _world_rows(slot, shape),
-                _world_rows(v_ref, shape),
-                _world_rows(a_ref, shape),
-            ]
+            if self._law_inputs:  # a built-in law class: (K, n, 2) float64 arrays
+                triple = [slot.reshape(N, 2), v_ref.reshape(N, 2), a_ref.reshape(N, 2)]
+            else:
+                shape = (K, n, 2)
+                triple = [
+                    _world_rows(slot, shape),
+                    _world_rows(v_ref, shape),
+                    _world_rows(a_ref, shape),
+                ]
         tr, cmd = self._track_rows, self._commanded_rows
         if (ref is not None and len(tr)) or len(cmd):
             # Copies: the law may keep (or broadcast) what it returned.
@@ -249,9 +252,7 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
                 slot[tr], v_ref[tr], a_ref[tr] = ref[0], ref[1], ref[2]
             slot[cmd] = np.nan
         else:  # nothing to overwrite: read-only use downstream, no copies needed
-            slot = np.asarray(triple[0], dtype=float)
-            v_ref = np.asarray(triple[1], dtype=float)
-            a_ref = np.asarray(triple[2], dtype=float)
+            slot, v_ref, a_ref = triple  # float64 rows, each branch above
         point = ref[0] if ref is not None else np.full(2, np.nan)
         return slot, v_ref, a_ref, point
 
@@ -529,7 +530,7 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             return
         self._control_time += time.perf_counter() - start
         self._record(self.plan)
-        if not np.count_nonzero(self.live):
+        if not self._n_live:
             self._closed = True
             return
         if should_stop is not None and should_stop():
@@ -598,9 +599,10 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
 def _world_rows(a: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray:
     """A law's array of every world, shape (K, n, 2) or broadcasting to it, as rows.
 
-    Shape (K n, 2): a view where it has the shape, else a new array of its values.
+    Float64, shape (K n, 2): a view where it is float64 of the shape, else a new
+    array of its values.
     """
-    a = np.asarray(a)
+    a = np.asarray(a, dtype=float)
     return (a if a.shape == shape else spread(a, shape)).reshape(-1, 2)
 
 

@@ -33,7 +33,7 @@ class StepAPI:
     @property
     def done(self) -> bool:
         """Whether the run has reached its duration, diverged or been stopped."""
-        return self._closed or self.k >= self.steps or not np.count_nonzero(self.live)
+        return self._closed or self.k >= self.steps or not self._n_live
 
     @property
     def names(self) -> list[str]:

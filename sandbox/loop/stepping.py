@@ -19,6 +19,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from sandbox.physics.interface import Physics
+
+try:
+    from sandbox.loop import _period
+except ImportError:  # pragma: no cover - built without a C compiler
+    _period = None
 from sandbox.physics.stepping import WorldStepper
 from sandbox.physics.world import MAX_FORCE_SETTER, World, motor_limits
 
@@ -104,6 +109,15 @@ class WorldsPhysics:
                 np.concatenate([s.vel for s in states]),
             )
         rows = self._rows
+        if len(self.live) == K and _period is not None:  # the copies in one C call
+            N = self.N
+            pos, theta, vel = np.empty((N, 2)), np.empty(N), np.empty((N, 2))
+            try:
+                _period.read_state(rows, self._measured, pos, theta, vel)
+            except (BufferError, TypeError, ValueError):  # not such arrays: numpy
+                pass
+            else:
+                return pos, theta, vel
         self._measured.reshape(K, n, 3)[...] = rows[..., 3:6]  # (v_x1, v_x2, omega)
         if len(self.live) < K:
             rows = rows.copy()
@@ -181,17 +195,17 @@ class WorldsPhysics:
             out[:, 0] = v1 * np.cos(heading)
             out[:, 1] = v1 * np.sin(heading)
         out[:, 2] = v2
-        if np.count_nonzero(self._tracking):
-            rows, force, torque = motor_limits(
-                out, self._measured, free, h / substeps, self, self._limits
-            )
-            if len(rows):
-                self._force[rows], self._torque[rows] = force[rows], torque[rows]
-                set_max, joints = self._set_max_force, self._joint_handles
-                for r in rows.tolist():  # Constraint.max_force's own C call
-                    pivot, gear = joints[r]
-                    set_max(pivot, force[r])
-                    set_max(gear, torque[r])
+        # (the rows of motors that do not track never change)
+        rows, force, torque = motor_limits(
+            out, self._measured, free, h / substeps, self, self._limits
+        )
+        if len(rows):
+            self._force[rows], self._torque[rows] = force[rows], torque[rows]
+            set_max, joints = self._set_max_force, self._joint_handles
+            for r in rows.tolist():  # Constraint.max_force's own C call
+                pivot, gear = joints[r]
+                set_max(pivot, force[r])
+                set_max(gear, torque[r])
         if self._stepper is not None:  # every world at once
             self._stepper.advance(t0, h)
             return

@@ -63,7 +63,7 @@ class WorldStages:
 
     def _live_worlds(self) -> list[int]:
         """The live worlds in order (a new list; remade only after a world ends)."""
-        count = np.count_nonzero(self.live)
+        count = self._n_live
         cached = getattr(self, "_live_cache", None)
         if cached is None or len(cached) != count:
             cached = self._live_cache = [int(w) for w in self.live.nonzero()[0]]

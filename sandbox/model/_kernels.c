@@ -10,8 +10,9 @@
  * multiply-adds), numpy's own rules where it has them (its maximum and clip on ties
  * and NaN, its floating remainder), and the C library's sqrt, hypot, sin and cos,
  * which kernels.py checks give numpy's numbers on this machine before it uses them.
- * The angles of chi (numpy's arctan2, which may not be the C library's) come in
- * computed by numpy.
+ * The angles of chi come in computed by numpy's arctan2 (flat_step), or are taken
+ * from the C library's atan2 where kernels.py checks that it gives numpy's numbers
+ * (controller_step, the period in one call).
  *
  * Arrays are C-contiguous float64; a parameter array of length 1 is one value for
  * every row (stride 0). Every pointer argument is an object with the buffer
@@ -50,6 +51,87 @@ wrap_angle(double a)
 {
     double w = np_remainder(a + M_PI, 2.0 * M_PI) - M_PI;
     return (w >= M_PI) ? -M_PI : w;
+}
+
+/* Eq. (6) and the Euler step of advance_extension with its two clamps, one row:
+ * writes chi before the turn limit to ``nxt`` (2) and its norm to ``norm``. */
+static inline void
+extension_row(const double *p, const double *c, const double *g, const double *vr,
+              const double *ar, double k1, double k2, double k3, double k4,
+              double accel, double vmax, double dt, double *nxt, double *norm_out)
+{
+    double aim0 = (g[0] != g[0]) ? p[0] : g[0];
+    double aim1 = (g[1] != g[1]) ? p[1] : g[1];
+    /* eq. (6): k_pos (pos - aim) + k_vel (chi - v_ref) + a_ref */
+    double d0 = k1 * (p[0] - aim0) + k2 * (c[0] - vr[0]);
+    double d1 = k3 * (p[1] - aim1) + k4 * (c[1] - vr[1]);
+    d0 = d0 + ar[0];
+    d1 = d1 + ar[1];
+    double s0 = d0 * dt, s1 = d1 * dt;
+    double step_norm = hypot(s0, s1);
+    double limit = accel * dt;
+    if (step_norm > limit) {
+        double scale = limit / np_maximum(step_norm, 1e-300);
+        s0 = s0 * scale;
+        s1 = s1 * scale;
+    }
+    double x0 = c[0] + s0, x1 = c[1] + s1;
+    double norm = hypot(x0, x1);
+    if (norm > vmax) {
+        double scale = vmax / np_maximum(norm, 1e-300);
+        x0 = x0 * scale;
+        x1 = x1 * scale;
+        norm = hypot(x0, x1);
+    }
+    nxt[0] = x0;
+    nxt[1] = x1;
+    *norm_out = norm;
+}
+
+/* limit_turn (where ``turning_limit``; ``angle_nxt`` the angle of ``nxt``), the
+ * applied rate, flat_inputs (``angle_chi`` the angle of ``chi``) and the clip of v2,
+ * one row: writes chi_next (2), v1 and v2. */
+static inline void
+flat_row(double th, const double *c, const double *x, double norm, double angle_nxt,
+         double angle_chi, double k, double turn, double vmax, double dt, long flags,
+         double *chi_next, double *v1_out, double *v2_out)
+{
+    int turning_limit = (int)(flags & 1);
+    double out0 = x[0], out1 = x[1];
+    double aim = NAN;
+    if (turning_limit) { /* limit_turn */
+        double off = wrap_angle(angle_nxt - th);
+        double lim = turn * dt;
+        int outside = (fabs(off) > lim) && (norm >= CHI_HOLD);
+        if (outside) {
+            double edge = (flags & 2) ? clip_scalars(off, -lim, lim)
+                                      : clip_rows(off, -lim, lim);
+            double along = np_maximum(norm * cos(off - edge), 0.0);
+            double direction = th + edge;
+            out0 = along * cos(direction);
+            out1 = along * sin(direction);
+            aim = angle_nxt;
+        }
+    }
+    chi_next[0] = out0;
+    chi_next[1] = out1;
+    double cd0 = (out0 - c[0]) / dt, cd1 = (out1 - c[1]) / dt;
+    /* flat_inputs, eq. (5) */
+    double c1 = c[0], c2 = c[1];
+    double norm2 = c1 * c1 + c2 * c2;
+    double v1 = sqrt(norm2);
+    int defined = norm2 >= CHI_HOLD * CHI_HOLD;
+    double safe = np_maximum(norm2, CHI_REG * CHI_REG);
+    double feedforward = (-c2 * cd0 + c1 * cd1) / safe;
+    double heading_error = wrap_angle(th - angle_chi);
+    double v2 = defined ? feedforward - k * heading_error : 0.0;
+    if (aim == aim) { /* turning: toward the aim the turn limit held chi from */
+        double toward = -k * wrap_angle(th - aim);
+        v2 = (defined ? feedforward : 0.0) + toward;
+    }
+    v2 = (flags & 4) ? clip_scalars(v2, -vmax, vmax) : clip_rows(v2, -vmax, vmax);
+    *v1_out = defined ? v1 : 0.0;
+    *v2_out = v2;
 }
 
 PyDoc_STRVAR(extension_step_doc,
@@ -99,38 +181,12 @@ extension_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     }
     for (Py_ssize_t i = 0; i < n; i++) {
-        const double *p = pos->data + 2 * i, *c = chi->data + 2 * i;
-        const double *g = target->data + 2 * i;
-        const double *vr = v_ref->data + 2 * i, *ar = a_ref->data + 2 * i;
-        double aim0 = (g[0] != g[0]) ? p[0] : g[0];
-        double aim1 = (g[1] != g[1]) ? p[1] : g[1];
-        /* eq. (6): k_pos (pos - aim) + k_vel (chi - v_ref) + a_ref */
-        double d0 = k1->data[i * k1->step] * (p[0] - aim0) +
-                    k2->data[i * k2->step] * (c[0] - vr[0]);
-        double d1 = k3->data[i * k3->step] * (p[1] - aim1) +
-                    k4->data[i * k4->step] * (c[1] - vr[1]);
-        d0 = d0 + ar[0];
-        d1 = d1 + ar[1];
-        double s0 = d0 * dt, s1 = d1 * dt;
-        double step_norm = hypot(s0, s1);
-        double limit = accel->data[i * accel->step] * dt;
-        if (step_norm > limit) {
-            double scale = limit / np_maximum(step_norm, 1e-300);
-            s0 = s0 * scale;
-            s1 = s1 * scale;
-        }
-        double x0 = c[0] + s0, x1 = c[1] + s1;
-        double norm = hypot(x0, x1);
-        double vmax = v1_max->data[i * v1_max->step];
-        if (norm > vmax) {
-            double scale = vmax / np_maximum(norm, 1e-300);
-            x0 = x0 * scale;
-            x1 = x1 * scale;
-            norm = hypot(x0, x1);
-        }
-        nxt->data[2 * i] = x0;
-        nxt->data[2 * i + 1] = x1;
-        norm_out->data[i] = norm;
+        extension_row(pos->data + 2 * i, chi->data + 2 * i, target->data + 2 * i,
+                      v_ref->data + 2 * i, a_ref->data + 2 * i,
+                      k1->data[i * k1->step], k2->data[i * k2->step],
+                      k3->data[i * k3->step], k4->data[i * k4->step],
+                      accel->data[i * accel->step], v1_max->data[i * v1_max->step],
+                      dt, nxt->data + 2 * i, norm_out->data + i);
     }
     release(r, got);
     Py_RETURN_NONE;
@@ -184,47 +240,77 @@ flat_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     }
     for (Py_ssize_t i = 0; i < n; i++) {
-        double th = theta->data[i];
-        const double *c = chi->data + 2 * i, *x = nxt->data + 2 * i;
-        double out0 = x[0], out1 = x[1];
-        double aim = NAN;
-        int outside = 0;
-        if (turning_limit) { /* limit_turn */
-            double angle = angle_nxt->data[i];
-            double off = wrap_angle(angle - th);
-            double lim = turn->data[i * turn->step] * dt;
-            outside = (fabs(off) > lim) && (norm->data[i] >= CHI_HOLD);
-            if (outside) {
-                double edge = (flags & 2) ? clip_scalars(off, -lim, lim)
-                                          : clip_rows(off, -lim, lim);
-                double along = np_maximum(norm->data[i] * cos(off - edge), 0.0);
-                double direction = th + edge;
-                out0 = along * cos(direction);
-                out1 = along * sin(direction);
-                aim = angle;
-            }
+        flat_row(theta->data[i], chi->data + 2 * i, nxt->data + 2 * i, norm->data[i],
+                 turning_limit ? angle_nxt->data[i] : 0.0, angle_chi->data[i],
+                 kp->data[i * kp->step], turn->data[i * turn->step],
+                 v2_max->data[i * v2_max->step], dt, flags, chi_next->data + 2 * i,
+                 v1_out->data + i, v2_out->data + i);
+    }
+    release(r, got);
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(controller_step_doc,
+"controller_step(pos, chi, theta, target, v_ref, a_ref, k1, k2, k3, k4, accel_max,\n"
+"                v1_max, kp, turn_max, v2_max, dt, flags, chi_next, v1, v2) -> None\n"
+"\n"
+"extension_step and flat_step of a period in one call, the angles of chi and of\n"
+"the stepped chi by the C library's atan2 (used where kernels.py checks that it\n"
+"gives numpy's arctan2): the same operations, the same numbers.");
+
+static PyObject *
+controller_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 20) {
+        PyErr_SetString(PyExc_TypeError, "controller_step takes 20 arguments");
+        return NULL;
+    }
+    double dt = PyFloat_AsDouble(args[15]);
+    long flags = PyLong_AsLong(args[16]);
+    if ((dt == -1.0 || flags == -1) && PyErr_Occurred()) {
+        return NULL;
+    }
+    Rows r[18];
+    int got = 0;
+    for (int k = 0; k < 20; k++) {
+        if (k == 15 || k == 16) {
+            continue;
         }
-        chi_next->data[2 * i] = out0;
-        chi_next->data[2 * i + 1] = out1;
-        double cd0 = (out0 - c[0]) / dt, cd1 = (out1 - c[1]) / dt;
-        /* flat_inputs, eq. (5) */
-        double c1 = c[0], c2 = c[1];
-        double norm2 = c1 * c1 + c2 * c2;
-        double v1 = sqrt(norm2);
-        int defined = norm2 >= CHI_HOLD * CHI_HOLD;
-        double safe = np_maximum(norm2, CHI_REG * CHI_REG);
-        double feedforward = (-c2 * cd0 + c1 * cd1) / safe;
-        double k = kp->data[i * kp->step];
-        double heading_error = wrap_angle(th - angle_chi->data[i]);
-        double v2 = defined ? feedforward - k * heading_error : 0.0;
-        if (aim == aim) { /* turning: toward the aim the turn limit held chi from */
-            double toward = -k * wrap_angle(th - aim);
-            v2 = (defined ? feedforward : 0.0) + toward;
+        int idx = k < 15 ? k : k - 2;
+        if (get_rows(args[k], &r[idx], k >= 17) < 0) {
+            release(r, got);
+            return NULL;
         }
-        double vmax = v2_max->data[i * v2_max->step];
-        v2 = (flags & 4) ? clip_scalars(v2, -vmax, vmax) : clip_rows(v2, -vmax, vmax);
-        v1_out->data[i] = defined ? v1 : 0.0;
-        v2_out->data[i] = v2;
+        got++;
+    }
+    Rows *pos = &r[0], *chi = &r[1], *theta = &r[2], *target = &r[3];
+    Rows *v_ref = &r[4], *a_ref = &r[5], *k1 = &r[6], *k2 = &r[7], *k3 = &r[8];
+    Rows *k4 = &r[9], *accel = &r[10], *v1_max = &r[11], *kp = &r[12];
+    Rows *turn = &r[13], *v2_max = &r[14], *chi_next = &r[15], *v1_out = &r[16];
+    Rows *v2_out = &r[17];
+    Py_ssize_t n = theta->len;
+    if (pos->len != 2 * n || chi->len != 2 * n || target->len != 2 * n ||
+        v_ref->len != 2 * n || a_ref->len != 2 * n || chi_next->len != 2 * n ||
+        v1_out->len != n || v2_out->len != n) {
+        release(r, got);
+        PyErr_SetString(PyExc_ValueError, "controller_step: shapes differ");
+        return NULL;
+    }
+    int turning_limit = (int)(flags & 1);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double *c = chi->data + 2 * i;
+        double nxt[2], norm;
+        extension_row(pos->data + 2 * i, c, target->data + 2 * i, v_ref->data + 2 * i,
+                      a_ref->data + 2 * i, k1->data[i * k1->step],
+                      k2->data[i * k2->step], k3->data[i * k3->step],
+                      k4->data[i * k4->step], accel->data[i * accel->step],
+                      v1_max->data[i * v1_max->step], dt, nxt, &norm);
+        double angle_chi = atan2(c[1], c[0]);
+        double angle_nxt = turning_limit ? atan2(nxt[1], nxt[0]) : 0.0;
+        flat_row(theta->data[i], c, nxt, norm, angle_nxt, angle_chi,
+                 kp->data[i * kp->step], turn->data[i * turn->step],
+                 v2_max->data[i * v2_max->step], dt, flags, chi_next->data + 2 * i,
+                 v1_out->data + i, v2_out->data + i);
     }
     release(r, got);
     Py_RETURN_NONE;
@@ -236,7 +322,7 @@ PyDoc_STRVAR(elementwise_doc,
 "One of this module's scalar functions over arrays, for the checks of\n"
 "sandbox/model/kernels.py: op 0 hypot, 1 sin, 2 cos, 3 wrap_angle (b unused), 4\n"
 "numpy's maximum, 5 numpy's clip with scalar bounds (-b, b), 6 with array bounds,\n"
-"7 sqrt.");
+"7 sqrt, 8 atan2(a, b).");
 
 static PyObject *
 elementwise(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -275,6 +361,7 @@ elementwise(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             case 4: out[i] = np_maximum(a[i], b[i]); break;
             case 5: out[i] = clip_scalars(a[i], -b[i], b[i]); break;
             case 6: out[i] = clip_rows(a[i], -b[i], b[i]); break;
+            case 8: out[i] = atan2(a[i], b[i]); break;
             default: out[i] = sqrt(a[i]); break;
         }
     }
@@ -339,6 +426,8 @@ static PyMethodDef methods[] = {
      extension_step_doc},
     {"flat_step", (PyCFunction)(void (*)(void))flat_step, METH_FASTCALL,
      flat_step_doc},
+    {"controller_step", (PyCFunction)(void (*)(void))controller_step, METH_FASTCALL,
+     controller_step_doc},
     {"motor_model", (PyCFunction)(void (*)(void))motor_model, METH_FASTCALL,
      motor_model_doc},
     {"elementwise", (PyCFunction)(void (*)(void))elementwise, METH_FASTCALL,

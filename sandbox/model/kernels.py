@@ -10,17 +10,17 @@ and the clip of ``v2`` to ``v2_max``. Those numpy functions are the definition; 
 50 numpy calls a period, whose fixed cost (half a microsecond each) is most of a small
 fleet's controller.
 
-Where the optional extension ``sandbox.model._kernels`` (``_kernels.c``) is built,
-the same composition runs as two C loops over the vehicles, between which numpy
-computes the two arctangents (numpy's own, which need not be the C library's). The
-C loops do the operations of the numpy functions in their order, with numpy's rules
-for its maximum and clip on ties and NaN and for its floating remainder, so the
-numbers are numpy's to the bit. They also take ``sqrt``, ``hypot``, ``sin`` and
-``cos`` from the C library: at the first use, :func:`kernels_agree` compares them,
-and every rule above, with numpy on a few thousand arguments (special values
-included), and the C loops are used only if every result has the same bits
-(``tests/test_kernels.py`` compares whole controller steps). :data:`USE_KERNELS`
-False forces the numpy path.
+Where the optional extension ``sandbox.model._kernels`` (``_kernels.c``) is built, the
+same composition runs as one C loop over the vehicles where the C library's ``atan2``
+gives numpy's ``arctan2`` (:func:`atan2_agrees`, checked once), else as two, between
+which numpy computes the two arctangents. The C loops do the operations of the numpy
+functions in their order, with numpy's rules for its maximum and clip on ties and NaN
+and for its floating remainder, so the numbers are numpy's to the bit. They also take
+``sqrt``, ``hypot``, ``sin`` and ``cos`` from the C library: at the first use,
+:func:`kernels_agree` compares them, and every rule above, with numpy on a few thousand
+arguments (special values included), and the C loops are used only if every result has
+the same bits (``tests/test_kernels.py`` compares whole controller steps).
+:data:`USE_KERNELS` False forces the numpy path.
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ except ImportError:  # pragma: no cover - built without a C compiler
 #: Use the C loops where they are built and agree with numpy (False: numpy only).
 USE_KERNELS = True
 _agreed: bool | None = None
+_atan2_agreed: bool | None = None
 
 
 def kernels_agree() -> bool:
@@ -112,6 +113,29 @@ def _agrees(a: np.ndarray, b: np.ndarray) -> bool:
         if not _same(got, CLIP(a, -hi, hi)):
             return False
     return True
+
+
+def atan2_agrees() -> bool:
+    """Whether the C library's atan2 gives numpy's arctan2 here (checked once).
+
+    Where it does, the controller's period is one C call (``controller_step``,
+    the angles of chi computed inside); else two, numpy's arctan2 between them.
+    """
+    global _atan2_agreed
+    if _atan2_agreed is None:
+        _atan2_agreed = kernels_agree() and _atan2_check()
+    return _atan2_agreed
+
+
+def _atan2_check() -> bool:
+    a, b = _samples()
+    got = np.empty_like(a)
+    with np.errstate(all="ignore"):
+        _kernels.elementwise(8, a, b, got)
+        if not _same(got, np.arctan2(a, b)):
+            return False
+        _kernels.elementwise(8, b, a, got)  # the arguments' roles swapped
+        return _same(got, np.arctan2(b, a))
 
 
 def _rows(value: float | np.ndarray) -> np.ndarray:
@@ -230,10 +254,18 @@ class Controller:
             return self._step_arrays(*map(c_float64, arrays))
 
     def _step_arrays(self, pos, chi, theta, target, v_ref, a_ref):
-        """The two C calls on C-contiguous float64 arrays (else an error, no write)."""
+        """The C calls on C-contiguous float64 arrays (else an error, no write)."""
         n = len(theta)
-        nxt, norm = np.empty((n, 2)), np.empty(n)
         k1, k2, k3, k4 = self._k
+        if atan2_agrees():  # the period in one call
+            chi_next, v1, v2 = np.empty((n, 2)), np.empty(n), np.empty(n)
+            _kernels.controller_step(
+                pos, chi, theta, target, v_ref, a_ref, k1, k2, k3, k4, self._accel,
+                self._v1, self._kp, self._turn, self._v2, self.dt, self._flags,
+                chi_next, v1, v2,
+            )  # fmt: skip
+            return chi_next, v1, v2
+        nxt, norm = np.empty((n, 2)), np.empty(n)
         _kernels.extension_step(
             pos, chi, target, v_ref, a_ref, k1, k2, k3, k4, self._accel, self._v1,
             self.dt, nxt, norm,

@@ -29,11 +29,12 @@ get_flags(PyObject *obj, Py_buffer *view, int writable)
 PyDoc_STRVAR(motor_limits_doc,
 "motor_limits(command, measured, free, substep, headroom, mass, moment,\n"
 "             least_force, least_torque, force, torque, tracking, force_out,\n"
-"             torque_out, change) -> None\n"
+"             torque_out, change) -> int\n"
 "\n"
 "``command``, ``measured`` (n, 3); ``free``, ``tracking`` and ``change`` (n,) bool;\n"
 "the rest (n,) float64. Writes the new limits to ``force_out``, ``torque_out`` and\n"
-"sets ``change`` where a tracking vehicle's joints must change.");
+"sets ``change`` where a tracking vehicle's joints must change; returns how many\n"
+"do.");
 
 static PyObject *
 motor_limits(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -81,6 +82,7 @@ motor_limits(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     double *force = r[8].data, *torque = r[9].data;
     const unsigned char *free_ = f[0].buf, *tracking = f[1].buf;
     unsigned char *change = f[2].buf;
+    Py_ssize_t changed = 0;
     for (Py_ssize_t i = 0; i < n; i++) {
         double d0 = cmd[3 * i] - meas[3 * i];
         double d1 = cmd[3 * i + 1] - meas[3 * i + 1];
@@ -94,9 +96,9 @@ motor_limits(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         force[i] = fi;
         torque[i] = ti;
         change[i] = tracking[i] && (grow || shrink);
+        changed += change[i];
     }
-    result = Py_None;
-    Py_INCREF(result);
+    result = PyLong_FromSsize_t(changed);
 done:
     release(r, got_r);
     for (int k = 0; k < got_f; k++) {

@@ -232,7 +232,7 @@ def motor_limits(
             out = np.empty(n), np.empty(n), np.empty(n, bool)
         force, torque, change = out
         try:
-            _motors.motor_limits(
+            changed = _motors.motor_limits(
                 command, measured, free, substep, MOTOR_HEADROOM, m._mass, m._moment,
                 m._least_force, m._least_torque, m._force, m._torque, m._tracking,
                 force, torque, change,
@@ -240,8 +240,13 @@ def motor_limits(
         except (BufferError, TypeError, ValueError):  # not float64 C arrays: numpy
             pass
         else:
-            return change.nonzero()[0], force, torque
+            return (change.nonzero()[0] if changed else _NO_ROWS), force, torque
     return motor_limits_numpy(command, measured, free, substep, motors)
+
+
+#: No rows (the motors of a period where no joint changes).
+_NO_ROWS = np.zeros(0, dtype=np.intp)
+_NO_ROWS.flags.writeable = False
 
 
 def motor_limits_numpy(
