@@ -74,18 +74,19 @@ healthy(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 
 PyDoc_STRVAR(buffer_period_doc,
 "buffer_period(pos, i, j, v1, v2, vel, contact, theta, h, d2, v, vel_out, free,\n"
-"              cmd) -> None\n"
+"              cmd[, d2_known]) -> None\n"
 "\n"
 "For N vehicles: ``pos``, ``vel`` (N, 2), ``v1``, ``v2``, ``theta`` (N,), ``contact``\n"
 "(N,) bool, the pairs ``i``, ``j`` (intp, each world's rows from 0, P of them) or\n"
 "None; writes ``d2`` (K, P) (where ``i`` is given), ``v`` (2, N), ``vel_out``\n"
-"(N, 2), ``free`` (N,) bool and ``cmd`` (N, 2), ``v1 (cos, sin)(theta + v2 h / 2)``.");
+"(N, 2), ``free`` (N,) bool and ``cmd`` (N, 2), ``v1 (cos, sin)(theta + v2 h / 2)``;\n"
+"without pairs, ``d2_known`` (K P) if given is copied into ``d2``.");
 
 static PyObject *
 buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 14) {
-        PyErr_SetString(PyExc_TypeError, "buffer_period takes 14 arguments");
+    if (nargs != 14 && nargs != 15) {
+        PyErr_SetString(PyExc_TypeError, "buffer_period takes 14 or 15 arguments");
         return NULL;
     }
     double h = PyFloat_AsDouble(args[8]);
@@ -93,6 +94,9 @@ buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     }
     int pairs = args[1] != Py_None;
+    int known = !pairs && nargs == 15 && args[14] != Py_None; /* d2 given: copied */
+    Rows given;
+    memset(&given.view, 0, sizeof(Py_buffer));
     /* float arrays: pos, v1, v2, vel, theta, d2, v, vel_out, cmd */
     static const int at[] = {0, 3, 4, 5, 7, 9, 10, 11, 13};
     Rows r[9];
@@ -100,8 +104,9 @@ buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_buffer cb, fb;
     int got = 0, got_i = 0, got_j = 0, got_c = 0, got_f = 0;
     PyObject *result = NULL;
+    if (known && get_rows(args[14], &given, 0) < 0) goto done;
     for (int k = 0; k < 9; k++) {
-        if (at[k] == 9 && !pairs) {
+        if (at[k] == 9 && !pairs && !known) {
             r[k].len = 0;
             r[k].data = NULL;
             memset(&r[k].view, 0, sizeof(Py_buffer));
@@ -132,9 +137,12 @@ buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (pos->len != 2 * N || v2->len != N || vel->len != 2 * N || theta->len != N ||
         v->len != 2 * N || vel_out->len != 2 * N || cmd->len != 2 * N ||
         cb.len != N || cb.itemsize != 1 || fb.len != N || fb.itemsize != 1 ||
-        (pairs && (P == 0 || d2->len % P != 0))) {
+        (pairs && (P == 0 || d2->len % P != 0)) || (known && given.len != d2->len)) {
         PyErr_SetString(PyExc_ValueError, "buffer_period: shapes differ");
         goto done;
+    }
+    if (known) {
+        memcpy(d2->data, given.data, (size_t)d2->len * sizeof(double));
     }
     if (pairs) {
         const Py_ssize_t *ii = ib.data, *jj = jb.data;
@@ -185,6 +193,7 @@ done:
     if (got_j) PyBuffer_Release(&jb.view);
     if (got_c) PyBuffer_Release(&cb);
     if (got_f) PyBuffer_Release(&fb);
+    PyBuffer_Release(&given.view); /* nothing where not acquired (obj NULL) */
     return result;
 }
 

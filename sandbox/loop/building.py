@@ -187,6 +187,15 @@ class Building:
             [s.reconfiguration is not None for s in self.states]
         )
         self._reconfiguring = bool(self._reconfigurable.any())
+        # Without failures, detection, reconfiguration and platoons, what the platoon
+        # believes has failed and who may avoid never change: made at the first plan.
+        self._may_avoid_fixed = not (
+            len(self.failures)
+            or self._detecting
+            or self._reconfiguring
+            or self.states[0].platoons is not None
+        )
+        self._may_avoid: np.ndarray | None = None
         # What each world's reconfiguration last saw, and the worlds it waits on.
         self._reacted, self._waiting = np.zeros(N, dtype=bool), set()
         # Range sensors (sensors.range; None without; one world, structure_key) and

@@ -298,7 +298,13 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         if self.platoons is not None and self.K > 1:  # each world's platoons decide
             for w, s in enumerate(self.states):
                 self._avoid_candidates[self._rows(w)] = s.platoons.avoid_candidates
-        may_avoid = self._avoid_candidates & ~known
+        if not self._may_avoid_fixed:
+            may_avoid = self._avoid_candidates & ~known
+        elif self._may_avoid is None:  # the same every period (building.py)
+            may_avoid = self._may_avoid = self._avoid_candidates & ~known
+            may_avoid.flags.writeable = False
+        else:
+            may_avoid = self._may_avoid
         if self._strategy_per_world:
             shift, active = self._world_strategy(t, slot, may_avoid, known)
         else:
@@ -449,7 +455,8 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             chi_next[rows, 0] = speed * np.cos(theta)
             chi_next[rows, 1] = speed * np.sin(theta)
         fleet.v1, fleet.v2, fleet.failed = v1, v2, failed
-        self.physics.failed[:] = failed  # an episode starting now is not healthy
+        if len(self.failures):  # else never set: an episode now is healthy
+            self.physics.failed[:] = failed  # an episode starting now is not healthy
         mode = plan.active.astype(np.int8)  # MODE_FORMATION 0, MODE_AVOID 1
         if external is not None:
             mode[external] = MODE_EXTERNAL

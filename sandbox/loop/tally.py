@@ -144,19 +144,17 @@ class LoopTally:
 
     def _buffer_c(self, b: Any, contact: np.ndarray) -> None:
         """:meth:`_buffer` in one C call (the same numbers)."""
-        K, m = self.K, self._m
-        i = j = None
+        m = self._m
+        i = j = d2 = None
         if self.n >= 2 and self._closest is None:
-            d2 = b.distances(b.pos)
+            d2 = b.distances(b.pos)  # the neighbour search's, copied by the call
             if d2 is None:
                 i, j = self._i, self._j
-            else:
-                self._buf_d2[m] = d2.reshape(K, -1)
         commanded = self._buf_cmd[m]  # valid until the slot is written again
         _period.buffer_period(
             b.pos, i, j, b.v1, b.v2, b.vel, contact, b.theta, float(self.h),
             self._buf_d2[m], self._buf_v[m], self._buf_vel[m], self._buf_free[m],
-            commanded,
+            commanded, d2,
         )  # fmt: skip
         self.commanded, self.commanded_at = commanded, b.k
         self._m = m + 1

@@ -238,6 +238,9 @@ class StackedFailures:
         self._on_at = -1
         self._on = np.zeros(len(specs), dtype=bool)
         self._waiting = len(specs)  # failures not started yet
+        #: No vehicle of any world (read-only: the flags of a period without failures).
+        self._none = np.zeros(self.N, dtype=bool)
+        self._none.flags.writeable = False
 
     def __len__(self) -> int:
         return len(self.specs)
@@ -282,11 +285,11 @@ class StackedFailures:
         raised (that world's other failures are skipped; the caller ends it).
         """
         N = self.N
+        errors: list[tuple[int, PluginRunError]] = []
+        if not len(self.specs):  # no vehicle ever fails: shared read-only flags
+            return v1, v2, self._none, self._none, errors
         failed = np.zeros(N, dtype=bool)
         frozen = np.zeros(N, dtype=bool)
-        errors: list[tuple[int, PluginRunError]] = []
-        if not len(self.specs):
-            return v1, v2, failed, frozen, errors
         v1, v2 = v1.copy(), v2.copy()
         broken: set[int] = set()
         active = self.active(t, live).nonzero()[0]
