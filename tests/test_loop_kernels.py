@@ -123,3 +123,44 @@ def test_a_flush_of_many_periods_sums_as_period_after_period(monkeypatch):
     many = metrics()
     monkeypatch.setattr(tally, "CHUNK", 1)
     assert metrics() == many
+
+
+@needs_period
+def test_the_state_read_in_c_is_numpys(monkeypatch):
+    # WorldsPhysics.read splits the bodies' rows in one C call; without it numpy's
+    # copies do: the same runs to the bit, alone and batched
+    from sandbox.loop import stepping
+
+    calls = []
+    real = _period.read_state
+
+    def counted(*args):
+        calls.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(_period, "read_state", counted)
+    with_c = records(0) + records(3)
+    assert calls
+    monkeypatch.setattr(stepping, "_period", None)
+    assert records(0) + records(3) == with_c
+
+
+@needs_period
+def test_known_pair_distances_are_copied_into_the_buffer():
+    # buffer_period copies the neighbour search's squared distances when given
+    # (no pairs to compute), and refuses a copy of the wrong length
+    K, n = 2, 3
+    N, P = K * n, n * (n - 1) // 2
+    rng = np.random.default_rng(3)
+    pos, vel = rng.normal(size=(N, 2)), rng.normal(size=(N, 2))
+    v1, v2, theta = rng.normal(size=N), rng.normal(size=N), rng.normal(size=N)
+    contact = rng.random(N) < 0.3
+    known = rng.random(K * P)
+    outs = [np.empty((K, P)), np.empty((2, N)), np.empty((N, 2))]
+    free, cmd = np.empty(N, dtype=bool), np.empty((N, 2))
+    args = (pos, None, None, v1, v2, vel, contact, theta, 0.01, outs[0], outs[1])
+    _period.buffer_period(*args, outs[2], free, cmd, known)
+    assert outs[0].ravel().tolist() == known.tolist()
+    assert free.tolist() == (~contact).tolist()
+    with pytest.raises(ValueError):
+        _period.buffer_period(*args, outs[2], free, cmd, known[:-1])
