@@ -68,6 +68,7 @@ EXACT = tuple(
     _exact(source)
     for source in (
         "sandbox/model/_kernels.c",
+        "sandbox/model/_laws.c",
         "sandbox/behaviour/_pair_field.c",
         "sandbox/physics/_motors.c",
         "sandbox/behaviour/safety/_qp.c",

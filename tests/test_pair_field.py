@@ -82,19 +82,29 @@ def test_runs_with_the_c_terms_equal_numpy(monkeypatch, name, overrides, batch):
 
 
 @needs_c
-def test_the_strategy_takes_the_c_path(monkeypatch):
+@pytest.mark.parametrize(
+    "name", ["paper/fig15_continuous_beta1", "failures/obstacle_field"]
+)
+def test_the_strategy_takes_the_c_path(monkeypatch, name):
+    # Without obstacles the loop calls the C loop for the whole shift
+    # (ShiftKernel); with them, weighted_shift calls it for the pairs' terms.
     calls = []
-    original = pair_field.add_pair_terms
+    real = pair_field._pair_field
 
-    def counted(*args):
-        calls.append(1)
-        return original(*args)
+    class Counted:
+        def pair_field(*args):
+            calls.append("pair_field")
+            return real.pair_field(*args)
 
-    monkeypatch.setattr(pair_field, "add_pair_terms", counted)
-    Simulation(
-        load_scenario("paper/fig15_continuous_beta1", overrides=["duration=0.5"])
-    ).run()
+        def shifted_targets(*args):
+            calls.append("shifted_targets")
+            return real.shifted_targets(*args)
+
+    monkeypatch.setattr(pair_field, "_pair_field", Counted)
+    Simulation(load_scenario(name, overrides=["duration=0.5"])).run()
     assert calls
+    expected = "pair_field" if "obstacle" in name else "shifted_targets"
+    assert set(calls) == {expected}
 
 
 def test_use_kernel_false_forces_numpy(monkeypatch):
@@ -104,6 +114,7 @@ def test_use_kernel_false_forces_numpy(monkeypatch):
         raise AssertionError("the C path ran with USE_KERNEL False")
 
     monkeypatch.setattr(pair_field, "add_pair_terms", refuse)
+    monkeypatch.setattr(pair_field.ShiftKernel, "shifted", refuse)
     run = Simulation(
         load_scenario("paper/fig15_continuous_beta1", overrides=["duration=0.5"])
     ).run()

@@ -35,6 +35,7 @@ USE_KERNEL = True
 #: The weights the C loop computes: ``kind`` 0 and 1.
 DISCONTINUOUS, CONTINUOUS = 0, 1
 _agreed: bool | None = None
+_shift_agreed: bool | None = None
 
 
 def usable() -> bool:
@@ -107,6 +108,161 @@ def add_pair_terms(
         None if avoiders is None else np.ascontiguousarray(avoiders, dtype=bool),
     )
     neighbours.remember(pos, d2)
+
+
+class ShiftKernel:
+    """A weighted strategy's shifted targets of a period in one C call.
+
+    What the loop does with a built-in discontinuous or continuous strategy without
+    static obstacles and without the tangential term: the shift of
+    :func:`~sandbox.behaviour.recovery.weighted_shift` (eqs. (22)-(27)), zero for
+    the vehicles that do not avoid, and the targets ``slot + shift`` of eq. (22) /
+    (26), the numbers of those numpy calls (checked once: :func:`shift_agrees`).
+
+    Parameters
+    ----------
+    neighbours : NeighbourList or WorldPairs
+        The loop's neighbour search (its candidates, radius and ``remember``).
+    R, r : float [m]
+        The weight's radii (``r`` unused by the discontinuous weight).
+    kind : int
+        :data:`DISCONTINUOUS` or :data:`CONTINUOUS`.
+    beta : float or ndarray
+        One aggressiveness [m^2], or each row's (shape (N, 1) or (N,)).
+    """
+
+    def __init__(
+        self, neighbours: Any, R: float, r: float | None, kind: int, beta: Any
+    ) -> None:
+        self.neighbours = neighbours
+        self.R, self.r, self.kind = float(R), 0.0 if r is None else float(r), kind
+        self.radius = float(neighbours.radius)
+        self.beta = np.ascontiguousarray(np.reshape(beta, -1), dtype=float)
+
+    def shifted(
+        self,
+        pos: np.ndarray,
+        seen: np.ndarray | None,
+        avoiders: np.ndarray,
+        slot: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The targets, the shift and the avoiding vehicles of a period.
+
+        Parameters
+        ----------
+        pos : ndarray, shape (N, 2) [m]
+            True positions.
+        seen : ndarray, shape (N, 2) or (N, 3), or None
+            The broadcast positions (first two columns) each vehicle sees of the
+            others (None: ``pos``).
+        avoiders : ndarray, shape (N,), bool
+            The vehicles that may avoid.
+        slot : ndarray, shape (N, 2) [m]
+
+        Returns
+        -------
+        target, shift : ndarray, shape (N, 2) [m]
+        active : ndarray, shape (N,), bool
+
+        Raises
+        ------
+        TypeError, ValueError, BufferError
+            An array that is not what the C loop reads (nothing is changed then).
+        """
+        neighbours, N = self.neighbours, len(pos)
+        i, j = neighbours.candidates(pos)
+        d2 = np.empty(len(i))
+        target, shift = np.empty((N, 2)), np.empty((N, 2))
+        active = np.empty(N, dtype=bool)
+        _pair_field.shifted_targets(
+            pos, seen, i, j, self.radius, self.R, self.r, self.kind, self.beta,
+            avoiders, slot, shift, target, active, d2,
+        )  # fmt: skip
+        neighbours.remember(pos, d2)
+        return target, shift, active
+
+
+def shift_agrees() -> bool:
+    """Whether :class:`ShiftKernel` gives the numpy path's bits here (checked once).
+
+    The pair terms' check (:func:`kernel_agrees`), then whole periods of random
+    fleets: :func:`~sandbox.behaviour.recovery.weighted_shift` by numpy and
+    ``slot + shift`` against the one call, one beta and each row's, with the true
+    and the broadcast positions (in rows of 2 and of 3).
+    """
+    global _shift_agreed
+    if _shift_agreed is None:
+        _shift_agreed = kernel_agrees() and _shift_check()
+    return _shift_agreed
+
+
+def _shift_check() -> bool:
+    from sandbox.behaviour import recovery
+    from sandbox.geometry.neighbours import NeighbourList, WorldPairs
+    from sandbox.model.obstacle_field import ObstacleField
+    from sandbox.plugins.contexts import StrategyContext
+
+    global USE_KERNEL
+    rng = np.random.default_rng(20261208)
+    weights = {DISCONTINUOUS: recovery.discontinuous, CONTINUOUS: recovery.continuous}
+    saved = USE_KERNEL
+    try:
+        for trial in range(80):
+            K, n = int(rng.integers(1, 4)), int(rng.integers(1, 8))
+            N = K * n
+            pos = rng.uniform(-2.0, 2.0, (N, 2))
+            if trial % 5 == 0 and n > 1:
+                pos[1] = pos[0]  # coincident vehicles: eq. (25)'s least distance
+            if trial % 7 == 0:
+                pos[-1] = np.nan  # a vehicle whose position is unknown
+            poses = np.concatenate((pos, rng.normal(0.0, 1.0, (N, 1))), axis=1)
+            poses[:, :2] += rng.normal(0.0, 0.05, (N, 2))
+            seen = (None, poses, np.ascontiguousarray(poses[:, :2]))[trial % 3]
+            slot = rng.normal(0.0, 3.0, (N, 2))
+            slot[rng.random(N) < 0.2] = np.nan
+            avoiders = rng.random(N) < (0.0 if trial % 11 == 0 else 0.8)
+            kind = (DISCONTINUOUS, CONTINUOUS)[(trial // 3) % 2]
+            beta = 0.3 if trial % 2 else rng.uniform(0.0, 1.0, (N, 1))
+            R, r = 1.5, (None, 0.5)[kind]
+            ctx = StrategyContext(
+                t=0.0,
+                dt=0.01,
+                pos=pos,
+                theta=np.zeros(N),
+                vel=np.zeros((N, 2)),
+                slot=slot,
+                diameter=np.zeros(N),
+                may_avoid=avoiders,
+                failed=np.zeros(N, dtype=bool),
+                params={},
+                R=R,
+                obstacle_field=ObstacleField(()),
+                neighbours=WorldPairs(K, n, R) if trial % 4 else NeighbourList(R),
+                seen_pos=None if seen is None else np.array(seen[:, :2]),
+            )
+            USE_KERNEL = False
+            shift, active = recovery.weighted_shift(
+                ctx, weights[kind], beta, r, 2.0, 0.0
+            )
+            USE_KERNEL = True
+            search = WorldPairs(K, n, R) if trial % 4 else NeighbourList(R)
+            kernel = ShiftKernel(search, R, r, kind, beta)
+            got = kernel.shifted(pos, seen, avoiders, slot)
+            want = (slot + shift, shift, active)
+            if not all(_bits_equal(a, b) for a, b in zip(got, want, strict=True)):
+                return False
+    finally:
+        USE_KERNEL = saved
+    return True
+
+
+def _bits_equal(a: np.ndarray, b: np.ndarray) -> bool:
+    """Same shape, dtype and bytes."""
+    return (
+        a.shape == b.shape
+        and a.dtype == b.dtype
+        and bool(np.array_equal(a.view(np.uint8), b.view(np.uint8)))
+    )
 
 
 def _check() -> bool:

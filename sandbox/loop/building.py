@@ -26,6 +26,7 @@ from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.behaviour.sensing import StackedBroadcast
 from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList, WorldPairs
 from sandbox.loop.plan import Plan, structure_key
+from sandbox.loop.plan_kernel import law_kernel_of, reference_table, shift_kernel_of
 from sandbox.loop.platoon_sections import StackedSections
 from sandbox.loop.platoons import Platoons
 from sandbox.loop.recording import WorldsRecorder
@@ -209,6 +210,11 @@ class Building:
         self._avoid_field = avoid_field(self.range_sensor, self.obstacles, self.rec)
         for w, state in enumerate(self.states):
             state.range_sensor = sensors[w]
+        # the plan's law and strategy as C calls where they cover them (plan_kernel)
+        self._law_kernel = law_kernel_of(self)
+        self._kernel_table = reference_table(self) if self._law_kernel else None
+        self._shift_kernel = shift_kernel_of(self)
+        self._kernel_strategy = self.strategy  # what the strategy's C call replaces
         if self._sense():
             self._guarded(self._plan)
 

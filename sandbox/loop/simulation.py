@@ -53,6 +53,7 @@ from sandbox.loop.stacked_law import stacked_law_context, stacked_law_inputs
 from sandbox.loop.step_api import StepAPI
 from sandbox.loop.world_stages import WorldStages
 from sandbox.model.dynamics import CLIP
+from sandbox.model.law_kernel import overwrite_rows
 from sandbox.model.laws import LawInputs, spread
 from sandbox.physics.interface import Physics
 from sandbox.plugins.registration import (
@@ -218,6 +219,10 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
                 return self.platoons.targets(t, fl.pos, fl.theta, fl.vel, self.believed)
             return self._platoon_targets(t)
         K, n, N = self.K, self.n, self.N
+        if self._law_kernel is not None:  # the law's period in one C call
+            triple = self._kernel_targets()
+            if triple is not None:
+                return triple
         if self._ref_table is not None:
             k, (p, dp, ddp) = self.k, self._ref_table
             ref = (p[k], dp[k], ddp[k])
@@ -242,18 +247,33 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
                     _world_rows(v_ref, shape),
                     _world_rows(a_ref, shape),
                 ]
-        tr, cmd = self._track_rows, self._commanded_rows
-        if (ref is not None and len(tr)) or len(cmd):
-            # Copies: the law may keep (or broadcast) what it returned.
-            slot = np.array(triple[0], dtype=float)
-            v_ref = np.array(triple[1], dtype=float)
-            a_ref = np.array(triple[2], dtype=float)
-            if ref is not None:
-                slot[tr], v_ref[tr], a_ref[tr] = ref[0], ref[1], ref[2]
-            slot[cmd] = np.nan
-        else:  # nothing to overwrite: read-only use downstream, no copies needed
-            slot, v_ref, a_ref = triple  # float64 rows, each branch above
+        # the reference-tracking rows and the commanded ones (copies where any)
+        slot, v_ref, a_ref = overwrite_rows(
+            triple, ref, self._track_rows, self._commanded_rows
+        )
         point = ref[0] if ref is not None else np.full(2, np.nan)
+        return slot, v_ref, a_ref, point
+
+    def _kernel_targets(self) -> tuple[np.ndarray, ...] | None:
+        """:meth:`_targets` by the law's C call (plan_kernel.py); None: use numpy.
+
+        Not for a law replaced since, or whose ``targets`` was (a spy, a wrapper).
+        """
+        law = self.law
+        if law is not self._law_kernel.law or "targets" in law.__dict__:
+            return None
+        k, table, believed = self.k, self._kernel_table, self.believed
+        if believed is None:
+            pose, theta = self.fleet.pos, self.fleet.theta
+        else:
+            pose, theta = believed, None
+        try:
+            slot, v_ref, a_ref = self._law_kernel.targets(
+                pose, theta, table, k, self._track_rows, self._commanded_rows
+            )
+        except (BufferError, TypeError, ValueError):  # not such arrays: numpy
+            return None
+        point = self._ref_table[0][k] if table is not None else np.full(2, np.nan)
         return slot, v_ref, a_ref, point
 
     def _law_context(self, t: float, ref: tuple | None) -> LawContext | LawInputs:
@@ -305,6 +325,27 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             may_avoid.flags.writeable = False
         else:
             may_avoid = self._may_avoid
+        shifted = None
+        if self._shift_kernel is not None:  # eqs. (22)-(27) in one C call
+            shifted = self._kernel_shift(slot, may_avoid)
+        if shifted is not None:
+            target, shift, active = shifted
+        else:
+            shift, active = self._shift(t, slot, may_avoid, known)
+            target = slot + shift  # eq. (22) / (26)
+        if self.rec.target_derivatives == "estimate":
+            d_shift, dd_shift = self.shift_motion.update(shift)
+            v_ref = v_ref + d_shift
+            a_ref = a_ref + dd_shift
+        self._failing = failing
+        if self.K > 1:
+            point = spread(point, (self.K, 2))
+        if self.K == 1 and not self.live[0]:
+            return  # a plug-in failed: the plan stays undefined
+        self.plan = Plan(slot, target, v_ref, a_ref, point, active, failing)
+
+    def _shift(self, t, slot, may_avoid, known) -> tuple[np.ndarray, np.ndarray]:
+        """The strategy's shift and avoiding vehicles of ``t`` (numpy, plug-ins)."""
         if self._strategy_per_world:
             shift, active = self._world_strategy(t, slot, may_avoid, known)
         else:
@@ -323,17 +364,21 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             ):
                 shift = np.where(may_avoid[:, None], shift, 0.0)
             active = np.asarray(active, dtype=bool) & may_avoid
-        target = slot + shift  # eq. (22) / (26)
-        if self.rec.target_derivatives == "estimate":
-            d_shift, dd_shift = self.shift_motion.update(shift)
-            v_ref = v_ref + d_shift
-            a_ref = a_ref + dd_shift
-        self._failing = failing
-        if self.K > 1:
-            point = spread(point, (self.K, 2))
-        if self.K == 1 and not self.live[0]:
-            return  # a plug-in failed: the plan stays undefined
-        self.plan = Plan(slot, target, v_ref, a_ref, point, active, failing)
+        return shift, active
+
+    def _kernel_shift(self, slot, may_avoid) -> tuple[np.ndarray, ...] | None:
+        """Targets, shift, active by the strategy's C call; None: use numpy.
+
+        Not for a strategy replaced since the loop was built.
+        """
+        if self.strategy is not self._kernel_strategy:
+            return None
+        try:
+            return self._shift_kernel.shifted(
+                self.fleet.pos, self.believed, may_avoid, slot
+            )
+        except (BufferError, TypeError, ValueError):  # not such arrays: numpy
+            return None
 
     def _strategy_context(self, t, slot, may_avoid, known) -> StrategyContext:
         """The strategy's context of ``t``: a new one, or a built-in's one, updated.

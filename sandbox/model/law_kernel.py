@@ -1,0 +1,329 @@
+"""A built-in formation law's targets of one period, eqs. (7)-(20), in one C call.
+
+A built-in law class (:mod:`sandbox.model.laws`) computes a period's slots, ``x_ref'``
+and ``x_ref''`` in about ten numpy calls (the rotating law with its leader's backward
+differences, about fifteen), and the loop then gives the rows that track the
+reference the reference's own point and derivatives and the commanded rows a NaN
+slot (:func:`overwrite_rows`): for a small fleet the fixed cost of those calls (half
+a microsecond each) is most of the period's law. Where the optional extension
+``sandbox.model._laws`` (``_laws.c``) is built, :class:`LawKernel` does the same for
+K worlds in one C call: the law's numbers row by row in numpy's order, the backward
+differences of eqs. (8)-(9) and (18)-(19) advanced in place in the law's own
+estimator, and the tangent angle of eq. (15) returned to the law, so the law object
+holds the state the numpy path leaves in it.
+
+The C loop takes ``sin``, ``cos``, ``hypot`` and ``atan2`` from the C library: it is
+used only where :func:`~sandbox.model.kernels.kernels_agree` and
+:func:`~sandbox.model.kernels.atan2_agrees` found them to be numpy's, and where
+:func:`kernel_agrees` (checked once) finds the C call and the numpy law to give the
+same bits on a few hundred periods of random fleets of every law (tests in
+``tests/test_plan_kernel.py``). :data:`USE_KERNEL` False forces the numpy path.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from sandbox.model.kernels import atan2_agrees, c_float64, kernels_agree
+from sandbox.model.laws import (
+    BackwardDifference,
+    FixedFormation,
+    LawInputs,
+    LeaderReferenceFormation,
+    OwnEstimateFormation,
+    RotatingFormation,
+    VirtualLeaderFormation,
+)
+
+try:
+    from sandbox.model import _laws
+except ImportError:  # pragma: no cover - built without a C compiler
+    _laws = None
+
+#: Use the C loop where it is built and agrees with numpy (False: numpy only).
+USE_KERNEL = True
+#: The law classes the C loop computes, by the number it knows them by.
+KINDS: dict[type, int] = {
+    FixedFormation: 0,
+    RotatingFormation: 1,
+    VirtualLeaderFormation: 2,
+    LeaderReferenceFormation: 3,
+    OwnEstimateFormation: 4,
+}
+#: The estimator of each law class with one (eqs. (8)-(9) or (18)-(19)).
+_MOTION = {0: "leader_motion", 1: "leader_motion", 4: "slot_motion"}
+_agreed: bool | None = None
+
+
+def usable() -> bool:
+    """Whether :class:`LawKernel` may run (built, agreeing, not switched off)."""
+    return USE_KERNEL and kernel_agrees()
+
+
+def kernel_agrees() -> bool:
+    """Whether the C loop gives the numpy laws' bits here (checked once)."""
+    global _agreed
+    if _agreed is None:
+        _agreed = _laws is not None and kernels_agree() and atan2_agrees() and _check()
+    return _agreed
+
+
+def overwrite_rows(
+    triple: list[np.ndarray],
+    ref: tuple | None,
+    track: np.ndarray,
+    commanded: np.ndarray,
+) -> list[np.ndarray]:
+    """The loop's targets from the law's: reference-tracking and commanded rows.
+
+    The rows ``track`` (indices) take the reference's point and derivatives ``ref``
+    (when there is one), the rows ``commanded`` (open loop) a NaN slot; on copies
+    of the law's arrays, which it may keep. Without such rows the law's arrays
+    themselves are returned (float64 (N, 2) rows, read-only downstream).
+    """
+    if (ref is not None and len(track)) or len(commanded):
+        slot = np.array(triple[0], dtype=float)
+        v_ref = np.array(triple[1], dtype=float)
+        a_ref = np.array(triple[2], dtype=float)
+        if ref is not None:
+            slot[track], v_ref[track], a_ref[track] = ref[0], ref[1], ref[2]
+        slot[commanded] = np.nan
+        return [slot, v_ref, a_ref]
+    return triple
+
+
+class LawKernel:
+    """A built-in law of K worlds, its period's targets in one C call.
+
+    Parameters
+    ----------
+    law : FormationLaw
+        A law of exactly one of the classes of :data:`KINDS`, with offsets of shape
+        (K, n, 2), whose estimator is a :class:`~sandbox.model.laws.
+        BackwardDifference` of all worlds (one history).
+    leader : int
+        The leader's row in each world (negative: none, for ``virtual`` only).
+    """
+
+    def __init__(self, law: Any, leader: int) -> None:
+        self.law = law
+        self.kind = KINDS[type(law)]
+        self.leader = max(int(leader), 0)
+        self.turns = bool(law.rotate) and self.kind in (2, 3)
+        self._motion = getattr(law, _MOTION.get(self.kind, ""), None)
+        K, n = law.delta.shape[:2]
+        self.n = n
+        self._shape = (K, 1, 2) if self.kind in (0, 1) else (K, n, 2)
+        self._prev: tuple[np.ndarray, np.ndarray] | None = None
+
+    @classmethod
+    def make(cls, law: Any, leader: int) -> LawKernel | None:
+        """The kernel of ``law``; None where the C loop cannot run or not cover it."""
+        if not (covers(law, leader) and usable()):
+            return None
+        return cls(law, leader)
+
+    def targets(
+        self,
+        pose: np.ndarray,
+        theta: np.ndarray | None,
+        table: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+        row: int,
+        track: np.ndarray,
+        commanded: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Slots, ``x_ref'``, ``x_ref''`` of every row, (K n, 2) each, new arrays.
+
+        The numbers of ``law.targets`` followed by :func:`overwrite_rows` (whose
+        ``ref`` is the reference's row ``row`` of ``table``), the law's state
+        advanced as its own call advances it.
+
+        Parameters
+        ----------
+        pose : ndarray, shape (K n, 2) or (K n, 3)
+            The positions the law reads the leader's from [m]; (K n, 3): with the
+            heading [rad] as third column (the believed poses).
+        theta : ndarray, shape (K n,), or None
+            The headings [rad] beside positions of shape (K n, 2).
+        table : tuple of 3 ndarrays of shape (T, 2), or None
+            The reference's points and derivatives (None: no reference).
+        row : int
+            The row of ``table`` of this period.
+        track, commanded : ndarray of intp
+            The rows that track the reference, the rows without a slot.
+
+        Raises
+        ------
+        TypeError, ValueError, BufferError
+            An array that is not what the C loop reads (nothing is changed then).
+        """
+        law, N = self.law, pose.shape[0]
+        slot, v_ref, a_ref = np.empty((N, 2)), np.empty((N, 2)), np.empty((N, 2))
+        motion = self._motion
+        if motion is None:
+            count, prev_x, prev_v = 0, None, None
+        else:
+            count = motion.count
+            if self._prev is None or motion.prev_x is not self._prev[0]:
+                self._adopt(motion)
+            prev_x, prev_v = self._prev
+        p, dp, ddp = (None, None, None) if table is None else table
+        tangent = _laws.law_targets(
+            self.kind, law.delta, self.n, pose, theta, self.leader, p, dp, ddp, row,
+            self.turns, law._tangent, law.h, count, prev_x, prev_v, track, commanded,
+            slot, v_ref, a_ref,
+        )  # fmt: skip
+        if motion is not None:
+            motion.count = count + 1
+        if self.turns:
+            law._tangent = tangent
+        return slot, v_ref, a_ref
+
+    def _adopt(self, motion: BackwardDifference) -> None:
+        """Give the estimator a history of its values that the C loop writes into.
+
+        New arrays (the ones it had may have been handed out as a period's
+        estimates), the values it holds (zeros before its first update).
+        """
+        if motion.prev_x is None:
+            prev_x, prev_v = np.zeros(self._shape), np.zeros(self._shape)
+        else:
+            prev_x = np.array(motion.prev_x, dtype=float).reshape(self._shape)
+            prev_v = np.array(motion.prev_v, dtype=float).reshape(self._shape)
+        motion.prev_x, motion.prev_v = prev_x, prev_v
+        self._prev = (prev_x, prev_v)
+
+
+def covers(law: Any, leader: int) -> bool:
+    """Whether :class:`LawKernel` computes ``law`` with the leader's row ``leader``.
+
+    The five built-in classes themselves (not a subclass), offsets of shape
+    (K, n, 2) in C-contiguous float64, one tangent angle, a leader for the laws
+    that read one, and one history of the estimator for all worlds.
+    """
+    kind = KINDS.get(type(law))
+    if kind is None:
+        return False
+    delta = law.delta
+    if not (
+        type(delta) is np.ndarray
+        and delta.ndim == 3
+        and delta.shape[2] == 2
+        and delta.dtype == np.float64
+        and delta.flags.c_contiguous
+        and isinstance(law._tangent, float)
+    ):
+        return False
+    if kind != 2 and leader < 0:
+        return False
+    motion = getattr(law, _MOTION.get(kind, ""), None)
+    return kind not in _MOTION or type(motion) is BackwardDifference
+
+
+def numpy_targets(
+    law: Any,
+    pose: np.ndarray,
+    theta: np.ndarray | None,
+    leader: int,
+    ref: tuple | None,
+    track: np.ndarray,
+    commanded: np.ndarray,
+) -> list[np.ndarray]:
+    """What :meth:`LawKernel.targets` computes, by the law's own numpy (the check's).
+
+    The leader's pose as the loop gathers it (``stacked_law_inputs``), the law's
+    ``targets``, its arrays as rows, then :func:`overwrite_rows`.
+    """
+    K, n = law.delta.shape[:2]
+    N = K * n
+    if theta is None:
+        pos, theta = pose[:, :2], pose[:, 2]
+    else:
+        pos = pose
+    if leader < 0:
+        lead_pos = lead_theta = None
+    else:
+        lead_pos = np.ascontiguousarray(pos.reshape(K, n, 2)[:, leader : leader + 1])
+        lead_theta = np.ascontiguousarray(theta.reshape(K, n)[:, leader : leader + 1])
+    triple = [
+        a.reshape(N, 2) for a in law.targets(LawInputs(lead_pos, lead_theta, ref))
+    ]
+    return overwrite_rows(triple, ref, track, commanded)
+
+
+def _check() -> bool:
+    """Both paths on random fleets of every law, period after period, bit for bit."""
+    from sandbox.plugins.registration import make_law
+
+    names = ("fixed", "rotating", "virtual", "leader_ref", "own_estimate")
+    rng = np.random.default_rng(20261207)
+    for trial in range(60):
+        name = names[trial % 5]
+        K, n = int(rng.integers(1, 4)), int(rng.integers(1, 6))
+        delta = rng.uniform(-3.0, 3.0, (K, n, 2))
+        rotate = name in ("virtual", "leader_ref") and bool(trial % 2)
+        params = {"rotate": rotate} if rotate else {}
+        laws = [make_law(name, params, delta, 0.01) for _ in range(2)]
+        leader = int(rng.integers(0, n))
+        if trial % 7 == 0 and name == "virtual":
+            leader = -1  # the virtual leader's law reads no leader
+        if not covers(laws[0], leader):
+            return False
+        kernel = LawKernel(laws[0], leader)
+        if not _agree_periods(kernel, laws[1], rng, K, n, leader, trial):
+            return False
+    return True
+
+
+def _agree_periods(kernel, law, rng, K, n, leader, trial) -> bool:
+    """Ten periods of one law by both paths: the arrays and the law's state."""
+    N = K * n
+    T = 12
+    table = tuple(c_float64(rng.normal(0.0, 1.0, (T, 2))) for _ in range(3))
+    table[1][3:6] = 0.0  # a reference at rest: the tangent is kept
+    table[1][8] = (1e-3, 0.0)  # at REST_SPEED exactly: a new tangent
+    if trial % 3 == 0:
+        table[1][0] = np.nan
+    track = np.flatnonzero(rng.random(N) < 0.3)
+    commanded = np.flatnonzero(rng.random(N) < 0.2)
+    with_ref = kernel.kind in (2, 3) or trial % 4
+    for k in range(T):
+        pose = rng.normal(0.0, 2.0, (N, 3))
+        if k == 5 and trial % 5 == 0:
+            pose[:, 0] = np.nan
+        theta = None if trial % 2 else c_float64(pose[:, 2])
+        given = pose if theta is None else c_float64(pose[:, :2])
+        ref = (table[0][k], table[1][k], table[2][k]) if with_ref else None
+        got = kernel.targets(
+            given, theta, table if with_ref else None, k, track, commanded
+        )
+        want = numpy_targets(law, given, theta, leader, ref, track, commanded)
+        if not all(_same(a, b) for a, b in zip(got, want, strict=True)):
+            return False
+        if not _same_state(kernel.law, law):
+            return False
+    return True
+
+
+def _same_state(a: Any, b: Any) -> bool:
+    """Whether two laws hold the same tangent and estimator history, bit for bit."""
+    if not _same(np.float64(a._tangent), np.float64(b._tangent)):
+        return False
+    for name in ("leader_motion", "slot_motion"):
+        ma, mb = getattr(a, name, None), getattr(b, name, None)
+        if ma is None:
+            continue
+        if ma.count != mb.count or not (
+            _same(ma.prev_x, mb.prev_x) and _same(ma.prev_v, mb.prev_v)
+        ):
+            return False
+    return True
+
+
+def _same(x: Any, y: Any) -> bool:
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    return x.shape == y.shape and bool(
+        np.array_equal(x.view(np.uint64), y.view(np.uint64))
+    )
