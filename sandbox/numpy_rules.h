@@ -50,6 +50,37 @@ numpy_data(PyObject *obj, int type, int writable, Py_ssize_t *count)
 }
 #endif
 
+/* 1 where this build makes new arrays through numpy's C API (new_array). */
+#ifdef SANDBOX_NUMPY_API
+#define SANDBOX_ALLOCATES 1
+#else
+#define SANDBOX_ALLOCATES 0
+#endif
+
+/* A new C-contiguous ndarray of ``nd`` (1 or 2) dimensions ``d0``, ``d1``,
+ * float64 (or bool where ``boolean``), uninitialised: through numpy's C API, the
+ * cost of a few field writes where numpy.empty's call costs a fifth of a
+ * microsecond. NULL with TypeError set where the build lacks numpy's headers (the
+ * caller then passes arrays it made). */
+static inline PyObject *
+new_array(int nd, Py_ssize_t d0, Py_ssize_t d1, int boolean)
+{
+#ifdef SANDBOX_NUMPY_API
+    if (PyArray_API == NULL && _import_array() < 0) {
+        return NULL;
+    }
+    npy_intp dims[2] = {d0, d1};
+    return PyArray_EMPTY(nd, dims, boolean ? NPY_BOOL : NPY_DOUBLE, 0);
+#else
+    (void)nd;
+    (void)d0;
+    (void)d1;
+    (void)boolean;
+    PyErr_SetString(PyExc_TypeError, "built without numpy's headers: pass arrays");
+    return NULL;
+#endif
+}
+
 /* numpy.maximum(a, b): a where a > b or a is NaN, else b (b on a tie). */
 static inline double
 np_maximum(double a, double b)

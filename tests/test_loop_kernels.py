@@ -131,16 +131,23 @@ def test_the_state_read_in_c_is_numpys(monkeypatch):
     # copies do: the same runs to the bit, alone and batched
     from sandbox.loop import stepping
 
-    calls = []
-    real = _period.read_state
+    calls, refused = [], []
 
-    def counted(*args):
-        calls.append(1)
-        return real(*args)
+    def counted(real):
+        def call(*args):
+            calls.append(real.__name__)
+            try:
+                return real(*args)
+            except Exception as exc:  # the loop would take numpy's path
+                refused.append(exc)
+                raise
 
-    monkeypatch.setattr(_period, "read_state", counted)
+        return call
+
+    for name in ("read_state", "command_rows"):
+        monkeypatch.setattr(_period, name, counted(getattr(_period, name)))
     with_c = records(0) + records(3)
-    assert calls
+    assert set(calls) == {"read_state", "command_rows"} and not refused
     monkeypatch.setattr(stepping, "_period", None)
     assert records(0) + records(3) == with_c
 
@@ -164,3 +171,34 @@ def test_known_pair_distances_are_copied_into_the_buffer():
     assert free.tolist() == (~contact).tolist()
     with pytest.raises(ValueError):
         _period.buffer_period(*args, outs[2], free, cmd, known[:-1])
+
+
+@needs_period
+def test_the_state_split_makes_or_fills_its_arrays():
+    # read_state's new arrays (numpy's C API) hold what the given ones are filled
+    # with; the commands' copies are numpy's two slice assignments
+    rng = np.random.default_rng(5)
+    N = 7
+    rows = rng.normal(size=(N, 6))
+    measured = [np.empty((N, 3)), np.empty((N, 3))]
+    given = (np.empty((N, 2)), np.empty(N), np.empty((N, 2)))
+    filled = _period.read_state(rows, measured[0], *given)
+    assert all(a is b for a, b in zip(filled, given, strict=True))
+    if _period.ALLOCATES:
+        made = _period.read_state(rows, measured[1], None, None, None)
+        for a, b in zip(made, given, strict=True):
+            assert a.flags.c_contiguous and a.flags.writeable
+            assert a.shape == b.shape and np.array_equal(a, b)
+        assert np.array_equal(measured[0], measured[1])
+    with pytest.raises(TypeError):
+        _period.read_state(rows, measured[1], None, given[1], None)
+    assert given[0].tolist() == rows[:, :2].tolist()
+    assert given[1].tolist() == rows[:, 2].tolist()
+    assert measured[0].tolist() == rows[:, 3:].tolist()
+    commanded, v2 = rng.normal(size=(N, 2)), rng.normal(size=N)
+    out, want = np.empty((N, 3)), np.empty((N, 3))
+    _period.command_rows(commanded, v2, out)
+    want[:, :2], want[:, 2] = commanded, v2
+    assert out.tolist() == want.tolist()
+    with pytest.raises(ValueError):
+        _period.command_rows(commanded[:-1], v2, out)

@@ -92,6 +92,8 @@ def test_the_strategy_takes_the_c_path(monkeypatch, name):
     real = pair_field._pair_field
 
     class Counted:
+        ALLOCATES = real.ALLOCATES
+
         def pair_field(*args):
             calls.append("pair_field")
             return real.pair_field(*args)

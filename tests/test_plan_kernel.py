@@ -56,12 +56,12 @@ def test_the_law_check_fails_on_one_changed_bit(monkeypatch):
     real = law_kernel._laws.law_targets
 
     def off_by_one_ulp(*args):
-        tangent = real(*args)
-        slot = args[18]
+        slot, v_ref, a_ref, tangent = real(*args)
         slot[0, 0] = np.nextafter(slot[0, 0], np.inf)
-        return tangent
+        return slot, v_ref, a_ref, tangent
 
     class Patched:
+        ALLOCATES = law_kernel._laws.ALLOCATES
         law_targets = staticmethod(off_by_one_ulp)
 
     monkeypatch.setattr(law_kernel, "_laws", Patched)
@@ -74,17 +74,30 @@ def test_the_shift_check_fails_on_one_changed_bit(monkeypatch):
     real = pair_field._pair_field
 
     def off_by_one_ulp(*args):
-        real.shifted_targets(*args)
-        target = args[12]
+        target, shift, active, d2 = real.shifted_targets(*args)
         target[0, 1] = np.nextafter(target[0, 1], -np.inf)
+        return target, shift, active, d2
 
     class Patched:
+        ALLOCATES = real.ALLOCATES
         pair_field = staticmethod(real.pair_field)
         shifted_targets = staticmethod(off_by_one_ulp)
 
     monkeypatch.setattr(pair_field, "_pair_field", Patched)
     monkeypatch.setattr(pair_field, "_shift_agreed", None)
     assert not pair_field.shift_agrees()
+
+
+@needs_c
+@pytest.mark.parametrize("law", [law_kernel, pair_field])
+def test_outputs_made_by_numpy_give_the_same_runs(monkeypatch, law):
+    # A build without numpy's headers passes arrays it made: the same numbers.
+    module = law._laws if law is law_kernel else law._pair_field
+    name = "paper/fig15_continuous_beta1"
+    made_by_c = _runs(name, ["duration=3"], True, monkeypatch)
+    monkeypatch.setattr(module, "ALLOCATES", 0)
+    made_by_numpy = _runs(name, ["duration=3"], True, monkeypatch)
+    _same_runs(made_by_c, made_by_numpy)
 
 
 @needs_c
@@ -158,16 +171,24 @@ def test_the_c_calls_run_and_numpy_stays_off(monkeypatch):
     real_law, real_field = law_kernel._laws, pair_field._pair_field
 
     class CountedLaws:
+        ALLOCATES = real_law.ALLOCATES
+
         def law_targets(*args):
             calls.append("law")
-            return real_law.law_targets(*args)
+            return real_law.law_targets(*args)  # an error: numpy's path, refused
 
     class CountedField:
+        ALLOCATES = real_field.ALLOCATES
         pair_field = staticmethod(real_field.pair_field)
 
         def shifted_targets(*args):
+            try:
+                result = real_field.shifted_targets(*args)
+            except Exception:  # the loop would take numpy's path
+                calls.append("refused")
+                raise
             calls.append("shift")
-            return real_field.shifted_targets(*args)
+            return result
 
     monkeypatch.setattr(law_kernel, "_laws", CountedLaws)
     monkeypatch.setattr(pair_field, "_pair_field", CountedField)
@@ -179,6 +200,7 @@ def test_the_c_calls_run_and_numpy_stays_off(monkeypatch):
     monkeypatch.setattr(type(sim.law), "targets", refuse)  # the class's, checked
     sim.run()
     assert calls.count("law") >= 50 and calls.count("shift") >= 50
+    assert "refused" not in calls
 
 
 @needs_c

@@ -202,7 +202,9 @@ PyDoc_STRVAR(shifted_targets_doc,
 "None, (n, 2) or (n, 3), the broadcast poses, the position first) times ``beta``\n"
 "(one value, or (n,) each row's), zero where not ``avoid`` (n,) bool; ``active``\n"
 "(n,) bool to the vehicles with a term above zero that avoid; ``target`` (n, 2) to\n"
-"``slot + shift``; ``d2`` to every candidate's squared distance.");
+"``slot + shift``; ``d2`` to every candidate's squared distance. Each of ``shift``,\n"
+"``target``, ``active``, ``d2`` None: a new array (where the module's ALLOCATES).\n"
+"Returns ``(target, shift, active, d2)``.");
 
 static PyObject *
 shifted_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -227,20 +229,43 @@ shifted_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_buffer avoid, active;
     int got_i = 0, got_j = 0, got_avoid = 0, got_active = 0;
     PyObject *result = NULL;
-    for (int k = 0; k < 7; k++) {
-        if (args[at[k]] == Py_None) {
-            continue;
-        }
-        if (get_rows(args[at[k]], &rows[k], at[k] >= 11) < 0) goto done;
-        have[k] = 1;
-    }
+    /* the outputs, given or new: shift, target, active, d2 */
+    PyObject *out[4] = {NULL, NULL, NULL, NULL};
+    static const int out_at[] = {11, 12, 13, 14};
     if (get_indices(args[2], &ci) < 0) goto done;
     got_i = 1;
     if (get_indices(args[3], &cj) < 0) goto done;
     got_j = 1;
+    if (get_rows(args[0], &rows[0], 0) < 0) goto done;
+    have[0] = 1;
+    for (int k = 0; k < 4; k++) {
+        PyObject *obj = args[out_at[k]];
+        if (obj == Py_None) {
+            Py_ssize_t N = rows[0].len / 2;
+            out[k] = k < 2    ? new_array(2, N, 2, 0)
+                     : k == 2 ? new_array(1, N, 0, 1)
+                              : new_array(1, ci.len, 0, 0);
+            if (out[k] == NULL) goto done;
+        }
+        else {
+            out[k] = obj;
+            Py_INCREF(obj);
+        }
+    }
+    for (int k = 1; k < 7; k++) {
+        PyObject *obj = args[at[k]];
+        if (at[k] == 11 || at[k] == 12 || at[k] == 14) {
+            obj = out[at[k] == 14 ? 3 : at[k] - 11];
+        }
+        if (obj == Py_None) {
+            continue;
+        }
+        if (get_rows(obj, &rows[k], at[k] >= 11) < 0) goto done;
+        have[k] = 1;
+    }
     if (get_bytes(args[9], &avoid, 0) < 0) goto done;
     got_avoid = 1;
-    if (get_bytes(args[13], &active, 1) < 0) goto done;
+    if (get_bytes(out[2], &active, 1) < 0) goto done;
     got_active = 1;
     if (!(have[0] && have[2] && have[3] && have[4] && have[5] && have[6])) {
         PyErr_SetString(PyExc_TypeError, "shifted_targets: an array is missing");
@@ -264,28 +289,27 @@ shifted_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             goto done;
         }
     }
-    double *out = shift->data, *goal = target->data;
+    double *shifted = shift->data, *goal = target->data;
     const double *s = slot->data, *b = beta->data;
     unsigned char *on = (unsigned char *)active.buf;
     const unsigned char *may = (const unsigned char *)avoid.buf;
-    memset(out, 0, (size_t)(2 * n) * sizeof(double));
+    memset(shifted, 0, (size_t)(2 * n) * sizeof(double));
     memset(on, 0, (size_t)n);
     add_terms(pos->data, with_seen ? seen->data : NULL, qs, ci.data, cj.data, m,
-              radius, R, r, (int)kind, out, on, d2->data);
+              radius, R, r, (int)kind, shifted, on, d2->data);
     for (Py_ssize_t v = 0; v < n; v++) {
         double bv = b[v * beta->step]; /* shift *= beta, eq. (22) / (26) */
-        out[2 * v] = out[2 * v] * bv;
-        out[2 * v + 1] = out[2 * v + 1] * bv;
+        shifted[2 * v] = shifted[2 * v] * bv;
+        shifted[2 * v + 1] = shifted[2 * v + 1] * bv;
         if (!may[v]) { /* shift[~avoid] = 0; active &= avoid */
-            out[2 * v] = 0.0;
-            out[2 * v + 1] = 0.0;
+            shifted[2 * v] = 0.0;
+            shifted[2 * v + 1] = 0.0;
             on[v] = 0;
         }
-        goal[2 * v] = s[2 * v] + out[2 * v]; /* target = slot + shift */
-        goal[2 * v + 1] = s[2 * v + 1] + out[2 * v + 1];
+        goal[2 * v] = s[2 * v] + shifted[2 * v]; /* target = slot + shift */
+        goal[2 * v + 1] = s[2 * v + 1] + shifted[2 * v + 1];
     }
-    result = Py_None;
-    Py_INCREF(result);
+    result = PyTuple_Pack(4, out[1], out[0], out[2], out[3]);
 done:
     if (got_active) PyBuffer_Release(&active);
     if (got_avoid) PyBuffer_Release(&avoid);
@@ -295,6 +319,9 @@ done:
         if (have[k]) {
             PyBuffer_Release(&rows[k].view);
         }
+    }
+    for (int k = 0; k < 4; k++) {
+        Py_XDECREF(out[k]);
     }
     return result;
 }
@@ -316,5 +343,10 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC
 PyInit__pair_field(void)
 {
-    return PyModule_Create(&module);
+    PyObject *m = PyModule_Create(&module);
+    if (m != NULL && PyModule_AddIntConstant(m, "ALLOCATES", SANDBOX_ALLOCATES) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
 }

@@ -169,14 +169,21 @@ class ShiftKernel:
         TypeError, ValueError, BufferError
             An array that is not what the C loop reads (nothing is changed then).
         """
-        neighbours, N = self.neighbours, len(pos)
+        neighbours = self.neighbours
         i, j = neighbours.candidates(pos)
-        d2 = np.empty(len(i))
-        target, shift = np.empty((N, 2)), np.empty((N, 2))
-        active = np.empty(N, dtype=bool)
-        _pair_field.shifted_targets(
+        if _pair_field.ALLOCATES:  # the call makes its outputs
+            out = (None, None, None, None)
+        else:
+            N = len(pos)
+            out = (
+                np.empty((N, 2)),
+                np.empty((N, 2)),
+                np.empty(N, bool),
+                np.empty(len(i)),
+            )
+        target, shift, active, d2 = _pair_field.shifted_targets(
             pos, seen, i, j, self.radius, self.R, self.r, self.kind, self.beta,
-            avoiders, slot, shift, target, active, d2,
+            avoiders, slot, *out,
         )  # fmt: skip
         neighbours.remember(pos, d2)
         return target, shift, active

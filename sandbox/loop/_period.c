@@ -20,6 +20,9 @@
  * motors' measured velocities (sandbox/loop/stepping.py, WorldsPhysics.read):
  * copies only.
  *
+ * command_rows: the motors' commands of a period from the loop metrics' velocities
+ * along the mean heading (WorldsPhysics.advance): copies only.
+ *
  * flush_periods: the loop metrics' buffered periods accounted for at once
  * (sandbox/loop/tally.py, LoopTally.flush), numpy's operations in its order.
  */
@@ -357,11 +360,12 @@ done:
 }
 
 PyDoc_STRVAR(read_state_doc,
-"read_state(rows, measured, pos, theta, vel) -> None\n"
+"read_state(rows, measured, pos, theta, vel) -> (pos, theta, vel)\n"
 "\n"
 "The bodies' rows (N, 6) as read, (x1, x2, x3, v_x1, v_x2, omega), split (copies):\n"
 "``measured`` (N, 3) the velocities, ``pos`` (N, 2), ``theta`` (N,), ``vel``\n"
-"(N, 2).");
+"(N, 2). ``pos``, ``theta``, ``vel`` None: new arrays (where the module's\n"
+"ALLOCATES), all three or none.");
 
 static PyObject *
 read_state(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -370,21 +374,44 @@ read_state(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         PyErr_SetString(PyExc_TypeError, "read_state takes 5 arguments");
         return NULL;
     }
+    PyObject *out[3] = {NULL, NULL, NULL}, *result = NULL;
     Rows r[5];
     int got = 0;
-    for (int k = 0; k < 5; k++) {
-        if (get_rows(args[k], &r[k], k >= 1) < 0) {
-            release(r, got);
-            return NULL;
+    for (int k = 0; k < 2; k++) { /* rows, measured */
+        if (get_rows(args[k], &r[k], k == 1) < 0) goto done;
+        got++;
+    }
+    int given = args[2] != Py_None, none = args[2] == Py_None;
+    for (int k = 3; k < 5; k++) {
+        given &= args[k] != Py_None;
+        none &= args[k] == Py_None;
+    }
+    if (given) {
+        for (int k = 0; k < 3; k++) {
+            out[k] = args[2 + k];
+            Py_INCREF(out[k]);
         }
+    }
+    else if (none) { /* as many rows as ``measured`` */
+        Py_ssize_t n = r[1].len / 3;
+        out[0] = new_array(2, n, 2, 0);
+        out[1] = new_array(1, n, 0, 0);
+        out[2] = new_array(2, n, 2, 0);
+        if (out[0] == NULL || out[1] == NULL || out[2] == NULL) goto done;
+    }
+    else {
+        PyErr_SetString(PyExc_TypeError, "read_state: all three outputs or none");
+        goto done;
+    }
+    for (int k = 2; k < 5; k++) {
+        if (get_rows(out[k - 2], &r[k], 1) < 0) goto done;
         got++;
     }
     Py_ssize_t N = r[3].len;
     if (r[0].len != 6 * N || r[1].len != 3 * N || r[2].len != 2 * N ||
         r[4].len != 2 * N) {
-        release(r, got);
         PyErr_SetString(PyExc_ValueError, "read_state: shapes differ");
-        return NULL;
+        goto done;
     }
     const double *rows = r[0].data;
     double *measured = r[1].data, *pos = r[2].data, *theta = r[3].data;
@@ -399,6 +426,51 @@ read_state(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         measured[3 * i] = row[3];
         measured[3 * i + 1] = row[4];
         measured[3 * i + 2] = row[5];
+    }
+    result = PyTuple_Pack(3, out[0], out[1], out[2]);
+done:
+    release(r, got);
+    for (int k = 0; k < 3; k++) {
+        Py_XDECREF(out[k]);
+    }
+    return result;
+}
+
+PyDoc_STRVAR(command_rows_doc,
+"command_rows(commanded, v2, out) -> None\n"
+"\n"
+"The motors' commands of N vehicles: ``out`` (N, 3) takes ``commanded`` (N, 2), the\n"
+"velocities along the mean heading, in its first two columns and ``v2`` (N,) in\n"
+"its third (``out[:, :2] = commanded; out[:, 2] = v2``).");
+
+static PyObject *
+command_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "command_rows takes 3 arguments");
+        return NULL;
+    }
+    Rows r[3];
+    int got = 0;
+    for (int k = 0; k < 3; k++) {
+        if (get_rows(args[k], &r[k], k == 2) < 0) {
+            release(r, got);
+            return NULL;
+        }
+        got++;
+    }
+    Py_ssize_t N = r[1].len;
+    if (r[0].len != 2 * N || r[2].len != 3 * N) {
+        release(r, got);
+        PyErr_SetString(PyExc_ValueError, "command_rows: shapes differ");
+        return NULL;
+    }
+    const double *cmd = r[0].data, *v2 = r[1].data;
+    double *out = r[2].data;
+    for (Py_ssize_t i = 0; i < N; i++) {
+        out[3 * i] = cmd[2 * i];
+        out[3 * i + 1] = cmd[2 * i + 1];
+        out[3 * i + 2] = v2[i];
     }
     release(r, got);
     Py_RETURN_NONE;
@@ -488,6 +560,8 @@ static PyMethodDef methods[] = {
      flush_periods_doc},
     {"read_state", (PyCFunction)(void (*)(void))read_state, METH_FASTCALL,
      read_state_doc},
+    {"command_rows", (PyCFunction)(void (*)(void))command_rows, METH_FASTCALL,
+     command_rows_doc},
     {NULL, NULL, 0, NULL},
 };
 
@@ -501,5 +575,10 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC
 PyInit__period(void)
 {
-    return PyModule_Create(&module);
+    PyObject *m = PyModule_Create(&module);
+    if (m != NULL && PyModule_AddIntConstant(m, "ALLOCATES", SANDBOX_ALLOCATES) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
 }

@@ -110,14 +110,15 @@ class WorldsPhysics:
             )
         rows = self._rows
         if len(self.live) == K and _period is not None:  # the copies in one C call
-            N = self.N
-            pos, theta, vel = np.empty((N, 2)), np.empty(N), np.empty((N, 2))
+            if _period.ALLOCATES:  # the call makes the three arrays
+                out = (None, None, None)
+            else:
+                N = self.N
+                out = (np.empty((N, 2)), np.empty(N), np.empty((N, 2)))
             try:
-                _period.read_state(rows, self._measured, pos, theta, vel)
+                return _period.read_state(rows, self._measured, *out)
             except (BufferError, TypeError, ValueError):  # not such arrays: numpy
                 pass
-            else:
-                return pos, theta, vel
         self._measured.reshape(K, n, 3)[...] = rows[..., 3:6]  # (v_x1, v_x2, omega)
         if len(self.live) < K:
             rows = rows.copy()
@@ -189,12 +190,16 @@ class WorldsPhysics:
             return
         out = self._out
         if commanded is not None:
-            out[:, :2] = commanded
+            try:  # the copies in one C call
+                _period.command_rows(commanded, v2, out)
+            except (AttributeError, BufferError, TypeError, ValueError):  # numpy's
+                out[:, :2] = commanded
+                out[:, 2] = v2
         else:
             heading = theta + 0.5 * v2 * h
             out[:, 0] = v1 * np.cos(heading)
             out[:, 1] = v1 * np.sin(heading)
-        out[:, 2] = v2
+            out[:, 2] = v2
         # (the rows of motors that do not track never change)
         rows, force, torque = motor_limits(
             out, self._measured, free, h / substeps, self, self._limits

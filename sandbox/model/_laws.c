@@ -48,7 +48,7 @@ difference(const double *x, Py_ssize_t m, long long count, double h, double *pre
 PyDoc_STRVAR(law_targets_doc,
 "law_targets(kind, delta, n, pose, theta, leader, ref_p, ref_dp, ref_ddp, row,\n"
 "            rotate, tangent, h, count, prev_x, prev_v, track, commanded, slot,\n"
-"            v_ref, a_ref) -> float\n"
+"            v_ref, a_ref) -> (slot, v_ref, a_ref, tangent)\n"
 "\n"
 "The targets of a period of the built-in law ``kind`` (0 fixed, 1 rotating, 2\n"
 "virtual, 3 leader_ref, 4 own_estimate) for K worlds of ``n`` vehicles: ``delta``\n"
@@ -59,8 +59,9 @@ PyDoc_STRVAR(law_targets_doc,
 "angle of eq. (15) last defined [rad]; ``h`` [s]; the backward difference's\n"
 "``count`` and history ``prev_x``, ``prev_v`` ((K, 2) of the leader, or (K n, 2) of\n"
 "the slots; None for a law without one), advanced in place. Writes ``slot``,\n"
-"``v_ref``, ``a_ref`` (K n, 2), then the reference's point and derivatives on the\n"
-"rows ``track`` (intp) and NaN slots on the rows ``commanded``. Returns the\n"
+"``v_ref``, ``a_ref`` (K n, 2; each None: a new array, where the module's\n"
+"ALLOCATES), then the reference's point and derivatives on the rows ``track``\n"
+"(intp) and NaN slots on the rows ``commanded``. Returns the three arrays and the\n"
 "tangent angle now.");
 
 static PyObject *
@@ -90,13 +91,25 @@ law_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     int have[11] = {0};
     Indices track, cmd;
     int got_track = 0, got_cmd = 0;
-    PyObject *result = NULL;
+    PyObject *result = NULL, *out[3] = {NULL, NULL, NULL};
     for (int k = 0; k < 11; k++) {
-        if (args[at[k]] == Py_None) {
+        PyObject *obj = args[at[k]];
+        if (k >= 8) { /* the outputs: the given arrays, or new ones */
+            if (obj == Py_None) {
+                out[k - 8] = new_array(2, have[0] ? r[0].len / 2 : 0, 2, 0);
+                if (out[k - 8] == NULL) goto done;
+            }
+            else {
+                out[k - 8] = obj;
+                Py_INCREF(obj);
+            }
+            obj = out[k - 8];
+        }
+        else if (obj == Py_None) {
             continue;
         }
         int writable = at[k] >= 14;
-        if (get_rows(args[at[k]], &r[k], writable) < 0) goto done;
+        if (get_rows(obj, &r[k], writable) < 0) goto done;
         have[k] = 1;
     }
     if (get_indices(args[16], &track) < 0) goto done;
@@ -214,7 +227,7 @@ law_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         s[e] = NAN;
         s[e + 1] = NAN;
     }
-    result = PyFloat_FromDouble(tangent);
+    result = Py_BuildValue("(OOOd)", out[0], out[1], out[2], tangent);
 done:
     if (got_cmd) PyBuffer_Release(&cmd.view);
     if (got_track) PyBuffer_Release(&track.view);
@@ -222,6 +235,9 @@ done:
         if (have[k]) {
             PyBuffer_Release(&r[k].view);
         }
+    }
+    for (int k = 0; k < 3; k++) {
+        Py_XDECREF(out[k]);
     }
     return result;
 }
@@ -241,5 +257,10 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC
 PyInit__laws(void)
 {
-    return PyModule_Create(&module);
+    PyObject *m = PyModule_Create(&module);
+    if (m != NULL && PyModule_AddIntConstant(m, "ALLOCATES", SANDBOX_ALLOCATES) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
 }

@@ -55,6 +55,8 @@ KINDS: dict[type, int] = {
 #: The estimator of each law class with one (eqs. (8)-(9) or (18)-(19)).
 _MOTION = {0: "leader_motion", 1: "leader_motion", 4: "slot_motion"}
 _agreed: bool | None = None
+#: The C call's outputs made by the call itself (numpy's C API).
+_NEW = (None, None, None)
 
 
 def usable() -> bool:
@@ -159,8 +161,7 @@ class LawKernel:
         TypeError, ValueError, BufferError
             An array that is not what the C loop reads (nothing is changed then).
         """
-        law, N = self.law, pose.shape[0]
-        slot, v_ref, a_ref = np.empty((N, 2)), np.empty((N, 2)), np.empty((N, 2))
+        law = self.law
         motion = self._motion
         if motion is None:
             count, prev_x, prev_v = 0, None, None
@@ -170,10 +171,10 @@ class LawKernel:
                 self._adopt(motion)
             prev_x, prev_v = self._prev
         p, dp, ddp = (None, None, None) if table is None else table
-        tangent = _laws.law_targets(
+        slot, v_ref, a_ref, tangent = _laws.law_targets(
             self.kind, law.delta, self.n, pose, theta, self.leader, p, dp, ddp, row,
             self.turns, law._tangent, law.h, count, prev_x, prev_v, track, commanded,
-            slot, v_ref, a_ref,
+            *(_NEW if _laws.ALLOCATES else _empty(len(pose))),
         )  # fmt: skip
         if motion is not None:
             motion.count = count + 1
@@ -194,6 +195,11 @@ class LawKernel:
             prev_v = np.array(motion.prev_v, dtype=float).reshape(self._shape)
         motion.prev_x, motion.prev_v = prev_x, prev_v
         self._prev = (prev_x, prev_v)
+
+
+def _empty(N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Three arrays (N, 2) for the C call's outputs (a build that cannot make them)."""
+    return np.empty((N, 2)), np.empty((N, 2)), np.empty((N, 2))
 
 
 def covers(law: Any, leader: int) -> bool:
