@@ -90,6 +90,7 @@ import numpy as np
 from sandbox.behaviour import residual_kernel
 from sandbox.behaviour.isolation import SHAPE_HISTORY, read_kinds
 from sandbox.behaviour.tracks import TrackHistory
+from sandbox.behaviour.tracks import stop_fits as stop_fits  # its documented path
 from sandbox.model.kernels import motor_model
 from sandbox.plugins.registration import (
     DetectorContext,
