@@ -153,6 +153,33 @@ release(Rows *rows, int count)
     }
 }
 
+/* ``count`` float64 arrays ``objs`` into ``rows`` (get_rows), those from
+ * ``first_writable`` on writable; on an error the ones read are released. */
+static inline int
+get_all_rows(PyObject *const *objs, Rows *rows, int count, int first_writable)
+{
+    for (int k = 0; k < count; k++) {
+        if (get_rows(objs[k], &rows[k], k >= first_writable) < 0) {
+            release(rows, k);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+/* The module of ``def`` with its constant ALLOCATES: whether its calls make their
+ * output arrays themselves (new_array), where a caller may pass None for them. */
+static inline PyObject *
+module_allocating(PyModuleDef *def)
+{
+    PyObject *m = PyModule_Create(def);
+    if (m != NULL && PyModule_AddIntConstant(m, "ALLOCATES", SANDBOX_ALLOCATES) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}
+
 /* A contiguous array of one-byte elements (numpy's bool or int8) in ``view``:
  * through numpy's C API where it can (``view->obj`` NULL: nothing to release), else
  * the buffer interface (C-contiguous, and writable if asked). */

@@ -326,14 +326,10 @@ fits(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     }
     Rows r[2];
-    int got = 0;
-    for (int k = 0; k < 2; k++) {
-        if (get_rows(args[k], &r[k], 0) < 0) {
-            release(r, got);
-            return NULL;
-        }
-        got++;
+    if (get_all_rows(args, r, 2, 2) < 0) {
+        return NULL;
     }
+    int got = 2;
     Py_ssize_t m = r[0].len;
     if (r[1].len != m || m < 2 || speeds < 2) {
         release(r, got);

@@ -406,14 +406,10 @@ elementwise(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     }
     Rows r[3];
-    int got = 0;
-    for (int k = 0; k < 3; k++) {
-        if (get_rows(args[k + 1], &r[k], k == 2) < 0) {
-            release(r, got);
-            return NULL;
-        }
-        got++;
+    if (get_all_rows(args + 1, r, 3, 2) < 0) {
+        return NULL;
     }
+    int got = 3;
     Py_ssize_t n = r[2].len;
     if (r[0].len != n || r[1].len != n) {
         release(r, got);

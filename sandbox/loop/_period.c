@@ -48,14 +48,10 @@ healthy(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     }
     Rows r[4];
-    int got = 0;
-    for (int k = 0; k < 4; k++) {
-        if (get_rows(args[k], &r[k], 0) < 0) {
-            release(r, got);
-            return NULL;
-        }
-        got++;
+    if (get_all_rows(args, r, 4, 4) < 0) {
+        return NULL;
     }
+    int got = 4;
     Py_ssize_t n = r[1].len;
     if (r[0].len != 2 * n ||
         r[2].len != 2 * n || r[3].len != 2 * n) {
@@ -451,14 +447,10 @@ command_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     }
     Rows r[3];
-    int got = 0;
-    for (int k = 0; k < 3; k++) {
-        if (get_rows(args[k], &r[k], k == 2) < 0) {
-            release(r, got);
-            return NULL;
-        }
-        got++;
+    if (get_all_rows(args, r, 3, 2) < 0) {
+        return NULL;
     }
+    int got = 3;
     Py_ssize_t N = r[1].len;
     if (r[0].len != 2 * N || r[2].len != 3 * N) {
         release(r, got);
@@ -575,10 +567,5 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC
 PyInit__period(void)
 {
-    PyObject *m = PyModule_Create(&module);
-    if (m != NULL && PyModule_AddIntConstant(m, "ALLOCATES", SANDBOX_ALLOCATES) < 0) {
-        Py_DECREF(m);
-        return NULL;
-    }
-    return m;
+    return module_allocating(&module);
 }

@@ -257,10 +257,5 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC
 PyInit__laws(void)
 {
-    PyObject *m = PyModule_Create(&module);
-    if (m != NULL && PyModule_AddIntConstant(m, "ALLOCATES", SANDBOX_ALLOCATES) < 0) {
-        Py_DECREF(m);
-        return NULL;
-    }
-    return m;
+    return module_allocating(&module);
 }
