@@ -167,6 +167,39 @@ get_all_rows(PyObject *const *objs, Rows *rows, int count, int first_writable)
     return 0;
 }
 
+/* A module's ``elementwise(op, a, b, out)`` for its checks: ``out[i] = f(op, a[i],
+ * b[i])`` over three float64 arrays of one length. */
+static inline PyObject *
+elementwise_over(PyObject *const *args, Py_ssize_t nargs,
+                 double (*f)(long op, double a, double b))
+{
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "elementwise takes 4 arguments");
+        return NULL;
+    }
+    long op = PyLong_AsLong(args[0]);
+    if (op == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    Rows r[3];
+    if (get_all_rows(args + 1, r, 3, 2) < 0) {
+        return NULL;
+    }
+    Py_ssize_t n = r[2].len;
+    if (r[0].len != n || r[1].len != n) {
+        release(r, 3);
+        PyErr_SetString(PyExc_ValueError, "elementwise: shapes differ");
+        return NULL;
+    }
+    const double *a = r[0].data, *b = r[1].data;
+    double *out = r[2].data;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        out[i] = f(op, a[i], b[i]);
+    }
+    release(r, 3);
+    Py_RETURN_NONE;
+}
+
 /* The module of ``def`` with its constant ALLOCATES: whether its calls make their
  * output arrays themselves (new_array), where a caller may pass None for them. */
 static inline PyObject *

@@ -394,46 +394,28 @@ PyDoc_STRVAR(elementwise_doc,
 "5 log, 6 log1p, 7 detection._wrap (b unused), 8 detection.llr of |z| ``a`` for\n"
 "the shift ``b``, 9 the hypot of three (a, b, a - b) as numpy's hypot.reduce.");
 
+/* This module's scalar functions, by their number. */
+static double
+scalar(long op, double a, double b)
+{
+    switch (op) {
+        case 0: return hypot(a, b);
+        case 1: return sin(a);
+        case 2: return cos(a);
+        case 3: return sqrt(a);
+        case 4: return exp(a);
+        case 5: return log(a);
+        case 6: return log1p(a);
+        case 7: return wrap(a);
+        case 8: return llr(a, b, 0.5 * b * b);
+        default: return hypot(hypot(a, b), a - b);
+    }
+}
+
 static PyObject *
 elementwise(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 4) {
-        PyErr_SetString(PyExc_TypeError, "elementwise takes 4 arguments");
-        return NULL;
-    }
-    long op = PyLong_AsLong(args[0]);
-    if (op == -1 && PyErr_Occurred()) {
-        return NULL;
-    }
-    Rows r[3];
-    if (get_all_rows(args + 1, r, 3, 2) < 0) {
-        return NULL;
-    }
-    int got = 3;
-    Py_ssize_t n = r[2].len;
-    if (r[0].len != n || r[1].len != n) {
-        release(r, got);
-        PyErr_SetString(PyExc_ValueError, "elementwise: shapes differ");
-        return NULL;
-    }
-    const double *a = r[0].data, *b = r[1].data;
-    double *out = r[2].data;
-    for (Py_ssize_t i = 0; i < n; i++) {
-        switch (op) {
-            case 0: out[i] = hypot(a[i], b[i]); break;
-            case 1: out[i] = sin(a[i]); break;
-            case 2: out[i] = cos(a[i]); break;
-            case 3: out[i] = sqrt(a[i]); break;
-            case 4: out[i] = exp(a[i]); break;
-            case 5: out[i] = log(a[i]); break;
-            case 6: out[i] = log1p(a[i]); break;
-            case 7: out[i] = wrap(a[i]); break;
-            case 8: out[i] = llr(a[i], b[i], 0.5 * b[i] * b[i]); break;
-            default: out[i] = hypot(hypot(a[i], b[i]), a[i] - b[i]); break;
-        }
-    }
-    release(r, got);
-    Py_RETURN_NONE;
+    return elementwise_over(args, nargs, scalar);
 }
 
 static PyMethodDef methods[] = {

@@ -324,45 +324,27 @@ PyDoc_STRVAR(elementwise_doc,
 "numpy's maximum, 5 numpy's clip with scalar bounds (-b, b), 6 with array bounds,\n"
 "7 sqrt, 8 atan2(a, b).");
 
+/* This module's scalar functions, by their number. */
+static double
+scalar(long op, double a, double b)
+{
+    switch (op) {
+        case 0: return hypot(a, b);
+        case 1: return sin(a);
+        case 2: return cos(a);
+        case 3: return wrap_angle(a);
+        case 4: return np_maximum(a, b);
+        case 5: return clip_scalars(a, -b, b);
+        case 6: return clip_rows(a, -b, b);
+        case 8: return atan2(a, b);
+        default: return sqrt(a);
+    }
+}
+
 static PyObject *
 elementwise(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 4) {
-        PyErr_SetString(PyExc_TypeError, "elementwise takes 4 arguments");
-        return NULL;
-    }
-    long op = PyLong_AsLong(args[0]);
-    if (op == -1 && PyErr_Occurred()) {
-        return NULL;
-    }
-    Rows r[3];
-    if (get_all_rows(args + 1, r, 3, 2) < 0) {
-        return NULL;
-    }
-    int got = 3;
-    Py_ssize_t n = r[2].len;
-    if (r[0].len != n || r[1].len != n) {
-        release(r, got);
-        PyErr_SetString(PyExc_ValueError, "elementwise: shapes differ");
-        return NULL;
-    }
-    const double *a = r[0].data, *b = r[1].data;
-    double *out = r[2].data;
-    for (Py_ssize_t i = 0; i < n; i++) {
-        switch (op) {
-            case 0: out[i] = hypot(a[i], b[i]); break;
-            case 1: out[i] = sin(a[i]); break;
-            case 2: out[i] = cos(a[i]); break;
-            case 3: out[i] = wrap_angle(a[i]); break;
-            case 4: out[i] = np_maximum(a[i], b[i]); break;
-            case 5: out[i] = clip_scalars(a[i], -b[i], b[i]); break;
-            case 6: out[i] = clip_rows(a[i], -b[i], b[i]); break;
-            case 8: out[i] = atan2(a[i], b[i]); break;
-            default: out[i] = sqrt(a[i]); break;
-        }
-    }
-    release(r, got);
-    Py_RETURN_NONE;
+    return elementwise_over(args, nargs, scalar);
 }
 
 PyDoc_STRVAR(motor_model_doc,
