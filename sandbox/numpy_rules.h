@@ -1,10 +1,10 @@
 /* numpy's rules for the C kernels, and numpy's arrays through the buffer interface.
  *
  * Included by the optional extensions whose loops must give numpy's numbers to the
- * bit (see setup.py): numpy's maximum and clip on ties and NaN, a contiguous float64
- * array (or one value for every row), a contiguous intp index array and a contiguous
- * bool array, read from any object with the buffer interface (an ndarray through
- * numpy's C API where the build has its headers).
+ * bit (see setup.py): numpy's maximum, clip and remainder on ties, NaN and signs; a
+ * contiguous float64 array (or one value for every row), a contiguous intp index
+ * array and a contiguous bool array, read from any object with the buffer interface
+ * (an ndarray through numpy's C API where the build has its headers).
  */
 
 #ifndef SANDBOX_NUMPY_RULES_H
@@ -79,6 +79,25 @@ new_array(int nd, Py_ssize_t d0, Py_ssize_t d1, int boolean)
     PyErr_SetString(PyExc_TypeError, "built without numpy's headers: pass arrays");
     return NULL;
 #endif
+}
+
+/* numpy.remainder(a, b) of floats: fmod, moved to b's sign, +-0 with b's sign. */
+static inline double
+np_remainder(double a, double b)
+{
+    double mod = fmod(a, b);
+    if (!b) {
+        return mod;
+    }
+    if (mod) {
+        if ((b < 0) != (mod < 0)) {
+            mod += b;
+        }
+    }
+    else {
+        mod = copysign(0.0, b);
+    }
+    return mod;
 }
 
 /* numpy.maximum(a, b): a where a > b or a is NaN, else b (b on a tie). */

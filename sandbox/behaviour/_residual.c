@@ -21,25 +21,6 @@
 #include "numpy_rules.h"
 #include "motor_model.h"
 
-/* numpy.remainder(a, b) of floats: fmod, moved to b's sign, +-0 with b's sign. */
-static inline double
-np_remainder(double a, double b)
-{
-    double mod = fmod(a, b);
-    if (!b) {
-        return mod;
-    }
-    if (mod) {
-        if ((b < 0) != (mod < 0)) {
-            mod += b;
-        }
-    }
-    else {
-        mod = copysign(0.0, b);
-    }
-    return mod;
-}
-
 /* detection._wrap: (a + pi) % (2 pi) - pi. */
 static inline double
 wrap(double a)

@@ -26,25 +26,6 @@
 #define CHI_HOLD 1e-3
 #define CHI_REG 0.01
 
-/* numpy.remainder(a, b) of floats: fmod, moved to b's sign, +-0 with b's sign. */
-static inline double
-np_remainder(double a, double b)
-{
-    double mod = fmod(a, b);
-    if (!b) {
-        return mod;
-    }
-    if (mod) {
-        if ((b < 0) != (mod < 0)) {
-            mod += b;
-        }
-    }
-    else {
-        mod = copysign(0.0, b);
-    }
-    return mod;
-}
-
 /* sandbox.model.dynamics.wrap_angle: (a + pi) % (2 pi) - pi, pi folded to -pi. */
 static inline double
 wrap_angle(double a)
