@@ -136,7 +136,7 @@ def _blame_duration_option(exc: ScenarioError, duration: float | None) -> Scenar
 
 
 def _print_summary(name: str, metrics: dict, out_dir: Path, fmt: str) -> None:
-    from sandbox.run.metrics import summary_rows
+    from sandbox.run.metrics import deadlock_summary, summary_rows
 
     col = metrics["collisions"]
     md = metrics["min_distance"]
@@ -149,6 +149,7 @@ def _print_summary(name: str, metrics: dict, out_dir: Path, fmt: str) -> None:
         f"vehicle-obstacle {col['vehicle_obstacle']}); min distance: "
         f"{'-' if md is None else f'{md:.3f} m'}"
     )
+    print(deadlock_summary(metrics))
     for pname, p in metrics.get("platoons", {}).items():  # with platoons: only
         st = p["settling_time"]
         print(

@@ -445,6 +445,34 @@ def run_warnings(metrics: dict[str, Any]) -> list[str]:
     return out
 
 
+#: The terminal summary names at most this many deadlocks (metrics.json has them all).
+SUMMARY_DEADLOCKS = 3
+
+
+def deadlock_summary(metrics: dict[str, Any]) -> str:
+    """The summary's line of the ``deadlocks`` of ``metrics.json``.
+
+    Each deadlock by its vehicles, its start and its length [s] ("to the end" when it
+    lasts to the end of the run), at most :data:`SUMMARY_DEADLOCKS` of them.
+
+    >>> deadlock_summary({"deadlocks": [], "duration": 10.0})
+    'deadlocks: 0'
+    >>> entry = {"vehicles": ["red", "green"], "t": 4.0, "duration": 6.0}
+    >>> deadlock_summary({"deadlocks": [entry], "duration": 10.0})
+    'deadlocks: 1 (red, green from 4.00 s to the end)'
+    """
+    found = metrics.get("deadlocks") or []
+    end = float(metrics.get("duration", 0.0))
+    parts = []
+    for d in found[:SUMMARY_DEADLOCKS]:
+        stop = d["t"] + d["duration"]
+        span = "to the end" if stop >= end - 1e-6 else f"for {d['duration']:.2f} s"
+        parts.append(f"{', '.join(d['vehicles'])} from {d['t']:.2f} s {span}")
+    if len(found) > SUMMARY_DEADLOCKS:
+        parts.append(f"{len(found) - SUMMARY_DEADLOCKS} more in metrics.json")
+    return f"deadlocks: {len(found)}" + (f" ({'; '.join(parts)})" if parts else "")
+
+
 def summary_rows(metrics: dict[str, Any]) -> list[tuple[str, str, str, str, str, str]]:
     """Rows ``(vehicle, final error, rms last quarter, settling, effort, switches)``."""
 
