@@ -6,6 +6,8 @@ and checks both the run and the text, so that a number that goes stale fails her
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from helpers import REPO, SCENARIOS
@@ -92,3 +94,25 @@ def test_random_start_table_counts_the_deadlocks_of_its_named_seeds() -> None:
     text = (DOCS / "results" / "safety-benchmark.md").read_text()
     assert "| none | 0 | none | 56 / 200 | 34.6 % | 62 | 3 | 3 |" in text
     assert "3 starts (seeds 72,\n115, 118)" in text
+
+
+def test_the_readme_demo_settles_without_a_warning(tmp_path) -> None:
+    readme = (REPO / "README.md").read_text()
+    start = readme.index("<!-- runnable: file demo.yaml -->\n```yaml\n")
+    body = readme[start:].split("```yaml\n", 1)[1].split("```", 1)[0]
+    path = tmp_path / "demo.yaml"
+    path.write_text(body)
+    # as the README runs it: 5 s, the continuous strategy
+    overrides = ["duration=5", "recovery.strategy=continuous"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the loader's warnings (SandboxWarning)
+        scenario = load_scenario(path, overrides)
+    metrics = compute_metrics(Simulation(scenario).run())
+    assert metrics["converged"] and metrics["collisions"]["total"] == 0
+    assert not metrics["warnings"]
+    settle = max(v["settling_time"] for v in metrics["vehicles"].values())
+    assert f"{settle:.2f}" == "1.32"
+    assert "(by 1.32 s)" in readme
+    errors = [v["formation_error"]["final"] for v in metrics["vehicles"].values()]
+    assert f"{max(errors):.3f}" == "0.036"
+    assert "each follower 3.6 cm off its slot" in readme
