@@ -20,7 +20,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sandbox.render.overlay import LEGEND_NAMES_MAX, Bands, LegendItem, frame_bands
+from sandbox.render.overlay import (
+    LEGEND_NAMES_MAX,
+    MAX_BANDS,
+    Bands,
+    LegendItem,
+    frame_bands,
+)
 from sandbox.render.palette import _build_palette
 from sandbox.run.record import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, Run
 
@@ -275,8 +281,8 @@ def frame_height(
     aspect : float or "run"
         Width over height, from ``1 / MAX_FRAME_ASPECT`` to :data:`MAX_FRAME_ASPECT`;
         ``"run"``: the aspect of the area framed when the whole run is (the text
-        bands included; within the same bounds), and a square frame for a camera
-        that moves.
+        bands added, the frame high enough to keep the legend, within the same
+        bounds), and a square frame for a camera that moves.
 
     Returns
     -------
@@ -292,6 +298,7 @@ def frame_height(
         bands = _run_bands(run, size, True)
         view = (x1 - x0) * extent[1] / extent[0]
         height = view + bands.top + bands.bottom + 2.0 * _MARGIN * size
+        height = max(height, (bands.top + bands.bottom) / MAX_BANDS + 1.0)  # a legend
         low, high = size / MAX_FRAME_ASPECT, size * MAX_FRAME_ASPECT
         return max(64, int(round(min(max(height, low), high))))
     if isinstance(aspect, str) or not (
@@ -341,7 +348,8 @@ def action_track(run: Run) -> tuple[np.ndarray, np.ndarray] | None:
     At each sample the window holds the healthy vehicles, each failed vehicle while it
     is within the formation's width of them (so a vehicle that stops in the
     platoon's path, and the contacts around it, stay in view until the others have
-    passed it), and the parts of the obstacles within that distance. Its centre is
+    passed it), and the parts of the obstacles within twice the avoidance radius
+    ``R`` of them (at least :data:`MIN_WINDOW_DIAMETERS` vehicle radii). Its centre is
     the centre of these, averaged over :data:`ACTION_SMOOTHING`; its size is fixed
     for the run, the largest the samples need (with the averaging's lag), at least
     that of a window following the leader, :data:`MIN_WINDOW_DIAMETERS` vehicle
@@ -375,14 +383,17 @@ def action_track(run: Run) -> tuple[np.ndarray, np.ndarray] | None:
     close = finite & failed & (np.hypot(gap[..., 0], gap[..., 1]) <= near)
     lo = np.minimum(lo, np.min(np.where(close[..., None], pos, inf), axis=1))
     hi = np.maximum(hi, np.max(np.where(close[..., None], pos, -inf), axis=1))
-    # The parts of the obstacles near them.
+    # The parts of the obstacles near them: within twice the avoidance radius R.
+    rec = run.info.get("recovery") if isinstance(run.info, dict) else None
+    radius = rec.get("R") if isinstance(rec, dict) else None
+    margin = max(2.0 * float(radius or 0.0), MIN_WINDOW_DIAMETERS * reach)  # [m]
     for kind, geom in _obstacles(run):
         if kind == "circle":
             (cx, cy), r = geom
             olo, ohi = np.array([cx - r, cy - r]), np.array([cx + r, cy + r])
         else:
             olo, ohi = geom.min(axis=0), geom.max(axis=0)
-        clo, chi = np.maximum(olo, lo - near), np.minimum(ohi, hi + near)
+        clo, chi = np.maximum(olo, lo - margin), np.minimum(ohi, hi + margin)
         seen = (clo <= chi).all(axis=1)
         lo[seen] = np.minimum(lo[seen], clo[seen])
         hi[seen] = np.maximum(hi[seen], chi[seen])
