@@ -38,7 +38,7 @@ AXIS_JOIN = " & "
 
 #: The lines of a rates figure are set apart along x by this fraction of the
 #: smallest step between two x values, in all (the first and the last line).
-DODGE = 0.3
+DODGE = 0.2
 #: Markers and dashes of the lines, in turn.
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "<", ">", "*")
 DASHES = ("-", "--", "-.", ":")
@@ -73,7 +73,7 @@ def dodges(xpos: list[float], lines: int) -> np.ndarray:
     values, centred on the true value (a single line is not moved).
 
     >>> dodges([0.0, 1.0, 2.0], 3).tolist()
-    [-0.15, 0.0, 0.15]
+    [-0.1, 0.0, 0.1]
     >>> dodges([0.0, 1.0], 1).tolist()
     [0.0]
     """
@@ -210,6 +210,7 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
             color="0.3",
         )
         ax2.set_yticks([])
+        ax2.set_xlim(ax1.get_xlim())  # the x axis of the other panels, not 0..1
     n_runs = [s["runs"] for s in summary.values()]
     lo_n, hi_n = min(n_runs), max(n_runs)
     each = f"{lo_n}" if lo_n == hi_n else f"{lo_n}-{hi_n}"
