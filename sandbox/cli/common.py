@@ -227,8 +227,8 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
     """Render ``run`` to ``args.gif`` and/or ``args.mp4`` (each atomically).
 
     The camera is ``args.follow``: ``auto`` (the default: the gallery's automatic
-    camera, following the leader of a run spread along a line), ``leader`` or
-    ``whole`` (frame the whole run).
+    camera, following what happens in a run spread along a line), ``leader`` or
+    ``whole`` (frame the whole run); the frames' aspect is ``args.aspect``.
     """
     from sandbox.render.animation import write_gif
 
@@ -239,6 +239,7 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
         "speed": args.speed,
         "zones": args.zones,
         "follow": follow,
+        "aspect": getattr(args, "aspect", "run"),
     }
     if getattr(args, "show_beams", False):
         options["show_beams"] = True
@@ -360,6 +361,31 @@ def bounded(kind: type, low: float, high: float) -> Callable[[str], float]:
     return parse
 
 
+def frame_aspect(text: str) -> float | str:
+    """An argparse type for ``--aspect``: ``run``, ``square``, ``W:H`` or a number.
+
+    Returns ``"run"`` or the width over height, from 1/4 to 4.
+    """
+    from sandbox.render.camera import MAX_FRAME_ASPECT
+
+    words = {"run": "run", "square": 1.0}
+    if text in words:
+        return words[text]
+    try:
+        parts = [float(x) for x in text.split(":")]
+        value = parts[0] / parts[1] if len(parts) == 2 else parts[0]
+        if len(parts) > 2:
+            raise ValueError(text)
+    except (ValueError, ZeroDivisionError):
+        value = float("nan")
+    if not (1.0 / MAX_FRAME_ASPECT <= value <= MAX_FRAME_ASPECT):  # NaN fails too
+        raise argparse.ArgumentTypeError(
+            f"expected run, square, W:H or a number from {1 / MAX_FRAME_ASPECT:g} "
+            f"to {MAX_FRAME_ASPECT:g} (width over height), got {text!r}"
+        )
+    return value
+
+
 def nonempty(text: str) -> str:
     """An argparse type: a path that is not empty."""
     if not text.strip():
@@ -421,7 +447,7 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
         "--size",
         type=bounded(int, *GIF_SIZE),
         default=640,
-        help=f"frame size in pixels, {GIF_SIZE[0]} to {GIF_SIZE[1]} (default 640)",
+        help=f"frame width in pixels, {GIF_SIZE[0]} to {GIF_SIZE[1]} (default 640)",
     )
     p.add_argument(
         "--speed",
@@ -446,8 +472,18 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
         "--follow",
         choices=("auto", "leader", "whole"),
         default="auto",
-        help="camera: auto (default: follow the leader of a run spread along a line, "
-        "else frame the whole run, as the gallery does), leader, or whole",
+        help="camera: auto (default: for a run spread along a line, a window that "
+        "follows what happens, the healthy vehicles, a failed vehicle near them and "
+        "the obstacles near them; else the whole run, as the gallery does), leader, "
+        "or whole",
+    )
+    p.add_argument(
+        "--aspect",
+        type=frame_aspect,
+        default="run",
+        help="frame width over height: run (default: the framed area's own when the "
+        "whole run is framed, square when the camera moves), square, W:H such as "
+        "16:9, or a number from 0.25 to 4; --size is the width",
     )
     p.add_argument(
         "--mp4",
