@@ -50,6 +50,7 @@ from sandbox.cli.common import (
     load_cli_plugins,
 )
 from sandbox.errors import PluginError, SandboxError, SandboxWarning, ScenarioError
+from sandbox.run.output_guard import OutputRefused
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
 COMMANDS = (run, validate, check, scenarios, figures, view, compare, sweep, plugins)
@@ -148,6 +149,9 @@ def _dispatch(argv: list[str] | None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     except GifOptionError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    except OutputRefused as exc:  # a user's file in the way: nothing was replaced
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     except SandboxError as exc:

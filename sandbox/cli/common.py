@@ -281,30 +281,25 @@ def check_mp4(args: argparse.Namespace) -> None:
         require_video()
 
 
-#: How the first bytes of an earlier output of each kind begin.
-_MAGIC = {
-    "gif": lambda head: head[:6] in (b"GIF87a", b"GIF89a"),
-    "mp4": lambda head: head[4:8] == b"ftyp",
-}
-
-
 def check_target(target: str | None, kind: str, force: bool) -> None:
-    """Refuse to replace a file that is not an earlier ``kind`` output (``--force``)."""
-    if not target or force:
+    """Refuse to replace a file that is not an earlier ``kind`` output (``--force``).
+
+    ``kind`` is ``gif`` or ``mp4``: an earlier output is recognised by its first
+    bytes (:func:`sandbox.run.output_guard.is_gif`, ``is_mp4``).
+    """
+    if not target:
         return
-    path = Path(target)
-    if not path.exists() or path.is_dir():  # a directory: the write names it (exit 1)
-        return
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(12)
-    except OSError:
-        head = b""
-    if not path.is_file() or not _MAGIC[kind](head):
-        raise GifOptionError(
-            f"--{kind} {target}: exists and is not a {kind.upper()} file; not "
-            "replaced (give another path, or --force to replace it)"
-        )
+    from sandbox.run import output_guard as guard
+
+    guard.check_target(
+        target,
+        kind,
+        force=force,
+        recognise={"gif": guard.is_gif, "mp4": guard.is_mp4}[kind],
+        what=f"a {kind.upper()} file",
+        hint="give another path, or --force to replace it",
+        label=f"--{kind} {target}",
+    )
 
 
 class GifOptionError(SandboxError):

@@ -47,6 +47,7 @@ from sandbox.run.record import MODE_NAMES, Run
 __all__ = [
     "FORMAT",
     "LARGE_FLEET",
+    "MAX_BEAM_READINGS",
     "MAX_VEHICLE_SAMPLES",
     "STEPS",
     "beam_data",
@@ -61,6 +62,10 @@ FORMAT = 1
 #: longer record is decimated in time. About 40 bytes of page per vehicle-sample at
 #: most, and 36 bytes of browser memory.
 MAX_VEHICLE_SAMPLES = 1_500_000
+#: Most range readings (recorded samples times vehicles times beams) a page with the
+#: beams (``--show-beams``) embeds; a longer record is decimated in time the same way.
+#: About 2 to 4 bytes of page per reading, and 4 bytes of browser memory.
+MAX_BEAM_READINGS = 2_000_000
 #: Fleets larger than this are drawn without trails, slot marks and names (as the GIF).
 LARGE_FLEET = 100
 #: Fleets up to this size get a closest-approach mark (pairwise distances per sample).
@@ -363,14 +368,22 @@ def _summary(run: Run, metrics: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def decimation(samples: int, vehicles: int, budget: int | None = None) -> int:
-    """The stride in time that keeps a record within the vehicle-sample budget.
+def decimation(
+    samples: int, vehicles: int, budget: int | None = None, beams: int = 0
+) -> int:
+    """The stride in time that keeps a record within the page's budgets.
 
-    >>> decimation(6001, 10), decimation(18001, 1000)
-    (1, 13)
+    Within ``budget`` vehicle-samples (default :data:`MAX_VEHICLE_SAMPLES`) and, with
+    ``beams`` beams a vehicle embedded, within :data:`MAX_BEAM_READINGS` readings.
+
+    >>> decimation(6001, 10), decimation(18001, 1000), decimation(6001, 16, beams=1024)
+    (1, 13, 50)
     """
     limit = MAX_VEHICLE_SAMPLES if budget is None else int(budget)
-    return max(1, -(-samples * vehicles // max(limit, 1)))
+    stride = -(-samples * vehicles // max(limit, 1))
+    if beams > 0:
+        stride = max(stride, -(-samples * vehicles * beams // MAX_BEAM_READINGS))
+    return max(1, stride)
 
 
 def replay_data(
@@ -379,6 +392,7 @@ def replay_data(
     *,
     title: str | None = None,
     max_vehicle_samples: int | None = None,
+    beams: int = 0,
 ) -> dict[str, Any]:
     """The mapping a replay page embeds (see the module docstring).
 
@@ -391,6 +405,9 @@ def replay_data(
         The name shown; default the scenario's name.
     max_vehicle_samples : int, optional
         Decimation budget; default :data:`MAX_VEHICLE_SAMPLES`.
+    beams : int
+        The beams a vehicle the page will embed (:func:`beam_data`), counted in the
+        decimation against :data:`MAX_BEAM_READINGS`; 0: none.
 
     Returns
     -------
@@ -418,7 +435,7 @@ def replay_data(
     t = np.asarray(run.t, dtype=float)
     T, n = len(t), run.n_vehicles
     pos = np.asarray(run.pose[:, :, :2], dtype=float)
-    stride = decimation(T, n, max_vehicle_samples)
+    stride = decimation(T, n, max_vehicle_samples, beams)
     keep = np.arange(0, T, stride)
     if keep[-1] != T - 1:
         keep = np.append(keep, T - 1)
@@ -447,7 +464,9 @@ def replay_data(
         notes.append(
             f"Decimated in time: every {stride}th of the {T:,} recorded samples is "
             f"shown ({len(keep):,} samples; a page holds at most "
-            f"{max_vehicle_samples or MAX_VEHICLE_SAMPLES:,} vehicle-samples)."
+            f"{max_vehicle_samples or MAX_VEHICLE_SAMPLES:,} vehicle-samples"
+            + (f" and {MAX_BEAM_READINGS:,} range readings" if beams > 0 else "")
+            + ")."
         )
     if n > LARGE_FLEET:
         notes.append(
@@ -549,7 +568,7 @@ def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
     keep = np.arange(0, T, int(data["stride"]))
     if keep[-1] != T - 1:
         keep = np.append(keep, T - 1)
-    ranges = np.asarray(run.ranges, dtype=float)[keep]
+    ranges = np.asarray(run.ranges)[keep].astype(float)  # the samples kept only
     specs = None
     if run.scenario is not None and hasattr(run.scenario, "range_specs"):
         specs = run.scenario.range_specs()
