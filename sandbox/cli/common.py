@@ -287,8 +287,8 @@ def check_target(target: str | None, kind: str, force: bool) -> None:
     ``kind`` is ``gif`` or ``mp4``: an earlier output is recognised by its first
     bytes (:func:`sandbox.run.output_guard.is_gif`, ``is_mp4``).
     """
-    if not target:
-        return
+    if not target or (Path(target).is_dir() and not Path(target).is_symlink()):
+        return  # a directory: the write names it (exit status 1)
     from sandbox.run import output_guard as guard
 
     guard.check_target(
@@ -450,6 +450,15 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
         metavar="OUT.mp4",
         help="also write an MP4 video of the same frames (needs the extra 'video')",
     )
+
+
+def add_force_option(p: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--force``: replace ``what``, which the command otherwise refuses to.
+
+    Without it an output replaces only an earlier output of the same command (see
+    :mod:`sandbox.run.output_guard`).
+    """
+    p.add_argument("--force", action="store_true", help=f"replace {what} all the same")
 
 
 def add_plugin_option(p: argparse.ArgumentParser, trust: bool = False) -> None:

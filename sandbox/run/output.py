@@ -29,8 +29,8 @@ import numpy as np
 import yaml
 
 from sandbox.errors import OutputError, SandboxWarning
+from sandbox.run.output_guard import process_alive
 from sandbox.run.record import MODE_NAMES, Run, RunFileError
-from sandbox.run.recorder import _alive
 from sandbox.scenario import load_scenario
 
 CSV_HEADER = "t,vehicle,x1,x2,x3,v1,v2,chi1,chi2,mode,failed"
@@ -332,7 +332,7 @@ def _remove_leftovers(parent: Path, name: str) -> None:
     for prefix in (f".{name}.tmp-", f".{name}.old-"):
         for path in parent.glob(f"{glob.escape(prefix)}*"):
             pid = path.name[len(prefix) :].split("-", 1)[0]
-            if not pid.isdigit() or _alive(int(pid)):
+            if not pid.isdigit() or process_alive(int(pid)):
                 continue
             if path.is_symlink() or not path.is_dir():
                 continue

@@ -47,6 +47,8 @@ __all__ = [
     "is_gif",
     "is_mp4",
     "mark_written",
+    "process_alive",
+    "remove_dead_stages",
     "staged",
     "write_output",
 ]
@@ -259,7 +261,7 @@ def write_output(
     Parameters
     ----------
     path : path-like
-        The target; its directory is created if needed.
+        The target, in a directory that exists.
     data : str or bytes
         The content (text is written as UTF-8, its line ends as they are).
     command : str
@@ -281,7 +283,6 @@ def write_output(
     check_target(path, command, force=force, recognise=recognise)
     raw = data.encode("utf-8") if isinstance(data, str) else data
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
         _write_atomic(path, raw)
     except OSError as exc:
         raise OutputError(f"{path}: cannot be written ({_reason(exc)})") from None
@@ -307,9 +308,12 @@ class Stage:
         self.out = Path(out)
         self.command = command
         self.force = force
-        self.created = not self.out.exists()
+        #: The directories this stage makes (``out`` and missing parents), innermost
+        #: first: removed again if nothing was put in them.
+        self.created = [p for p in (self.out, *self.out.parents) if not p.exists()]
         try:
             self.out.mkdir(parents=True, exist_ok=True)
+            remove_dead_stages(self.out)
             self.path = Path(
                 tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}-", dir=self.out)
             )
@@ -340,13 +344,49 @@ class Stage:
         return targets
 
     def remove(self) -> None:
-        """Remove the stage (and ``out`` if this stage made it and it is empty)."""
+        """Remove the stage, and the directories it made if they are empty."""
         shutil.rmtree(self.path, ignore_errors=True)
-        if self.created:
+        for directory in self.created:
             try:
-                self.out.rmdir()
+                directory.rmdir()
             except OSError:
-                pass
+                break
+
+
+def remove_dead_stages(directory: Path) -> None:
+    """Remove the stages that killed commands left in ``directory``.
+
+    A stage ``.sandbox-stage-<pid>-*`` whose process is dead is removed with the
+    regular files in it, and only if it holds nothing else.
+    """
+    for path in Path(directory).glob(f"{STAGE_PREFIX}*-*"):
+        pid = path.name[len(STAGE_PREFIX) :].split("-", 1)[0]
+        if not pid.isdigit() or process_alive(int(pid)):
+            continue
+        try:
+            if path.is_symlink() or not path.is_dir():
+                continue
+            entries = list(path.iterdir())
+            if any(e.is_symlink() or not e.is_file() for e in entries):
+                continue
+            for e in entries:
+                e.unlink()
+            path.rmdir()
+        except OSError:
+            continue
+
+
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (or may: it belongs to another user)."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
 
 
 @contextmanager

@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.run.output_guard import process_alive
+
 #: Above this size [bytes] a run's record is streamed to files on disk (see
 #: :class:`Recorder`); smaller records stay in memory.
 SPILL_BYTES = 64 * 2**20
@@ -219,7 +221,7 @@ def remove_dead_records(directory: Path) -> None:
     """
     for path in Path(directory).glob("sandbox-record-*-*"):
         pid = path.name[len("sandbox-record-") :].split("-", 1)[0]
-        if not pid.isdigit() or _alive(int(pid)):
+        if not pid.isdigit() or process_alive(int(pid)):
             continue
         try:
             if path.is_symlink() or not path.is_dir():
@@ -233,19 +235,6 @@ def remove_dead_records(directory: Path) -> None:
             path.rmdir()
         except OSError:
             continue
-
-
-def _alive(pid: int) -> bool:
-    """Whether process ``pid`` exists (or may: it belongs to another user)."""
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except (PermissionError, OSError):
-        return True
-    return True
 
 
 def _discard(files: dict[str, Any], directory: Path) -> None:
