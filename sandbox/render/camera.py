@@ -27,7 +27,7 @@ LARGE_FLEET = 100
 _MARGIN = 0.04  # fraction of the image size kept free around the content
 
 
-def _reference_path(run: Run) -> np.ndarray | None:
+def reference_path(run: Run) -> np.ndarray | None:
     """Return the reference path (m, 2) [m]: ``info["reference_path"]`` or samples."""
     raw = run.info.get("reference_path") if isinstance(run.info, dict) else None
     pts = None
@@ -41,7 +41,7 @@ def _reference_path(run: Run) -> np.ndarray | None:
     return pts if len(pts) >= 2 else None
 
 
-def _obstacles(run: Run) -> list[tuple[str, Any]]:
+def drawn_obstacles(run: Run) -> list[tuple[str, Any]]:
     """List obstacles as ``("circle", ((x, y), r))`` or ``("polygon", (m, 2))`` [m]."""
     out: list[tuple[str, Any]] = []
     raw = run.info.get("obstacles", []) if isinstance(run.info, dict) else []
@@ -186,7 +186,7 @@ class Camera:
         bands = _run_bands(run, size, legend)
         edges = (bands.top, bands.bottom)
         if follow is None:
-            lo, hi = _content_bounds(run, reach)
+            lo, hi = content_bounds(run, reach)
             return cls.fit(lo, hi, size, edges)
         track = _follow_track(run, follow)
         first = pos[0][np.isfinite(pos[0]).all(axis=1)]
@@ -252,7 +252,7 @@ def _legend_items(run: Run, body: np.ndarray, large: bool) -> list[LegendItem]:
     else:
         items = [LegendItem("vehicle", f"{run.n_vehicles} vehicles", int(body[0]))]
     mode = np.asarray(run.mode)
-    if _reference_path(run) is not None:
+    if reference_path(run) is not None:
         items.append(LegendItem("reference", "reference"))
     if not large:
         items.append(LegendItem("slot", "slot"))
@@ -277,13 +277,13 @@ def _run_bands(run: Run, size: int, legend: bool) -> Bands:
     )
 
 
-def _content_bounds(run: Run, reach: float) -> tuple[np.ndarray, np.ndarray]:
+def content_bounds(run: Run, reach: float) -> tuple[np.ndarray, np.ndarray]:
     """World bounding box [m] of poses, reference path and obstacles."""
     boxes = [_finite_box(run.pose[:, :, :2]), _finite_box(run.reference)]
-    path = _reference_path(run)
+    path = reference_path(run)
     if path is not None:
         boxes.append(_finite_box(path))
-    for kind, geom in _obstacles(run):
+    for kind, geom in drawn_obstacles(run):
         if kind == "circle":
             (cx, cy), r = geom
             boxes.append((np.array([cx - r, cy - r]), np.array([cx + r, cy + r])))

@@ -19,9 +19,9 @@ from sandbox.render.camera import (
     LARGE_FLEET,
     Camera,
     _follow_track,
-    _obstacles,
-    _reference_path,
     _run_bands,
+    drawn_obstacles,
+    reference_path,
     resolve_follow,
 )
 from sandbox.render.overlay import (
@@ -119,8 +119,8 @@ class Scene:
             self.beam_angles = np.asarray(run.beam_angles, dtype=float)
             self.reach = _beam_reach(run, self.ranges)
         # Static geometry.
-        self.obstacles = _obstacles(run)
-        path = _reference_path(run)
+        self.obstacles = drawn_obstacles(run)
+        path = reference_path(run)
         on, off = (v / self.camera.scale for v in _DASH_PX)
         self.dashes = np.zeros((0, 2, 2)) if path is None else _dashes(path, on, off)
         paths = platoon_paths(run)  # with platoons: every platoon's reference

@@ -13,31 +13,44 @@ Array shapes use ``T`` for recorded samples and ``n`` for vehicles.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sandbox.run.analysis import VehicleTrack, to_dataframe, vehicle_track
+from sandbox.run.codes import (
+    MODE_AVOID,
+    MODE_EXTERNAL,
+    MODE_FAILED,
+    MODE_FORMATION,
+    MODE_NAMES,
+    STATUS_DIVERGED,
+    STATUS_ERROR,
+    STATUS_INTERRUPTED,
+    STATUS_OK,
+    STATUSES,
+)
+
 if TYPE_CHECKING:
     import pandas
 
-    from sandbox.run.analysis import VehicleTrack
-
-#: Integer codes of the ``mode`` array, and their names in ``trajectory.csv``.
-MODE_FORMATION = 0
-MODE_AVOID = 1
-MODE_FAILED = 2
-#: Driven this period by commands or targets given to ``Simulation.step``.
-MODE_EXTERNAL = 3
-MODE_NAMES = ("formation", "avoid", "failed", "external")
-
-#: Status values of a run (``metrics.json`` key ``status``).
-STATUS_OK = "ok"
-STATUS_DIVERGED = "diverged"
-STATUS_INTERRUPTED = "interrupted"
-#: A plug-in raised or returned non-finite numbers (``Run.info["error"]``).
-STATUS_ERROR = "error"
+__all__ = [
+    "MODE_AVOID",
+    "MODE_EXTERNAL",
+    "MODE_FAILED",
+    "MODE_FORMATION",
+    "MODE_NAMES",
+    "STATUS_DIVERGED",
+    "STATUS_ERROR",
+    "STATUS_INTERRUPTED",
+    "STATUS_OK",
+    "CollisionEvent",
+    "Run",
+    "RunFileError",
+]
 
 
 @dataclass
@@ -225,8 +238,6 @@ class Run:
         See :class:`sandbox.run.analysis.VehicleTrack`; raises ``KeyError`` (listing the
         names) for an unknown vehicle.
         """
-        from sandbox.run.analysis import vehicle_track
-
         return vehicle_track(self, name)
 
     def formation_at(self) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -257,9 +268,42 @@ class Run:
         One row per vehicle per sample, the columns of ``trajectory.csv``; needs the
         ``analysis`` extra. See :func:`sandbox.run.analysis.to_dataframe`.
         """
-        from sandbox.run.analysis import to_dataframe
-
         return to_dataframe(self)
+
+    def save(self, path: str | os.PathLike[str], trajectory: str = "csv") -> Path:
+        """Write the run's directory, as ``sandbox run`` does: metrics included.
+
+        ``trajectory.csv`` (or ``trajectory.parquet`` with ``trajectory="parquet"``,
+        the ``analysis`` extra), ``metrics.json`` (computed here, as ``sandbox run``
+        computes it), ``scenario.yaml``, ``run.npz`` and the manifest, written whole
+        (see :func:`sandbox.run.run_dir.write_run_dir`). ``sandbox view``, ``render``
+        and ``plot`` read the directory, and :func:`sandbox.load_run` gives the run
+        back. A stepped run (``Simulation.step``, then ``result()``) is saved the same
+        way.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The directory: missing, empty, or an earlier run directory (its manifest
+            lists what is replaced; other entries, such as ``figures/``, are kept).
+            Anything else is never replaced.
+
+        Returns
+        -------
+        Path
+            ``path``.
+
+        Raises
+        ------
+        OutputError
+            ``path`` is not a directory that may be replaced, or cannot be written.
+        """
+        from sandbox.run.metrics import compute_metrics
+        from sandbox.run.run_dir import check_out_dir, write_run_dir
+
+        out = Path(path)
+        check_out_dir(out)  # before the metrics, which a long run takes a while for
+        return write_run_dir(self, compute_metrics(self), out, trajectory=trajectory)
 
     # ------------------------------------------------------------------ persistence
     def save_npz(self, path: Path) -> None:
@@ -451,12 +495,7 @@ def _check_meta(meta: Any, n: int) -> None:
     leader = meta.get("leader")
     if isinstance(leader, bool) or not isinstance(leader, int) or not -1 <= leader < n:
         raise RunFileError(f"meta: leader {leader!r} is not a vehicle index or -1")
-    if meta.get("status") not in (
-        STATUS_OK,
-        STATUS_DIVERGED,
-        STATUS_INTERRUPTED,
-        STATUS_ERROR,
-    ):
+    if meta.get("status") not in STATUSES:
         raise RunFileError(f"meta: unknown status {meta.get('status')!r}")
     if not isinstance(meta.get("info"), dict):
         raise RunFileError("meta: info is not a mapping")

@@ -15,12 +15,13 @@ vehicles) is decimated in time: every ``stride``-th sample is kept (and the last
 and the page says so. The events marked on the page's timeline are read with the
 functions the figures and the GIF use
 (:func:`sandbox.behaviour.detection.detection_metrics`,
-:func:`sandbox.render.figure_marks._changed`; a collision's health from the metrics),
-the obstacles and the reference path as the GIF draws them (``_obstacles`` and
-``_reference_path`` of :mod:`sandbox.render.camera`), the first view as the GIF frames
-it (``_content_bounds``, :func:`~sandbox.render.camera.auto_follow` and
+:func:`sandbox.render.figure_marks.changed_slots`; a collision's health from the
+metrics), the obstacles and the reference path as the GIF draws them
+(``drawn_obstacles`` and ``reference_path`` of :mod:`sandbox.render.camera`), the first
+view as the GIF frames it (``content_bounds``,
+:func:`~sandbox.render.camera.auto_follow` and
 :meth:`~sandbox.render.camera.Camera.for_run`), and the colours with the GIF's palette
-(:func:`sandbox.render.palette._rgb`).
+(:func:`sandbox.render.palette.color_rgb`).
 
 With ``platoons:`` the mapping also has ``platoons`` (each platoon's ``name``,
 ``color``, ``since`` and ``until``: those of
@@ -155,9 +156,9 @@ def unpack(packed: dict[str, Any]) -> np.ndarray:
 # ---------------------------------------------------------------------------- content
 def _hex(color: str, k: int) -> str:
     """``#rrggbb`` of a vehicle colour, as the GIF's palette resolves it."""
-    from sandbox.render.palette import _rgb
+    from sandbox.render.palette import color_rgb
 
-    return "#{:02x}{:02x}{:02x}".format(*_rgb(color, k))
+    return "#{:02x}{:02x}{:02x}".format(*color_rgb(color, k))
 
 
 def _rounded(x: Any, digits: int = 6) -> float | None:
@@ -175,7 +176,7 @@ def _info(run: Run, key: str) -> Any:
 
 def _obstacles(run: Run) -> list[dict[str, Any]]:
     """Obstacles as the GIF draws them, walls told apart by the scenario."""
-    from sandbox.render.camera import _obstacles as drawn
+    from sandbox.render.camera import drawn_obstacles as drawn
 
     raw = _info(run, "obstacles") or []
     names = [ob.get("name") if isinstance(ob, dict) else None for ob in raw]
@@ -274,14 +275,14 @@ def _events(run: Run, pos: np.ndarray, metrics: dict[str, Any]) -> list[dict[str
             )
     moves = _info(run, "reassignments") or []
     if moves:
-        from sandbox.render.figure_marks import _changed
+        from sandbox.render.figure_marks import changed_slots
 
         for event in moves:
             out.append(
                 {
                     "t": _rounded(event["t"]),
                     "kind": "reassignment",
-                    "changes": _changed(run, event),
+                    "changes": changed_slots(run, event),
                 }
             )
     for change in _info(run, "leader_changes") or []:
@@ -427,9 +428,9 @@ def replay_data(
         metrics = compute_metrics(run)
     from sandbox.render.camera import (
         Camera,
-        _content_bounds,
-        _reference_path,
         auto_follow,
+        content_bounds,
+        reference_path,
     )
 
     t = np.asarray(run.t, dtype=float)
@@ -457,8 +458,8 @@ def replay_data(
     }
     platoons = _platoons(run, keep, arrays)
     reach = float(np.max(run.diameter, initial=0.0)) / 2.0
-    lo, hi = _content_bounds(run, reach)
-    path = _reference_path(run)
+    lo, hi = content_bounds(run, reach)
+    path = reference_path(run)
     notes = []
     if stride > 1:
         notes.append(
