@@ -266,7 +266,7 @@ def test_damaged_run_directories_give_clear_errors(
     (out / "run.npz").write_bytes(b"\x89PNG not a zip")
     with pytest.raises(OutputError, match="damaged"):
         load_run_dir(out)
-    assert main(["render", str(out), "--gif", str(tmp_path / "x.gif")]) == 1
+    assert main(["render", str(out), "--gif", str(tmp_path / "x.gif")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "damaged" in err and "Traceback" not in err
     half = out / "run.npz"

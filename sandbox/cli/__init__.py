@@ -50,7 +50,6 @@ from sandbox.cli.common import (
     load_cli_plugins,
 )
 from sandbox.errors import PluginError, SandboxError, SandboxWarning, ScenarioError
-from sandbox.run.output_guard import OutputRefused
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
 COMMANDS = (run, validate, check, scenarios, figures, view, compare, sweep, plugins)
@@ -151,12 +150,9 @@ def _dispatch(argv: list[str] | None) -> int:
     except GifOptionError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
-    except OutputRefused as exc:  # a user's file in the way: nothing was replaced
+    except SandboxError as exc:  # bad input (a user's file in the way, ...) says so
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_INVALID
-    except SandboxError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_FAILED
+        return getattr(exc, "exit_status", EXIT_FAILED)
     except BrokenPipeError:
         # The reader of our output went away (e.g. `sandbox schema | head`).
         sys.stderr.close()

@@ -35,6 +35,7 @@ __all__ = [
     "MANIFEST",
     "PRODUCT_FILES",
     "check_out_dir",
+    "RunDirError",
     "load_run_dir",
     "read_manifest",
     "write_csv",
@@ -44,6 +45,16 @@ __all__ = [
 ]
 
 
+class RunDirError(OutputError):
+    """Not a valid run directory: missing, damaged or crafted (names the member).
+
+    The command line prints the message as one line and exits with status 2.
+    """
+
+    #: The command line's exit status: invalid input.
+    exit_status = 2
+
+
 #: What reading a damaged or foreign ``run.npz`` can raise.
 _DAMAGED = (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile)
 
@@ -51,15 +62,17 @@ _DAMAGED = (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFi
 def load_run_dir(run_dir: Path) -> Run:
     """Read back a run directory written by :func:`write_run_dir`.
 
-    Every array of ``run.npz`` is checked (members, dtypes, shapes against the number
-    of samples and vehicles, sizes before inflating; see :meth:`Run.load_npz`), so a
-    crafted or damaged directory is refused with :class:`~sandbox.errors.OutputError`
-    (``not a valid run directory: DIR (...)``) before rendering or plotting reads it.
+    Every member of ``run.npz`` is checked before anything reads it (members, dtypes,
+    shapes against the number of samples and vehicles, sizes before inflating, the
+    values, and each entry of the metadata that is read: see
+    :mod:`sandbox.run.run_file`), so a crafted or damaged directory is refused with a
+    :class:`RunDirError` (``not a valid run directory: DIR (run.npz: MEMBER: ...)``,
+    one line) before the metrics, the pictures or the replay read it.
     """
     run_dir = Path(run_dir)
     npz = run_dir / "run.npz"
     if not npz.is_file():
-        raise OutputError(
+        raise RunDirError(
             f"not a valid run directory: {run_dir} (no run.npz; run a scenario "
             "with 'sandbox run FILE --out DIR' first)"
         )
@@ -73,17 +86,17 @@ def load_run_dir(run_dir: Path) -> Run:
         with open(npz, "rb") as fh:
             run = Run.load_npz(fh, scenario)
     except RunFileError as exc:
-        raise OutputError(
+        raise RunDirError(
             f"not a valid run directory: {run_dir} (run.npz: {exc})"
         ) from None
     except _DAMAGED as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-        raise OutputError(
+        raise RunDirError(
             f"not a valid run directory: {run_dir} (run.npz: damaged, cannot be read: "
             f"{reason})"
         ) from None
     if scenario is not None and [v.name for v in scenario.vehicles] != run.names:
-        raise OutputError(
+        raise RunDirError(
             f"not a valid run directory: {run_dir} (scenario.yaml names other vehicles "
             "than run.npz)"
         )

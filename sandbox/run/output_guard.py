@@ -70,6 +70,9 @@ class OutputRefused(OutputError):
     The command line prints the message as one line and exits with status 2.
     """
 
+    #: The command line's exit status: invalid input.
+    exit_status = 2
+
 
 def _digest(path: Path) -> str | None:
     """The SHA-256 of a regular file's bytes, or None if it cannot be read."""
