@@ -93,7 +93,9 @@ KINDS = ("failure", "detection", "leader_change", "reassignment", "collision")
 
 
 # ---------------------------------------------------------------------------- packing
-def pack(values: np.ndarray, step: float, order: int = 2) -> dict[str, Any]:
+def pack(
+    values: np.ndarray, step: float, order: int = 2, level: int = 9
+) -> dict[str, Any]:
     """Pack an array whose first axis is time into a compact JSON-ready mapping.
 
     Parameters
@@ -105,6 +107,9 @@ def pack(values: np.ndarray, step: float, order: int = 2) -> dict[str, Any]:
         magnitude still fits in an ``int32``.
     order : int
         How many times to difference along the first axis (0, 1 or 2).
+    level : int
+        zlib's compression level (9: the smallest; 6 for noisy data such as range
+        readings, where 9 searches for matches up to 30 times longer for about 1 %).
 
     Returns
     -------
@@ -130,7 +135,7 @@ def pack(values: np.ndarray, step: float, order: int = 2) -> dict[str, Any]:
         q = q.astype(np.int32).astype(np.int64)  # wrap to 32 bits
     raw = q.astype("<i4").tobytes()
     planes = np.frombuffer(raw, dtype=np.uint8).reshape(-1, 4).T.tobytes()
-    data = base64.b64encode(zlib.compress(planes, 9)).decode("ascii")
+    data = base64.b64encode(zlib.compress(planes, level)).decode("ascii")
     return {"shape": list(arr.shape), "step": step, "order": int(order), "data": data}
 
 
@@ -558,10 +563,10 @@ def _platoons(
 def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
     """The range sensors' scans for the page, on its samples; None without scans.
 
-    ``ranges`` packed like the other arrays (0.1 mm steps, differenced once; NaN for
-    a vehicle or beam without a sensor), ``angles`` each beam's angle about the
-    heading (n, B) [rad], ``reach`` each vehicle's ``max_range`` [m] (a reading
-    there hit nothing; None without a sensor).
+    ``ranges`` packed like the other arrays (0.1 mm steps, differenced once, zlib's
+    level 6: readings are noisy; NaN for a vehicle or beam without a sensor), ``angles``
+    each beam's angle about the heading (n, B) [rad], ``reach`` each vehicle's
+    ``max_range`` [m] (a reading there hit nothing; None without a sensor).
     """
     if run.ranges is None or run.beam_angles is None:
         return None
@@ -579,7 +584,7 @@ def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
     else:
         reach = [None if s is None else _rounded(s.max_range) for s in specs]
     return {
-        "ranges": pack(ranges, STEPS["pose"], order=1),
+        "ranges": pack(ranges, STEPS["pose"], order=1, level=6),
         "angles": [[_rounded(a) for a in row] for row in run.beam_angles.tolist()],
         "reach": reach,
         "width": int(run.beam_angles.shape[1]),
