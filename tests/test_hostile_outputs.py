@@ -44,6 +44,7 @@ def test_only_an_unchanged_earlier_output_of_the_same_command_is_replaced(
     tmp_path: Path,
 ) -> None:
     target = tmp_path / "out" / "a.txt"
+    target.parent.mkdir()
     write_output(target, "one\n", "demo")
     assert (
         json.loads((tmp_path / "out" / MARKS).read_text())["files"]["a.txt"]["command"]

@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 import yaml
 from browser import ARGS, CHROMIUM, Page, require_browser, wait_until
+from crafted import crafted_run
 from helpers import HEADON, SCENARIOS, write_yaml
 
 from sandbox import simulate
@@ -193,20 +194,9 @@ def test_the_beams_count_in_the_pages_budget() -> None:
     t = np.linspace(0.0, 60.0, T)
     pose = np.zeros((T, n, 3))
     pose[:, :, 0] = np.arange(n) * 2.0
-    run = Run(
-        t=t,
-        pose=pose,
-        cmd=np.zeros((T, n, 2)),
-        chi=np.zeros((T, n, 2)),
-        slot=np.full((T, n, 2), np.nan),
-        target=np.full((T, n, 2), np.nan),
-        mode=np.zeros((T, n), np.int8),
-        failed=np.zeros((T, n), bool),
-        reference=np.full((T, 2), np.nan),
-        names=["a", "b", "c", "d"],
-        colors=["blue"] * n,
-        diameter=np.full(n, 0.5),
-        leader=-1,
+    run = crafted_run(
+        t,
+        pose,
         ranges=np.full((T, n, B), 3.0, dtype=np.float32),
         beam_angles=np.tile(np.linspace(-np.pi, np.pi, B, endpoint=False), (n, 1)),
     )
@@ -328,22 +318,15 @@ def write_dir(run: Run, out: Path) -> Path:
 def crafted(bad: str) -> Run:
     """A run as a crafted ``run.npz`` may hold it: names the loader would refuse."""
     T, n = 11, 2
-    t = np.linspace(0.0, 1.0, T)
     pose = np.zeros((T, n, 3))
     pose[:, 1, 0] = 2.0
-    return Run(
-        t=t,
-        pose=pose,
-        cmd=np.zeros((T, n, 2)),
-        chi=np.zeros((T, n, 2)),
+    return crafted_run(
+        np.linspace(0.0, 1.0, T),
+        pose,
         slot=pose[:, :, :2].copy(),
         target=pose[:, :, :2].copy(),
-        mode=np.zeros((T, n), np.int8),
-        failed=np.zeros((T, n), bool),
-        reference=np.full((T, 2), np.nan),
         names=[bad, f"2{bad}"],
         colors=["blue", "red"],
-        diameter=np.full(n, 0.5),
         leader=0,
         info={
             "scenario_name": bad,

@@ -13,14 +13,13 @@ writes its page.
 
 from __future__ import annotations
 
-import io
 import json
-import zipfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
+from crafted import arrays_of, write_npz
 from helpers import write_yaml
 
 from sandbox.cli import main
@@ -54,21 +53,10 @@ def valid(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("valid")
     out = root / "run"
     assert main(["run", str(write_yaml(root, SCENARIO)), "--out", str(out)]) == 0
-    info = json.loads(str(arrays_of(out)["meta"]))["info"]
+    info = json.loads(str(arrays_of(out / "run.npz")["meta"]))["info"]
     for key in ("reassignments", "leader_changes", "slots", "detection", "obstacles"):
         assert info.get(key), key  # the valid run has each of them to damage
     return out
-
-
-def arrays_of(run_dir: Path) -> dict[str, np.ndarray]:
-    with np.load(run_dir / "run.npz") as data:
-        return {k: data[k] for k in data.files}
-
-
-def npy_bytes(array: np.ndarray) -> bytes:
-    buf = io.BytesIO()
-    np.lib.format.write_array(buf, array)
-    return buf.getvalue()
 
 
 def craft(valid: Path, out: Path, edit: Callable[[dict], None]) -> Path:
@@ -77,11 +65,7 @@ def craft(valid: Path, out: Path, edit: Callable[[dict], None]) -> Path:
     for f in valid.iterdir():
         if f.is_file() and f.name != "run.npz":
             (out / f.name).write_bytes(f.read_bytes())
-    arrays = arrays_of(valid)
-    edit(arrays)
-    with zipfile.ZipFile(out / "run.npz", "w", zipfile.ZIP_DEFLATED) as zf:
-        for name, value in arrays.items():
-            zf.writestr(f"{name}.npy", npy_bytes(value))
+    craft_into(valid / "run.npz", out / "run.npz", edit)
     return out
 
 
@@ -311,9 +295,7 @@ def test_sweep_view_logs_a_damaged_run_and_writes_its_page(
 
 
 def craft_into(good: Path, target: Path, edit: Callable[[dict], None]) -> None:
-    with np.load(good) as data:
-        arrays = {k: data[k] for k in data.files}
+    """Write ``target``: the members of the ``run.npz`` ``good`` that ``edit`` left."""
+    arrays = arrays_of(good)
     edit(arrays)
-    with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as zf:
-        for name, value in arrays.items():
-            zf.writestr(f"{name}.npy", npy_bytes(value))
+    write_npz(target, arrays)

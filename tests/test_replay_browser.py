@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from browser import ARGS, CHROMIUM, TIMEOUT_MS, Page, require_browser, wait_until
+from crafted import crafted_run
 from helpers import SCENARIOS
 from PIL import Image, ImageColor
 
@@ -487,25 +488,16 @@ def test_home_after_a_jump_to_an_event_shows_the_vehicles(
     Two vehicles drive 100 m east side by side and touch at 9 s. Before, Home kept the
     jump's view (zoomed in on the contact) and showed an empty canvas until ``f``.
     """
-    T, n = 101, 2
-    t = np.linspace(0.0, 10.0, T)
-    pose = np.zeros((T, n, 3))
+    t = np.linspace(0.0, 10.0, 101)
+    pose = np.zeros((101, 2, 3))
     pose[:, :, 0] = 10.0 * t[:, None]  # [m] 10 m/s east
     pose[:, 1, 1] = 2.1  # [m] side by side, 0.1 m apart
-    run = Run(
-        t=t,
-        pose=pose,
-        cmd=np.zeros((T, n, 2)),
-        chi=np.zeros((T, n, 2)),
-        slot=np.full((T, n, 2), np.nan),
-        target=np.full((T, n, 2), np.nan),
-        mode=np.zeros((T, n), np.int8),
-        failed=np.zeros((T, n), bool),
-        reference=np.full((T, 2), np.nan),
+    run = crafted_run(
+        t,
+        pose,
         names=["a", "b"],
         colors=["blue", "red"],
-        diameter=np.full(n, 2.0),
-        leader=-1,
+        diameter=np.full(2, 2.0),
         events=[CollisionEvent(9.0, "a", "b", "vehicle_vehicle", 9.1, True, 0.0)],
     )
     p = Page(browser, write_html(run, tmp_path / "jump.html"))

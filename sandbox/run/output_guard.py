@@ -25,6 +25,7 @@ this module.
 
 from __future__ import annotations
 
+import glob
 import hashlib
 import json
 import os
@@ -48,6 +49,7 @@ __all__ = [
     "is_mp4",
     "mark_written",
     "process_alive",
+    "remove_dead_dirs",
     "remove_dead_stages",
     "staged",
     "write_output",
@@ -357,13 +359,21 @@ class Stage:
 
 
 def remove_dead_stages(directory: Path) -> None:
-    """Remove the stages that killed commands left in ``directory``.
+    """Remove the stages that killed commands left in ``directory``."""
+    remove_dead_dirs(directory, STAGE_PREFIX)
 
-    A stage ``.sandbox-stage-<pid>-*`` whose process is dead is removed with the
-    regular files in it, and only if it holds nothing else.
+
+def remove_dead_dirs(
+    directory: Path, prefix: str, names: frozenset[str] | None = None
+) -> None:
+    """Remove the directories ``<prefix><pid>-*`` of dead processes in ``directory``.
+
+    One is removed only if it holds nothing but regular files (of ``names``, when
+    given), which are deleted with it; a link, a subdirectory or another file keeps
+    it (a SIGKILL leaves them behind; a user's file is never deleted).
     """
-    for path in Path(directory).glob(f"{STAGE_PREFIX}*-*"):
-        pid = path.name[len(STAGE_PREFIX) :].split("-", 1)[0]
+    for path in Path(directory).glob(f"{glob.escape(prefix)}*-*"):
+        pid = path.name[len(prefix) :].split("-", 1)[0]
         if not pid.isdigit() or process_alive(int(pid)):
             continue
         try:
@@ -371,6 +381,8 @@ def remove_dead_stages(directory: Path) -> None:
                 continue
             entries = list(path.iterdir())
             if any(e.is_symlink() or not e.is_file() for e in entries):
+                continue
+            if names is not None and not {e.name for e in entries} <= names:
                 continue
             for e in entries:
                 e.unlink()

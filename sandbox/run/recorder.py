@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from sandbox.errors import OutputError
-from sandbox.run.output_guard import process_alive
+from sandbox.run.output_guard import remove_dead_dirs
 
 #: Above this size [bytes] a run's record is streamed to files on disk (see
 #: :class:`Recorder`); smaller records stay in memory.
@@ -262,22 +262,7 @@ def remove_dead_records(directory: Path) -> None:
     Only directories named ``sandbox-record-<pid>-*`` whose process is dead and that
     hold nothing but a record's files are removed (a SIGKILL leaves them behind).
     """
-    for path in Path(directory).glob("sandbox-record-*-*"):
-        pid = path.name[len("sandbox-record-") :].split("-", 1)[0]
-        if not pid.isdigit() or process_alive(int(pid)):
-            continue
-        try:
-            if path.is_symlink() or not path.is_dir():
-                continue
-            entries = list(path.iterdir())
-            if not {e.name for e in entries} <= _RECORD_FILES:
-                continue
-            for e in entries:
-                if e.is_file() and not e.is_symlink():
-                    e.unlink()
-            path.rmdir()
-        except OSError:
-            continue
+    remove_dead_dirs(directory, "sandbox-record-", _RECORD_FILES)
 
 
 def _discard(files: dict[str, Any], directory: Path) -> None:
