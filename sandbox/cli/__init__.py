@@ -150,9 +150,9 @@ def _dispatch(argv: list[str] | None) -> int:
     except GifOptionError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
-    except SandboxError as exc:
+    except SandboxError as exc:  # bad input (a user's file in the way, ...) says so
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_FAILED
+        return getattr(exc, "exit_status", EXIT_FAILED)
     except BrokenPipeError:
         # The reader of our output went away (e.g. `sandbox schema | head`).
         sys.stderr.close()

@@ -282,30 +282,25 @@ def check_mp4(args: argparse.Namespace) -> None:
         require_video()
 
 
-#: How the first bytes of an earlier output of each kind begin.
-_MAGIC = {
-    "gif": lambda head: head[:6] in (b"GIF87a", b"GIF89a"),
-    "mp4": lambda head: head[4:8] == b"ftyp",
-}
-
-
 def check_target(target: str | None, kind: str, force: bool) -> None:
-    """Refuse to replace a file that is not an earlier ``kind`` output (``--force``)."""
-    if not target or force:
-        return
-    path = Path(target)
-    if not path.exists() or path.is_dir():  # a directory: the write names it (exit 1)
-        return
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(12)
-    except OSError:
-        head = b""
-    if not path.is_file() or not _MAGIC[kind](head):
-        raise GifOptionError(
-            f"--{kind} {target}: exists and is not a {kind.upper()} file; not "
-            "replaced (give another path, or --force to replace it)"
-        )
+    """Refuse to replace a file that is not an earlier ``kind`` output (``--force``).
+
+    ``kind`` is ``gif`` or ``mp4``: an earlier output is recognised by its first
+    bytes (:func:`sandbox.run.output_guard.is_gif`, ``is_mp4``).
+    """
+    if not target or (Path(target).is_dir() and not Path(target).is_symlink()):
+        return  # a directory: the write names it (exit status 1)
+    from sandbox.run import output_guard as guard
+
+    guard.check_target(
+        target,
+        kind,
+        force=force,
+        recognise={"gif": guard.is_gif, "mp4": guard.is_mp4}[kind],
+        what=f"a {kind.upper()} file",
+        hint="give another path, or --force to replace it",
+        label=f"--{kind} {target}",
+    )
 
 
 class GifOptionError(SandboxError):
@@ -491,6 +486,15 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
         metavar="OUT.mp4",
         help="also write an MP4 video of the same frames (needs the extra 'video')",
     )
+
+
+def add_force_option(p: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--force``: replace ``what``, which the command otherwise refuses to.
+
+    Without it an output replaces only an earlier output of the same command (see
+    :mod:`sandbox.run.output_guard`).
+    """
+    p.add_argument("--force", action="store_true", help=f"replace {what} all the same")
 
 
 def add_plugin_option(p: argparse.ArgumentParser, trust: bool = False) -> None:

@@ -52,7 +52,7 @@ ACTION_SMOOTHING = 1.0
 MIN_WINDOW_DIAMETERS = 10.0
 
 
-def _reference_path(run: Run) -> np.ndarray | None:
+def reference_path(run: Run) -> np.ndarray | None:
     """Return the reference path (m, 2) [m]: ``info["reference_path"]`` or samples."""
     raw = run.info.get("reference_path") if isinstance(run.info, dict) else None
     pts = None
@@ -66,7 +66,7 @@ def _reference_path(run: Run) -> np.ndarray | None:
     return pts if len(pts) >= 2 else None
 
 
-def _obstacles(run: Run) -> list[tuple[str, Any]]:
+def drawn_obstacles(run: Run) -> list[tuple[str, Any]]:
     """List obstacles as ``("circle", ((x, y), r))`` or ``("polygon", (m, 2))`` [m]."""
     out: list[tuple[str, Any]] = []
     raw = run.info.get("obstacles", []) if isinstance(run.info, dict) else []
@@ -231,7 +231,7 @@ class Camera:
         edges = (bands.top, bands.bottom)
         framing = camera_track(run, follow)
         if framing is None:  # a square frame keeps the square box it always had
-            lo, hi = _content_bounds(run, _reach(run), square=height == size)
+            lo, hi = content_bounds(run, _reach(run), square=height == size)
             return cls.fit(lo, hi, size, edges, height)
         track, window = framing
         c = track[0]
@@ -292,7 +292,7 @@ def frame_height(
     if aspect == "run":
         if camera_track(run, follow) is not None:
             return int(size)
-        lo, hi = _content_bounds(run, _reach(run), square=False)
+        lo, hi = content_bounds(run, _reach(run), square=False)
         extent = np.maximum(hi - lo, 1e-9)
         x0, _, x1, _ = _viewport(size)
         bands = _run_bands(run, size, True)
@@ -387,7 +387,7 @@ def action_track(run: Run) -> tuple[np.ndarray, np.ndarray] | None:
     rec = run.info.get("recovery") if isinstance(run.info, dict) else None
     radius = rec.get("R") if isinstance(rec, dict) else None
     margin = max(2.0 * float(radius or 0.0), MIN_WINDOW_DIAMETERS * reach)  # [m]
-    for kind, geom in _obstacles(run):
+    for kind, geom in drawn_obstacles(run):
         if kind == "circle":
             (cx, cy), r = geom
             olo, ohi = np.array([cx - r, cy - r]), np.array([cx + r, cy + r])
@@ -402,7 +402,7 @@ def action_track(run: Run) -> tuple[np.ndarray, np.ndarray] | None:
     track = _moving_average(centre, max(1, int(round(ACTION_SMOOTHING / dt))))
     need = 2.0 * np.maximum(hi - track, track - lo).max(axis=0) + 2.0 * reach
     window = np.maximum(need, max(near, _least_window(run)))
-    whole_lo, whole_hi = _content_bounds(run, reach, square=False)
+    whole_lo, whole_hi = content_bounds(run, reach, square=False)
     if (window >= whole_hi - whole_lo).all():
         return None
     return track, window
@@ -432,7 +432,7 @@ def _least_window(run: Run) -> float:
     the road's scene, and a lone vehicle is not framed at its own size.
     """
     reach = _reach(run)
-    lo, hi = _content_bounds(run, reach, square=False)
+    lo, hi = content_bounds(run, reach, square=False)
     return max(MIN_WINDOW_DIAMETERS * 2.0 * reach, float(np.min(hi - lo)))
 
 
@@ -465,7 +465,7 @@ def _legend_items(run: Run, body: np.ndarray, large: bool) -> list[LegendItem]:
     else:
         items = [LegendItem("vehicle", f"{run.n_vehicles} vehicles", int(body[0]))]
     mode = np.asarray(run.mode)
-    if _reference_path(run) is not None:
+    if reference_path(run) is not None:
         items.append(LegendItem("reference", "reference"))
     if not large:
         items.append(LegendItem("slot", "slot"))
@@ -493,7 +493,7 @@ def _run_bands(run: Run, size: int, legend: bool, height: int | None = None) -> 
     )
 
 
-def _content_bounds(
+def content_bounds(
     run: Run, reach: float, square: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """World bounding box [m] of poses, reference path and obstacles.
@@ -502,10 +502,10 @@ def _content_bounds(
     each side is at least the larger of 8 ``reach`` and 0.5 m.
     """
     boxes = [_finite_box(run.pose[:, :, :2]), _finite_box(run.reference)]
-    path = _reference_path(run)
+    path = reference_path(run)
     if path is not None:
         boxes.append(_finite_box(path))
-    for kind, geom in _obstacles(run):
+    for kind, geom in drawn_obstacles(run):
         if kind == "circle":
             (cx, cy), r = geom
             boxes.append((np.array([cx - r, cy - r]), np.array([cx + r, cy + r])))

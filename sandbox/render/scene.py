@@ -18,11 +18,11 @@ from PIL import Image, ImageDraw
 from sandbox.render.camera import (
     LARGE_FLEET,
     Camera,
-    _obstacles,
-    _reference_path,
     _run_bands,
     camera_track,
+    drawn_obstacles,
     frame_height,
+    reference_path,
 )
 from sandbox.render.overlay import (
     TextStamps,
@@ -121,8 +121,8 @@ class Scene:
             self.beam_angles = np.asarray(run.beam_angles, dtype=float)
             self.reach = _beam_reach(run, self.ranges)
         # Static geometry.
-        self.obstacles = _obstacles(run)
-        path = _reference_path(run)
+        self.obstacles = drawn_obstacles(run)
+        path = reference_path(run)
         on, off = (v / self.camera.scale for v in _DASH_PX)
         self.dashes = np.zeros((0, 2, 2)) if path is None else _dashes(path, on, off)
         paths = platoon_paths(run)  # with platoons: every platoon's reference

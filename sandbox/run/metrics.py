@@ -75,9 +75,9 @@ import numpy as np
 from sandbox.geometry.planar import norms
 from sandbox.model.tunnelling import SUBSTEP_FRACTION
 from sandbox.plugins.registration import metric_contributions
+from sandbox.run.codes import MODE_AVOID, MODE_FORMATION
 from sandbox.run.deadlock import find_deadlocks
 from sandbox.run.platoons import platoon_metrics
-from sandbox.run.record import MODE_AVOID, MODE_FORMATION, Run
 from sandbox.run.steady_state import steady_state
 
 #: Above this many vehicles the minimum distance uses a KD-tree per sample.
@@ -219,7 +219,7 @@ def mode_switches(mode: np.ndarray) -> int:
     return int(np.count_nonzero(np.diff(m) != 0))
 
 
-def healthy_events(run: Run) -> list[bool]:
+def healthy_events(run: Any) -> list[bool]:
     """Whether each collision event involved only vehicles without an active failure.
 
     A vehicle's failure state at an event is the one recorded for the control period the
@@ -241,7 +241,7 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]:
+def compute_metrics(run: Any, settle_tol: float | None = None) -> dict[str, Any]:
     """All metrics of a run, as written to ``metrics.json``.
 
     Parameters
@@ -374,7 +374,7 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     return out
 
 
-def _deadlocks(run: Run, spec: Any) -> list[dict[str, Any]]:
+def _deadlocks(run: Any, spec: Any) -> list[dict[str, Any]]:
     """The ``deadlocks`` of ``metrics.json``: :func:`find_deadlocks` of the run."""
     keys = {}
     if spec is not None:
@@ -417,7 +417,7 @@ def _effort(
     }
 
 
-def _tunnelling(run: Run, peak_v1: list[float] | None) -> dict[str, Any] | None:
+def _tunnelling(run: Any, peak_v1: list[float] | None) -> dict[str, Any] | None:
     """The vehicle that moved farthest beyond the tunnelling bound in one substep.
 
     From the commands applied during the run (``LoopMetrics.peak_v1``), not from the
