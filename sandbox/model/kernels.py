@@ -78,11 +78,7 @@ class Controller:
         self._accel, self._v1 = _rows(accel_max), _rows(v1_max)
         self._v2 = _rows(v2_max)
         self._turn = _rows(np.inf if turn_max is None else turn_max)
-        self._flags = (
-            (0 if turn_max is None else 1)
-            | (2 if np.ndim(turn_max) == 0 else 0)
-            | (4 if np.ndim(v2_max) == 0 else 0)
-        )
+        self._flags = 0 if turn_max is None else 1  # the turn-rate limit
         self._c = accel.module("controller")
 
     def step(

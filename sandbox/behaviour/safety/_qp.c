@@ -1,10 +1,11 @@
 /* The exact projection of sandbox/behaviour/safety/qp.py (project) in one C call.
  *
- * qp.py calls this where this optional extension is built and its check passes: each
- * problem projected as numpy's project does (qp_project.h, shared with _filter.c).
+ * qp.py calls this where this optional extension is built (the compiled path ``qp``
+ * of sandbox/accel.py): each problem projected as qp.project_numpy projects it
+ * (qp_project.h, shared with _filter.c).
  */
 
-#include "numpy_rules.h"
+#include "accel.h"
 #include "qp_project.h"
 
 PyDoc_STRVAR(project_doc,
