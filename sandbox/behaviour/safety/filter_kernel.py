@@ -53,7 +53,7 @@ from sandbox.model.barriers import MIN_DIST, MIN_SPEED
 from sandbox.model.kernels import c_float64
 
 if TYPE_CHECKING:
-    from sandbox.behaviour.safety.cbf import CBFState
+    from sandbox.behaviour.safety.state import CBFState
     from sandbox.plugins.contexts import FilterContext
 
 #: The flags of the C loop: ``reverse: true``, ``projection: speed``,
