@@ -143,7 +143,8 @@ def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]
     s : ndarray (m,) [m]
         The positions along the direction of travel.
     brake : float [m/s^2]
-        The drive's braking limit (finite).
+        The drive's braking limit (finite, above 0; for others the numpy form
+        evaluates the whole grid and the compiled form's numbers are its own).
 
     Returns
     -------
