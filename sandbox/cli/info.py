@@ -52,12 +52,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         sub,
         "info",
         "print the versions and which compiled paths are on",
-        ["sandbox info", "SANDBOX_ACCEL=0 sandbox info   # every compiled path off"],
+        ["sandbox info", "sandbox info | grep off   # the paths that do not run"],
         description=(
             "Print the package's version, Python's, numpy's and pymunk's, and one "
             "line per compiled path (the C loops of the stages, sandbox/accel.py): "
             "its name, then on, or off and why: not built (no C compiler at "
-            "install), SANDBOX_ACCEL=0, or the error its import raised."
+            "install), SANDBOX_ACCEL=0, or the error its import raised. "
+            "SANDBOX_ACCEL=0 in the environment turns every compiled path off."
         ),
     )
     p.set_defaults(func=cmd_info)
