@@ -218,7 +218,7 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         return st.detected.copy(), list(st.kinds)
     if st.history is None:
         st.history = shape_history(ctx)
-    if residual_kernel.usable():  # the same numbers in one C call
+    if residual_kernel.usable():  # the compiled path: the pass in one C call
         events = residual_kernel.ResidualPass.of(ctx).run(
             st, ctx.t, ctx.seen, ctx.fresh, ctx.in_contact, ctx.commands,
             ctx.memory.get("trace"),

@@ -105,7 +105,7 @@ def advance_model(st: DetectorState, ctx: DetectorContext) -> None:
         st.pose, st.vel, st.rate, st.travel, ctx.commands, ctx.motor_accel,
         ctx.turn_accel, h, s,
     )  # fmt: skip
-    if moved is not None:  # the same numbers in one C call
+    if moved is not None:  # the compiled path: the period in one C call
         st.vel, st.rate = moved
         return
     dts = h / s
