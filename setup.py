@@ -71,7 +71,6 @@ LOOPS = tuple(
         "sandbox/model/_laws.c",
         "sandbox/behaviour/_pair_field.c",
         "sandbox/physics/_motors.c",
-        "sandbox/behaviour/safety/_qp.c",
         "sandbox/behaviour/safety/_filter.c",
         "sandbox/loop/_period.c",
         "sandbox/behaviour/_fits.c",

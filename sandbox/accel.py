@@ -90,8 +90,8 @@ PATHS: tuple[CompiledPath, ...] = (
     ),
     CompiledPath(
         "qp",
-        "sandbox.behaviour.safety._qp",
-        "the safety filter's exact projections",
+        "sandbox.behaviour.safety._filter",
+        "the safety filter's exact projections (in the filter's extension)",
     ),
     CompiledPath(
         "motors",

@@ -14,7 +14,8 @@
  * vehicle whose problem, or whose turned problem, has no point (which needs
  * qp.min_violation, LAPACK's) is handed back to numpy with its problem.
  *
- * world_counts does the reductions of accounting.account_worlds.
+ * world_counts does the reductions of accounting.account_worlds, and project the
+ * exact projections of qp.project over many problems (the compiled path ``qp``).
  *
  * The C library's sin, cos and hypot; the numbers agree with the numpy step within
  * the tolerance of sandbox/accel.py.
@@ -633,17 +634,71 @@ done:
     return result;
 }
 
+PyDoc_STRVAR(project_doc,
+"project(z0, a, b, tol, z, feasible) -> None\n"
+"\n"
+"``z0`` (n, 2), ``a`` (n, m, 2), ``b`` (n, m) float64; writes the nearest point of\n"
+"each polygon to ``z`` (n, 2) (``z0`` where it is empty) and ``feasible`` (n,) bool.");
+
+static PyObject *
+project(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "project takes 6 arguments");
+        return NULL;
+    }
+    double tol = PyFloat_AsDouble(args[3]);
+    if (tol == -1.0 && PyErr_Occurred()) {
+        return NULL;
+    }
+    Rows r[4];
+    Py_buffer ok;
+    int got = 0, got_ok = 0;
+    PyObject *result = NULL;
+    const int at[] = {0, 1, 2, 4};
+    for (int k = 0; k < 4; k++) {
+        if (get_rows(args[at[k]], &r[k], k == 3) < 0) goto done;
+        got++;
+    }
+    if (PyObject_GetBuffer(args[5], &ok, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0)
+        goto done;
+    got_ok = 1;
+    Py_ssize_t n = r[0].len / 2;
+    Py_ssize_t m = n ? r[2].len / n : 0;
+    if (r[0].len != 2 * n || r[2].len != n * m || r[1].len != 2 * n * m ||
+        r[3].len != 2 * n || ok.len != n || ok.itemsize != 1) {
+        PyErr_SetString(PyExc_ValueError, "project: shapes differ");
+        goto done;
+    }
+    const double *z0 = r[0].data, *A = r[1].data, *B = r[2].data;
+    double *z = r[3].data;
+    unsigned char *feasible = ok.buf;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        feasible[k] = (unsigned char)project_one(A + 2 * m * k, B + m * k, m, z0[2 * k],
+                                                 z0[2 * k + 1], tol, z + 2 * k);
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    release(r, got);
+    if (got_ok) {
+        PyBuffer_Release(&ok);
+    }
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"velocity_step", (PyCFunction)(void (*)(void))velocity_step, METH_FASTCALL,
      velocity_step_doc},
     {"world_counts", (PyCFunction)(void (*)(void))world_counts, METH_FASTCALL,
      world_counts_doc},
+    {"project", (PyCFunction)(void (*)(void))project, METH_FASTCALL, project_doc},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_filter",
-    "The CBF filter's velocity barrier and its counters in C (see filter_kernel.py).",
+    "The CBF filter's velocity barrier, its counters and its projections in C.",
     -1, methods,
 };
 

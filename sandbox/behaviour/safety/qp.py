@@ -8,8 +8,8 @@ edge line, or a vertex, the intersection of two edge lines. :func:`project` comp
 all ``1 + m + m (m - 1) / 2`` candidates, keeps the feasible ones and returns the
 nearest: the exact optimum, with no iteration and no tolerance other than the
 feasibility test. Where the compiled path ``qp`` is on (:mod:`sandbox.accel`;
-``_qp.c``), :func:`project` is one C loop over the problems, within 1e-9 of
-:func:`project_numpy`, the reference (``tests/test_compiled_paths.py``).
+``project`` of ``_filter.c``), :func:`project` is one C loop over the problems,
+within 1e-9 of :func:`project_numpy`, the reference (``tests/test_compiled_paths.py``).
 
 When the half-planes have no common point, :func:`min_violation` finds the smallest
 slack ``s`` for which the *soft* half-planes relaxed to ``a . z <= b + s`` meet the

@@ -1,7 +1,7 @@
 /* The exact projection of one problem of sandbox/behaviour/safety/qp.py (project).
  *
- * Shared by _qp.c (qp.project over many problems) and _filter.c (the velocity
- * barrier's whole step). For one problem it does what qp.project_numpy does: z0
+ * Included by _filter.c: qp.project over many problems (project) and the velocity
+ * barrier's whole step. For one problem it does what qp.project_numpy does: z0
  * itself if it keeps every half-plane (within the tolerance); else every candidate
  * (the projections of z0 on the edge lines, then the vertices of each pair of lines
  * i < j), the feasible ones kept and the nearest returned (the first on a tie).
