@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import platform
 
-from sandbox.cli.common import EXIT_OK, add_command
+from sandbox.cli.common import EXIT_OK, add_command, add_plugin_option
 
 
 def cmd_info(args: argparse.Namespace) -> int:
@@ -61,4 +61,5 @@ def register(sub: argparse._SubParsersAction) -> None:
             "SANDBOX_ACCEL=0 in the environment turns every compiled path off."
         ),
     )
+    add_plugin_option(p)
     p.set_defaults(func=cmd_info)
