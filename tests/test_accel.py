@@ -148,8 +148,9 @@ def test_a_path_not_built_is_named_by_info_and_run(tmp_path):
     done = sandbox(*run, str(tmp_path / "a"), missing=missing)
     assert done.returncode == 0, done.stderr
     warned = [x for x in done.stderr.splitlines() if "not built" in x]
+    gone = [p.name for p in accel.PATHS if p.module in missing.split(",")]
     assert warned == [
-        "warning: compiled paths not built (controller, filter): this install runs "
+        f"warning: compiled paths not built ({', '.join(gone)}): this install runs "
         "their numpy forms, several times slower for small fleets; reinstall with a "
         "C compiler (sandbox info)"
     ]
