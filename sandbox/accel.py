@@ -22,23 +22,25 @@ bit apart, and a C loop adds in its own order), and over a long run such a diffe
 may grow where a contact grazes or not. Outside contacts the paths agree with their
 numpy forms within (the tests' bounds, ``tests/test_compiled_paths.py``):
 
-=============  ======================================================================
-path           tolerance against the numpy form
-=============  ======================================================================
-stepping       the same calls of pymunk's own functions: the same bytes
-motors         rtol 1e-12 on the force limits; the same joints changed
-controller     rtol 1e-12, atol 1e-12 on ``chi`` and the commands of a period
-laws           rtol 1e-12, atol 1e-12 on the slots and their derivatives
-pair_field     rtol 1e-12, atol 1e-12 on the shift; the same active vehicles
-filter         atol 1e-9 [m/s] on the filtered commands, 1e-9 on barrier values
-qp             atol 1e-9 on the projection (the feasibility tolerance); the same
-               feasible problems
-residual       rtol 1e-9 on the CUSUMs and the detector's sums; the same alarms
-fits           rtol 1e-9 on the two least sums of squares
-period         rtol 1e-12 on the loop metrics and the recorded samples
-=============  ======================================================================
+==========  ==========================================================================
+path        tolerance against the numpy form (rtol and atol)
+==========  ==========================================================================
+laws        1e-12 on a period's slots and their derivatives, and the tangent of (15)
+pair_field  1e-12 on the shift and the targets; the same avoiding vehicles
+controller  1e-12 on ``chi`` and the commands of a period, and on the motor model
+filter      1e-9 [m/s] on ``v1`` and the slack, 1e-8 [rad/s] on ``v2``, 1e-9 on the
+            barrier values; the same filtered vehicles and rows
+qp          1e-9 [m/s] on the projections; the same feasible problems
+motors      1e-12 on the force limits; the same joints changed
+stepping    1e-9 on whole runs with contacts (the same calls of pymunk's functions)
+period      the divergence check's verdict; the loop metrics and the record within
+            the whole runs' bound
+residual    1e-9 on the detector's state and trace; the same alarms and kinds
+fits        1e-9 on the two least sums of squares
+==========  ==========================================================================
 
-and whole runs without contacts agree within rtol 1e-9 on every recorded number.
+and whole runs without contacts agree within 1e-9 on every recorded number and
+metric, with the same events and detections.
 """
 
 from __future__ import annotations
