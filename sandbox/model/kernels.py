@@ -13,8 +13,8 @@ fleet's controller.
 Where the compiled path ``controller`` is on (:mod:`sandbox.accel`; ``_kernels.c``),
 the same composition runs as one C loop over the vehicles, with the C library's
 ``atan2``, ``hypot``, ``sin`` and ``cos``: within rtol 1e-12 of the numpy functions
-(``tests/test_compiled_paths.py``), which stay the reference (:meth:`Controller.
-step_numpy`) and run where the path is off.
+(``tests/test_compiled_paths.py``), which stay the reference
+(:meth:`Controller.step_numpy`) and run where the path is off.
 """
 
 from __future__ import annotations

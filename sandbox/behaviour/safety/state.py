@@ -4,8 +4,9 @@
 index and, for ``barrier: braking`` under sensing, the estimate of the others' poses;
 :func:`auto_range` and :func:`braking_range` bound the distance beyond which no
 condition of the velocity or the braking barrier can bind; :class:`Brakings` is every
-vehicle's braking, which the braking barrier's rows (:mod:`~sandbox.behaviour.safety.
-braking`), its check (:mod:`~sandbox.behaviour.safety.braking_check`) and its runs
+vehicle's braking, which the braking barrier's rows
+(:mod:`~sandbox.behaviour.safety.braking`), its check
+(:mod:`~sandbox.behaviour.safety.braking_check`) and its runs
 (:mod:`~sandbox.behaviour.safety.running`) read. The filter itself is
 :mod:`sandbox.behaviour.safety.cbf`.
 """
