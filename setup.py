@@ -11,8 +11,10 @@ Everything else is declared in ``pyproject.toml``.
 The optional C extensions are the compiled paths of ``sandbox/accel.py``, the
 registry that imports them (``ARCHITECTURE.md``, "Compiled paths"): ``_cstep``, which
 steps a batch of pymunk worlds through a whole control period in one call through
-pymunk's own functions' addresses (nothing of Chipmunk is linked), and the loops
-that share ``sandbox/accel.h``, which read an ndarray's data through numpy's C API
+pymunk's own functions' addresses (nothing of Chipmunk is linked); ``_draws``, which
+draws every world's sensing noise through numpy's random C API (linked with the
+``npyrandom`` library numpy ships for extensions); and the loops that share
+``sandbox/accel.h``, which read an ndarray's data through numpy's C API
 where numpy's headers are there at build time (``pyproject.toml`` asks for numpy in
 the build), else through the buffer interface. They are optional: where one cannot
 be compiled the install goes on without it (setuptools prints the error), its path
@@ -79,6 +81,28 @@ LOOPS = tuple(
 )
 
 
+def _draws() -> list[Extension]:
+    """The sensing draws' extension, which links numpy's random C API (npyrandom).
+
+    None without numpy at build time (its headers and its library come with it).
+    """
+    try:
+        import numpy.random
+    except ImportError:
+        return []
+    return [
+        Extension(
+            "sandbox.behaviour._draws",
+            ["sandbox/behaviour/_draws.c"],
+            depends=HEADERS,
+            optional=True,
+            library_dirs=[str(Path(numpy.random.__file__).parent / "lib")],
+            libraries=["npyrandom", "m"],
+            **_numpy_api(),
+        )
+    ]
+
+
 class FreshBuild(build):
     """``build`` from an empty build directory of its own (nothing stale reused)."""
 
@@ -98,7 +122,7 @@ SCENARIO_PACKAGES = [
 ]
 
 setup(
-    ext_modules=[CSTEP, *LOOPS],
+    ext_modules=[CSTEP, *LOOPS, *_draws()],
     cmdclass={"build": FreshBuild},
     packages=[
         *find_packages(include=["sandbox", "sandbox.*"]),

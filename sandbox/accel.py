@@ -27,6 +27,7 @@ path        tolerance against the numpy form (rtol and atol)
 ==========  ==========================================================================
 laws        1e-12 on a period's slots and their derivatives, and the tangent of (15)
 pair_field  1e-12 on the shift and the targets; the same avoiding vehicles
+draws       the numbers of each world's Generator (numpy's own functions): exact
 controller  1e-12 on ``chi`` and the commands of a period, and on the motor model
 filter      1e-9 [m/s] on ``v1`` and the slack, 1e-8 [rad/s] on ``v2``, 1e-9 on the
             barrier values; the same filtered vehicles and rows
@@ -79,6 +80,11 @@ PATHS: tuple[CompiledPath, ...] = (
         "pair_field",
         "sandbox.behaviour._pair_field",
         "the avoidance field's pair terms and a weighted strategy's targets",
+    ),
+    CompiledPath(
+        "draws",
+        "sandbox.behaviour._draws",
+        "every world's sensing draws from its own generator (numpy's random C API)",
     ),
     CompiledPath(
         "controller",

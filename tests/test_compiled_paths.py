@@ -28,6 +28,7 @@ from sandbox.behaviour.residual_kernel import ResidualPass
 from sandbox.behaviour.safety import accounting, qp
 from sandbox.behaviour.safety.accounting import FilterStep, WorldCounters
 from sandbox.behaviour.safety.cbf import PARAMS, CBFState, filter_commands
+from sandbox.behaviour.sensing import Broadcast, StackedBroadcast
 from sandbox.geometry.neighbours import NeighbourList, WorldPairs
 from sandbox.loop.divergence import RowsView, healthy
 from sandbox.loop.simulation import Simulation
@@ -324,6 +325,28 @@ def test_a_strategys_shifted_targets_agree_with_numpy(kind):
         close(got[0], ctx.slot + shift, TIGHT)
         close(got[1], shift, TIGHT)
         assert np.array_equal(got[2], active)
+
+
+# ------------------------------------------------------------------ sensing draws
+@needs("draws")
+@pytest.mark.parametrize("K", [1, 5])
+def test_the_draws_of_a_batch_are_each_worlds_generators(K):
+    # Not a tolerance: the one call runs numpy's own fill functions on each world's
+    # bit generator, so a world in a batch receives the copies of its single run.
+    n = 4
+
+    def copies():
+        parts = [Broadcast(0.01, 0.005, 1, 0.2, seed) for seed in range(K)]
+        stacked = StackedBroadcast(parts, n)
+        pos, theta = np.zeros((K * n, 2)), np.zeros(K * n)
+        return [stacked.update(pos, theta).copy() for _ in range(6)]
+
+    got, want = both_ways(copies, "draws")
+    alone = Broadcast(0.01, 0.005, 1, 0.2, 0)
+    first = [alone.update(np.zeros((n, 2)), np.zeros(n)).copy() for _ in range(6)]
+    for a, b, c in zip(got, want, first, strict=True):
+        assert np.array_equal(a, b)
+        assert np.array_equal(a[:n], c)
 
 
 # ------------------------------------------------------------------ safety filter
@@ -680,6 +703,7 @@ def test_a_world_keeps_its_clock_alone_and_leaves_the_shared_one_when_stopped():
 CALLED = {
     "laws": ("law_targets",),
     "pair_field": ("shifted_targets",),
+    "draws": ("fill_worlds",),
     "controller": ("controller_step",),
     "filter": ("velocity_step", "world_counts"),
     "motors": ("motor_limits",),

@@ -16,7 +16,9 @@ crc32("sensing")])``: adding sensing changes no other draw of a scenario, and th
 scenario and seed give the same copies. With every value 0 no broadcast is made at all
 (:func:`make_broadcast` returns None) and runs are bit-identical to runs without the
 section. The worlds of a batch (:class:`StackedBroadcast`) draw, each from its own
-generator in the order it draws alone, into their rows of two stacked buffers.
+generator in the order it draws alone, into their rows of two stacked buffers: in one
+C call for all of them where the compiled path ``draws`` is on (:mod:`sandbox.accel`;
+numpy's random C API on each world's bit generator, the numbers of its Generator).
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ import zlib
 from collections import deque
 
 import numpy as np
+
+from sandbox import accel
 
 #: The stream of the sensing draws, mixed with the scenario's seed.
 SENSING_STREAM = zlib.crc32(b"sensing")
@@ -152,14 +156,20 @@ class StackedBroadcast:
             (b.rng.standard_normal, self._noise[w], b.rng.random, self._draws[w])
             for w, b in enumerate(broadcasts)
         ]
+        # Or every world's in one C call, on their bit generators' capsules.
+        self._c = accel.module("draws")
+        self._capsules = [b.rng.bit_generator.capsule for b in broadcasts]
         for w, b in enumerate(broadcasts):
             b.stack = (self, slice(w * n, (w + 1) * n))
 
     def update(self, pos: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """:meth:`Broadcast.update` of every world, shape (K n, 3)."""
-        for normal, noise, uniform, draws in self._calls:  # its normals, its uniforms
-            normal(out=noise)
-            uniform(out=draws)
+        if self._c is not None:
+            self._c.fill_worlds(self._capsules, self._noise, self._draws)
+        else:
+            for normal, noise, uniform, draws in self._calls:  # normals, uniforms
+                normal(out=noise)
+                uniform(out=draws)
         lost = self._draws.reshape(-1) < self.loss
         noise = self._noise.reshape(-1, 3) * self.sigma
         pose = np.column_stack((pos, theta)) + noise
