@@ -22,6 +22,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "sandbox._about",
         "sandbox._version",
         "sandbox._moved",
+        "sandbox.accel",
     ),
     ("sandbox.geometry",),
     ("sandbox.plugins",),

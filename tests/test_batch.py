@@ -15,8 +15,8 @@ from sandbox.cli import main
 from sandbox.loop import plan as planning
 from sandbox.loop.plan import structure_key
 from sandbox.loop.simulation import Simulation
-from sandbox.loop.stepping import WorldsPhysics
 from sandbox.loop.tally import row_reduce, row_sum
+from sandbox.physics.stepping import WorldStepper
 from sandbox.study import engine, store
 
 #: The form-up's slots lie within recovery.R of each other (so avoidance stays on, as
@@ -207,7 +207,7 @@ def test_a_batch_that_raises_gives_the_single_runs(tmp_path, monkeypatch):
         assert json.dumps(got[run_id]) == json.dumps(engine.run_task(*job))
 
 
-def test_fast_stepping_gives_the_bytes_of_world_by_world(tmp_path, monkeypatch):
+def test_stepping_together_gives_the_bytes_of_world_by_world(tmp_path, monkeypatch):
     # Without recovery the form-ups collide: contact episodes open and close while
     # every world is stepped substep by substep (the static body of the obstacle
     # reorders the bulk read).
@@ -218,7 +218,7 @@ def test_fast_stepping_gives_the_bytes_of_world_by_world(tmp_path, monkeypatch):
     fast_runs = fast.run_all()
     stepper = fast.physics._stepper
     assert stepper is not None and stepper._order is not None
-    monkeypatch.setattr(WorldsPhysics, "fast_stepping", False)
+    monkeypatch.setattr(WorldStepper, "build", classmethod(lambda cls, *a: None))
     slow = Simulation.stacked(scenarios)
     slow_runs = slow.run_all()
     assert slow.physics._stepper is None

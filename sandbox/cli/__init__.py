@@ -32,6 +32,7 @@ from sandbox.cli import (
     check,
     compare,
     figures,
+    info,
     plugins,
     run,
     scenarios,
@@ -52,7 +53,18 @@ from sandbox.cli.common import (
 from sandbox.errors import PluginError, SandboxError, SandboxWarning, ScenarioError
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
-COMMANDS = (run, validate, check, scenarios, figures, view, compare, sweep, plugins)
+COMMANDS = (
+    run,
+    validate,
+    check,
+    scenarios,
+    figures,
+    view,
+    compare,
+    sweep,
+    plugins,
+    info,
+)
 
 EPILOG = """\
 examples:

@@ -22,6 +22,7 @@ from sandbox.cli.common import (
     render_gif,
     scenario_file,
 )
+from sandbox.cli.info import not_built_warnings
 from sandbox.errors import Problem, ScenarioError
 
 
@@ -69,7 +70,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         metrics = compute_metrics(run)
         write_run_dir(run, metrics, out_dir, trajectory=args.format)
     _print_summary(scenario.name, metrics, out_dir, args.format)
-    for line in metrics.get("warnings", []):
+    for line in [*metrics.get("warnings", []), *not_built_warnings()]:
         print(f"warning: {line}", file=sys.stderr)
     if stop() and run.status != STATUS_INTERRUPTED:
         # The signal came after the last step, while the outputs were written: they

@@ -28,22 +28,13 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.model.kernels import kernels_agree
+from sandbox import accel
 from sandbox.run.metrics import (
     ALL_PAIRS_MAX,
     MOTOR_ABS_TOL,
     MOTOR_REL_TOL,
     ClosestApproach,
 )
-
-try:
-    from sandbox.loop import _period
-except ImportError:  # pragma: no cover - built without a C compiler
-    _period = None
-
-#: Copy a period into the buffers in one C call where ``sandbox.loop._period`` is
-#: built and the C library's sine and cosine are numpy's (False: numpy).
-USE_KERNEL = True
 
 #: Periods buffered before :meth:`LoopTally.flush` accounts for them.
 CHUNK = 64
@@ -116,9 +107,10 @@ class LoopTally:
     def _buffer(self, b: Any, contact: np.ndarray) -> None:
         """Copy what period ``b.k`` accounts for into the buffers."""
         K, n, m = self.K, self.n, self._m
-        if _period is not None and USE_KERNEL and kernels_agree():
+        period = accel.module("period")
+        if period is not None:
             try:
-                self._buffer_c(b, contact)
+                self._buffer_c(period, b, contact)
                 return
             except (BufferError, TypeError, ValueError):  # not C arrays: numpy
                 pass
@@ -142,7 +134,7 @@ class LoopTally:
         if self._m == CHUNK:
             self.flush()
 
-    def _buffer_c(self, b: Any, contact: np.ndarray) -> None:
+    def _buffer_c(self, period: Any, b: Any, contact: np.ndarray) -> None:
         """:meth:`_buffer` in one C call (the same numbers)."""
         m = self._m
         i = j = d2 = None
@@ -151,7 +143,7 @@ class LoopTally:
             if d2 is None:
                 i, j = self._i, self._j
         commanded = self._buf_cmd[m]  # valid until the slot is written again
-        _period.buffer_period(
+        period.buffer_period(
             b.pos, i, j, b.v1, b.v2, b.vel, contact, b.theta, float(self.h),
             self._buf_d2[m], self._buf_v[m], self._buf_vel[m], self._buf_free[m],
             commanded, d2,
@@ -167,7 +159,8 @@ class LoopTally:
         if not m:
             return
         self._m = 0
-        if _period is not None and USE_KERNEL and kernels_agree() and self._flush_c(m):
+        period = accel.module("period")
+        if period is not None and self._flush_c(period, m):
             return
         if n >= 2 and self._closest is None:
             d2 = self._buf_d2[:m].reshape(m * K, -1)
@@ -199,7 +192,7 @@ class LoopTally:
         self._commanded = cmd_now[m - 1].copy()
         self._was_free = free[m - 1].copy()
 
-    def _flush_c(self, m: int) -> bool:
+    def _flush_c(self, period: Any, m: int) -> bool:
         """:meth:`flush` of ``m`` periods in one C call (the same numbers).
 
         False where the call refuses the arrays (nothing is changed then).
@@ -210,7 +203,7 @@ class LoopTally:
         commanded = self._commanded if has_cmd else np.empty((K * n, 2))
         was_free = self._was_free if has_cmd else np.empty(K * n, dtype=bool)
         try:
-            _period.flush_periods(
+            period.flush_periods(
                 m, K, n, MOTOR_REL_TOL, MOTOR_ABS_TOL, has_prev, has_cmd,
                 self._buf_d2[:m], self._buf_v[:m], self._buf_vel[:m],
                 self._buf_cmd[:m], self._buf_free[:m], self.best, self.effort_v1,
