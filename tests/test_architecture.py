@@ -131,22 +131,6 @@ KNOWN_CIRCLES: tuple[frozenset[str], ...] = (
         f"sandbox.behaviour.{m}" for m in ("detection", "isolation", "residual_kernel")
     ),
     frozenset({"sandbox.behaviour.pair_field", "sandbox.behaviour.recovery"}),
-    frozenset(  # the loop's, until reconfiguration returns what changes
-        {"sandbox.behaviour.reconfigure"}
-        | {
-            f"sandbox.loop.{m}"
-            for m in (
-                "building",
-                "plan_kernel",
-                "platoon_reconfigure",
-                "platoon_sections",
-                "platoons",
-                "simulation",
-                "stacked_law",
-                "step_api",
-            )
-        }
-    ),
     frozenset(
         f"sandbox.behaviour.safety.{m}"
         for m in (

@@ -64,7 +64,7 @@ def _run(scenarios) -> tuple[list, detection.DetectorState]:
     """The runs of the scenarios stepped at once, and their detector's last state."""
     sim = Simulation.stacked(scenarios)
     runs = sim.run_all()
-    detector = sim.detection if len(scenarios) == 1 else sim._detection
+    detector = sim.detection
     return runs, detector.memory["state"]
 
 

@@ -63,7 +63,7 @@ def test_samples_recorded_in_c_are_numpys(monkeypatch, batch):
 def test_a_sample_the_c_copy_refuses_is_written_by_numpy():
     K, n = 2, 3
     rng = np.random.default_rng(0)
-    made = [recording.WorldsRecorder(4, K, n) for _ in range(2)]
+    made = [recording.LoopRecord(4, K, n) for _ in range(2)]
     N = K * n
     args = dict(
         pos=rng.normal(size=(N, 2)),
@@ -127,7 +127,7 @@ def test_a_flush_of_many_periods_sums_as_period_after_period(monkeypatch):
 
 @needs_period
 def test_the_state_read_in_c_is_numpys(monkeypatch):
-    # WorldsPhysics.read splits the bodies' rows in one C call; without it numpy's
+    # LoopPhysics.read splits the bodies' rows in one C call; without it numpy's
     # copies do: the same runs to the bit, alone and batched
     from sandbox.loop import stepping
 

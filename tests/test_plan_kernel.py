@@ -153,16 +153,17 @@ def _built(name, overrides=()):
 
 @needs_c
 def test_the_loop_chooses_the_c_calls_where_they_cover_it():
-    fig15 = _built("paper/fig15_continuous_beta1")
-    assert fig15._law_kernel is not None and fig15._shift_kernel is not None
+    def calls(sim):  # the law's and the strategy's C calls the loop chose
+        return sim._formation.kernel, sim._avoidance.kernel
+
+    law, shift = calls(_built("paper/fig15_continuous_beta1"))
+    assert law is not None and shift is not None
     # obstacles to avoid, several platoons: the numpy path
-    obstacles = _built("failures/obstacle_field")
-    assert obstacles._shift_kernel is None
-    platoons = _built("traffic/intersection_four")
-    assert platoons._law_kernel is None and platoons._shift_kernel is None
+    assert calls(_built("failures/obstacle_field"))[1] is None
+    assert calls(_built("traffic/intersection_four")) == (None, None)
     # the tangential term is not in the C call
     tangential = _built("paper/fig15_continuous_beta1", ["recovery.tangential=0.5"])
-    assert tangential._shift_kernel is None
+    assert calls(tangential)[1] is None
 
 
 @needs_c

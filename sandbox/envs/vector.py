@@ -214,7 +214,7 @@ class VectorTask:
         for c, (sim, worlds) in enumerate(self.cohorts):
             for j, k in enumerate(worlds):
                 if self.where[k, 0] == c and self.ended[k]:
-                    terminated[k] = sim.states[j].status == "diverged"
+                    terminated[k] = sim.statuses[j] == "diverged"
         return terminated, self.ended & ~terminated
 
     def times(self) -> np.ndarray:

@@ -36,7 +36,7 @@ _FIELDS = {
 }
 
 
-class WorldsRecorder:
+class LoopRecord:
     """Samples of K worlds of ``n`` vehicles, at most ``capacity`` each.
 
     Parameters
