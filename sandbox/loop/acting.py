@@ -15,8 +15,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from sandbox.loop.detecting import Detecting
-from sandbox.loop.formation import Failed
 from sandbox.loop.layout import Layout
+from sandbox.loop.liveness import Failed
 from sandbox.loop.plan import Plan
 from sandbox.loop.safety import Safety
 from sandbox.loop.schedules import CommandSchedules
@@ -89,6 +89,8 @@ class Acting:
             gains, layout.h, self.v1_max, self.accel_max, self.v2_max, turn_max
         )
         self.schedules = CommandSchedules(layout.scenarios, layout.n)
+        self._scheduled = len(self.schedules) > 0
+        self._fails = len(failures) > 0  # else no vehicle ever fails
         self._commanded_rows = np.flatnonzero(fleet.commanded)
 
     def commands(
@@ -152,7 +154,7 @@ class Acting:
         # Vehicles not driven by the controller this period.
         passive = fleet.commanded
         schedules = self.schedules
-        if len(schedules):
+        if self._scheduled:
             if external is not None:  # an override of the target drives the vehicle
                 v1c, v2c = v1.copy(), v2.copy()
                 schedules.apply(t, v1, v2)
@@ -182,7 +184,7 @@ class Acting:
             frozen = frozen & ~fs.active_vehicles(t + h, live)
         # chi follows the applied velocity of passive vehicles, so that the law resumes
         # without a jump when the failure or the override ends.
-        if len(fs):  # else no vehicle is frozen
+        if self._fails:  # else no vehicle is frozen
             passive = frozen | passive
         if (passive is not fleet.commanded or len(self._commanded_rows)) and (
             np.count_nonzero(passive)
@@ -194,7 +196,7 @@ class Acting:
         mode = plan.active.astype(np.int8)  # MODE_FORMATION 0, MODE_AVOID 1
         if external is not None:
             mode[external] = MODE_EXTERNAL
-        if len(fs):  # else no vehicle has failed
+        if self._fails:  # else no vehicle has failed
             mode[failing] = MODE_FAILED
         overridden = target if external is not None else None
         return Acted(v1, v2, failing, mode, chi_next, overridden)

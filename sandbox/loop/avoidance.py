@@ -13,6 +13,7 @@ not avoid.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -20,8 +21,8 @@ import numpy as np
 from sandbox.behaviour.ranges import avoid_field
 from sandbox.errors import PluginRunError
 from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList, WorldPairs
-from sandbox.loop.formation import Failed
 from sandbox.loop.layout import Layout
+from sandbox.loop.liveness import Failed
 from sandbox.loop.perception import Perception
 from sandbox.loop.state import Fleet
 from sandbox.model.obstacle_field import ObstacleField
@@ -111,7 +112,7 @@ class Avoidance:
         may_avoid: np.ndarray,
         known: np.ndarray,
         believed: np.ndarray | None,
-        live: list[int],
+        live: Sequence[int],
         failed: Failed,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The targets, the shift and the avoiding vehicles of ``t`` (N rows each).

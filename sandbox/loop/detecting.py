@@ -10,6 +10,7 @@ events and summary.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -17,8 +18,8 @@ import numpy as np
 from sandbox.behaviour.detection import Detection
 from sandbox.errors import PluginRunError
 from sandbox.loop.divergence import RowsView
-from sandbox.loop.formation import Failed
 from sandbox.loop.layout import Layout
+from sandbox.loop.liveness import Failed
 from sandbox.loop.perception import Perception
 from sandbox.loop.state import Fleet
 from sandbox.plugins.registration import get
@@ -60,7 +61,7 @@ class Detecting:
         failing: np.ndarray,
         fleet: Fleet,
         seen: np.ndarray | None,
-        live: list[int],
+        live: Sequence[int],
         failed: Failed,
     ) -> np.ndarray:
         """What each world's platoon believes has failed at ``t`` [s], (N,) bool.
@@ -110,7 +111,7 @@ class Detecting:
                 failed(w, exc)
         return known
 
-    def intend(self, v1: np.ndarray, v2: np.ndarray, live: list[int]) -> None:
+    def intend(self, v1: np.ndarray, v2: np.ndarray, live: Sequence[int]) -> None:
         """Tell the detectors the commands the controllers ask for this period."""
         if self.batch is not None:  # np.column_stack's, in two copies
             intended = np.empty((len(v1), 2))

@@ -25,7 +25,7 @@ slot. A plug-in that fails ends its world alone (``failed(w, exc)``).
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -33,6 +33,7 @@ import numpy as np
 from sandbox.behaviour.reconfigure import FormationState, Reconfiguration, Reform
 from sandbox.errors import PluginRunError
 from sandbox.loop.layout import Layout
+from sandbox.loop.liveness import Failed
 from sandbox.loop.platoon_targets import platoon_targets
 from sandbox.loop.platoons import Platoons
 from sandbox.loop.reference_rows import ReferenceRows
@@ -42,9 +43,6 @@ from sandbox.model.law_kernel import overwrite_rows
 from sandbox.model.laws import LawInputs, spread
 from sandbox.model.references import TABULATED_REFERENCES
 from sandbox.plugins.registration import LawContext, get, make_law
-
-#: What ends a world whose plug-in failed: ``failed(w, exc)``.
-Failed = Callable[[int, PluginRunError], None]
 
 
 class Formation:
@@ -72,7 +70,7 @@ class Formation:
         #: The reference row by row, evaluated a chunk at a time (tabulated types).
         self.rows: ReferenceRows | None = None
         if type(self.reference) in TABULATED_REFERENCES:
-            self.rows = ReferenceRows(self.reference, h, layout.steps)
+            self.rows = ReferenceRows(self.reference, h, layout.steps, K)
         #: Each world's leader (-1: none), as its reconfiguration last set it.
         self.leaders = np.array([sc.leader_index for sc in scenarios], dtype=np.intp)
         plugin = get("law", spec.law) if spec is not None else None
@@ -172,7 +170,7 @@ class Formation:
         k: int,
         fleet: Fleet,
         believed: np.ndarray | None,
-        live: list[int],
+        live: Sequence[int],
         failed: Failed,
     ) -> tuple[np.ndarray, ...]:
         """Slots, ``x_ref'``, ``x_ref''`` (N, 2) and each world's point (K, 2).
@@ -231,6 +229,8 @@ class Formation:
         slot, v_ref, a_ref = overwrite_rows(
             triple, ref, self.track_rows, self.commanded_rows
         )
+        if self.rows is not None:  # the chunk's points of every world (a view)
+            return slot, v_ref, a_ref, self.rows.points(k)
         point = ref[0] if ref is not None else np.full(2, np.nan)
         return slot, v_ref, a_ref, spread(point, (K, 2))
 
@@ -261,8 +261,9 @@ class Formation:
             )
         except (BufferError, TypeError, ValueError):  # not such arrays: numpy
             return None
-        point = table[0][row] if table is not None else np.full(2, np.nan)
-        return slot, v_ref, a_ref, spread(point, (self._layout.K, 2))
+        if table is None:
+            return slot, v_ref, a_ref, spread(np.full(2, np.nan), (self._layout.K, 2))
+        return slot, v_ref, a_ref, self.rows.points_of(row)
 
     def _one_context(
         self, t: float, ref: tuple | None, fleet: Fleet, believed: np.ndarray | None
@@ -298,7 +299,7 @@ class Formation:
         ref: tuple | None,
         fleet: Fleet,
         believed: np.ndarray | None,
-        live: list[int],
+        live: Sequence[int],
         failed: Failed,
     ) -> list[np.ndarray]:
         """Each world's own law on its rows (a plug-in's, see the module docstring)."""
@@ -358,7 +359,7 @@ class Formation:
         )
 
     def _platoon_targets(
-        self, t: float, fleet: Fleet, believed: np.ndarray | None, live: list[int]
+        self, t: float, fleet: Fleet, believed: np.ndarray | None, live: Sequence[int]
     ) -> tuple[np.ndarray, ...]:
         """Each world's platoons' slots, ``x_ref'``, ``x_ref''`` and points.
 
@@ -484,7 +485,7 @@ class Formation:
         seen: np.ndarray | None,
         believed: np.ndarray | None,
         known: np.ndarray,
-        live: list[int],
+        live: Sequence[int],
         info: list[dict],
     ) -> list[int]:
         """Each live world's platoons: the merges, splits and reconfigurations of ``t``.

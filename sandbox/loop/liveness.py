@@ -3,17 +3,22 @@
 A world ends alone (a diverged state, a plug-in that failed) or with the others (at
 the duration, when stopped, when the caller asks for the results early); from then
 on its rows are not stepped, and its :class:`~sandbox.Run` is kept here.
-:class:`Liveness` is changed only through its methods, by the loop's ending
-(:mod:`sandbox.loop.ending`).
+:class:`Liveness` is built with the loop (:mod:`sandbox.loop.building`) and changed
+by the loop alone (:class:`~sandbox.loop.simulation.Simulation`, where worlds end).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from sandbox.errors import PluginRunError
 from sandbox.run.record import STATUS_OK, Run
+
+#: What a stage calls to end a world whose plug-in failed: ``failed(w, exc)``.
+Failed = Callable[[int, PluginRunError], None]
 
 
 class Liveness:
@@ -58,11 +63,11 @@ class Liveness:
         self.undefined = np.zeros(K, dtype=bool)
         self.closed = False
         self.stopped = False
-        self._worlds = list(range(K))
+        self._worlds = tuple(range(K))
 
-    def worlds(self) -> list[int]:
-        """The live worlds in order (a new list)."""
-        return list(self._worlds)
+    def worlds(self) -> tuple[int, ...]:
+        """The live worlds in order (as they are now: a world that ends later stays)."""
+        return self._worlds
 
     def end(self, w: int, run: Run, undefined: bool) -> None:
         """World ``w`` has ended with ``run`` (``undefined``: its plan undefined)."""
@@ -70,4 +75,4 @@ class Liveness:
         self.count -= 1
         self.undefined[w] = undefined
         self.runs[w] = run
-        self._worlds = [int(k) for k in self.live.nonzero()[0]]
+        self._worlds = tuple(int(k) for k in self.live.nonzero()[0])

@@ -57,6 +57,8 @@ class Perception:
         self.obstacles = obstacles
         #: Every world's range sensors (None: no vehicle has one).
         self.ranges = RangeReadings.make(list(scenarios), worlds, obstacles, layout.n)
+        #: Whether anything is perceived but the truth (else :meth:`update` is idle).
+        self.active = self.broadcast is not None or self.ranges is not None
 
     def update(
         self, t: float, fleet: Fleet, seen: np.ndarray | None

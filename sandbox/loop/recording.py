@@ -11,6 +11,8 @@ to world by world.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from sandbox.run.recorder import Recorder
@@ -80,7 +82,7 @@ class LoopRecord:
         mode: np.ndarray,
         failed: np.ndarray,
         point: np.ndarray,
-        worlds: list[int],
+        worlds: Sequence[int],
     ) -> None:
         """One sample of the live ``worlds`` (stacked rows ``(K n, ...)``).
 

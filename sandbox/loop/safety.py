@@ -10,14 +10,15 @@ platoon's safety section is called on its rows
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from sandbox.behaviour.ranges import avoid_field
 from sandbox.errors import PluginRunError
-from sandbox.loop.formation import Failed
 from sandbox.loop.layout import Layout
+from sandbox.loop.liveness import Failed
 from sandbox.loop.perception import Perception
 from sandbox.loop.state import Fleet
 from sandbox.model.obstacle_field import ObstacleField
@@ -95,7 +96,7 @@ class Safety:
         slot: np.ndarray,
         known: np.ndarray,
         seen: np.ndarray | None,
-        live: list[int],
+        live: Sequence[int],
         failed: Failed,
     ) -> tuple[np.ndarray, np.ndarray]:
         """The filtered commands of the period from ``t`` [s], (N,) each.

@@ -227,6 +227,7 @@ class Simulation:
             or formation.platoons is not None
         )
         self._may_avoid: np.ndarray | None = None
+        self._fails = len(parts.failures) > 0  # else no vehicle ever fails
         self._wall = time.perf_counter()
         #: Wall time spent planning and acting (law, recovery, controller, filters).
         self._control_time = 0.0
@@ -262,7 +263,9 @@ class Simulation:
             self.finite = bool(live.live.all()) and diverged(fleet) is None
         if not live.count:
             return False
-        self.seen, self.believed = self._perception.update(t, fleet, self.seen)
+        perception = self._perception
+        if perception.active:
+            self.seen, self.believed = perception.update(t, fleet, self.seen)
         return True
 
     def _plan(self) -> None:
@@ -292,7 +295,7 @@ class Simulation:
         )
         failing = self._failing
         fs = self._failures
-        if len(fs):
+        if self._fails:
             new = fs.start_new(t, live.live, fleet.v2)
             for j in new:
                 w = int(fs.world[j])
@@ -355,7 +358,7 @@ class Simulation:
             live.worlds,
         )
         fleet.v1, fleet.v2, fleet.failed = acted.v1, acted.v2, acted.failed
-        if len(self._failures):  # else never set: an episode now is healthy
+        if self._fails:  # else never set: an episode now is healthy
             self.physics.failed[:] = acted.failed  # an episode now is not healthy
         fleet.mode = acted.mode
         if acted.target is not None:
