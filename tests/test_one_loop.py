@@ -330,7 +330,7 @@ def test_worlds_that_re_form_apart_share_one_law_and_give_the_bytes_alone(
     name, fixed, tmp_path
 ):
     # The built-in law stays one call for all worlds through each world's handover
-    # and reassignment (loop/stacked_law.py); the worlds the virtual leader takes over
+    # and reassignment (loop/reforming.py); the worlds the virtual leader takes over
     # follow a second one.
     scenarios = [
         load_scenario(name, overrides=["duration=4", *fixed, *extra])
