@@ -5,7 +5,7 @@ sweep's group) of the follower-stop platoon (``scenarios/failures/follower_stop.
 four vehicles, 8 s) with ``safety: {filter: cbf}``, run as one batch
 (``Simulation.batch``). Each period it times, per call:
 
-- ``stage``: the loop's safety stage (``WorldStages._safety``: the filter's context
+- ``stage``: the loop's safety stage (``Safety.commands``: the filter's context
   for the K worlds, the filter, its counters, the commands' copies);
 - ``filter``: :func:`~sandbox.behaviour.safety.cbf.filter_commands` alone;
 - ``counters``: :func:`~sandbox.behaviour.safety.accounting.account_worlds` alone.
@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT))
 
 from sandbox import accel  # noqa: E402
 from sandbox.behaviour.safety import cbf  # noqa: E402
-from sandbox.loop import world_stages  # noqa: E402
+from sandbox.loop.safety import Safety  # noqa: E402
 from sandbox.loop.simulation import Simulation  # noqa: E402
 from sandbox.scenario import load_scenario  # noqa: E402
 
@@ -53,7 +53,7 @@ class Timers:
     def install(self) -> None:
         """Wrap the three functions where the loop and the filter look them up."""
         for owner, name, key in (
-            (world_stages.WorldStages, "_safety", "stage"),
+            (Safety, "commands", "stage"),
             (cbf, "filter_commands", "filter"),
             (cbf, "account_worlds", "counters"),
         ):

@@ -11,6 +11,8 @@ to world by world.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from sandbox import accel
@@ -28,7 +30,7 @@ _FIELDS = {
 }
 
 
-class WorldsRecorder:
+class LoopRecord:
     """Samples of K worlds of ``n`` vehicles, at most ``capacity`` each.
 
     Parameters
@@ -72,7 +74,7 @@ class WorldsRecorder:
         mode: np.ndarray,
         failed: np.ndarray,
         point: np.ndarray,
-        worlds: list[int],
+        worlds: Sequence[int],
     ) -> None:
         """One sample of the live ``worlds`` (stacked rows ``(K n, ...)``).
 

@@ -1,6 +1,6 @@
 """The physics of K worlds as the loop reaches it: read all, write all, step all.
 
-:class:`WorldsPhysics` holds one physics back-end per world. When every world is a
+:class:`LoopPhysics` holds one physics back-end per world. When every world is a
 pymunk :class:`~sandbox.physics.world.World` the worlds are read, written and stepped
 together: their motor arrays become views of stacked ones (sized at once by
 :func:`~sandbox.physics.world.motor_limits`), their control bodies read their
@@ -36,7 +36,7 @@ _MOTOR_ARRAYS = (
 )
 
 
-class WorldsPhysics:
+class LoopPhysics:
     """K worlds of ``n`` vehicles each, stepped together (see the module docstring).
 
     Parameters

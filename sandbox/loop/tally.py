@@ -24,6 +24,7 @@ short axis at a fraction of their cost.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -68,26 +69,33 @@ class LoopTally:
         self._prev: np.ndarray | None = None  # (2, N): the last v1, v2
         self._commanded: np.ndarray | None = None
         self._was_free: np.ndarray | None = None
-        i, j = np.triu_indices(n, 1)
-        self._i, self._j = i, j
+        # Every pair of a world, where every pair is checked (a large fleet: none).
+        empty = np.zeros(0, dtype=np.intp)
+        self._i, self._j = (empty, empty) if pairs == 0 else np.triu_indices(n, 1)
         #: The commanded velocities ``(v_x1, v_x2)`` of the period last accounted
         #: for, and its step index (the batch writes them to the physics).
         self.commanded: np.ndarray | None = None
         self.commanded_at = -1
 
     def update(
-        self, sim: Any, contact: np.ndarray | None, worlds: np.ndarray | None
+        self,
+        fleet: Any,
+        k: int,
+        finite: bool,
+        distances: Callable[[np.ndarray], np.ndarray | None],
+        contact: np.ndarray | None,
+        worlds: np.ndarray | None,
     ) -> None:
         """Account for period ``k`` of all worlds (or only ``worlds``).
 
-        ``sim`` gives the state at ``t_k`` and the commands from it (``sim.fleet``),
-        ``contact`` the rows in an open contact episode (None: unknown, no motor
-        check). With every world and every position finite the period is buffered
-        (see the module docstring); else the buffer is accounted for and the period at
-        once. The pair distances of the neighbour search of this period are reused
-        where it ran on these positions.
+        ``fleet`` gives the state at ``t_k`` and the commands from it, ``finite``
+        whether every position is finite, ``distances(pos)`` the pair distances the
+        neighbour search computed on these very positions (None: none), ``contact``
+        the rows in an open contact episode (None: unknown, no motor check). With
+        every world and every position finite the period is buffered (see the module
+        docstring); else the buffer is accounted for and the period at once.
         """
-        b = _State(sim)
+        b = _State(fleet, k, finite, distances)
         if contact is None:  # no contact flags: no vehicle is checked
             contact = np.ones(self.K * self.n, dtype=bool)
         if self._closest is not None:
@@ -375,13 +383,13 @@ def _raised_max(
 class _State:
     """What the tally reads of the loop at ``t_k``."""
 
-    def __init__(self, sim: Any) -> None:
-        fleet = sim.fleet
+    def __init__(self, fleet: Any, k: int, finite: bool, distances: Callable) -> None:
         self.pos, self.theta, self.vel = fleet.pos, fleet.theta, fleet.vel
         self.v1, self.v2 = fleet.v1, fleet.v2
-        self.k, self.finite = sim.k, sim.finite
-        self.distances = getattr(sim.neighbours, "distances", _no_distances)
+        self.k, self.finite = k, finite
+        self.distances = distances
 
 
-def _no_distances(pos: np.ndarray) -> None:
+def no_distances(pos: np.ndarray) -> None:
+    """No pair distances known (a neighbour search that keeps none)."""
     return None
