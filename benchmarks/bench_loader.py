@@ -80,7 +80,7 @@ def main() -> None:
         ("20,000 vehicles 1 m apart (accepted)", lambda: sc.load_scenario(spaced)),
         (
             "1.5 MB, the loader's parser (compose + construct)",
-            lambda: parse(sc._YAMLLoader),
+            lambda: parse(sc.YAMLLoader),
         ),
         (
             "1.5 MB, pure-Python SafeLoader (compose + construct)",

@@ -24,12 +24,12 @@ written in metres (``0.75``) or as multiples of the default vehicle diameter (``
 """
 
 from sandbox.model.obstacles import ObstacleSpec
-from sandbox.scenario.checks import _overlapping_pairs
+from sandbox.scenario.checks import overlapping_pairs
 from sandbox.scenario.parse import load_scenario, parse_scenario
 from sandbox.scenario.platoons import PLATOONS, PLATOONS_KEYS
 from sandbox.scenario.reader import (
-    _BAD_NAME,
-    _LENGTH,
+    BAD_NAME,
+    LENGTH,
     MAX_FILE_BYTES,
     MAX_LENGTH,
     MAX_NAME,
@@ -95,7 +95,7 @@ from sandbox.scenario.vehicles import (
     VEHICLE_PARAMS,
     platoon_offsets,
 )
-from sandbox.scenario.yamlfile import _duplicate_keys, _line_map, _YAMLLoader
+from sandbox.scenario.yamlfile import YAMLLoader, duplicate_keys, line_map
 
 __all__ = [
     "DRIVE",
@@ -156,12 +156,12 @@ __all__ = [
     "ReferenceSpec",
     "Scenario",
     "VehicleSpec",
-    "_BAD_NAME",
-    "_LENGTH",
-    "_YAMLLoader",
-    "_duplicate_keys",
-    "_line_map",
-    "_overlapping_pairs",
+    "BAD_NAME",
+    "LENGTH",
+    "YAMLLoader",
+    "duplicate_keys",
+    "line_map",
+    "overlapping_pairs",
     "load_scenario",
     "name_problem",
     "parse_scenario",

@@ -28,17 +28,18 @@ import numpy as np
 
 from sandbox.errors import Problem, ScenarioError
 from sandbox.plugins.registration import Param
-from sandbox.scenario.checks import _overlapping_pairs
+from sandbox.scenario.checks import overlapping_pairs
 from sandbox.scenario.events import read_events
 from sandbox.scenario.expectations import read_expectations
-from sandbox.scenario.reader import _describe, _Reader
-from sandbox.scenario.sections import _failures, _list_of, _section
+from sandbox.scenario.reader import Reader, describe
+from sandbox.scenario.sections import list_param, read_failures, section_param
 from sandbox.scenario.specs import (
+    ENTRY_SECTIONS,
     PALETTE,
     PlatoonGroup,
     ReconfigureSpec,
     Scenario,
-    _from_loader,
+    from_loader,
 )
 
 if TYPE_CHECKING:
@@ -59,28 +60,29 @@ PLATOONS: dict[str, Param] = {
         "green, ... by platoon)",
     ),
     "vehicle": Param(
-        **_section("vehicleParams"),
+        **section_param("vehicleParams"),
         doc="Defaults for the platoon's vehicles, merged over the top-level vehicle",
     ),
-    "vehicles": Param(**_list_of("vehicle"), doc="The platoon's listed vehicles"),
+    "vehicles": Param(**list_param("vehicle"), doc="The platoon's listed vehicles"),
     "platoon": Param(
-        **_section("platoon"),
+        **section_param("platoon"),
         doc="The platoon's generated followers (default prefix: <name>-v)",
     ),
     "reference": Param(
-        **_section("reference"), doc="The platoon's reference (default: top-level)"
+        **section_param("reference"), doc="The platoon's reference (default: top-level)"
     ),
     "formation": Param(
-        **_section("formation"), doc="The platoon's law (default: top-level)"
+        **section_param("formation"), doc="The platoon's law (default: top-level)"
     ),
     "recovery": Param(
-        **_section("recovery"), doc="The platoon's recovery (default: top-level)"
+        **section_param("recovery"), doc="The platoon's recovery (default: top-level)"
     ),
     "safety": Param(
-        **_section("safety"), doc="The platoon's safety filter (default: top-level)"
+        **section_param("safety"),
+        doc="The platoon's safety filter (default: top-level)",
     ),
     "reconfigure": Param(
-        **_section("reconfigure"),
+        **section_param("reconfigure"),
         doc="The platoon's slot reassignment (default: top-level)",
     ),
     "on_leader_failure": Param(
@@ -92,13 +94,13 @@ PLATOONS: dict[str, Param] = {
 }
 PLATOONS_KEYS = tuple(PLATOONS)
 #: The sections an entry replaces whole (``vehicle`` is merged key by key).
-_OWN = tuple(k for k in PLATOONS_KEYS if k not in ("name", "color", "vehicle"))
+_OWN = ENTRY_SECTIONS
 #: The top-level keys read once for the whole world, never in an entry's document.
 _WORLD = ("platoons", "events", "expect", "failures", "randomize", "plugins")
 
 
 def parse_platoons(
-    rd: _Reader,
+    rd: Reader,
     doc: dict[str, Any],
     source: str | None,
     parse: Callable[..., Scenario],
@@ -107,7 +109,7 @@ def parse_platoons(
 
     Parameters
     ----------
-    rd : _Reader
+    rd : Reader
         The loader's reader of the whole document (its lines, its problems so far).
     doc : dict
         The document, ``--set`` overrides and ``randomize:`` draws applied.
@@ -134,7 +136,7 @@ def parse_platoons(
         rd.fail(
             "platoons",
             "no platoons" if isinstance(entries, list) else "not a list of platoons",
-            _describe(entries),
+            describe(entries),
             "a list of at least one platoon",
         )
         raise ScenarioError(_sorted(rd.problems), source)
@@ -212,7 +214,7 @@ def parse_platoons(
             else dataclasses.replace(v, color=color)
             for k, v in enumerate(one.vehicles)
         )
-        with _from_loader():  # the file is the world's (equal scenarios compare equal)
+        with from_loader():  # the file is the world's (equal scenarios compare equal)
             one = dataclasses.replace(one, vehicles=painted, source=None, warnings=())
         groups.append((name, color, one))
     if rd.problems or not groups:
@@ -225,7 +227,7 @@ def parse_platoons(
         rows += count
     _starts_apart(rd, vehicles, specs)
     names = [v.name for v in vehicles]
-    failures = _failures(rd, doc.get("failures"), "failures")
+    failures = read_failures(rd, doc.get("failures"), "failures")
     first = groups[0][2]
     for path, f in failures:
         if f.vehicle not in names:
@@ -243,7 +245,7 @@ def parse_platoons(
     )
     if rd.problems:
         raise ScenarioError(_sorted(rd.problems), source)
-    with _from_loader():
+    with from_loader():
         scenario = dataclasses.replace(
             first,
             vehicles=tuple(vehicles),
@@ -297,14 +299,14 @@ def _entry_lines(lines: dict[str, int], i: int) -> dict[str, int]:
     return out
 
 
-def _starts_apart(rd: _Reader, vehicles: list, specs: list[PlatoonGroup]) -> None:
+def _starts_apart(rd: Reader, vehicles: list, specs: list[PlatoonGroup]) -> None:
     """Vehicles of different platoons must not start overlapping."""
     pos = np.array([v.pose[:2] for v in vehicles], dtype=float).reshape(-1, 2)
     rad = 0.5 * np.array([v.diameter for v in vehicles], dtype=float)
     group = np.zeros(len(vehicles), dtype=int)
     for k, p in enumerate(specs):
         group[list(p.rows)] = k
-    for a, b, dist in _overlapping_pairs(pos, rad, 5):
+    for a, b, dist in overlapping_pairs(pos, rad, 5):
         if group[a] == group[b]:
             continue
         rd.fail(
@@ -318,56 +320,6 @@ def _starts_apart(rd: _Reader, vehicles: list, specs: list[PlatoonGroup]) -> Non
 
 def _sorted(problems: list[Problem]) -> list[Problem]:
     return sorted(problems, key=lambda p: (p.line is None, p.line or 0))
-
-
-def platoons_document(sc: Scenario) -> dict[str, Any]:
-    """The document of a scenario of several platoons (:meth:`Scenario.to_dict`).
-
-    The top level holds the world's keys and the first platoon's sections; each
-    entry holds its name, colour, vehicles and the sections in which it differs
-    from the first platoon, so that a ``--set`` of a top-level section changes
-    every platoon that shares it.
-    """
-    first = sc.platoons[0].scenario
-    with _from_loader():  # the world's own keys, as one platoon writes them
-        alone = dataclasses.replace(
-            sc,
-            vehicles=first.vehicles,
-            platoon=first.platoon,
-            platoons=(),
-            failures=(),
-            expect=None,
-        )
-    doc = alone.to_dict()
-    for key in ("vehicles", "platoon", *_OWN):
-        doc.pop(key, None)
-    doc["vehicle"] = {"diameter": sc.diameter}
-    shared = first.to_dict()
-    sections = [k for k in _OWN if k not in ("vehicles", "platoon")]
-    doc.update({k: shared[k] for k in sections if k in shared})
-    doc["platoons"] = []
-    for p in sc.platoons:
-        own = p.scenario.to_dict()
-        entry: dict[str, Any] = {"name": p.name, "color": p.color}
-        for key in ("vehicle", "vehicles", "platoon"):
-            if key in own:
-                entry[key] = own[key]
-        for key in _OWN:
-            if key in own and own[key] != shared.get(key):
-                entry[key] = own[key]
-        doc["platoons"].append(entry)
-    failures = [f for f in sc.failures if f.at < sc.duration]
-    if failures:
-        doc["failures"] = []
-        for f in failures:
-            item = {k: v for k, v in dataclasses.asdict(f).items() if v is not None}
-            item.update(item.pop("params"))
-            doc["failures"].append(item)
-    if sc.events:
-        doc["events"] = [e.document() for e in sc.events]
-    if sc.expect is not None:
-        doc["expect"] = sc.expect.to_dict()
-    return doc
 
 
 __all__ = ["PALETTE", "PLATOONS", "PLATOONS_KEYS", "parse_platoons"]

@@ -14,8 +14,8 @@ import math
 from typing import Any
 
 from sandbox.plugins.registration import Param
-from sandbox.scenario.reader import _Reader
-from sandbox.scenario.sections import _section, read_param
+from sandbox.scenario.reader import Reader
+from sandbox.scenario.sections import read_param, section_param
 from sandbox.scenario.specs import RangeSpec, SensorsSpec
 
 #: The most beams of one range sensor (a scan is one pymunk query per beam at worst).
@@ -23,7 +23,7 @@ MAX_BEAMS = 1024
 
 SENSORS: dict[str, Param] = {
     "range": Param(
-        **_section("range"),
+        **section_param("range"),
         doc="A planar range sensor (LiDAR): beams from the vehicle's centre over a "
         "field of view about the heading, cast against obstacles, walls and the other "
         "vehicles (see sandbox/behaviour/ranges.py)",
@@ -91,7 +91,7 @@ RANGE_KEYS = tuple(RANGE)
 
 
 def read_sensors(
-    rd: _Reader, doc: Any, path: str, base: SensorsSpec | None = None
+    rd: Reader, doc: Any, path: str, base: SensorsSpec | None = None
 ) -> SensorsSpec | None:
     """A ``sensors:`` mapping, merged over ``base``; None if it has problems.
 
@@ -113,7 +113,7 @@ def read_sensors(
 
 
 def _read_range(
-    rd: _Reader, doc: Any, path: str, base: RangeSpec | None
+    rd: Reader, doc: Any, path: str, base: RangeSpec | None
 ) -> RangeSpec | None:
     """The ``range:`` mapping, its keys left out from ``base`` (or the defaults)."""
     m = rd.mapping(doc, path)

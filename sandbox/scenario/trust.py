@@ -25,9 +25,9 @@ from sandbox.plugins.registration import (
     PluginError,
 )
 from sandbox.scenario.reader import (
-    _describe,
-    _Reader,
-    _says,
+    Reader,
+    describe,
+    says,
 )
 
 #: The environment variable that trusts the plug-in code scenarios list.
@@ -36,7 +36,7 @@ TRUST_ENV = "SANDBOX_TRUST_PLUGINS"
 #: scenario, or leave it unrun and its sections unchecked.
 PLUGIN_CODE = ("load", "refuse", "skip")
 #: The sections a plug-in can own (their names select a registered plug-in).
-_PLUGIN_OWNED = tuple(kind.section for kind in KINDS.values())
+PLUGIN_OWNED = tuple(kind.section for kind in KINDS.values())
 
 
 #: A dotted module name.
@@ -74,8 +74,8 @@ class UncheckedScenario(ScenarioError):
         super().__init__([Problem("", note)], source)
 
 
-def _load_plugins(
-    rd: _Reader, listed: Any, source: str | None, plugin_code: str
+def load_listed_plugins(
+    rd: Reader, listed: Any, source: str | None, plugin_code: str
 ) -> list[str]:
     """The plug-ins a scenario lists, as they reload from anywhere, loaded or not.
 
@@ -94,7 +94,7 @@ def _load_plugins(
             rd.fail(
                 "plugins",
                 "not a list",
-                _describe(listed),
+                describe(listed),
                 "a list of plug-in files (.py) or module names",
             )
             return []
@@ -109,7 +109,7 @@ def _load_plugins(
         where = f"plugins[{i}]"
         if not isinstance(spec, str) or not spec.strip():
             rd.fail(
-                where, "not a plug-in name", _describe(spec), "a .py file or a module"
+                where, "not a plug-in name", describe(spec), "a .py file or a module"
             )
             continue
         is_file = plugins.looks_like_file(spec)
@@ -151,7 +151,7 @@ def _load_plugins(
             [
                 Problem(
                     "plugins",
-                    _says(
+                    says(
                         "plug-in code is not run without trust",
                         ", ".join(refused),
                         f"--trust-plugins, {TRUST_ENV}=1 or "

@@ -227,9 +227,9 @@ def _with_seed(scenario: Any, seed: int) -> Any:
     """The loader's scenario with another seed, built as the loader builds it."""
     import dataclasses
 
-    from sandbox.scenario.specs import _from_loader
+    from sandbox.scenario.specs import from_loader
 
-    with _from_loader():
+    with from_loader():
         return dataclasses.replace(scenario, seed=seed)
 
 

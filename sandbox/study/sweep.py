@@ -59,11 +59,11 @@ class SweepReport:
 
 def read_base(spec: SweepSpec) -> dict[str, Any]:
     """The base scenario document, read exactly as ``sandbox run`` reads it."""
-    from sandbox.scenario import _YAMLLoader, load_scenario
+    from sandbox.scenario import YAMLLoader, load_scenario
 
     load_scenario(spec.base, overrides=list(spec.fixed))  # its problems, with lines
     text = Path(spec.base).read_text(encoding="utf-8")
-    return yaml.load(text, Loader=_YAMLLoader)  # noqa: S506 (a SafeLoader)
+    return yaml.load(text, Loader=YAMLLoader)  # noqa: S506 (a SafeLoader)
 
 
 def check_points(spec: SweepSpec, base_doc: dict[str, Any]) -> None:
