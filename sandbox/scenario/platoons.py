@@ -148,7 +148,8 @@ def parse_platoons(
     groups: list[tuple[str, str, Scenario]] = []
     seen_names: dict[str, int] = {}
     owner: dict[str, str] = {}
-    messages: list[str] = []
+    messages: dict[str, None] = {}
+    world_lines, entry_lines = _entry_lines(rd.lines)
     for i, _, m in rd.items(entries, "platoons", "platoons"):
         where = f"platoons[{i}]"
         rd.keys(m, PLATOONS_KEYS, where)
@@ -167,7 +168,7 @@ def parse_platoons(
         seen_names[name] = i
         color = rd.string(m, "color", where, PLATOON_COLORS[i % len(PLATOON_COLORS)])
         sub = _entry_document(base, m, name)
-        lines = _entry_lines(rd.lines, i)
+        lines = {**world_lines, **entry_lines.get(i, {})}
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -183,8 +184,7 @@ def parse_platoons(
         own = {k for k in m if k in _OWN or k == "vehicle"}
         for w in one.warnings:
             w = _at_entry(w, where, own)
-            if w not in messages:
-                messages.append(w)
+            messages.setdefault(w, None)  # each once, in order
         leaders = [v.name for v in one.vehicles if v.leader]
         if len(leaders) != 1:
             rd.fail(
@@ -227,10 +227,11 @@ def parse_platoons(
         rows += count
     _starts_apart(rd, vehicles, specs)
     names = [v.name for v in vehicles]
+    known = set(names)
     failures = read_failures(rd, doc.get("failures"), "failures")
     first = groups[0][2]
     for path, f in failures:
-        if f.vehicle not in names:
+        if f.vehicle not in known:
             rd.fail(
                 f"{path}.vehicle",
                 "no such vehicle",
@@ -257,7 +258,7 @@ def parse_platoons(
             platoons=tuple(specs),
             events=tuple(events),
             plugins=tuple(doc.get("plugins") or ()),
-            warnings=tuple(messages + [w.format(source) for w in rd.warnings]),
+            warnings=tuple([*messages, *(w.format(source) for w in rd.warnings)]),
         )
     return scenario
 
@@ -291,12 +292,25 @@ def _entry_document(base: dict[str, Any], m: dict[Any, Any], name: str) -> dict:
     return sub
 
 
-def _entry_lines(lines: dict[str, int], i: int) -> dict[str, int]:
-    """The lines of the file as the paths of entry ``i``'s document name them."""
-    prefix = f"platoons[{i}]."
-    out = {p: n for p, n in lines.items() if not p.startswith("platoons")}
-    out.update({p[len(prefix) :]: n for p, n in lines.items() if p.startswith(prefix)})
-    return out
+def _entry_lines(
+    lines: dict[str, int],
+) -> tuple[dict[str, int], dict[int, dict[str, int]]]:
+    """The lines of the file as the paths of each entry's document name them.
+
+    Returns the lines of the keys outside ``platoons:`` and, per entry ``i``, those of
+    its own keys without the ``platoons[i].`` prefix: one pass over the file's lines
+    (an entry's document takes the first with its own on top).
+    """
+    world: dict[str, int] = {}
+    entries: dict[int, dict[str, int]] = {}
+    for path, line in lines.items():
+        if not path.startswith("platoons"):
+            world[path] = line
+            continue
+        found = re.match(r"platoons\[(\d+)\]\.", path)
+        if found is not None:
+            entries.setdefault(int(found.group(1)), {})[path[found.end() :]] = line
+    return world, entries
 
 
 def _starts_apart(rd: Reader, vehicles: list, specs: list[PlatoonGroup]) -> None:
