@@ -174,7 +174,7 @@ def test_a_scan_is_held_until_the_next_at_the_rate() -> None:
     [
         ({"beams": 0}, "sensors.range.beams: out of range (got 0"),
         ({"beams": 1025}, "expected a whole number from 1 to 1024"),
-        ({"fov": 0}, "sensors.range.fov: must be greater than 0 (got 0"),
+        ({"fov": 0}, "sensors.range.fov: must be at least 0.001 (got 0"),
         ({"fov": 7}, "sensors.range.fov: must be at most 6.28319 (got 7"),
         ({"max_range": 0}, "sensors.range.max_range: must be greater than 0"),
         ({"max_range": -1}, "sensors.range.max_range:"),

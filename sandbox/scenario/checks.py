@@ -20,8 +20,6 @@ from sandbox.model.flatness import (
 )
 from sandbox.model.obstacles import ObstacleSpec
 from sandbox.scenario.reader import (
-    _BYTES_PER_SAMPLE,
-    MAX_RECORD_BYTES,
     MAX_STEPS,
     Reader,
     describe,
@@ -42,7 +40,6 @@ def check_consistency(
     doc: dict[Any, Any],
     duration: float | None,
     dt: float | None,
-    record_every: int | None,
     vehicles: list[tuple[str, VehicleSpec]],
     reference: ReferenceSpec | None,
     formation: FormationSpec | None,
@@ -88,18 +85,6 @@ def check_consistency(
                 f"duration / dt = {duration / dt:.3g} steps",
                 f"at most {MAX_STEPS:g} steps: a longer dt or a shorter duration",
             )
-        elif record_every is not None:
-            samples = duration / dt // record_every + 1
-            size = samples * max(len(declared), 1) * _BYTES_PER_SAMPLE
-            if size > MAX_RECORD_BYTES:
-                rd.fail(
-                    "duration",
-                    "the run would not fit in memory",
-                    f"{samples:.3g} recorded samples of {len(declared)} vehicles, "
-                    f"about {size / 1e9:.3g} GB",
-                    f"at most {MAX_RECORD_BYTES / 1e9:g} GB: a shorter duration, a "
-                    "longer dt or a larger record_every",
-                )
     if dt is not None:
         _check_gains(rd, doc, dt, vehicles)
 

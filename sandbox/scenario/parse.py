@@ -36,6 +36,8 @@ from sandbox.plugins.registration import (
 from sandbox.scenario import bundled, randomize
 from sandbox.scenario.checks import check_consistency
 from sandbox.scenario.expectations import read_expectations
+from sandbox.scenario.inert import clip_detection, conditional_keys, spans_beyond_run
+from sandbox.scenario.needs import check_needs, estimate
 from sandbox.scenario.overrides import apply_override, mark_overrides
 from sandbox.scenario.platoons import parse_platoons
 from sandbox.scenario.reader import (
@@ -218,9 +220,12 @@ def parse_scenario(
         elif rd.unloaded and item.strip().split(".")[0] in PLUGIN_OWNED:
             del rd.problems[before:]  # a key an unloaded plug-in may own
             rd.unchecked.append((f"--set {item}", "a key of an unloaded plug-in"))
+    rd.varied.update(rd.overridden)
     if doc.get("randomize") is not None:  # draws into the document (randomize.py)
+        if isinstance(doc["randomize"], Mapping):
+            rd.varied.update(str(path) for path in doc["randomize"])
         doc, found = randomize.resolve(
-            doc, skip=rd.overridden, line=rd.line, check=parse_scenario
+            doc, skip=rd.overridden, line=rd.line, check=_quietly_parsed
         )
         rd.problems.extend(found)
     rd.keys(doc, TOP_KEYS, "")
@@ -309,6 +314,19 @@ def parse_scenario(
     detection = read_detection(rd, doc.get("detection"), "detection")
     _detection_window(rd, detection, dt)
     safety = read_safety(rd, doc.get("safety"), "safety")
+    parts = {
+        "sensing": sensing,
+        "metrics": metrics,
+        "detection": detection,
+        "safety": safety,
+        "recovery": recovery,
+        "sensors": sensors,
+        "platoon": platoon,
+    }
+    if isinstance(duration, float) and isinstance(dt, float) and dt > 0:
+        spans_beyond_run(rd, doc, duration, parts)
+        detection = clip_detection(detection, duration, dt)
+    conditional_keys(rd, doc, parts)
     _sensed_obstacles(rd, recovery, sensors, listed)
     reconfigure = _reconfigure(rd, doc.get("reconfigure"))
     on_leader_failure = read_param(
@@ -338,7 +356,6 @@ def parse_scenario(
         doc,
         duration,
         dt,
-        record_every,
         listed + generated,
         reference,
         formation,
@@ -349,6 +366,20 @@ def parse_scenario(
     )
     _safety_range(rd, safety, listed + generated)
     _safety_braking(rd, safety, listed + generated, sensing, dt)
+    if None not in (duration, dt, record_every):
+        fleet = [v for _, v in listed + generated]
+        ranges = [(v.sensors or sensors).range for v in fleet]
+        needs = estimate(
+            duration,
+            dt,
+            record_every,
+            fleet,
+            ranges=ranges,
+            sensing=sensing,
+            detection=detection,
+            safety=safety,
+        )
+        check_needs(rd, needs)
     _check_handover(
         rd,
         on_leader_failure,
@@ -405,6 +436,17 @@ def parse_scenario(
     for line in scenario.warnings:
         warnings.warn(line, SandboxWarning, stacklevel=_caller_level())
     return scenario
+
+
+def _quietly_parsed(doc: dict[str, Any]) -> Scenario:
+    """A candidate document of ``randomize:`` parsed without showing its warnings.
+
+    The draws are checked by parsing them; the scenario drawn in the end shows its
+    own warnings.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SandboxWarning)
+        return parse_scenario(doc)
 
 
 def _caller_level() -> int:

@@ -32,6 +32,12 @@ MAX_LENGTH = 1e6
 
 MAX_NUMBER = 1e9
 
+#: Smallest value of a number that must be greater than 0 (a gain, a floor, a rate, a
+#: field of view, a limit): such a number divides or is squared somewhere, and below
+#: this its reciprocal's square is no longer a finite float (1e-300 would pass "> 0"
+#: and make a detector's statistics infinite, a braking's periods an infinite count).
+MIN_POSITIVE = 1e-100
+
 #: Smallest vehicle diameter [m] (the physics tolerates 2 mm of contact overlap) and
 #: mass [kg] (the body's moment of inertia must stay a positive float).
 MIN_DIAMETER = 0.01
@@ -46,15 +52,6 @@ MAX_STEPS = 1e9
 
 #: Most physics substeps per control period.
 MAX_SUBSTEPS = 10_000
-
-#: Largest recorded state a run may allocate [bytes] (about 100 bytes per vehicle and
-#: recorded sample); beyond it the run is refused at load time instead of failing with a
-#: memory error.
-MAX_RECORD_BYTES = 1e12
-
-_BYTES_PER_SAMPLE = (
-    8 * 13 + 2 + 16
-)  # pose, cmd, chi, slot, target; mode, failed; t, ref
 
 #: Largest ``seed`` (numpy's generators take any 64-bit seed; it is stored as int64).
 MAX_SEED = 2**63 - 1
@@ -131,6 +128,9 @@ class Reader:
         self.timed: list[tuple[str, str | None, float | None]] = []
         #: Field paths set by ``--set`` overrides.
         self.overridden: set[str] = set()
+        #: Field paths set by ``--set`` overrides or drawn by ``randomize:`` (a
+        #: plug-in chosen there makes the file's keys of another plug-in no mistake).
+        self.varied: set[str] = set()
         #: The ``plugins:`` entries listed but not loaded (``sandbox validate``).
         self.unloaded: tuple[str, ...] = ()
         #: Sections left unchecked: they select a name an unloaded plug-in may own.
@@ -283,6 +283,14 @@ class Reader:
             return None
         if positive and value <= 0:
             self.fail(path, "must be greater than 0", shown, kind)
+            return None
+        if positive and value < MIN_POSITIVE:
+            self.fail(
+                path,
+                "too small to compute with",
+                shown,
+                f"{kind}, at least {MIN_POSITIVE:g}",
+            )
             return None
         if minimum is not None and value < minimum:
             self.fail(path, f"must be at least {minimum:g}", shown, kind)

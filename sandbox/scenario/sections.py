@@ -587,6 +587,11 @@ def _and(names: list[str]) -> str:
     return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
+def _plural(title: str) -> str:
+    """``recovery strategies``, ``failure detectors``."""
+    return f"{title[:-1]}ies" if title.endswith("y") else f"{title}s"
+
+
 def read_plugin_section(
     rd: Reader,
     m: dict[Any, Any],
@@ -625,8 +630,8 @@ def read_plugin_section(
                 users = everyone[key]
                 rd.fail(
                     f"{path}.{key}",
-                    f"applies only to the {_and(users)} {info.title}"
-                    f"{'s' if len(users) > 1 else ''}",
+                    f"applies only to the {_and(users)} "
+                    f"{_plural(info.title) if len(users) > 1 else info.title}",
                     f"{key} with {info.selector} {name}",
                     f"no '{key}' ({info.title} {name} does not take it)",
                 )
@@ -634,6 +639,15 @@ def read_plugin_section(
                 declared = plugins.get(kind, everyone[key][0]).params[key]
                 if not declared.required:
                     read_param(rd, m, key, path, declared)
+                users = everyone[key]
+                if f"{path}.{info.selector}" in rd.varied:
+                    continue  # the file's key, for the plug-in the file chose
+                rd.warn(
+                    f"{path}.{key}",
+                    f"does nothing here: it applies only to the {_and(users)} "
+                    f"{_plural(info.title) if len(users) > 1 else info.title}, not "
+                    f"to {info.selector} {name}",
+                )
             continue
         rd.keys({key: None}, allowed, path)
     values, good = read_params(rd, m, path, plugin.params)

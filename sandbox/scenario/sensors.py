@@ -20,6 +20,8 @@ from sandbox.scenario.specs import RangeSpec, SensorsSpec
 
 #: The most beams of one range sensor (a scan is one pymunk query per beam at worst).
 MAX_BEAMS = 1024
+#: The narrowest field of view [rad] (about 0.06 degrees; one beam has no width).
+MIN_FOV = 1e-3
 
 SENSORS: dict[str, Param] = {
     "range": Param(
@@ -44,8 +46,7 @@ RANGE: dict[str, Param] = {
         "rad",
         "Field of view, centred on the heading; a full turn (2 pi) spaces the beams "
         "2 pi / beams apart from -pi, a narrower one puts beams on both edges",
-        minimum=0.0,
-        exclusive=True,
+        minimum=MIN_FOV,
         maximum=2.0 * math.pi,
     ),
     "max_range": Param(

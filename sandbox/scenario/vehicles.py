@@ -43,6 +43,10 @@ from sandbox.scenario.specs import (
     VehicleSpec,
 )
 
+#: The least acceleration limit [m/s^2]: a stop from 1 m/s then takes 17 minutes (the
+#: braking barrier plans every vehicle's stop period by period).
+MIN_ACCEL = 1e-3
+
 VEHICLE_PARAMS: dict[str, Param] = {
     "diameter": Param(
         "number",
@@ -61,8 +65,7 @@ VEHICLE_PARAMS: dict[str, Param] = {
         None,
         "m/s^2",
         "Limit on |d chi / dt| (chi is clamped: no wind-up); default: unlimited",
-        minimum=0.0,
-        exclusive=True,
+        minimum=MIN_ACCEL,
     ),
     "v1_max": Param(
         "number",
@@ -88,8 +91,7 @@ VEHICLE_PARAMS: dict[str, Param] = {
         "which may be too weak to follow the commands (the run reports how often); "
         "default: a motor that follows every command while free and pushes with 200 "
         "m/s^2 in contact",
-        minimum=0.0,
-        exclusive=True,
+        minimum=MIN_ACCEL,
     ),
 }
 
