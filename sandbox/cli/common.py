@@ -481,6 +481,21 @@ def add_plugin_option(p: argparse.ArgumentParser, trust: bool = False) -> None:
         )
 
 
+def trust_advice(exc: Exception, args: argparse.Namespace) -> Exception:
+    """A refusal of plug-in code, advising what this command takes to run it.
+
+    Commands that run scenarios take ``--trust-plugins``; the others (``validate``,
+    ``view``, ``gallery``, ...) never run the code a file lists, but load a plug-in
+    named with ``--plugin``. Any other error is returned as it is (and nothing is
+    imported for it).
+    """
+    advised = getattr(exc, "advised", None)  # an UntrustedScenario's
+    if advised is None:
+        return exc
+    runs = getattr(args, "trust_plugins", None) is not None
+    return advised("option" if runs else "plugin")
+
+
 def load_cli_plugins(args: argparse.Namespace) -> None:
     """Import the ``--plugin`` plug-ins and the installed entry points.
 
@@ -522,10 +537,13 @@ def add_command(
     epilog = "examples:\n" + "\n".join(f"  {line}" for line in examples)
     text = description or f"{summary[:1].upper()}{summary[1:]}."
     width = min(shutil.get_terminal_size().columns - 2, 78)
-    return sub.add_parser(
+    parser = sub.add_parser(
         name,
         help=summary,
         description=textwrap.fill(text, width),
         epilog=epilog,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    # an unknown option is reported with this command's usage (sandbox.cli.main)
+    parser.set_defaults(command_parser=parser)
+    return parser

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from sandbox.plugins.registration import Param
-from sandbox.scenario.reader import Reader, describe, hint
+from sandbox.scenario.reader import NAME_RULE, Reader, describe, hint, name_problem
 from sandbox.scenario.sections import read_reference
 from sandbox.scenario.specs import ReferenceSpec, plain
 
@@ -257,6 +257,14 @@ def _split(
             "not a new platoon name",
             describe(new),
             "a name no platoon has",
+        )
+        new = None
+    elif (why := name_problem(new)) is not None:  # the rule of every platoon's name
+        rd.fail(
+            f"{path}.new",
+            "unusable name",
+            f"{describe(new)}, which {why}",
+            NAME_RULE,
         )
         new = None
     vehicles = m.get("vehicles")

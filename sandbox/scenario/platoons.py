@@ -56,8 +56,8 @@ PLATOONS: dict[str, Param] = {
     "color": Param(
         "string",
         None,
-        doc="Colour of the platoon's vehicles that name none (default: blue, red, "
-        "green, ... by platoon)",
+        doc="Colour of the platoon's vehicles that name none, a CSS colour name or "
+        "#rrggbb (default: blue, red, green, ... by platoon)",
     ),
     "vehicle": Param(
         **section_param("vehicleParams"),
@@ -166,7 +166,7 @@ def parse_platoons(
                 "a name of its own",
             )
         seen_names[name] = i
-        color = rd.string(m, "color", where, PLATOON_COLORS[i % len(PLATOON_COLORS)])
+        color = rd.color(m, "color", where, PLATOON_COLORS[i % len(PLATOON_COLORS)])
         sub = _entry_document(base, m, name)
         lines = {**world_lines, **entry_lines.get(i, {})}
         try:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime
 import difflib
+import functools
 import math
 import re
 from collections.abc import Iterator, Mapping
@@ -345,6 +346,26 @@ class Reader:
             return None if default is REQUIRED else default
         return value
 
+    def color(self, m: dict[Any, Any], key: str, path: str, default: str) -> str:
+        """A colour: a CSS colour name or ``#rrggbb`` (``#rgb``); the default if not.
+
+        A colour is drawn by the GIF, the figures and the replay page and written
+        back into the run's ``scenario.yaml``: anything else is refused.
+        """
+        value = self.string(m, key, path, default)
+        if not isinstance(value, str) or value is default:
+            return default
+        if HEX_COLOR.fullmatch(value) or value.lower() in color_names():
+            return value
+        hinted = hint(value.lower(), tuple(sorted(color_names())))
+        self.fail(
+            f"{path}.{key}" if path else key,
+            f"not a colour{hinted}",
+            describe(value),
+            COLOR_RULE,
+        )
+        return default
+
     def name(
         self, m: dict[Any, Any], key: str, path: str, default: Any, *, run: bool = False
     ) -> Any:
@@ -464,6 +485,20 @@ NAME_RULE = (
     f"at most {MAX_NAME} characters on one line, without commas, quotes, slashes, "
     "backslashes or control characters, not starting with = + - @"
 )
+
+
+#: A colour written as ``#rgb`` or ``#rrggbb``.
+HEX_COLOR = re.compile(r"#(?:[0-9a-fA-F]{3}){1,2}")
+
+COLOR_RULE = "a colour name (CSS: red, teal, slategray, ...) or #rrggbb"
+
+
+@functools.cache
+def color_names() -> frozenset[str]:
+    """The colour names every renderer knows (the CSS names, lower case)."""
+    from PIL import ImageColor  # on the first colour only: Pillow takes 20 ms
+
+    return frozenset(name.lower() for name in ImageColor.colormap)
 
 
 def name_problem(value: str, *, run: bool = False) -> str | None:

@@ -68,10 +68,54 @@ class UncheckedScenario(ScenarioError):
         self.plugins = tuple(plugins)
         sections = ", ".join(f"{path} ({what})" for path, what in self.unchecked)
         note = (
-            f"not checked: {sections}: they name plug-ins whose code is not run "
-            f"here ({', '.join(self.plugins)}); --trust-plugins loads them"
+            f"not checked: {sections}: they name plug-ins whose code validate never "
+            f"runs ({', '.join(self.plugins)}); --plugin "
+            f"{' --plugin '.join(self.plugins)} loads what you trust and checks them"
         )
         super().__init__([Problem("", note)], source)
+
+
+#: What unlocks the plug-in code of a scenario, by where it is loaded: anywhere (the
+#: library), a command with ``--trust-plugins``, a command with ``--plugin`` only.
+TRUST_ADVICE = {
+    "any": f"--trust-plugins, {TRUST_ENV}=1 or load_scenario(..., trust_plugins=True) "
+    "to run it",
+    "option": f"--trust-plugins or {TRUST_ENV}=1 to run it",
+    "plugin": "--plugin {entries} to run it (a plug-in named on the command line is "
+    "trusted)",
+}
+
+
+class UntrustedScenario(ScenarioError):
+    """A scenario that lists plug-in code, refused without trust.
+
+    ``refused`` holds the entries of ``plugins:`` not run. The message advises
+    ``advice`` (a key of :data:`TRUST_ADVICE`); :meth:`advised` gives the same
+    refusal with the advice of the command that loaded it (only commands that run
+    scenarios take ``--trust-plugins``).
+    """
+
+    def __init__(
+        self,
+        refused: tuple[str, ...],
+        line: int | None,
+        source: str | None,
+        advice: str = "any",
+    ) -> None:
+        self.refused, self.line = tuple(refused), line
+        entries = ", ".join(self.refused)
+        options = " --plugin ".join(self.refused)
+        expected = TRUST_ADVICE[advice].format(entries=options)
+        problem = Problem(
+            "plugins",
+            says("plug-in code is not run without trust", entries, expected),
+            line,
+        )
+        super().__init__([problem], source)
+
+    def advised(self, advice: str) -> UntrustedScenario:
+        """The same refusal advising ``advice`` (a key of :data:`TRUST_ADVICE`)."""
+        return UntrustedScenario(self.refused, self.line, self.source, advice)
 
 
 def load_listed_plugins(
@@ -147,20 +191,6 @@ def load_listed_plugins(
                 continue
             out.append(entry)
     if refused:
-        raise ScenarioError(
-            [
-                Problem(
-                    "plugins",
-                    says(
-                        "plug-in code is not run without trust",
-                        ", ".join(refused),
-                        f"--trust-plugins, {TRUST_ENV}=1 or "
-                        "load_scenario(..., trust_plugins=True) to run it",
-                    ),
-                    rd.line("plugins"),
-                )
-            ],
-            source,
-        )
+        raise UntrustedScenario(tuple(refused), rd.line("plugins"), source)
     rd.unloaded = tuple(unloaded)
     return out

@@ -21,7 +21,6 @@ from sandbox.plugins.registration import (
     Param,
 )
 from sandbox.scenario.reader import (
-    BAD_TEXT,
     MAX_VEHICLES,
     MIN_DIAMETER,
     MIN_MASS,
@@ -134,7 +133,7 @@ VEHICLE: dict[str, Param] = {
     "color": Param(
         "string",
         None,
-        doc="Colour name or #rrggbb (default: blue, red, green, ... in order)",
+        doc="A CSS colour name or #rrggbb (default: blue, red, green, ... in order)",
     ),
     "drive": Param(
         **section_param("drive"), doc="How the vehicle is driven (default: by its law)"
@@ -358,15 +357,7 @@ def read_vehicles(
                     rd.check_number(raw[2], f"{pose_path}[2]"),
                 )
         offset = rd.vector(m, "offset", sub, 2, (0.0, 0.0), length=True)
-        color = rd.string(m, "color", sub, PALETTE[i % len(PALETTE)])
-        if isinstance(color, str) and BAD_TEXT.search(color):
-            rd.fail(
-                f"{sub}.color",
-                "holds a control character",
-                describe(color),
-                "a colour name or #rrggbb",
-            )
-            color = PALETTE[i % len(PALETTE)]
+        color = rd.color(m, "color", sub, PALETTE[i % len(PALETTE)])
         drive: DriveSpec | None = DriveSpec()
         if m.get("drive") is not None:
             drive = _drive(rd, m["drive"], f"{sub}.drive")

@@ -57,17 +57,27 @@ class SweepReport:
     interrupted: bool = False
 
 
-def read_base(spec: SweepSpec) -> dict[str, Any]:
-    """The base scenario document, read exactly as ``sandbox run`` reads it."""
+def read_base(spec: SweepSpec, trust_plugins: bool | None = None) -> dict[str, Any]:
+    """The base scenario document, read exactly as ``sandbox run`` reads it.
+
+    ``trust_plugins`` as :func:`~sandbox.scenario.load_scenario` takes it (False:
+    never run the code the base lists, as ``sandbox validate``).
+    """
     from sandbox.scenario import YAMLLoader, load_scenario
 
-    load_scenario(spec.base, overrides=list(spec.fixed))  # its problems, with lines
+    # its problems, with lines
+    load_scenario(spec.base, overrides=list(spec.fixed), trust_plugins=trust_plugins)
     text = Path(spec.base).read_text(encoding="utf-8")
     return yaml.load(text, Loader=YAMLLoader)  # noqa: S506 (a SafeLoader)
 
 
-def check_points(spec: SweepSpec, base_doc: dict[str, Any]) -> None:
+def check_points(
+    spec: SweepSpec, base_doc: dict[str, Any], plugin_code: str | None = None
+) -> None:
     """Validate every grid point on the first seed (before anything runs).
+
+    ``plugin_code`` as :func:`~sandbox.scenario.parse_scenario` takes it
+    (``refuse``: never run the code the base lists).
 
     Raises
     ------
@@ -82,7 +92,10 @@ def check_points(spec: SweepSpec, base_doc: dict[str, Any]) -> None:
         task = Task("", 0, tuple((p, t) for p, t, _ in point), first)
         try:
             parse_scenario(
-                base_doc, source=str(spec.base), overrides=task.overrides(spec.fixed)
+                base_doc,
+                source=str(spec.base),
+                overrides=task.overrides(spec.fixed),
+                plugin_code=plugin_code,
             )
         except ScenarioError as exc:
             if any(p.path == "randomize" for p in exc.problems):
@@ -358,7 +371,8 @@ def check_sweep_file(path: str | Path) -> str | None:
         return None
     spec = build_spec(path)
     spec.check_size()
-    check_points(spec, read_base(spec))
+    # never the code the base lists (a plug-in named with --plugin is loaded already)
+    check_points(spec, read_base(spec, trust_plugins=False), plugin_code="refuse")
     points = spec.n_points()
     return (
         f"sweep: {points} grid points x {len(spec.seeds)} seeds = "
