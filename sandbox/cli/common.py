@@ -140,36 +140,13 @@ def progress(total: int, desc: str, unit: str = "step") -> Progress:
     return Progress(total, desc, unit)
 
 
-class StopFlag:
-    """SIGINT/SIGTERM handler that asks the running simulation to stop cleanly."""
-
-    def __init__(self) -> None:
-        self.raised = False
-        self._old: dict[int, object] = {}
-
-    def __call__(self) -> bool:
-        """Whether a stop was asked for."""
-        return self.raised
-
-    def _handle(self, signum: int, frame: FrameType | None) -> None:
-        self.raised = True
-
-    def __enter__(self) -> StopFlag:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            self._old[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
-
-
 class command_signals:  # noqa: N801 - used as a context manager, like a function
     """SIGINT and SIGTERM raise ``KeyboardInterrupt`` while a command runs.
 
     The same at every phase (loading, writing a GIF, ...): whatever is being written
     is removed or left whole by its ``except``/``finally``, and ``main`` exits with
-    status 130. A run's simulation and output writing use :class:`StopFlag` instead.
+    status 130. A run's simulation and output writing use
+    :class:`sandbox._startup.StopOnSignal` instead (a first signal asks them to stop).
     The earlier handlers are restored on exit.
 
     An interrupt that lands where Python cannot raise it (a ``__del__`` method, a

@@ -8,16 +8,16 @@ and rebuilds ``results.csv`` at the end, also when interrupted.
 
 Signals: until the runs start, SIGINT and SIGTERM act as they do around the call
 (under ``sandbox`` they raise ``KeyboardInterrupt``: exit status 130, nothing
-written but whole files); while runs are computed they stop the sweep, which keeps
-every finished run and returns at once (:class:`StopOnSignal`).
+written but whole files); while runs are computed the first stops the sweep, which
+keeps every finished run and returns at once, and a second stops it where it is (a
+group under way in this process, a blocking plug-in), the finished runs kept
+(:class:`~sandbox._startup.StopOnSignal`).
 """
 
 from __future__ import annotations
 
 import shlex
-import signal
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -26,6 +26,7 @@ from typing import Any
 
 import yaml
 
+from sandbox._startup import StopOnSignal
 from sandbox.errors import ScenarioError
 from sandbox.study import engine
 from sandbox.study.spec import (
@@ -39,6 +40,11 @@ from sandbox.study.spec import (
 )
 from sandbox.study.store import Store, digest
 
+#: What the first SIGINT/SIGTERM of a sweep says.
+STOP_NOTICE = (
+    "stopping: the runs under way end, the finished ones are stored (a second "
+    "Ctrl-C stops at once; the store keeps every run finished)"
+)
 #: Most rejected run files named one by one (then their count).
 SHOW_REJECTED = 5
 #: With ``keep_runs``, each computed run's directory is ``DIR/run_dirs/<run id>/``.
@@ -176,7 +182,7 @@ def run_sweep(
         done = store.done(spec.iter_tasks())
         _warn_rejected(store, warn)
         todo = to_compute(spec.iter_tasks(), done, retry_failed)
-        with StopOnSignal() as stop:
+        with StopOnSignal(STOP_NOTICE) as stop:
             engines = (jobs, scheduler, scheduler_file)
             return _compute(
                 spec, store, base_doc, todo, engines, progress, stop, keep_runs
@@ -252,34 +258,6 @@ def _compute(
     store.rejected.clear()
     report.failed = sum(1 for s in statuses if s in engine.FAILED_STATUSES)
     return report
-
-
-class StopOnSignal:
-    """SIGINT/SIGTERM ask the sweep to stop after storing what has finished.
-
-    Only in the main thread (elsewhere signals cannot be caught; the flag stays down).
-    """
-
-    def __init__(self) -> None:
-        self.raised = False
-        self._old: dict[int, Any] = {}
-
-    def __call__(self) -> bool:
-        """Whether a stop was asked for."""
-        return self.raised
-
-    def _handle(self, signum: int, frame: Any) -> None:
-        self.raised = True
-
-    def __enter__(self) -> StopOnSignal:
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._old[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
 
 
 class Progress:
