@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import shlex
 import sys
-import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -91,8 +90,19 @@ def check_points(
         The first grid point whose scenario is invalid, its problems marked with the
         ``--set`` that caused them.
     """
-    from sandbox.scenario import parse_scenario
+    from sandbox.scenario import YAMLLoader, line_map, parse_scenario
 
+    # the file's lines: a warning of the base reads as when the base was loaded (and
+    # is shown once), those of a grid point at their --set
+    lines: dict[str, int] = {}
+    try:
+        loader = YAMLLoader(Path(spec.base).read_text(encoding="utf-8"))
+        try:
+            line_map(loader.get_single_node(), "", lines)
+        finally:
+            loader.dispose()
+    except (OSError, ValueError, yaml.YAMLError):
+        lines = {}
     first = spec.seeds.start
     for point in spec.iter_points():
         task = Task("", 0, tuple((p, t) for p, t, _ in point), first)
@@ -100,6 +110,7 @@ def check_points(
             parse_scenario(
                 base_doc,
                 source=str(spec.base),
+                lines=lines,
                 overrides=task.overrides(spec.fixed),
                 plugin_code=plugin_code,
             )
@@ -148,7 +159,9 @@ def run_sweep(
     retry_failed : bool
         Also rerun the stored runs whose status is a failure.
     progress : callable, optional
-        Called as ``progress(done, total)`` after each run.
+        Called as ``progress(stored, total)`` when the runs start and after each run
+        stored (``stored`` counts the runs stored before, ``total`` every run of the
+        sweep: what the store holds).
     max_runs : int
         Most runs the sweep may have (:data:`~sandbox.study.spec.MAX_RUNS`).
     warn : callable, optional
@@ -227,7 +240,14 @@ def _compute(
             for t in todo
         ]
         if scheduler or scheduler_file:
-            client = engine.dask_client(scheduler, scheduler_file)
+            try:
+                client = engine.dask_client(scheduler, scheduler_file)
+            except engine.EngineError as exc:
+                raise engine.EngineError(
+                    f"{exc}; nothing was computed ({report.already} of {total} runs "
+                    f"are stored in {out}): run the same command again with a "
+                    "scheduler that answers, or without --scheduler to compute here"
+                ) from None
             results = engine.run_dask(
                 jobs_list,
                 client,
@@ -239,15 +259,26 @@ def _compute(
             )
         else:
             results = engine.run_local(jobs_list, jobs, should_stop=stop)
+        if progress is not None:
+            progress(report.already, total)
         try:  # every run the engine yields is stored; it stops when asked to
             for run_id, result in results:
                 if result is not None:
                     store.put(by_id[run_id], result)
                     report.computed += 1
                     if progress is not None:
-                        progress(report.computed, len(todo))
+                        progress(report.already + report.computed, total)
         except KeyboardInterrupt:
             stop.raised = True
+        except engine.EngineError as exc:
+            if scheduler or scheduler_file:
+                raise  # the engine's own line says what was kept and how to resume
+            kept = report.already + report.computed
+            raise engine.EngineError(
+                f"{exc}; the {kept} of {total} runs finished are stored in {out}: run "
+                "the same command again to compute the rest (with fewer --jobs if "
+                "memory ran out)"
+            ) from None
         finally:
             results.close()
             report.rows = store.write_results(spec, spec.iter_tasks())
@@ -258,31 +289,6 @@ def _compute(
     store.rejected.clear()
     report.failed = sum(1 for s in statuses if s in engine.FAILED_STATUSES)
     return report
-
-
-class Progress:
-    """A progress line with rate and ETA on an interactive terminal (else silent)."""
-
-    def __init__(self, stream: Any = None) -> None:
-        self.stream = stream or sys.stderr
-        self.start = time.perf_counter()
-        self.last = 0.0
-
-    def __call__(self, done: int, total: int) -> None:
-        """Show ``done`` of ``total`` runs, their rate and the time left."""
-        now = time.perf_counter()
-        if now - self.last < 0.2 and done < total:
-            return
-        self.last = now
-        rate = done / max(now - self.start, 1e-9)
-        left = (total - done) / rate if rate > 0 else float("inf")
-        eta = f"{int(left // 60)}m{int(left % 60):02d}s" if left < 1e6 else "?"
-        self.stream.write(
-            f"\r  sweep: {done}/{total} runs, {rate:.1f} runs/s, ETA {eta}   "
-        )
-        if done >= total:
-            self.stream.write("\n")
-        self.stream.flush()
 
 
 def describe_dry_run(
