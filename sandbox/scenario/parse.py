@@ -689,7 +689,9 @@ def _safety_braking(
     (an error); a margin for the error of the estimated poses under sensing larger
     than a vehicle, or a start whose look-ahead points are closer than the
     barrier's ``D`` are warned of (the start is also reported in ``metrics.json``,
-    ``safety.unsafe_start``).
+    ``safety.unsafe_start``). From such a start the barrier's guarantee does not
+    hold: two vehicles 0.62 m apart facing each other turn at 4 rad/s, speed up and
+    touch at 0.35 s (``tests/test_hostile_limits.py``).
     """
     if safety.params.get("barrier") != "braking":
         return
@@ -744,7 +746,9 @@ def _safety_braking(
             f"the start is unsafe for barrier: braking: the look-ahead points of "
             f"{specs[i[k]].name} and {specs[j[k]].name} are {gap[k]:.3g} m apart, "
             f"below D = {big_d[k]:.3g} m (d + 2 l + margin + sensing margin); the "
-            "filter brakes them from t = 0 (metrics.json: safety.unsafe_start)",
+            "barrier keeps vehicles apart only from a safe start: from this one the "
+            "filter does not hold them at rest, and they may touch (metrics.json: "
+            "safety.unsafe_start)",
         )
 
 

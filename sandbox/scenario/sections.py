@@ -202,18 +202,18 @@ TOP: dict[str, Param] = {
     "sensing": Param(
         **section_param("sensing"),
         doc="What the vehicles see of each other: a noisy, delayed, lossy broadcast "
-        "of the poses (see sandbox/sensing.py; all 0: the truth)",
+        "of the poses (see sandbox/behaviour/sensing.py; all 0: the truth)",
     ),
     "detection": Param(
         **section_param("detection"),
         doc="How the platoon learns of failures: oracle (the truth, at once) or "
         "residual (observed motion against the broadcast commands, a CUSUM; see "
-        "sandbox/detection.py)",
+        "sandbox/behaviour/detection.py)",
     ),
     "safety": Param(
         **section_param("safety"),
         doc="A safety filter on the commands, after the controller and before the "
-        "failures (see sandbox/safety/; filter none: no filter)",
+        "failures (see sandbox/behaviour/safety/; filter none: no filter)",
     ),
     "sensors": Param(
         **section_param("sensors"),
@@ -223,7 +223,7 @@ TOP: dict[str, Param] = {
     "reconfigure": Param(
         **section_param("reconfigure"),
         doc="Who tracks which slot once a vehicle is believed failed (see "
-        "sandbox/reconfigure.py; default: everyone keeps their slot)",
+        "sandbox/behaviour/reconfigure.py; default: everyone keeps their slot)",
     ),
     "on_leader_failure": Param(
         "choice",
@@ -251,15 +251,15 @@ TOP: dict[str, Param] = {
         doc="Random draws from the seed: field paths (the --set syntax, e.g. "
         "vehicles[1].pose) mapped to {uniform: [low, high]}, {normal: [mean, std]} "
         "(numbers or equal-length lists, elementwise) or {choice: [a, b, ...]}; "
-        "overlapping starts are redrawn (see sandbox/randomize.py)",
+        "overlapping starts are redrawn (see sandbox/scenario/randomize.py)",
         schema=_RANDOMIZE_SCHEMA,
     ),
     "expect": Param(
         "custom",
         None,
         doc="What the run must show, checked by 'sandbox check' and the pytest plugin "
-        "(see sandbox/expectations.py; bounds are inclusive; quantities are those of "
-        "metrics.json)",
+        "(see sandbox/scenario/expectations.py; bounds are inclusive; quantities are "
+        "those of metrics.json)",
         schema=_nullable_keys(EXPECT_SCHEMA),
     ),
 }
