@@ -23,6 +23,7 @@ with those stages' own.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import shutil
@@ -88,6 +89,7 @@ class Need:
     disk: float = 0.0
 
 
+@functools.cache
 def physical_memory() -> float | None:
     """The machine's memory [bytes], or its control group's limit if that is less.
 

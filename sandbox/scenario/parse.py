@@ -449,13 +449,17 @@ def _quietly_parsed(doc: dict[str, Any]) -> Scenario:
         return parse_scenario(doc)
 
 
+#: The package's folder, with a trailing separator (frames inside it are skipped).
+PACKAGE_DIR = os.path.join(str(Path(__file__).parents[1]), "")
+
+
 def _caller_level() -> int:
     """The ``stacklevel`` of the first frame outside sandbox, for :func:`warnings.warn`.
 
     The frame of ``warnings.warn``'s caller is level 1; the loader's own frames (and
     those of the sandbox code that called it) are skipped.
     """
-    package = os.path.join(str(Path(__file__).parents[1]), "")
+    package = PACKAGE_DIR
     frame = sys._getframe(1)  # the caller of warnings.warn
     level = 1
     while frame.f_back is not None and frame.f_code.co_filename.startswith(package):

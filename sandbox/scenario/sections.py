@@ -496,17 +496,29 @@ def _length_default(rd: Reader, value: Any) -> Any:
     return value
 
 
+#: ``read_param``'s default: the declared one.
+DECLARED: Any = type("Declared", (), {"__repr__": lambda self: "DECLARED"})()
+
+
 def read_param(
-    rd: Reader, m: dict[Any, Any], key: str, path: str, p: Param
+    rd: Reader,
+    m: dict[Any, Any],
+    key: str,
+    path: str,
+    p: Param,
+    default: Any = DECLARED,
 ) -> tuple[Any, bool]:
     """Read one declared key: ``(value, ok)``; problems are recorded in ``rd``.
 
     A missing optional key gives its default (lengths like ``"3d"`` in metres); a
     missing required key, or a value of the wrong type or out of bounds, gives
-    ``(None, False)``.
+    ``(None, False)``. ``default`` replaces the declared one (a vehicle's keys left
+    out take the shared ``vehicle:`` values).
     """
     before = len(rd.problems)
-    default = REQUIRED if p.required else p.default
+    if default is DECLARED:
+        default = p.default
+    required = default is REQUIRED
     if p.type == "length":
         default = _length_default(rd, default)
     t = p.type
@@ -557,7 +569,7 @@ def read_param(
         value = rd.vector(m, key, path, 2, default, length=True)
     elif t == "points":
         if key not in m or m[key] is None:
-            if p.required:
+            if required:
                 value = rd.points(m, key, path, p.min_items)
             else:
                 value = default

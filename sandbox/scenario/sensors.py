@@ -9,13 +9,12 @@ defaults, without a fleet-wide sensor). The sensor itself is
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any
 
 from sandbox.plugins.registration import Param
 from sandbox.scenario.reader import Reader
-from sandbox.scenario.sections import read_param, section_param
+from sandbox.scenario.sections import DECLARED, read_param, section_param
 from sandbox.scenario.specs import RangeSpec, SensorsSpec
 
 #: The most beams of one range sensor (a scan is one pymunk query per beam at worst).
@@ -123,9 +122,8 @@ def _read_range(
     rd.keys(m, RANGE_KEYS, path)
     values, ok = {}, True
     for key, p in RANGE.items():
-        if base is not None:
-            p = dataclasses.replace(p, default=getattr(base, key))
-        values[key], good = read_param(rd, m, key, path, p)
+        default = getattr(base, key) if base is not None else DECLARED
+        values[key], good = read_param(rd, m, key, path, p, default)
         ok = ok and good
     if not ok:
         return None

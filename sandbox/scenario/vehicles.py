@@ -231,8 +231,7 @@ def read_vehicle_params(
     out = dict(base)
     for key, p in VEHICLE_PARAMS.items():
         if p.type != "custom":
-            p = dataclasses.replace(p, default=base[key])
-            out[key], _ = read_param(rd, m, key, path, p)
+            out[key], _ = read_param(rd, m, key, path, p, base[key])
     gains_doc, gains_path = rd.get(m, "gains", path, None)
     gains = dict(base["gains"])
     if gains_doc is not None:
@@ -240,8 +239,7 @@ def read_vehicle_params(
         if g is not None:
             rd.keys(g, GAIN_KEYS, gains_path)
             for key, p in GAINS.items():
-                p = dataclasses.replace(p, default=gains[key])
-                gains[key], _ = read_param(rd, g, key, gains_path, p)
+                gains[key], _ = read_param(rd, g, key, gains_path, p, gains[key])
     out["gains"] = gains
     return out
 
