@@ -16,6 +16,8 @@ those declarations. The package:
 - :mod:`.yamlfile`: bounded YAML reading, line numbers, duplicate keys;
 - :mod:`.sections`, :mod:`.vehicles`: the declared sections and their readers;
 - :mod:`.checks`: checks across sections;
+- :mod:`.needs`: what a run will need (memory, disk), and the bounds that follow;
+- :mod:`.inert`: keys that would do nothing, warned of;
 - :mod:`.parse`: :func:`load_scenario`, :func:`parse_scenario`, ``--set``.
 
 The format is documented key by key in ``scenarios/reference.yaml``. Lengths may be
