@@ -706,3 +706,13 @@ def test_ten_thousand_one_vehicle_platoons_validate(tmp_path: Path) -> None:
         warnings.simplefilter("ignore", SandboxWarning)
         sc = load_scenario(path)
     assert len(sc.platoons) == 10_000 and len(sc.vehicles) == 10_000
+
+
+def test_a_platoons_method_set_for_the_world_leaves_its_keys_unwarned(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # intersection_two.yaml's recovery has beta; --set chooses no strategy for all
+    assert main(["validate", "traffic/intersection_two"]) == 0
+    sets = ["--set", "recovery.strategy=none"]
+    assert main(["validate", "traffic/intersection_two", *sets]) == 0
+    assert capsys.readouterr().err == ""

@@ -121,6 +121,7 @@ def parse_scenario(
     overrides: list[str] | None = None,
     problems: list[Problem] | None = None,
     plugin_code: str | None = None,
+    varied: frozenset[str] = frozenset(),
 ) -> Scenario:
     """Validate a scenario document (as loaded from YAML); return a :class:`Scenario`.
 
@@ -141,6 +142,10 @@ def parse_scenario(
         One of :data:`PLUGIN_CODE`: ``load`` the listed plug-ins, ``refuse`` a scenario
         that lists one not yet loaded, or ``skip`` them (``sandbox validate``); default
         ``load`` if ``SANDBOX_TRUST_PLUGINS=1``, else ``refuse``.
+    varied : frozenset of str, optional
+        Field paths a caller set or drew already (a world's ``--set`` of the
+        sections a platoon inherits): where one selects a plug-in, the document's
+        keys of another plug-in are not warned of, as for ``overrides``.
 
     Raises
     ------
@@ -220,7 +225,7 @@ def parse_scenario(
         elif rd.unloaded and item.strip().split(".")[0] in PLUGIN_OWNED:
             del rd.problems[before:]  # a key an unloaded plug-in may own
             rd.unchecked.append((f"--set {item}", "a key of an unloaded plug-in"))
-    rd.varied.update(rd.overridden)
+    rd.varied.update(rd.overridden, varied)
     if doc.get("randomize") is not None:  # draws into the document (randomize.py)
         if isinstance(doc["randomize"], Mapping):
             rd.varied.update(str(path) for path in doc["randomize"])

@@ -172,7 +172,13 @@ def parse_platoons(
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                one = parse(sub, source=source, lines=lines, plugin_code="load")
+                one = parse(
+                    sub,
+                    source=source,
+                    lines=lines,
+                    plugin_code="load",
+                    varied=_entry_varied(rd.varied, i),
+                )
         except ScenarioError as exc:
             own = {k for k in m if k in _OWN or k == "vehicle"}
             for p in exc.problems:
@@ -311,6 +317,16 @@ def _entry_lines(
         if found is not None:
             entries.setdefault(int(found.group(1)), {})[path[found.end() :]] = line
     return world, entries
+
+
+def _entry_varied(varied: set[str], i: int) -> frozenset[str]:
+    """The paths set or drawn for the world, as entry ``i``'s document names them."""
+    prefix = f"platoons[{i}]."
+    return frozenset(
+        path[len(prefix) :] if path.startswith(prefix) else path
+        for path in varied
+        if path.startswith(prefix) or not path.startswith("platoons")
+    )
 
 
 def _starts_apart(rd: Reader, vehicles: list, specs: list[PlatoonGroup]) -> None:

@@ -357,6 +357,14 @@ class Reader:
             return default
         if HEX_COLOR.fullmatch(value) or value.lower() in color_names():
             return value
+        if BAD_TEXT.search(value):
+            self.fail(
+                f"{path}.{key}" if path else key,
+                "holds a control character",
+                describe(value),
+                COLOR_RULE,
+            )
+            return default
         hinted = hint(value.lower(), tuple(sorted(color_names())))
         self.fail(
             f"{path}.{key}" if path else key,
