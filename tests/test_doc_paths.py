@@ -73,9 +73,4 @@ def test_a_page_names_only_paths_that_exist(name: str) -> None:
 @pytest.mark.parametrize("name", ["scenario reference", "command help"])
 def test_the_generated_text_names_only_paths_that_exist(name: str) -> None:
     found = missing(_generated()[name])
-    if name == "scenario reference" and found == ["sandbox/safety"]:
-        pytest.xfail(
-            "the cbf filter's docstring (sandbox/behaviour/safety/cbf.py, another "
-            "module's owner) still says sandbox/safety"
-        )
     assert found == []

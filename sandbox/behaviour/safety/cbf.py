@@ -572,7 +572,10 @@ def _check(values: dict, section: dict) -> list[tuple]:
 
 @register_filter("cbf", params=PARAMS, check=_check, batched=True)
 def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
-    """Control-barrier-function filter through the look-ahead point (sandbox/safety)."""
+    """Control-barrier-function filter through the look-ahead point.
+
+    Its pieces are the modules of ``sandbox/behaviour/safety/``.
+    """
     state = ctx.memory.get("cbf")
     if state is None:
         state = ctx.memory["cbf"] = CBFState(ctx)
