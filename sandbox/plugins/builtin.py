@@ -16,4 +16,7 @@ BUILTIN_MODULES: tuple[str, ...] = (
     "sandbox.behaviour.recovery",
     "sandbox.model.references",
     "sandbox.behaviour.safety",
+    "sandbox.model.potential",
+    "sandbox.model.flocking",
+    "sandbox.behaviour.safety.orca",
 )

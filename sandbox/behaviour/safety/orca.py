@@ -1,0 +1,442 @@
+"""ORCA as a safety filter on the commands (``safety: {filter: orca}``).
+
+Optimal reciprocal collision avoidance (van den Berg, Guy, Lin and Manocha,
+"Reciprocal n-body collision avoidance", Robotics Research, 2011), the field's common
+baseline among many robots, for the unicycles of eq. (1) of the report as Alonso-Mora,
+Breitenmoser, Rufli, Beardsley and Siegwart adapt it ("Optimal reciprocal collision
+avoidance for multiple non-holonomic robots", DARS 2010):
+
+1. each vehicle is a holonomic disc that its unicycle follows within the tracking
+   error ``E`` (:mod:`sandbox.behaviour.safety.holonomic`): the disc's radius is
+   ``d / 2 + E``, and the holonomic velocities it may take are those followed within
+   ``E`` (a polygon, the *drive's* lines);
+2. the controller's command ``(v1, v2)`` gives the preferred holonomic velocity
+   (:func:`~sandbox.behaviour.safety.holonomic.holonomic_velocity`), and the
+   vehicle's current velocity is the one it drove over the last period,
+   ``v1 (cos x3, sin x3)``;
+3. toward each of its ``neighbours`` nearest vehicles within ``neighbour_dist``, ORCA's
+   half-plane for the horizon ``time_horizon`` (:mod:`~sandbox.behaviour.safety.
+   orca_lines`: half of the change each, all of it toward a vehicle believed failed or
+   driven open loop); toward each static obstacle within reach, the half-plane for
+   ``obstacle_horizon`` (a circle as a disc standing still; a wall, box or polygon by
+   the line tangent to it at its nearest point, as the CBF filter sees it);
+4. a vehicle whose preferred velocity keeps all of its ORCA half-planes is left alone
+   (its command passes unchanged, bit for bit); the others take the admissible
+   velocity nearest to it, within the drive's polygon and the disc of ``v1_max``
+   (:func:`~sandbox.behaviour.safety.orca_program.solve`: ORCA's 2-D linear program,
+   and its 3-D program of least violation when the half-planes have no common point,
+   the obstacles' and the drive's lines kept hard);
+5. the new velocity is mapped back to ``(v1, v2)``
+   (:func:`~sandbox.behaviour.safety.holonomic.unicycle_commands`), within the
+   vehicle's limits: ``0 <= v1 <= v1_max``, ``|v1 - v1(t_k-1)| <= max_accel h``,
+   ``|v2| <= v2_max``.
+
+ORCA assumes that a velocity is reached at once; the drive reaches it within
+``max_accel`` (and the vehicles are rigid bodies that push each other), so what ORCA
+guarantees for discs holds here only approximately: the benchmarks measure it
+(``docs/results/state-of-the-art.md``). Symmetric swaps are ORCA's known deadlock:
+reciprocal half-planes of a perfectly symmetric configuration can leave every vehicle
+the velocity zero (van den Berg et al., section 7).
+
+Only vehicles driven by the controller are filtered (not those believed failed, not
+those driven open loop). Under sensing a vehicle sees the others where their broadcast
+puts them (``ctx.seen``). The counters of ``metrics.json`` ``safety`` are the CBF
+filter's (:mod:`sandbox.behaviour.safety.accounting`): ``active_steps`` counts the
+vehicle-periods whose commands ORCA changed, ``infeasible_steps`` those whose
+half-planes had no common point (the 3-D program), ``max_slack`` the largest violation
+it accepted [m/s], ``min_barrier`` the least gap between two discs (or a disc and an
+obstacle) [m] beyond contact of the enlarged radii and ``margin``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sandbox.behaviour.safety.accounting import (
+    FilterStep,
+    WorldCounters,
+    account,
+    account_worlds,
+)
+from sandbox.behaviour.safety.holonomic import (
+    CORNERS,
+    drive_lines,
+    holonomic_velocity,
+    unicycle_commands,
+)
+from sandbox.behaviour.safety.orca_lines import surface_lines, vehicle_lines
+from sandbox.behaviour.safety.orca_program import HalfPlanes, det, solve
+from sandbox.geometry.neighbours import NeighbourList, WorldPairs
+from sandbox.model.barriers import MIN_DIST
+from sandbox.model.dynamics import CLIP
+from sandbox.model.obstacle_field import ObstacleField
+from sandbox.plugins.contexts import FilterContext
+from sandbox.plugins.registration import Param, register_filter
+
+#: The speed bound used where a vehicle has no ``v1_max`` [m/s] (as the CBF filter).
+UNLIMITED_SPEED = 1e3
+#: Where the lines of a vehicle come in its program: obstacles, the drive's, vehicles.
+OBSTACLE, DRIVE, VEHICLE = 0, 1, 2
+
+PARAMS = {
+    "time_horizon": Param(
+        "number",
+        2.0,
+        "s",
+        "tau of ORCA's velocity obstacles between vehicles (van den Berg et al. "
+        "2011, eq. (2)): velocities that bring two discs into contact within tau are "
+        "avoided; default 2 s, five times the 0.4 s braking from 2 m/s at 5 m/s^2",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "obstacle_horizon": Param(
+        "number",
+        1.0,
+        "s",
+        "tau of the velocity obstacles of static obstacles (RVO2's timeHorizonObst): "
+        "a vehicle may close on an obstacle at most at its clearance / tau",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "neighbours": Param(
+        "integer",
+        10,
+        doc="The most vehicles each vehicle avoids, the nearest first (RVO2's "
+        "maxNeighbors, 10 in its examples)",
+        minimum=1,
+        maximum=64,
+    ),
+    "neighbour_dist": Param(
+        "length",
+        None,
+        "m",
+        "Vehicles farther than this are not avoided (RVO2's neighborDist; default: "
+        "2 v1_max tau + the largest enlarged diameter, beyond which no velocity "
+        "obstacle reaches a velocity within the speed limits)",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "margin": Param(
+        "length",
+        0.05,
+        "m",
+        "Clearance kept between the surfaces of two vehicles (and to obstacles) "
+        "beyond contact: added to the discs' combined radius",
+        minimum=0.0,
+    ),
+    "tracking_error": Param(
+        "length",
+        0.1,
+        "m",
+        "E: the largest distance between a vehicle and the holonomic disc it follows "
+        "(Alonso-Mora et al. 2010); each disc's radius is d / 2 + E, and its "
+        "velocities those the unicycle follows within E",
+        minimum=0.0,
+        exclusive=True,
+    ),
+    "align_time": Param(
+        "number",
+        0.4,
+        "s",
+        "T: the time in which a vehicle turns to head along its holonomic velocity "
+        "(at least |phi| / v2_max); larger T: smaller sideways velocities "
+        "(E / T at a right angle to the heading); default 0.4 s, a right angle at "
+        "4 rad/s",
+        minimum=0.0,
+        exclusive=True,
+    ),
+}
+
+
+def _per_vehicle(value: float | np.ndarray, n: int) -> np.ndarray:
+    return np.array(np.broadcast_to(np.asarray(value, dtype=float), (n,)))
+
+
+class ORCAState:
+    """What the filter keeps between steps: its parameters, limits, neighbour index."""
+
+    def __init__(self, ctx: FilterContext) -> None:
+        p, n = ctx.params, len(ctx.pos)
+        self.horizon = float(p["time_horizon"])
+        self.obstacle_horizon = float(p["obstacle_horizon"])
+        self.neighbours = int(p["neighbours"])
+        self.margin = float(p["margin"])
+        self.error = float(p["tracking_error"])
+        self.align = float(p["align_time"])
+        v1_max = _per_vehicle(ctx.v1_max, n)
+        self.v1_max = np.where(np.isfinite(v1_max), v1_max, UNLIMITED_SPEED)
+        self.v2_max = _per_vehicle(ctx.v2_max, n)
+        self.accel = _per_vehicle(ctx.accel_max, n)
+        #: Each vehicle's disc radius [m]: d / 2 + E.
+        self.radius = 0.5 * np.asarray(ctx.diameter, dtype=float) + self.error
+        radius = p.get("neighbour_dist")
+        if radius is None:
+            fastest = float(np.max(self.v1_max)) if n else 0.0
+            widest = 2.0 * float(np.max(self.radius)) if n else 0.0
+            radius = 2.0 * fastest * self.horizon + widest + self.margin
+        self.range = float(radius)
+        #: How far from a vehicle's surface an obstacle can matter [m].
+        self.reach = (
+            float(np.max(self.v1_max)) * self.obstacle_horizon
+            + 2.0 * self.error
+            + self.margin
+            if n
+            else 0.0
+        )
+        search = max(self.range, self.reach + float(np.max(self.radius, initial=0.0)))
+        if ctx.worlds > 1:  # a batched call: pairs within each world only
+            self.index = WorldPairs(ctx.worlds, n // ctx.worlds, search)
+        else:
+            self.index = NeighbourList(search)
+
+
+def _vehicle_rows(
+    state: ORCAState,
+    ctx: FilterContext,
+    filtered: np.ndarray,
+    seen: np.ndarray,
+    own: np.ndarray,
+    broadcast: np.ndarray,
+    least: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """The half-planes toward the nearest vehicles: owner, point, direction, key.
+
+    ``seen`` [m] are the others' positions as each vehicle receives them, ``own`` and
+    ``broadcast`` (n, 2) [m/s] the velocities of the last period as a vehicle knows
+    its own and as the others see it; ``least`` (n,) [m] receives each vehicle's least
+    gap beyond contact of the discs.
+    """
+    i, j, _ = state.index.near(seen)
+    me, other = np.concatenate((i, j)), np.concatenate((j, i))
+    keep = filtered[me].nonzero()[0]
+    me, other = me[keep], other[keep]
+    rel_pos = seen[other] - ctx.pos[me]  # x_B - x_A, A at its true position
+    dist_sq = rel_pos[:, 0] * rel_pos[:, 0] + rel_pos[:, 1] * rel_pos[:, 1]
+    near = (dist_sq < state.range * state.range).nonzero()[0]
+    me, other, rel_pos, dist_sq = me[near], other[near], rel_pos[near], dist_sq[near]
+    # The nearest `neighbours` of each vehicle, ties by index (RVO2's sorted list).
+    order = np.lexsort((other, dist_sq, me))
+    me, other, rel_pos, dist_sq = (
+        me[order],
+        other[order],
+        rel_pos[order],
+        dist_sq[order],
+    )
+    first = np.searchsorted(me, me)
+    rank = np.arange(len(me)) - first
+    kept = (rank < state.neighbours).nonzero()[0]
+    me, other, rel_pos, dist_sq = me[kept], other[kept], rel_pos[kept], dist_sq[kept]
+    combined = state.radius[me] + state.radius[other] + state.margin
+    np.minimum.at(least, me, np.sqrt(dist_sq) - combined)
+    rel_vel = own[me] - broadcast[other]
+    direction, u = vehicle_lines(rel_pos, rel_vel, combined, state.horizon, ctx.dt)
+    share = np.where(filtered[other], 0.5, 1.0)  # reciprocal, or all of it
+    point = own[me] + share[:, None] * u
+    return me, point, direction, dist_sq
+
+
+def _obstacle_rows(
+    state: ORCAState,
+    ctx: FilterContext,
+    filtered: np.ndarray,
+    own: np.ndarray,
+    least: np.ndarray,
+) -> tuple[np.ndarray, ...] | None:
+    """The half-planes toward the static obstacles in reach (None: none)."""
+    field = ctx.obstacle_field
+    if field is None or field.empty:
+        return None
+    rows, cols = state.index.obstacle_pairs(ctx.pos, field)
+    keep = filtered[rows].nonzero()[0]
+    rows, cols = rows[keep], cols[keep]
+    if not len(rows):
+        return None
+    signed, nearest = field.pair_distance(ctx.pos, rows, cols)
+    radius = state.radius[rows] + state.margin
+    gap = signed - radius
+    near = (gap < state.reach).nonzero()[0]
+    rows, cols, signed, nearest, radius = (
+        rows[near],
+        cols[near],
+        signed[near],
+        nearest[near],
+        radius[near],
+    )
+    if not len(rows):
+        return None
+    np.minimum.at(least, rows, signed - radius)
+    away = (ctx.pos[rows] - nearest) * np.where(signed < 0, -1.0, 1.0)[:, None]
+    away /= np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)[:, None]
+    point, direction = surface_lines(away, signed - radius, state.obstacle_horizon)
+    if isinstance(field, ObstacleField):  # a circle: a disc standing still
+        circle = (field.kind[cols] == 0).nonzero()[0]
+        if len(circle):
+            k = field.index[cols[circle]]
+            owner = rows[circle]
+            rel_pos = field.circle_center[k] - ctx.pos[owner]
+            combined = radius[circle] + field.circle_radius[k]
+            d, u = vehicle_lines(
+                rel_pos, own[owner], combined, state.obstacle_horizon, ctx.dt
+            )
+            point[circle] = own[owner] + u
+            direction[circle] = d
+    return rows, point, direction, signed
+
+
+def _programs(
+    who: np.ndarray,
+    owner: np.ndarray,
+    group: np.ndarray,
+    key: np.ndarray,
+    point: np.ndarray,
+    direction: np.ndarray,
+) -> HalfPlanes:
+    """The lines of the vehicles ``who`` packed into one program each.
+
+    Each vehicle's lines in the order of ``(group, key)``: its obstacles' (nearest
+    first), the drive's polygon, the vehicles' (nearest first); the first two kinds
+    hard.
+    """
+    slot = np.full(int(owner.max(initial=-1)) + 1, -1, dtype=np.intp)
+    slot[who] = np.arange(len(who))
+    mine = (slot[owner] >= 0).nonzero()[0]
+    owner, group, key = slot[owner[mine]], group[mine], key[mine]
+    point, direction = point[mine], direction[mine]
+    order = np.lexsort((key, group, owner))
+    owner, group = owner[order], group[order]
+    point, direction = point[order], direction[order]
+    count = np.bincount(owner, minlength=len(who))
+    rank = np.arange(len(owner)) - np.searchsorted(owner, owner)
+    m = int(count.max(initial=0))
+    lines = HalfPlanes(
+        np.zeros((len(who), m, 2)),
+        np.zeros((len(who), m, 2)),
+        np.zeros((len(who), m), dtype=bool),
+        np.bincount(owner[group < VEHICLE], minlength=len(who)),
+    )
+    lines.point[owner, rank] = point
+    lines.direction[owner, rank] = direction
+    lines.valid[owner, rank] = True
+    return lines
+
+
+def orca_commands(
+    state: ORCAState, ctx: FilterContext
+) -> tuple[np.ndarray, np.ndarray, FilterStep]:
+    """The filtered ``(v1, v2)`` of one step, and what the filter did.
+
+    Parameters
+    ----------
+    state : ORCAState
+    ctx : FilterContext
+
+    Returns
+    -------
+    v1 : ndarray, shape (n,) [m/s]
+    v2 : ndarray, shape (n,) [rad/s]
+    step : FilterStep
+    """
+    n = len(ctx.pos)
+    v1 = np.array(ctx.v1, dtype=float)
+    v2 = np.array(ctx.v2, dtype=float)
+    filtered = np.ones(n, dtype=bool)
+    if ctx.known_failed is not None:
+        filtered &= ~ctx.known_failed
+    if ctx.commanded is not None:
+        filtered &= ~ctx.commanded
+    least = np.full(n, np.inf)
+    heading = np.array(ctx.theta, dtype=float)
+    seen = ctx.pos
+    if ctx.seen is not None:
+        seen = np.array(ctx.seen[:, :2], dtype=float)
+        heading_seen = np.array(ctx.seen[:, 2], dtype=float)
+    else:
+        heading_seen = heading
+    # The velocity each vehicle drove over the last period (the first: measured),
+    # its own and as the others see it (along its broadcast heading).
+    if ctx.v1_prev is None:
+        own = broadcast = np.array(ctx.vel, dtype=float)
+    else:
+        own = np.empty((n, 2))
+        own[:, 0] = ctx.v1_prev * np.cos(heading)
+        own[:, 1] = ctx.v1_prev * np.sin(heading)
+        broadcast = own
+        if ctx.seen is not None:
+            broadcast = np.empty((n, 2))
+            broadcast[:, 0] = ctx.v1_prev * np.cos(heading_seen)
+            broadcast[:, 1] = ctx.v1_prev * np.sin(heading_seen)
+    parts = [_vehicle_rows(state, ctx, filtered, seen, own, broadcast, least)]
+    walls = _obstacle_rows(state, ctx, filtered, own, least)
+    if walls is not None:
+        parts.insert(0, walls)
+    owner = np.concatenate([p[0] for p in parts])
+    point = np.concatenate([p[1] for p in parts])
+    direction = np.concatenate([p[2] for p in parts])
+    key = np.concatenate([p[3] for p in parts])
+    group = np.concatenate(
+        [np.full(len(p[0]), VEHICLE if k == len(parts) - 1 else OBSTACLE) for k, p in
+         enumerate(parts)]
+    )  # fmt: skip
+    preferred = holonomic_velocity(v1, v2, heading, state.align, state.v1_max)
+    # The vehicles whose preferred velocity leaves one of their half-planes.
+    gap = det(direction, point - preferred[owner])
+    broken = np.zeros(n, dtype=bool)
+    broken[owner[gap > 0.0]] = True
+    who = (broken & filtered).nonzero()[0]
+    slack = np.zeros(n)
+    active = np.zeros(n, dtype=bool)
+    rows = len(owner)
+    if len(who):
+        corner, edge = drive_lines(
+            heading[who], state.v1_max[who], state.error, state.align, state.v2_max[who]
+        )
+        owner = np.concatenate((owner, np.repeat(who, CORNERS)))
+        point = np.concatenate((point, corner.reshape(-1, 2)))
+        direction = np.concatenate((direction, edge.reshape(-1, 2)))
+        group = np.concatenate((group, np.full(len(who) * CORNERS, DRIVE)))
+        key = np.concatenate((key, np.tile(np.arange(CORNERS, dtype=float), len(who))))
+        lines = _programs(who, owner, group, key, point, direction)
+        velocity, slack[who] = solve(lines, state.v1_max[who], preferred[who])
+        new_v1, new_v2 = unicycle_commands(
+            velocity, heading[who], state.align, state.v2_max[who]
+        )
+        lo = np.zeros(len(who))
+        hi = state.v1_max[who]
+        if ctx.v1_prev is not None:
+            reach = state.accel[who] * ctx.dt
+            prev = ctx.v1_prev[who]
+            lo = np.minimum(np.maximum(lo, prev - reach), np.minimum(hi, prev + reach))
+            hi = np.minimum(hi, prev + reach)
+        v1[who] = CLIP(new_v1, lo, hi)
+        v2[who] = CLIP(new_v2, -state.v2_max[who], state.v2_max[who])
+        active[who] = True
+    by_vehicle = least if ctx.worlds > 1 else None
+    step = FilterStep(
+        active,
+        slack,
+        rows,
+        float(least.min(initial=np.inf)),
+        np.zeros(n, dtype=bool),
+        by_vehicle,
+    )
+    return v1, v2, step
+
+
+@register_filter("orca", params=PARAMS, batched=True)
+def orca(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
+    """Optimal reciprocal collision avoidance for unicycles (van den Berg 2011)."""
+    state = ctx.memory.get("orca")
+    if state is None:
+        state = ctx.memory["orca"] = ORCAState(ctx)
+    v1, v2, step = orca_commands(state, ctx)
+    ctx.memory["last"] = step
+    if ctx.worlds == 1:
+        account(ctx.stats, ctx.t, False, step, slice(None), step.min_barrier)
+        return v1, v2
+    counters = ctx.memory.get("counters")
+    if counters is None:
+        counters = ctx.memory["counters"] = WorldCounters(ctx.world_stats)
+    account_worlds(
+        ctx.world_stats, ctx.t, False, step, len(ctx.pos) // ctx.worlds, counters
+    )
+    return v1, v2
