@@ -11,9 +11,11 @@ avoidance for multiple non-holonomic robots", DARS 2010):
    ``d / 2 + E``, and the holonomic velocities it may take are those followed within
    ``E`` (a polygon, the *drive's* lines);
 2. the controller's command ``(v1, v2)`` gives the preferred holonomic velocity
-   (:func:`~sandbox.behaviour.safety.holonomic.holonomic_velocity`), and the
-   vehicle's current velocity is the one it drove over the last period,
-   ``v1 (cos x3, sin x3)``;
+   (:func:`~sandbox.behaviour.safety.holonomic.holonomic_velocity`), and a vehicle's
+   current velocity is the holonomic one it was given over the last period (ORCA's,
+   or its command's where ORCA left it alone), as RVO2 keeps each agent's new
+   velocity: the pairs' half-planes stay reciprocal while the drives lag them (with
+   the measured velocities instead, the benchmark's jittered rings jam);
 3. toward each of its ``neighbours`` nearest vehicles within ``neighbour_dist``, ORCA's
    half-plane for the horizon ``time_horizon`` (:mod:`~sandbox.behaviour.safety.
    orca_lines`: half of the change each, all of it toward a vehicle believed failed or
@@ -169,6 +171,8 @@ class ORCAState:
         self.accel = _per_vehicle(ctx.accel_max, n)
         #: Each vehicle's disc radius [m]: d / 2 + E.
         self.radius = 0.5 * np.asarray(ctx.diameter, dtype=float) + self.error
+        #: The holonomic velocity each vehicle followed over the last period [m/s].
+        self.velocity: np.ndarray | None = None
         radius = p.get("neighbour_dist")
         if radius is None:
             fastest = float(np.max(self.v1_max)) if n else 0.0
@@ -195,16 +199,14 @@ def _vehicle_rows(
     ctx: FilterContext,
     filtered: np.ndarray,
     seen: np.ndarray,
-    own: np.ndarray,
-    broadcast: np.ndarray,
+    current: np.ndarray,
     least: np.ndarray,
 ) -> tuple[np.ndarray, ...]:
     """The half-planes toward the nearest vehicles: owner, point, direction, key.
 
-    ``seen`` [m] are the others' positions as each vehicle receives them, ``own`` and
-    ``broadcast`` (n, 2) [m/s] the velocities of the last period as a vehicle knows
-    its own and as the others see it; ``least`` (n,) [m] receives each vehicle's least
-    gap beyond contact of the discs.
+    ``seen`` [m] are the others' positions as each vehicle receives them, ``current``
+    (n, 2) [m/s] each vehicle's velocity of the last period (:func:`orca_commands`);
+    ``least`` (n,) [m] receives each vehicle's least gap beyond contact of the discs.
     """
     i, j, _ = state.index.near(seen)
     me, other = np.concatenate((i, j)), np.concatenate((j, i))
@@ -228,10 +230,10 @@ def _vehicle_rows(
     me, other, rel_pos, dist_sq = me[kept], other[kept], rel_pos[kept], dist_sq[kept]
     combined = state.radius[me] + state.radius[other] + state.margin
     np.minimum.at(least, me, np.sqrt(dist_sq) - combined)
-    rel_vel = own[me] - broadcast[other]
+    rel_vel = current[me] - current[other]
     direction, u = vehicle_lines(rel_pos, rel_vel, combined, state.horizon, ctx.dt)
     share = np.where(filtered[other], 0.5, 1.0)  # reciprocal, or all of it
-    point = own[me] + share[:, None] * u
+    point = current[me] + share[:, None] * u
     return me, point, direction, dist_sq
 
 
@@ -239,7 +241,7 @@ def _obstacle_rows(
     state: ORCAState,
     ctx: FilterContext,
     filtered: np.ndarray,
-    own: np.ndarray,
+    current: np.ndarray,
     least: np.ndarray,
 ) -> tuple[np.ndarray, ...] | None:
     """The half-planes toward the static obstacles in reach (None: none)."""
@@ -276,9 +278,9 @@ def _obstacle_rows(
             rel_pos = field.circle_center[k] - ctx.pos[owner]
             combined = radius[circle] + field.circle_radius[k]
             d, u = vehicle_lines(
-                rel_pos, own[owner], combined, state.obstacle_horizon, ctx.dt
+                rel_pos, current[owner], combined, state.obstacle_horizon, ctx.dt
             )
-            point[circle] = own[owner] + u
+            point[circle] = current[owner] + u
             direction[circle] = d
     return rows, point, direction, signed
 
@@ -346,27 +348,15 @@ def orca_commands(
         filtered &= ~ctx.commanded
     least = np.full(n, np.inf)
     heading = np.array(ctx.theta, dtype=float)
-    seen = ctx.pos
-    if ctx.seen is not None:
-        seen = np.array(ctx.seen[:, :2], dtype=float)
-        heading_seen = np.array(ctx.seen[:, 2], dtype=float)
-    else:
-        heading_seen = heading
-    # The velocity each vehicle drove over the last period (the first: measured),
-    # its own and as the others see it (along its broadcast heading).
-    if ctx.v1_prev is None:
-        own = broadcast = np.array(ctx.vel, dtype=float)
-    else:
-        own = np.empty((n, 2))
-        own[:, 0] = ctx.v1_prev * np.cos(heading)
-        own[:, 1] = ctx.v1_prev * np.sin(heading)
-        broadcast = own
-        if ctx.seen is not None:
-            broadcast = np.empty((n, 2))
-            broadcast[:, 0] = ctx.v1_prev * np.cos(heading_seen)
-            broadcast[:, 1] = ctx.v1_prev * np.sin(heading_seen)
-    parts = [_vehicle_rows(state, ctx, filtered, seen, own, broadcast, least)]
-    walls = _obstacle_rows(state, ctx, filtered, own, least)
+    seen = ctx.pos if ctx.seen is None else np.array(ctx.seen[:, :2], dtype=float)
+    # The velocity each vehicle followed over the last period: the holonomic one it
+    # was given (ORCA's, or its command's), as RVO2 keeps each agent's new velocity;
+    # the measured one at the first step and for the vehicles not filtered.
+    current = np.array(ctx.vel, dtype=float)
+    if state.velocity is not None:
+        current[filtered] = state.velocity[filtered]
+    parts = [_vehicle_rows(state, ctx, filtered, seen, current, least)]
+    walls = _obstacle_rows(state, ctx, filtered, current, least)
     if walls is not None:
         parts.insert(0, walls)
     owner = np.concatenate([p[0] for p in parts])
@@ -397,6 +387,7 @@ def orca_commands(
         key = np.concatenate((key, np.tile(np.arange(CORNERS, dtype=float), len(who))))
         lines = _programs(who, owner, group, key, point, direction)
         velocity, slack[who] = solve(lines, state.v1_max[who], preferred[who])
+        preferred[who] = velocity
         new_v1, new_v2 = unicycle_commands(
             velocity, heading[who], state.align, state.v2_max[who]
         )
@@ -410,6 +401,7 @@ def orca_commands(
         v1[who] = CLIP(new_v1, lo, hi)
         v2[who] = CLIP(new_v2, -state.v2_max[who], state.v2_max[who])
         active[who] = True
+    state.velocity = preferred
     by_vehicle = least if ctx.worlds > 1 else None
     step = FilterStep(
         active,
