@@ -25,6 +25,10 @@ import numpy as np
 from sandbox.model.laws import REST_SPEED, rotate_offsets
 from sandbox.plugins.contexts import LawContext
 
+#: The laws that hand the controller a moving target (their goals' metrics:
+#: :mod:`sandbox.run.goals`).
+MOVING_TARGET_LAWS = ("potential", "flocking")
+
 
 @dataclass
 class MovingTarget:
@@ -78,7 +82,7 @@ def goals(ctx: LawContext, target: MovingTarget, rotate: bool) -> np.ndarray:
         return p + offset
     if np.hypot(dp[0], dp[1]) >= REST_SPEED:
         target.tangent = np.full(target.tangent.shape, np.arctan2(dp[1], dp[0]))
-    return p + rotate_offsets(offset, target.tangent[..., None])  # eqs. (14)-(15)
+    return p + rotate_offsets(offset, target.tangent)  # eqs. (14)-(15)
 
 
 def advance(

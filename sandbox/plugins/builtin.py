@@ -6,7 +6,7 @@ module that registers into it. Registration order within a kind is the order her
 """
 
 #: The modules whose decorators register the built-in laws, detectors, failures,
-#: obstacles, strategies, references and filters.
+#: obstacles, strategies, references and filters, and contributions to the metrics.
 BUILTIN_MODULES: tuple[str, ...] = (
     "sandbox.model.laws",
     "sandbox.behaviour.detection",
@@ -19,4 +19,5 @@ BUILTIN_MODULES: tuple[str, ...] = (
     "sandbox.model.potential",
     "sandbox.model.flocking",
     "sandbox.behaviour.safety.orca",
+    "sandbox.run.goals",
 )
