@@ -29,9 +29,15 @@ avoidance for multiple non-holonomic robots", DARS 2010):
    and its 3-D program of least violation when the half-planes have no common point,
    the obstacles' and the drive's lines kept hard);
 5. the new velocity is mapped back to ``(v1, v2)``
-   (:func:`~sandbox.behaviour.safety.holonomic.unicycle_commands`), within the
-   vehicle's limits: ``0 <= v1 <= v1_max``, ``|v1 - v1(t_k-1)| <= max_accel h``,
-   ``|v2| <= v2_max``.
+   (:func:`~sandbox.behaviour.safety.holonomic.unicycle_commands`);
+6. the drive's own velocity ``v1 (cos x3, sin x3)`` is also kept within the obstacles'
+   half-planes, up to its body and ``margin`` (:func:`obstacle_speed_cap`): the
+   holonomic disc is planned afresh every period, so a vehicle turning toward its new
+   velocity while it drives would otherwise creep into a wall by a part of its
+   tracking error at every period (this module's addition to Alonso-Mora et al.'s
+   construction, which follows each plan to its end);
+7. every changed command within the vehicle's limits: ``0 <= v1 <= v1_max``,
+   ``|v1 - v1(t_k-1)| <= max_accel h``, ``|v2| <= v2_max``.
 
 ORCA assumes that a velocity is reached at once; the drive reaches it within
 ``max_accel`` (and the vehicles are rigid bodies that push each other), so what ORCA
@@ -244,7 +250,12 @@ def _obstacle_rows(
     current: np.ndarray,
     least: np.ndarray,
 ) -> tuple[np.ndarray, ...] | None:
-    """The half-planes toward the static obstacles in reach (None: none)."""
+    """The half-planes toward the static obstacles in reach (None: none).
+
+    Returns the owner, point, direction and sort key (the signed distance) of each
+    half-plane, and each pair's unit normal away from the obstacle and the vehicle's
+    clearance [m] beyond its body and ``margin`` (for :func:`obstacle_speed_cap`).
+    """
     field = ctx.obstacle_field
     if field is None or field.empty:
         return None
@@ -269,7 +280,8 @@ def _obstacle_rows(
     np.minimum.at(least, rows, signed - radius)
     away = (ctx.pos[rows] - nearest) * np.where(signed < 0, -1.0, 1.0)[:, None]
     away /= np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)[:, None]
-    point, direction = surface_lines(away, signed - radius, state.obstacle_horizon)
+    clearance = signed - radius
+    point, direction = surface_lines(away, clearance, state.obstacle_horizon)
     if isinstance(field, ObstacleField):  # a circle: a disc standing still
         circle = (field.kind[cols] == 0).nonzero()[0]
         if len(circle):
@@ -282,7 +294,38 @@ def _obstacle_rows(
             )
             point[circle] = current[owner] + u
             direction[circle] = d
-    return rows, point, direction, signed
+    # the drive's own clearance: the vehicle's body and margin, its tracking error
+    # used (obstacle_speed_cap)
+    return rows, point, direction, signed, away, clearance + state.error
+
+
+def obstacle_speed_cap(
+    n: int,
+    rows: np.ndarray,
+    away: np.ndarray,
+    clearance: np.ndarray,
+    heading: np.ndarray,
+    horizon: float,
+) -> np.ndarray:
+    """The largest ``v1`` [m/s] whose own velocity keeps each obstacle's half-plane.
+
+    ``v1 (cos x3, sin x3)`` must keep ``away . v >= -clearance / horizon`` of every
+    obstacle of the vehicle, with ``clearance`` the gap beyond the vehicle's body and
+    ``margin`` (its disc's gap plus the tracking error ``E``, which the drive may use,
+    as its disc's plan does): ``v1 <= clearance / (horizon cos a)`` where the vehicle
+    heads into the obstacle at the angle ``a`` from its normal (0 once at the
+    margin), inf where it heads away.
+
+    >>> obstacle_speed_cap(1, np.array([0]), np.array([[-1.0, 0.0]]),
+    ...                    np.array([0.5]), np.array([0.0]), 1.0).tolist()
+    [0.5]
+    """
+    toward = -(away[:, 0] * np.cos(heading[rows]) + away[:, 1] * np.sin(heading[rows]))
+    with np.errstate(divide="ignore"):
+        limit = np.maximum(clearance, 0.0) / (horizon * toward)
+    cap = np.full(n, np.inf)
+    np.minimum.at(cap, rows, np.where(toward > 0.0, limit, np.inf))
+    return cap
 
 
 def _programs(
@@ -358,7 +401,7 @@ def orca_commands(
     parts = [_vehicle_rows(state, ctx, filtered, seen, current, least)]
     walls = _obstacle_rows(state, ctx, filtered, current, least)
     if walls is not None:
-        parts.insert(0, walls)
+        parts.insert(0, walls[:4])
     owner = np.concatenate([p[0] for p in parts])
     point = np.concatenate([p[1] for p in parts])
     direction = np.concatenate([p[2] for p in parts])
@@ -391,16 +434,26 @@ def orca_commands(
         new_v1, new_v2 = unicycle_commands(
             velocity, heading[who], state.align, state.v2_max[who]
         )
-        lo = np.zeros(len(who))
-        hi = state.v1_max[who]
+        v1[who], v2[who] = new_v1, new_v2
+        active[who] = True
+    if walls is not None:  # the drive's own velocity kept out of the obstacles too
+        cap = obstacle_speed_cap(
+            n, walls[0], walls[4], walls[5], heading, state.obstacle_horizon
+        )
+        over = filtered & (v1 > cap)
+        v1[over], active[over] = cap[over], True
+    rows_on = active.nonzero()[0]
+    if len(rows_on):  # within the vehicles' limits
+        lo = np.zeros(len(rows_on))
+        hi = state.v1_max[rows_on]
         if ctx.v1_prev is not None:
-            reach = state.accel[who] * ctx.dt
-            prev = ctx.v1_prev[who]
+            reach = state.accel[rows_on] * ctx.dt
+            prev = ctx.v1_prev[rows_on]
             lo = np.minimum(np.maximum(lo, prev - reach), np.minimum(hi, prev + reach))
             hi = np.minimum(hi, prev + reach)
-        v1[who] = CLIP(new_v1, lo, hi)
-        v2[who] = CLIP(new_v2, -state.v2_max[who], state.v2_max[who])
-        active[who] = True
+        v1[rows_on] = CLIP(v1[rows_on], lo, hi)
+        limit = state.v2_max[rows_on]
+        v2[rows_on] = CLIP(v2[rows_on], -limit, limit)
     state.velocity = preferred
     by_vehicle = least if ctx.worlds > 1 else None
     step = FilterStep(
