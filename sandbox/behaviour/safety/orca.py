@@ -53,7 +53,9 @@ filter's (:mod:`sandbox.behaviour.safety.accounting`): ``active_steps`` counts t
 vehicle-periods whose commands ORCA changed, ``infeasible_steps`` those whose
 half-planes had no common point (the 3-D program), ``max_slack`` the largest violation
 it accepted [m/s], ``min_barrier`` the least gap between two discs (or a disc and an
-obstacle) [m] beyond contact of the enlarged radii and ``margin``.
+obstacle) [m] beyond contact of the enlarged radii and ``margin``, and ``constrained``
+the episodes of each vehicle whose commands it changed
+(:mod:`sandbox.behaviour.safety.constrained`).
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ from sandbox.behaviour.safety.accounting import (
     account,
     account_worlds,
 )
+from sandbox.behaviour.safety.constrained import record_episodes
 from sandbox.behaviour.safety.holonomic import (
     CORNERS,
     drive_lines,
@@ -477,11 +480,12 @@ def orca(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     ctx.memory["last"] = step
     if ctx.worlds == 1:
         account(ctx.stats, ctx.t, False, step, slice(None), step.min_barrier)
+        record_episodes(ctx.memory, [ctx.stats], ctx.t, step.active, len(ctx.pos))
         return v1, v2
     counters = ctx.memory.get("counters")
     if counters is None:
         counters = ctx.memory["counters"] = WorldCounters(ctx.world_stats)
-    account_worlds(
-        ctx.world_stats, ctx.t, False, step, len(ctx.pos) // ctx.worlds, counters
-    )
+    n = len(ctx.pos) // ctx.worlds
+    account_worlds(ctx.world_stats, ctx.t, False, step, n, counters)
+    record_episodes(ctx.memory, ctx.world_stats, ctx.t, step.active, n)
     return v1, v2

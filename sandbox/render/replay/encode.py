@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.run.constrained import constrained_mask, filter_name
 from sandbox.run.record import MODE_NAMES, Run
 
 __all__ = [
@@ -424,6 +425,8 @@ def replay_data(
         keep = np.append(keep, T - 1)
     mode = np.asarray(run.mode, dtype=np.int64)[keep]
     failed = np.asarray(run.failed, dtype=bool)[keep]
+    constrained = constrained_mask(run)
+    filtered = np.zeros_like(failed) if constrained is None else constrained[keep]
     arrays = {
         "t": pack(t[keep], STEPS["t"]),
         "pose": pack(np.asarray(run.pose, dtype=float)[keep], STEPS["pose"]),
@@ -434,8 +437,8 @@ def replay_data(
             np.asarray(run.reference, dtype=float).reshape(T, 2)[keep],
             STEPS["reference"],
         ),
-        # mode in the low bits, the failure flag in bit 2
-        "state": pack(mode + 4 * failed, 1.0, ORDERS["state"]),
+        # mode in the low bits, the failure flag in bit 2, the safety filter's in 3
+        "state": pack(mode + 4 * failed + 8 * filtered, 1.0, ORDERS["state"]),
         "slot_index": pack(run.slot_index[keep], 1.0, ORDERS["slot_index"]),
     }
     platoons = _platoons(run, keep, arrays)
@@ -499,6 +502,7 @@ def replay_data(
             "R": _rounded(rec.get("R")),
             "r": _rounded(rec.get("r")),
         },
+        "filter": filter_name(run),
         "camera": camera,
         "leaders": leaders,
         "modes": list(MODE_NAMES),
