@@ -403,7 +403,8 @@ def replay_data(
         ``recovery``, ``camera``, ``leaders`` (``[t, name]``: who leads from ``t``;
         None: the reference), ``modes``, ``samples``, ``stride``, ``notes``; with
         ``platoons:`` also ``platoons`` and ``arrays.platoon_reference`` (see the
-        module docstring).
+        module docstring); with a safety filter also ``filter``, its name (bit 3
+        of ``state``: the filter changed the vehicle's command).
     """
     if metrics is None:
         from sandbox.run.metrics import compute_metrics
@@ -502,7 +503,6 @@ def replay_data(
             "R": _rounded(rec.get("R")),
             "r": _rounded(rec.get("r")),
         },
-        "filter": filter_name(run),
         "camera": camera,
         "leaders": leaders,
         "modes": list(MODE_NAMES),
@@ -511,6 +511,8 @@ def replay_data(
     }
     if platoons is not None:
         data["platoons"] = platoons
+    if filter_name(run) is not None:  # the safety filter (state bit 3: it acts)
+        data["filter"] = filter_name(run)
     return data
 
 
