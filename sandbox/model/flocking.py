@@ -50,7 +50,9 @@ failed vehicle is avoided where it is, and aligned with at rest). The obstacle p
 
 Symbols and units: ``d`` (``distance``) [m], ``a = b`` (``separation``) [m/s^2],
 ``c_al`` (``alignment``) [1/s], ``c1`` (``gain``) [1/s^2], ``c2`` (``damping``) [1/s],
-``c_b`` = ``separation`` [m/s^2], ``max_speed`` [m/s]. Cost: every pair of vehicles of
+``c_b`` = ``separation`` [m/s^2], ``max_speed`` [m/s], ``contact`` [m] (the
+centre distance of two vehicles in contact, to tell their range hits from
+obstacles'). Cost: every pair of vehicles of
 a world, ``O(n^2)``.
 """
 
@@ -80,11 +82,11 @@ PARAMS = {
     "rotate": ROTATE,
     "distance": Param(
         "length",
-        "3d",
+        "2.5d",
         "m",
         "d of (F2): the distance the separation and cohesion terms keep between two "
-        "vehicles (repelling below d, attracting up to 1.2 d; default 3d, the "
-        "report's safe-zone radius R)",
+        "vehicles (repelling below d, attracting up to 1.2 d; default 2.5d, so that "
+        "1.2 d is the report's safe-zone radius R = 3d: slots R apart are not pulled)",
         minimum=0.0,
         exclusive=True,
     ),
@@ -120,6 +122,15 @@ PARAMS = {
         "1/s",
         "c2 of (F1): the damping toward the virtual leader's velocity (default "
         "2 sqrt(c1), critically damped)",
+        minimum=0.0,
+    ),
+    "contact": Param(
+        "length",
+        "1d",
+        "m",
+        "The centre distance of two vehicles in contact: a range hit within 0.6 of it "
+        "of another vehicle is that vehicle, not an obstacle (default 1d, the vehicle "
+        "diameter)",
         minimum=0.0,
     ),
     "max_speed": Param(
@@ -207,7 +218,8 @@ def flocking_acceleration(
     u = neighbour_sum(vehicle_term, q, pos, p, vel)
     if ctx.ranges is not None and a > 0.0:
         d_b = sigma_length(OBSTACLE_FRACTION * d)
-        points, _ = sensed_points(ctx, OBSTACLE_FRACTION * d)
+        body = 0.5 * float(params["contact"])
+        points, _ = sensed_points(ctx, OBSTACLE_FRACTION * d + body, body)
 
         def obstacle_term(rel: np.ndarray) -> np.ndarray:
             z = sigma_norm(rel)

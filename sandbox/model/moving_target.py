@@ -28,6 +28,8 @@ from sandbox.plugins.contexts import LawContext
 #: The laws that hand the controller a moving target (their goals' metrics:
 #: :mod:`sandbox.run.goals`).
 MOVING_TARGET_LAWS = ("potential", "flocking")
+#: A range hit within this many radii of another vehicle's centre is on that vehicle.
+BODY_SLACK = 1.2
 
 
 @dataclass
@@ -184,14 +186,25 @@ def point_sum(term: Any, q: np.ndarray, points: np.ndarray) -> np.ndarray:
     return total
 
 
-def sensed_points(ctx: LawContext, reach: float) -> tuple[np.ndarray, np.ndarray]:
+def sensed_points(
+    ctx: LawContext, reach: float, body: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Obstacle points the range sensor saw within ``reach`` of each vehicle.
 
     A beam's hit point, in world coordinates from the vehicle's position and heading
     now, where its reading is a local minimum of the scan (each convex obstacle's
     nearest point, one per obstacle without a segmentation) and shorter than
     ``reach``; a miss reads the sensor's ``max_range``, so ``reach`` below it keeps
-    misses out.
+    misses out. The beams also hit the other vehicles, which the laws see where they
+    are: a point within :data:`BODY_SLACK` times ``body`` of another vehicle's centre
+    is that vehicle, and left out.
+
+    Parameters
+    ----------
+    ctx : LawContext
+    reach : float [m]
+    body : float [m]
+        A vehicle's radius.
 
     Returns
     -------
@@ -213,5 +226,12 @@ def sensed_points(ctx: LawContext, reach: float) -> tuple[np.ndarray, np.ndarray
     points = np.empty((*ranges.shape, 2))
     points[..., 0] = pos[..., 0:1] + ranges * np.cos(angle)
     points[..., 1] = pos[..., 1:2] + ranges * np.sin(angle)
+    limit = (BODY_SLACK * body) ** 2
+    for j in range(pos.shape[-2]):  # the other vehicles' surfaces, in order
+        rel = points - pos[..., None, j : j + 1, :]
+        with np.errstate(invalid="ignore"):
+            on_vehicle = rel[..., 0] ** 2 + rel[..., 1] ** 2 < limit
+        on_vehicle[..., j, :] = False  # a vehicle does not see itself
+        seen &= ~on_vehicle
     points[~seen] = np.nan
     return points, seen

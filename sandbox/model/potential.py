@@ -10,20 +10,23 @@ vehicle's desired velocity is::
 
     v_i = sat_vmax( x_ref' + F_att,i + F_veh,i + F_obs,i )              (P1)
     F_att,i = -k_att (q_i - g_i)                                        (P2)
-    F_veh,i = sum_j  k_rep (1 / rho_ij - 1 / rho_0) (q_i - x_j) / |q_i - x_j|,
-              rho_ij = |q_i - x_j| - d_c,  for rho_ij < rho_0           (P3)
-    F_obs,i = sum_o  k_rep (1 / rho_io - 1 / rho_0) (q_i - o) / |q_i - o|,
-              rho_io = |q_i - o| - d_c / 2,  for rho_io < rho_0         (P4)
+    F_veh,i = sum_j  k_rep (1 / rho_ij - 1 / (R - d_c)) (q_i - x_j) / |q_i - x_j|,
+              rho_ij = |q_i - x_j| - d_c,   for |q_i - x_j| < R          (P3)
+    F_obs,i = sum_o  k_rep (1 / rho_io - 1 / (R - d_c / 2)) (q_i - o) / |q_i - o|,
+              rho_io = |q_i - o| - d_c / 2,  for |q_i - o| < R           (P4)
 
 with ``g_i = x_ref + Delta_i`` the vehicle's place on the virtual leader's formation
 (eqs. (13)-(15) of the report), ``x_j`` the other vehicles where they are, ``o`` the
 obstacle points the vehicle's range sensor sees (:func:`~sandbox.model.moving_target.
-sensed_points`), and ``sat_vmax`` the scaling down to the speed ``max_speed``. (P3)
-and (P4) are the negative gradient of ``U = k_rep (ln(rho_0 / rho) + rho / rho_0 - 1)``,
-zero and flat at ``rho_0``, infinite at contact (``rho`` is floored at
-:data:`MIN_GAP`). The feed-forward ``x_ref'`` (the virtual leader's velocity) is this
-module's addition: without it the formation trails a leader moving at speed ``V`` by
-``V / k_att``.
+sensed_points`, its hits on other vehicles left out), and ``sat_vmax`` the scaling
+down to the speed ``max_speed``. A vehicle repels within the centre distance ``R``,
+the report's safe-zone radius (eq. (27)'s R), so a formation whose slots are at
+least ``R`` apart holds them exactly. (P3) and (P4) are the negative gradient of
+``U = k_rep (ln(rho_0 / rho) + rho / rho_0 - 1)`` with ``rho_0`` the gap at ``R``, zero
+and flat there, infinite at contact (``rho`` is floored at :data:`MIN_GAP`). The
+feed-forward
+``x_ref'`` (the virtual leader's velocity) is this module's addition: without it the
+formation trails a leader moving at speed ``V`` by ``V / k_att``.
 
 How it drives a vehicle of eq. (1): ``v_i`` is integrated into the vehicle's moving
 target ``q_i`` (:mod:`sandbox.model.moving_target`), which starts at the vehicle, and
@@ -34,10 +37,10 @@ measured positions (a stopped or failed vehicle repels where it is).
 The static obstacles are seen through the range sensor (``sensors.range``; the law
 receives no map of them): without a sensor only the vehicles repel, and a scenario's
 obstacles are left to a recovery strategy or a safety filter. The sensor's
-``max_range`` should exceed ``range + contact / 2``, a miss reading ``max_range``.
+``max_range`` should exceed ``range``, a miss reading ``max_range``.
 
 Symbols: ``k_att`` (``attraction``) [1/s], ``k_rep`` (``repulsion``) [m^2/s],
-``rho_0`` (``range``) [m], ``d_c`` (``contact``) [m], ``max_speed`` [m/s]. Cost: every
+``R`` (``range``) [m], ``d_c`` (``contact``) [m], ``max_speed`` [m/s]. Cost: every
 pair of vehicles of a world, ``O(n^2)``.
 """
 
@@ -79,15 +82,15 @@ PARAMS = {
         "m^2/s",
         "k_rep of (P3)-(P4): the push k_rep (1 / rho - 1 / rho_0) away from a vehicle "
         "or obstacle point at the gap rho (default 0.5 m^2/s: 2 m/s at a gap of "
-        "0.21 m with rho_0 = 1.5 m)",
+        "0.2 m between two vehicles with R = 3d = 1.5 m)",
         minimum=0.0,
     ),
     "range": Param(
         "length",
         "3d",
         "m",
-        "rho_0 of (P3)-(P4): the gap beyond which nothing repels (default 3d, the "
-        "report's safe-zone radius R)",
+        "R of (P3)-(P4): the centre distance beyond which nothing repels (default 3d, "
+        "the report's safe-zone radius R)",
         minimum=0.0,
         exclusive=True,
     ),
@@ -114,15 +117,17 @@ PARAMS = {
 def repulsion(rel: np.ndarray, gain: float, reach: float, contact: float) -> np.ndarray:
     """(P3)-(P4): the push away from a point at ``rel = x - q`` [m], in [m/s].
 
-    ``gain (1 / rho - 1 / reach) (-rel / |rel|)`` with ``rho = |rel| - contact``
-    (floored at :data:`MIN_GAP`) below ``reach``, else 0.
+    ``gain (1 / rho - 1 / rho_0) (-rel / |rel|)`` with the gap ``rho = |rel| -
+    contact`` (floored at :data:`MIN_GAP`) and ``rho_0 = reach - contact`` where
+    ``|rel| < reach``, else 0.
 
-    >>> repulsion(np.array([[1.5, 0.0]]), 0.5, 1.5, 0.5).round(6).tolist()
-    [[-0.166667, -0.0]]
+    >>> repulsion(np.array([[1.0, 0.0]]), 0.5, 1.5, 0.5).round(6).tolist()
+    [[-0.5, -0.0]]
     """
     dist = np.sqrt(rel[..., 0] * rel[..., 0] + rel[..., 1] * rel[..., 1])
     gap = np.maximum(dist - contact, MIN_GAP)
-    size = np.where(gap < reach, gain * (1.0 / gap - 1.0 / reach), 0.0)
+    far = reach - contact
+    size = np.where(dist < reach, gain * (1.0 / gap - 1.0 / far), 0.0)
     return -(size / np.maximum(dist, 1e-300))[..., None] * rel
 
 
@@ -138,7 +143,7 @@ def potential_velocity(ctx: LawContext, q: np.ndarray, goal: np.ndarray) -> np.n
             lambda rel, _: repulsion(rel, gain, reach, contact), q, pos
         )  # (P3)
         if ctx.ranges is not None:
-            points, _ = sensed_points(ctx, reach + 0.5 * contact)
+            points, _ = sensed_points(ctx, reach, 0.5 * contact)
             velocity += point_sum(
                 lambda rel: repulsion(rel, gain, reach, 0.5 * contact), q, points
             )  # (P4)
