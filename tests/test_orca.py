@@ -13,12 +13,14 @@ documented deadlock), an obstacle field, and a world in a batch is its run alone
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from helpers import SCENARIOS, run_scenario
 
 from sandbox import compute_metrics, load_scenario
+from sandbox.behaviour.safety.constrained import record_episodes
 from sandbox.behaviour.safety.holonomic import (
     CORNERS,
     admissible_speed,
@@ -34,6 +36,7 @@ from sandbox.behaviour.safety.orca_program import HalfPlanes, det, solve
 from sandbox.loop.simulation import Simulation
 from sandbox.model.obstacle_field import ObstacleField
 from sandbox.plugins.contexts import FilterContext
+from sandbox.run.constrained import constrained_mask, filter_name
 from sandbox.run.output import write_run_dir
 
 SAFETY = SCENARIOS / "safety"
@@ -314,3 +317,36 @@ def test_a_world_in_a_batch_is_its_run_alone(name, fixed, tmp_path) -> None:
         alone = files_of(Simulation(sc).run(), tmp_path / f"alone{k}")
         together = files_of(run, tmp_path / f"batch{k}")
         assert together == alone, (name, k)
+
+
+# -------------------------------------------------------------- what a filter did
+def test_the_episodes_of_constrained_vehicles_merge_short_gaps() -> None:
+    # Two worlds of two vehicles; vehicle 1 of world 0 constrained at 0.00-0.02 s,
+    # free at 0.03, again at 0.04 (a gap of 0.02 s < MERGE_GAP: one episode), free
+    # from 0.30 s; vehicle 0 of world 1 from 0.10 s to the end.
+    memory: dict = {}
+    stats: list[dict] = [{}, {}]
+    for k in range(40):
+        t = round(0.01 * k, 2)
+        active = np.zeros(4, dtype=bool)  # rows: world 0's 0 and 1, world 1's 0, 1
+        active[1] = t < 0.3 and t != 0.03
+        active[2] = t >= 0.1
+        record_episodes(memory, stats, t, active, 2)
+    assert stats[0]["constrained"] == [[1, 0.0, 0.3]]
+    assert stats[1]["constrained"] == [[0, 0.1, None]]
+
+
+def test_the_mask_of_a_run_from_its_episodes() -> None:
+    run = SimpleNamespace(
+        t=np.arange(5) * 0.1,
+        n_vehicles=2,
+        scenario=None,
+        info={
+            "safety": {"filter": "orca", "constrained": [[0, 0.1, 0.3], [1, 0.2, None]]}
+        },
+    )
+    mask = constrained_mask(run)
+    assert mask.astype(int).tolist() == [[0, 0], [1, 0], [1, 1], [0, 1], [0, 1]]
+    assert filter_name(run) == "orca"
+    run.info = {}
+    assert constrained_mask(run) is None and filter_name(run) is None
