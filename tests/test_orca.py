@@ -12,14 +12,14 @@ documented deadlock), an obstacle field, and a world in a batch is its run alone
 
 from __future__ import annotations
 
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from helpers import SCENARIOS, run_scenario
+from test_one_loop import assert_batch_is_alone
 
-from sandbox import compute_metrics, load_scenario
+from sandbox import load_scenario
 from sandbox.behaviour.safety.constrained import record_episodes
 from sandbox.behaviour.safety.holonomic import (
     CORNERS,
@@ -33,11 +33,9 @@ from sandbox.behaviour.safety.holonomic import (
 from sandbox.behaviour.safety.orca import PARAMS, ORCAState, orca_commands
 from sandbox.behaviour.safety.orca_lines import surface_lines, vehicle_lines
 from sandbox.behaviour.safety.orca_program import HalfPlanes, det, solve
-from sandbox.loop.simulation import Simulation
 from sandbox.model.obstacle_field import ObstacleField
 from sandbox.plugins.contexts import FilterContext
 from sandbox.run.constrained import constrained_mask, filter_name
-from sandbox.run.output import write_run_dir
 
 SAFETY = SCENARIOS / "safety"
 
@@ -289,11 +287,6 @@ def test_the_obstacle_field_is_crossed_without_contact() -> None:
     assert m["collisions"]["total"] == 0 and m["converged"]
 
 
-def files_of(run, directory: Path) -> dict[str, bytes]:
-    out = write_run_dir(run, compute_metrics(run), directory)
-    return {p.name: p.read_bytes() for p in sorted(out.iterdir()) if p.is_file()}
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "fixed"),
@@ -311,12 +304,8 @@ def test_a_world_in_a_batch_is_its_run_alone(name, fixed, tmp_path) -> None:
         load_scenario(name, overrides=[*fixed, "safety.filter=orca", f"seed={s}"])
         for s in range(3)
     ]
-    runs = Simulation.batch(scenarios)
+    runs = assert_batch_is_alone(scenarios, tmp_path)
     assert any(r.info["safety"]["active_steps"] for r in runs)
-    for k, (sc, run) in enumerate(zip(scenarios, runs, strict=True)):
-        alone = files_of(Simulation(sc).run(), tmp_path / f"alone{k}")
-        together = files_of(run, tmp_path / f"batch{k}")
-        assert together == alone, (name, k)
 
 
 # -------------------------------------------------------------- what a filter did

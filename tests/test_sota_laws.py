@@ -10,14 +10,13 @@ potential's trap behind a stopped vehicle, and a world in a batch is its run alo
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 from helpers import SCENARIOS, run_scenario
+from test_one_loop import assert_batch_is_alone
 
-from sandbox import compute_metrics, load_scenario
-from sandbox.loop.simulation import Simulation
+from sandbox import load_scenario
 from sandbox.model.flocking import (
     PARAMS as FLOCKING,
 )
@@ -33,7 +32,6 @@ from sandbox.model.potential import PARAMS as POTENTIAL
 from sandbox.model.potential import potential_velocity, repulsion
 from sandbox.plugins.contexts import LawContext
 from sandbox.run.goals import goal_slots
-from sandbox.run.output import write_run_dir
 
 STUDIES = SCENARIOS / "studies"
 
@@ -203,11 +201,6 @@ def test_the_potential_s_trap_behind_a_stopped_vehicle() -> None:
     assert trapped[0]["t"] + trapped[0]["duration"] == pytest.approx(15.0)
 
 
-def files_of(run, directory: Path) -> dict[str, bytes]:
-    out = write_run_dir(run, compute_metrics(run), directory)
-    return {p.name: p.read_bytes() for p in sorted(out.iterdir()) if p.is_file()}
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "fixed"),
@@ -232,8 +225,4 @@ def test_a_world_in_a_batch_is_its_run_alone(name, fixed, tmp_path) -> None:
         load_scenario(name, overrides=[*fixed, "duration=4", f"seed={s}"])
         for s in range(3)
     ]
-    runs = Simulation.batch(scenarios)
-    for k, (sc, run) in enumerate(zip(scenarios, runs, strict=True)):
-        alone = files_of(Simulation(sc).run(), tmp_path / f"alone{k}")
-        together = files_of(run, tmp_path / f"batch{k}")
-        assert together == alone, (name, k)
+    assert_batch_is_alone(scenarios, tmp_path)

@@ -68,6 +68,7 @@ from sandbox.behaviour.safety.accounting import (
     account,
     account_worlds,
 )
+from sandbox.behaviour.safety.cbf import PARAMS as CBF_PARAMS
 from sandbox.behaviour.safety.constrained import record_episodes
 from sandbox.behaviour.safety.holonomic import (
     CORNERS,
@@ -127,14 +128,7 @@ PARAMS = {
         minimum=0.0,
         exclusive=True,
     ),
-    "margin": Param(
-        "length",
-        0.05,
-        "m",
-        "Clearance kept between the surfaces of two vehicles (and to obstacles) "
-        "beyond contact: added to the discs' combined radius",
-        minimum=0.0,
-    ),
+    "margin": CBF_PARAMS["margin"],  # the same clearance as the CBF filter's
     "tracking_error": Param(
         "length",
         0.1,
