@@ -23,7 +23,7 @@ with a bounded error and give ORCA a disc enlarged by that bound ``E``:
 
   so the vehicle stays within ``E`` of the holonomic disc's centre as long as
   ``V <= E / (T_phi |sin(phi / 2)|)``: the *admissible* holonomic velocities, a set
-  that reaches ``v1_max`` straight ahead and ``E / T`` sideways
+  that reaches ``v1_max`` straight ahead and ``sqrt(2) E / T`` sideways
   (:func:`drive_lines`: a polygon inscribed in it, as hard lines of the program).
 
 The unicycle drives forward only (``v1 >= 0``): the speed above vanishes at

@@ -145,8 +145,8 @@ PARAMS = {
         "s",
         "T: the time in which a vehicle turns to head along its holonomic velocity "
         "(at least |phi| / v2_max); larger T: smaller sideways velocities "
-        "(E / T at a right angle to the heading); default 0.4 s, a right angle at "
-        "4 rad/s",
+        "(sqrt(2) E / T at a right angle to the heading); default 0.4 s, a right "
+        "angle at 4 rad/s",
         minimum=0.0,
         exclusive=True,
     ),
