@@ -44,7 +44,8 @@ ORCA assumes that a velocity is reached at once; the drive reaches it within
 guarantees for discs holds here only approximately: the benchmarks measure it
 (``docs/results/state-of-the-art.md``). Symmetric swaps are ORCA's known deadlock:
 reciprocal half-planes of a perfectly symmetric configuration can leave every vehicle
-the velocity zero (van den Berg et al., section 7).
+the velocity zero (the RVO2 library's examples perturb the preferred velocities by a
+random 10^-4 m/s "to avoid deadlocks due to perfect symmetry"; this filter does not).
 
 Only vehicles driven by the controller are filtered (not those believed failed, not
 those driven open loop). Under sensing a vehicle sees the others where their broadcast
