@@ -66,11 +66,13 @@ def worst_settling(run: Any, metrics: dict[str, Any]) -> float | None:
     """The largest settling time of the healthy vehicles with a slot [s].
 
     Healthy: no failure active at the end of the run (as for ``converged``). None when
-    one of them never settles, or there is none.
+    one of them never settles, or there is none. A law that hands the controller a
+    moving target is judged against its goals (``metrics.json`` ``formation_goal``).
     """
     worst = None
+    judged = metrics.get("formation_goal") or metrics  # a moving-target law's goals
     for i, name in enumerate(run.names):
-        m = metrics["vehicles"][name]
+        m = judged["vehicles"][name]
         if m["formation_error"]["final"] is None:
             continue
         if len(run.t) and bool(run.failed[-1, i]):
@@ -84,16 +86,17 @@ def worst_settling(run: Any, metrics: dict[str, Any]) -> float | None:
 def row_of(run: Any, metrics: dict[str, Any]) -> dict[str, Any]:
     """The measured columns of a run's row in ``results.csv``."""
     col = metrics["collisions"]
+    judged = metrics.get("formation_goal") or metrics  # a moving-target law's goals
     return {
         "status": metrics["status"],
         "collisions.total": col["total"],
         "collisions.vehicle_vehicle": col["vehicle_vehicle"],
         "collisions.healthy": col["healthy"],
         "min_distance": metrics["min_distance"],
-        "converged": metrics["converged"],
+        "converged": judged["converged"],
         "settling_time": worst_settling(run, metrics),
         "effort": sum(m["control_effort"] for m in metrics["vehicles"].values()),
-        "deadlocks": len(metrics.get("deadlocks", ())),
+        "deadlocks": len(judged.get("deadlocks", ())),
     }
 
 
