@@ -194,6 +194,7 @@ def test_the_potential_s_trap_behind_a_stopped_vehicle() -> None:
         STUDIES / "failure_formup.yaml",
         "formation={law: potential, rotate: true}",
         "recovery.strategy=none",
+        "failures[0].kind=stop",
         seed=0,
     )
     assert m["collisions"]["total"] == 0
@@ -218,6 +219,15 @@ def test_the_potential_s_trap_behind_a_stopped_vehicle() -> None:
         (
             "studies/failure_formup",
             ["formation={law: flocking, rotate: true}", "recovery.strategy=none"],
+        ),
+        # worlds that re-form apart: each world's own law on its rows
+        (
+            "failures/follower_stop",
+            ["formation.law=potential", "reconfigure.assign=hungarian"],
+        ),
+        (
+            "failures/follower_stop",
+            ["formation={law: flocking, rotate: true}", "reconfigure.assign=hungarian"],
         ),
     ],
 )
