@@ -32,6 +32,7 @@ from sandbox.loop.platoons import Platoons
 from sandbox.loop.recording import WorldsRecorder
 from sandbox.loop.stacked_law import StackedLaw
 from sandbox.loop.state import Fleet, uniform
+from sandbox.loop.steering import CarDrive
 from sandbox.loop.stepping import WorldsPhysics
 from sandbox.loop.tally import LoopTally
 from sandbox.loop.worlds import (
@@ -152,6 +153,9 @@ class Building:
         self._schedules = StackedCommands(self.states, n)
         self.k = 0
         self.recorder = WorldsRecorder(self.steps // self.record_every + 1, K, n)
+        self._cars = CarDrive.build(
+            self.fleet, K, n, self.h, self.steps // self.record_every + 1
+        )
         self.tally = LoopTally(K, n, self.h)
         self.plan: Plan | None = None
         self._recorded_target: np.ndarray | None = None

@@ -45,6 +45,8 @@ class Ending:
         state, fleet = self.states[w], self.fleet
         state.status = status
         if last:
+            if self._cars is not None:
+                self._cars.record(self.recorder.count, fleet.steer, w)
             nan = np.full((self.N, 2), np.nan)
             arrays = self.recorder.append_last(
                 w,
@@ -142,4 +144,5 @@ class Ending:
             scenario=sc,
             **arrays,
             **({} if s.range_sensor is None else s.range_sensor.arrays()),
+            **({} if self._cars is None else self._cars.arrays(w, len(arrays["t"]))),
         )

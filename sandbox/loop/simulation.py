@@ -450,6 +450,9 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         chi_next, v1, v2 = self._controller.step(
             fleet.pos, fleet.chi, fleet.theta, target, v_ref, a_ref
         )
+        cars = self._cars
+        if cars is not None:  # the cars' rows by their own anti-windup (steering.py)
+            cars.control(fleet, target, v_ref, a_ref, chi_next, v1, v2)
         if self._filter is not None:  # after the controller, before the failures
             v1, v2 = self._safety(t, v1, v2)
         # Vehicles not driven by the controller this period.
@@ -468,6 +471,8 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             v2 = np.where(mask, CLIP(rows[:, 1], -self._v2_max, self._v2_max), v2)
             passive = passive | mask
             external = mask if external is None else external | mask
+        if cars is not None:  # what a car executes: its steering's turn rate
+            v2, steer = cars.steer(v1, v2, fleet.steer)
         if self._detection is not None:  # what the controllers ask for, broadcast
             intended = np.empty((len(v1), 2))  # np.column_stack's, in two copies
             intended[:, 0], intended[:, 1] = v1, v2
@@ -484,6 +489,10 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         )
         for w, exc in errors:  # a failure plug-in failed: its world ends now
             self._plugin_failed(w, exc)
+        if cars is not None:  # a failure's commands steered too
+            if len(self.failures):
+                v2, steer = cars.steer(v1, v2, fleet.steer, steer, failed)
+            fleet.steer = steer
         if self._detecting:
             # A failed controller does not know: it keeps its own state until the
             # failure ends (then it resumes from the applied velocity).
@@ -541,6 +550,8 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             plan.point,
             self._live_worlds(),
         )
+        if self._cars is not None:
+            self._cars.record(self.recorder.count - 1, fleet.steer)
         if self.range_sensor is not None:
             self.range_sensor.record()
 

@@ -125,6 +125,9 @@ class Run:
         vehicle or beam without one); None: the run had no range sensor.
     beam_angles : ndarray, shape (n, B) [rad], or None
         Each beam's angle about the vehicle's heading.
+    steer : ndarray, shape (T, n) [rad], or None
+        Each car's steering angle delta (``model: bicycle``) during the period from
+        each sample, NaN on a unicycle's row; None: the run had no car.
     """
 
     t: np.ndarray
@@ -146,6 +149,7 @@ class Run:
     scenario: Any = None
     ranges: np.ndarray | None = None
     beam_angles: np.ndarray | None = None
+    steer: np.ndarray | None = None
 
     @property
     def n_vehicles(self) -> int:
@@ -284,6 +288,8 @@ class Run:
         scans = {}
         if self.ranges is not None and self.beam_angles is not None:
             scans = {"ranges": self.ranges, "beam_angles": self.beam_angles}
+        if self.steer is not None:  # the steering angles only of a run with cars
+            scans["steer"] = self.steer
         with open(path, "wb") as fh:
             np.savez_compressed(
                 fh,
@@ -366,6 +372,9 @@ def _read_checked(path: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         if names & set(_OPTIONAL):  # both or neither
             expected |= set(_OPTIONAL)
             members.update(_OPTIONAL)
+        if "steer" in names:  # a run with cars
+            expected.add("steer")
+            members["steer"] = ("f", ("T", "n"))
         missing = sorted(expected - names)
         extra = sorted(set(infos) - {f"{k}.npy" for k in expected})
         if missing or extra:

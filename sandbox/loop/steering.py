@@ -1,0 +1,164 @@
+"""The cars of the loop: their controller rows, their steering, their record.
+
+A fleet may hold cars (``model: bicycle``, :mod:`sandbox.model.bicycle`) among its
+unicycles, in any world of a batch. The loop leaves the unicycles' path as it is and
+adds, where some row is a car (:meth:`CarDrive.build` gives None otherwise):
+
+1. after the controller (:meth:`CarDrive.control`): the cars' rows computed again by
+   :func:`~sandbox.model.bicycle.car_controller_step`, with the car's anti-windup in
+   place of the unicycle's turn limit;
+2. after the safety filter, the schedules and the overrides, and again after the
+   failures for the rows they hit (:meth:`CarDrive.steer`): the asked turn rate made
+   a steering angle within the car's limits, and the turn rate the car executes,
+   ``v1 tan(delta) / L``; every command a car executes (a filter's, a user's, a
+   failure's) is one it can;
+3. the steering angle of each sample in the record (:meth:`CarDrive.record`), given to
+   each world's :class:`~sandbox.run.record.Run` as ``steer`` where the world has a
+   car (NaN on its unicycles' rows).
+
+Every step is elementwise over rows: a world's cars have the numbers they have alone.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from sandbox.model.bicycle import CarLimits, car_controller_step, steer_commands
+from sandbox.model.flatness import Gains
+
+
+class CarDrive:
+    """The car rows of a loop of ``K`` worlds of ``n`` vehicles.
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The stacked fleet (rows world after world).
+    K, n : int
+    dt : float [s]
+        The control period.
+    capacity : int
+        Samples of the record.
+    """
+
+    def __init__(self, fleet: Any, K: int, n: int, dt: float, capacity: int) -> None:
+        self.rows = np.flatnonzero(fleet.bicycle)
+        self.K, self.n, self.dt = K, n, dt
+        rows = self.rows
+        self.gains = Gains(
+            **{k: getattr(fleet.gains, k)[rows] for k in ("k1", "k2", "k3", "k4", "kp")}
+        )
+        self.limits = CarLimits(
+            fleet.wheelbase[rows],
+            fleet.max_steer[rows],
+            fleet.max_steer_rate[rows],
+            fleet.v1_max[rows],
+            fleet.accel_max[rows],
+            fleet.v2_max[rows],
+        )
+        #: Which worlds hold a car (only they record ``steer``).
+        self.worlds = fleet.bicycle.reshape(K, n).any(axis=1)
+        self._unicycle = ~fleet.bicycle
+        self._record = np.full((capacity, K * n), np.nan)
+
+    @classmethod
+    def build(cls, fleet: Any, K: int, n: int, dt: float, capacity: int):
+        """The loop's cars, or None where every row is a unicycle."""
+        if not np.count_nonzero(fleet.bicycle):
+            return None
+        return cls(fleet, K, n, dt, capacity)
+
+    def control(
+        self,
+        fleet: Any,
+        target: np.ndarray,
+        v_ref: np.ndarray,
+        a_ref: np.ndarray,
+        chi_next: np.ndarray,
+        v1: np.ndarray,
+        v2: np.ndarray,
+    ) -> None:
+        """The cars' rows of the controller's outputs, computed again, in place.
+
+        :func:`~sandbox.model.bicycle.car_controller_step` on the car rows of the
+        period's state and targets; ``chi_next``, ``v1`` and ``v2`` (the
+        controller's, shape (K n, ...)) take its results on those rows.
+        """
+        r = self.rows
+        nxt, u1, u2 = car_controller_step(
+            fleet.pos[r],
+            fleet.chi[r],
+            fleet.theta[r],
+            target[r],
+            v_ref[r],
+            a_ref[r],
+            self.gains,
+            self.dt,
+            self.limits,
+        )
+        chi_next[r], v1[r], v2[r] = nxt, u1, u2
+
+    def steer(
+        self,
+        v1: np.ndarray,
+        v2: np.ndarray,
+        held: np.ndarray,
+        steer: np.ndarray | None = None,
+        only: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The turn rates the cars execute and their steering angles, all rows.
+
+        :func:`~sandbox.model.bicycle.steer_commands` on the car rows from the
+        angles ``held`` of the last period; the unicycles' rows keep their ``v2``.
+
+        Parameters
+        ----------
+        v1, v2 : ndarray, shape (K n,) [m/s], [rad/s]
+            The commands as they stand.
+        held : ndarray, shape (K n,) [rad]
+            The steering angles of the last period (``Fleet.steer``).
+        steer : ndarray, shape (K n,) [rad], optional
+            The angles an earlier call of this period gave; with ``only``, the rows
+            outside ``only`` keep them.
+        only : ndarray, shape (K n,), bool, optional
+            Steer these rows again (those a failure changed), the others as given.
+
+        Returns
+        -------
+        v2 : ndarray, shape (K n,) [rad/s]
+            A new array.
+        steer : ndarray, shape (K n,) [rad]
+            A new array.
+        """
+        r = self.rows
+        limits = self.limits
+        if only is not None:
+            pick = np.flatnonzero(only[r])
+            if not len(pick):
+                return v2, steer
+            r, limits = r[pick], limits.rows(pick)
+        u2, angle = steer_commands(v1[r], v2[r], held[r], limits, self.dt)
+        v2 = v2.copy()
+        out = held.copy() if steer is None else steer.copy()
+        v2[r], out[r] = u2, angle
+        return v2, out
+
+    def record(self, index: int, steer: np.ndarray, world: int | None = None) -> None:
+        """Keep the steering angles as sample ``index`` (of every world, or one)."""
+        if index >= len(self._record):
+            return
+        angles = np.where(self._unicycle, np.nan, steer)
+        if world is None:
+            self._record[index] = angles
+        else:
+            rows = slice(world * self.n, (world + 1) * self.n)
+            self._record[index, rows] = angles[rows]
+
+    def arrays(self, world: int, count: int) -> dict[str, np.ndarray]:
+        """World ``world``'s ``steer`` (count, n) [rad], or nothing without a car."""
+        if not self.worlds[world]:
+            return {}
+        rows = slice(world * self.n, (world + 1) * self.n)
+        return {"steer": np.ascontiguousarray(self._record[:count, rows])}
