@@ -237,11 +237,14 @@ def car_controller_step(
     """One period of the flatness controller for cars, eqs. (5)-(6).
 
     The unicycle's composition (:class:`~sandbox.model.kernels.Controller`) with the
-    car's anti-windup: eq. (6) for the flat output, chi's speed and acceleration
-    clamps (:func:`~sandbox.model.flatness.advance_extension`), chi kept within the
-    car's cone (:func:`limit_steer` with the turn limit of its next speed), then eq.
-    (5) and the clip of ``v2`` to ``v2_max``. The commands still ask for any turn
-    rate; :func:`steer_commands` makes them a steering angle within the car's limits.
+    car's anti-windup: eq. (6) for the flat output; the chi it asks for turned into
+    the car's cone at the speed it asks for (:func:`limit_steer`), so that a car
+    asked to go the other way accelerates into its tightest turn instead of braking
+    to rest, where it could not turn; chi's speed and acceleration clamps
+    (:func:`~sandbox.model.flatness.advance_extension`) towards it; chi turned into
+    the cone of its new speed; then eq. (5) and the clip of ``v2`` to ``v2_max``. The
+    commands still ask for any turn rate; :func:`steer_commands` makes them a
+    steering angle within the car's limits.
 
     Parameters
     ----------
@@ -263,12 +266,25 @@ def car_controller_step(
     """
     aim_at = np.where(np.isnan(target), pos, target)
     chi_dot = extension_rate(pos, chi, aim_at, v_ref, a_ref, gains)  # eq. (6)
-    nxt, _ = advance_extension(chi, chi_dot, dt, limits.v1_max, limits.accel_max)
+    # The chi eq. (6) asks for, turned into the car's cone first: its length is the
+    # speed the car is asked to reach, which the clamps below then limit.
+    wanted = chi + chi_dot * dt
+    reach = np.minimum(np.hypot(wanted[:, 0], wanted[:, 1]), limits.v1_max)
+    wanted, aim = limit_steer(wanted, theta, _cone(reach, limits, dt))
+    nxt, _ = advance_extension(
+        chi, (wanted - chi) / dt, dt, limits.v1_max, limits.accel_max
+    )
     speed = np.hypot(nxt[:, 0], nxt[:, 1])
-    cone = car_turn_limit(speed, limits.wheelbase, limits.max_steer) * dt
-    nxt, aim = limit_steer(nxt, theta, np.minimum(cone, limits.v2_max * dt))
+    nxt, late = limit_steer(nxt, theta, _cone(speed, limits, dt))
+    aim = np.where(np.isnan(aim), late, aim)
     v1, v2 = flat_inputs(theta, chi, (nxt - chi) / dt, gains.kp, aim)  # eq. (5)
     return nxt, v1, CLIP(v2, -limits.v2_max, limits.v2_max)
+
+
+def _cone(speed: np.ndarray, limits: CarLimits, dt: float) -> np.ndarray:
+    """The largest turn [rad] in one period at ``speed``, within ``v2_max`` too."""
+    turn = car_turn_limit(speed, limits.wheelbase, limits.max_steer)
+    return np.minimum(turn, limits.v2_max) * dt
 
 
 def steer_commands(

@@ -564,3 +564,28 @@ def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
         "reach": reach,
         "width": int(run.beam_angles.shape[1]),
     }
+
+
+def car_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
+    """The cars' steering for the page, on its samples; None for a run without cars.
+
+    ``steer`` packed like the other arrays (shape (T, n) [rad], NaN on a unicycle's
+    row), ``wheelbase`` each vehicle's [m] (None for a unicycle) and ``wheel`` the
+    drawn wheels' length as a fraction of the diameter
+    (:mod:`sandbox.render.cars`).
+    """
+    from sandbox.render.cars import WHEEL_FRACTION, car_wheelbases
+
+    wheelbase = car_wheelbases(run)
+    if wheelbase is None:
+        return None
+    T = len(run.t)
+    keep = np.arange(0, T, int(data["stride"]))
+    if keep[-1] != T - 1:
+        keep = np.append(keep, T - 1)
+    steer = np.asarray(run.steer, dtype=float)[keep]
+    return {
+        "steer": pack(steer, STEPS["pose"], order=1),
+        "wheelbase": [_rounded(w) for w in wheelbase],
+        "wheel": WHEEL_FRACTION,
+    }
