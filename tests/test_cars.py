@@ -242,3 +242,26 @@ def test_the_turning_limit_breaks_the_slot_it_warns_of() -> None:
     assert err[:, 1].max() < 0.06  # red (outside) holds it (eq. (12): 5.65 cm)
     assert np.mean(np.abs(run.steer[late, 2]) >= 0.2187 - 1e-9) > 0.9
     assert math.isclose(float(np.abs(run.steer).max()), 0.2187)
+
+
+def test_a_car_agents_action_is_its_speed_and_steering_angle() -> None:
+    pytest.importorskip("gymnasium")
+    from sandbox.envs import VehicleEnv
+    from sandbox.envs.vector import VehicleVectorEnv
+
+    doc = {**circle_platoon(), "duration": 2.0}
+    env = VehicleEnv(doc, agent="red", action="commands")
+    env.reset(seed=1)
+    for _ in range(60):  # a full action: 2 m/s at full lock, 0.5 rad
+        env.step(np.array([1.0, 1.0], dtype=np.float32))
+    sim, red = env.task.sim, 1
+    assert sim.fleet.steer[red] == pytest.approx(0.5)
+    assert sim.fleet.v1[red] == pytest.approx(2.0)
+    # half the steering action: 0.25 rad
+    env.step(np.array([1.0, 0.5], dtype=np.float32))
+    assert sim.fleet.steer[red] == pytest.approx(0.25)
+    venv = VehicleVectorEnv(doc, num_envs=2, agent="red", action="commands")
+    venv.reset(seed=1)
+    for _ in range(60):
+        venv.step(np.tile(np.array([1.0, -1.0], dtype=np.float32), (2, 1)))
+    assert venv.vector.cohorts[0][0].fleet.steer[1] == pytest.approx(-0.5)
