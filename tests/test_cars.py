@@ -265,3 +265,16 @@ def test_a_car_agents_action_is_its_speed_and_steering_angle() -> None:
     for _ in range(60):
         venv.step(np.tile(np.array([1.0, -1.0], dtype=np.float32), (2, 1)))
     assert venv.vector.cohorts[0][0].fleet.steer[1] == pytest.approx(-0.5)
+
+
+def test_a_car_parks_at_a_point_instead_of_orbiting_it() -> None:
+    # Section 2.2.2 with a car: it arrives, creeps past the point by a few centimetres
+    # and, the point now behind it and within its least turning radius (1.83 m),
+    # stops there; keeping its speed it would loop a 1.83 m circle every 11 s.
+    from helpers import PAPER
+
+    car = ["vehicle.model=bicycle", "vehicle.wheelbase=1", "vehicle.max_steer=0.5"]
+    run, m = run_scenario(PAPER / "stabilization.yaml", *car, duration=40)
+    late = run.t > 5.0
+    assert run.formation_error[late, 0].max() < 0.05  # never leaves the point again
+    assert m["converged"] is True

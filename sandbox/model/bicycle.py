@@ -39,6 +39,7 @@ from sandbox.model.flatness import (
     advance_extension,
     extension_rate,
     flat_inputs,
+    limit_turn,
 )
 
 #: The vehicle models a scenario may name (``vehicle.model``).
@@ -244,7 +245,11 @@ def car_controller_step(
     (:func:`~sandbox.model.flatness.advance_extension`) towards it; chi turned into
     the cone of its new speed; then eq. (5) and the clip of ``v2`` to ``v2_max``. The
     commands still ask for any turn rate; :func:`steer_commands` makes them a
-    steering angle within the car's limits.
+    steering angle within the car's limits. A car whose target is at rest (``|x_ref'|
+    < CHI_HOLD``) within one least turning radius **parks**: its chi is shortened as
+    the unicycle's (:func:`~sandbox.model.flatness.limit_turn`), so it stops where
+    the target falls behind it instead of looping around a point it cannot reach
+    without reversing.
 
     Parameters
     ----------
@@ -266,19 +271,38 @@ def car_controller_step(
     """
     aim_at = np.where(np.isnan(target), pos, target)
     chi_dot = extension_rate(pos, chi, aim_at, v_ref, a_ref, gains)  # eq. (6)
+    # Where the target rests within one least turning radius, a car parks: chi is
+    # shortened as a unicycle's (it stops where the target falls behind) instead of
+    # being kept for a loop around a point it would only orbit.
+    away = aim_at - pos
+    parks = (np.hypot(v_ref[:, 0], v_ref[:, 1]) < CHI_HOLD) & (
+        np.hypot(away[:, 0], away[:, 1])
+        < min_turning_radius(limits.wheelbase, limits.max_steer)
+    )
     # The chi eq. (6) asks for, turned into the car's cone first: its length is the
     # speed the car is asked to reach, which the clamps below then limit.
     wanted = chi + chi_dot * dt
     reach = np.minimum(np.hypot(wanted[:, 0], wanted[:, 1]), limits.v1_max)
-    wanted, aim = limit_steer(wanted, theta, _cone(reach, limits, dt))
+    wanted, aim = _into_cone(wanted, theta, _cone(reach, limits, dt), parks)
     nxt, _ = advance_extension(
         chi, (wanted - chi) / dt, dt, limits.v1_max, limits.accel_max
     )
     speed = np.hypot(nxt[:, 0], nxt[:, 1])
-    nxt, late = limit_steer(nxt, theta, _cone(speed, limits, dt))
+    nxt, late = _into_cone(nxt, theta, _cone(speed, limits, dt), parks)
     aim = np.where(np.isnan(aim), late, aim)
     v1, v2 = flat_inputs(theta, chi, (nxt - chi) / dt, gains.kp, aim)  # eq. (5)
     return nxt, v1, CLIP(v2, -limits.v2_max, limits.v2_max)
+
+
+def _into_cone(
+    chi: np.ndarray, theta: np.ndarray, limit: np.ndarray, parks: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`limit_steer`, or the unicycle's ``limit_turn`` on the rows that park."""
+    kept, aim = limit_steer(chi, theta, limit)
+    if not np.count_nonzero(parks):
+        return kept, aim
+    short, stop = limit_turn(chi, theta, limit)
+    return np.where(parks[:, None], short, kept), np.where(parks, stop, aim)
 
 
 def _cone(speed: np.ndarray, limits: CarLimits, dt: float) -> np.ndarray:
