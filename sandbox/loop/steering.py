@@ -21,10 +21,9 @@ Every step is elementwise over rows: a world's cars have the numbers they have a
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
+from sandbox.loop.state import Fleet
 from sandbox.model.bicycle import CarLimits, car_controller_step, steer_commands
 from sandbox.model.flatness import Gains
 
@@ -43,7 +42,7 @@ class CarDrive:
         Samples of the record.
     """
 
-    def __init__(self, fleet: Any, K: int, n: int, dt: float, capacity: int) -> None:
+    def __init__(self, fleet: Fleet, K: int, n: int, dt: float, capacity: int) -> None:
         self.rows = np.flatnonzero(fleet.bicycle)
         self.K, self.n, self.dt = K, n, dt
         rows = self.rows
@@ -64,7 +63,9 @@ class CarDrive:
         self._record = np.full((capacity, K * n), np.nan)
 
     @classmethod
-    def build(cls, fleet: Any, K: int, n: int, dt: float, capacity: int):
+    def build(
+        cls, fleet: Fleet, K: int, n: int, dt: float, capacity: int
+    ) -> CarDrive | None:
         """The loop's cars, or None where every row is a unicycle."""
         if not np.count_nonzero(fleet.bicycle):
             return None
@@ -72,7 +73,7 @@ class CarDrive:
 
     def control(
         self,
-        fleet: Any,
+        fleet: Fleet,
         target: np.ndarray,
         v_ref: np.ndarray,
         a_ref: np.ndarray,
@@ -137,7 +138,7 @@ class CarDrive:
         if only is not None:
             pick = np.flatnonzero(only[r])
             if not len(pick):
-                return v2, steer
+                return v2, (held.copy() if steer is None else steer)
             r, limits = r[pick], limits.rows(pick)
         u2, angle = steer_commands(v1[r], v2[r], held[r], limits, self.dt)
         v2 = v2.copy()

@@ -84,7 +84,9 @@ def turn_rate(
     return v1 * np.tan(steer) / wheelbase
 
 
-def min_turning_radius(wheelbase: np.ndarray | float, max_steer: np.ndarray | float):
+def min_turning_radius(
+    wheelbase: np.ndarray | float, max_steer: np.ndarray | float
+) -> np.ndarray:
     """The least turning radius ``L / tan(max_steer)`` [m] of the rear axle.
 
     >>> round(float(min_turning_radius(1.0, np.arctan(0.25))), 12)
@@ -130,7 +132,9 @@ def steer_angle(v1: np.ndarray, v2: np.ndarray, wheelbase: np.ndarray) -> np.nda
     return np.arctan2(wheelbase * v2 * sign, np.abs(v1))
 
 
-def flat_steer(chi: np.ndarray, chi_dot: np.ndarray, wheelbase: np.ndarray):
+def flat_steer(
+    chi: np.ndarray, chi_dot: np.ndarray, wheelbase: np.ndarray | float
+) -> np.ndarray:
     """The steering angle [rad] of the flat output's motion ``(chi, chi')``.
 
     The car's flat map (eq. (3) of the report for the bicycle; python-control's
