@@ -57,6 +57,8 @@ class CarDrive:
             fleet.accel_max[rows],
             fleet.v2_max[rows],
         )
+        #: Whether every row is a car.
+        self.every = len(self.rows) == len(fleet.bicycle)
         #: Which worlds hold a car (only they record ``steer``).
         self.worlds = fleet.bicycle.reshape(K, n).any(axis=1)
         self._unicycle = ~fleet.bicycle
@@ -87,7 +89,7 @@ class CarDrive:
         period's state and targets; ``chi_next``, ``v1`` and ``v2`` (the
         controller's, shape (K n, ...)) take its results on those rows.
         """
-        r = self.rows
+        r = slice(None) if self.every else self.rows  # a fleet of cars: no copies
         nxt, u1, u2 = car_controller_step(
             fleet.pos[r],
             fleet.chi[r],

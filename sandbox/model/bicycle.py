@@ -222,8 +222,14 @@ def limit_steer(
     angle = np.arctan2(c2, c1)
     off = wrap_angle(angle - theta)
     outside = (np.abs(off) > limit) & (norm >= CHI_HOLD)
+    if not np.count_nonzero(outside):  # every chi within its cone: as it is
+        nowhere = np.empty(norm.shape)
+        nowhere.fill(np.nan)
+        return chi, nowhere
     direction = theta + CLIP(off, -limit, limit)
-    turned = np.stack((norm * np.cos(direction), norm * np.sin(direction)), axis=-1)
+    turned = np.empty(chi.shape)
+    turned[..., 0] = norm * np.cos(direction)
+    turned[..., 1] = norm * np.sin(direction)
     out = np.where(outside[..., None], turned, chi)
     return out, np.where(outside, angle, np.nan)
 
@@ -278,21 +284,20 @@ def car_controller_step(
     # Where the target rests within one least turning radius, a car parks: chi is
     # shortened as a unicycle's (it stops where the target falls behind) instead of
     # being kept for a loop around a point it would only orbit.
-    away = aim_at - pos
-    parks = (np.hypot(v_ref[:, 0], v_ref[:, 1]) < CHI_HOLD) & (
-        np.hypot(away[:, 0], away[:, 1])
-        < min_turning_radius(limits.wheelbase, limits.max_steer)
-    )
+    parks = np.hypot(v_ref[:, 0], v_ref[:, 1]) < CHI_HOLD
+    if np.count_nonzero(parks):
+        away = aim_at - pos
+        parks &= np.hypot(away[:, 0], away[:, 1]) < limits.radius
     # The chi eq. (6) asks for, turned into the car's cone first: its length is the
     # speed the car is asked to reach, which the clamps below then limit.
     wanted = chi + chi_dot * dt
     reach = np.minimum(np.hypot(wanted[:, 0], wanted[:, 1]), limits.v1_max)
-    wanted, aim = _into_cone(wanted, theta, _cone(reach, limits, dt), parks)
+    wanted, aim = _into_cone(wanted, theta, limits.cone(reach, dt), parks)
     nxt, _ = advance_extension(
         chi, (wanted - chi) / dt, dt, limits.v1_max, limits.accel_max
     )
     speed = np.hypot(nxt[:, 0], nxt[:, 1])
-    nxt, late = _into_cone(nxt, theta, _cone(speed, limits, dt), parks)
+    nxt, late = _into_cone(nxt, theta, limits.cone(speed, dt), parks)
     aim = np.where(np.isnan(aim), late, aim)
     v1, v2 = flat_inputs(theta, chi, (nxt - chi) / dt, gains.kp, aim)  # eq. (5)
     return nxt, v1, CLIP(v2, -limits.v2_max, limits.v2_max)
@@ -307,12 +312,6 @@ def _into_cone(
         return kept, aim
     short, stop = limit_turn(chi, theta, limit)
     return np.where(parks[:, None], short, kept), np.where(parks, stop, aim)
-
-
-def _cone(speed: np.ndarray, limits: CarLimits, dt: float) -> np.ndarray:
-    """The largest turn [rad] in one period at ``speed``, within ``v2_max`` too."""
-    turn = car_turn_limit(speed, limits.wheelbase, limits.max_steer)
-    return np.minimum(turn, limits.v2_max) * dt
 
 
 def steer_commands(
@@ -371,9 +370,17 @@ class CarLimits:
         ``inf`` where not declared.
     v1_max, accel_max, v2_max : ndarray [m/s], [m/s^2], [rad/s]
         ``inf`` where not declared.
+
+    Attributes
+    ----------
+    curvature : ndarray [1/m]
+        The largest curvature ``tan(max_steer) / L``.
+    radius : ndarray [m]
+        The least turning radius ``L / tan(max_steer)`` (:func:`min_turning_radius`).
     """
 
-    __slots__ = (
+    #: The constructor's arguments, in order.
+    FIELDS = (
         "wheelbase",
         "max_steer",
         "max_steer_rate",
@@ -381,6 +388,7 @@ class CarLimits:
         "accel_max",
         "v2_max",
     )
+    __slots__ = (*FIELDS, "curvature", "radius", "_tan", "_turn_capped")
 
     def __init__(
         self,
@@ -395,6 +403,21 @@ class CarLimits:
         self.max_steer = max_steer
         self.max_steer_rate = max_steer_rate
         self.v1_max, self.accel_max, self.v2_max = v1_max, accel_max, v2_max
+        self._tan = np.tan(max_steer)
+        self.curvature = self._tan / wheelbase
+        self.radius = min_turning_radius(wheelbase, max_steer)
+        self._turn_capped = bool(np.isfinite(v2_max).any())
+
+    def cone(self, speed: np.ndarray, dt: float) -> np.ndarray:
+        """The largest turn [rad] in one period at ``speed``, within ``v2_max`` too.
+
+        ``|speed| tan(max_steer) / L dt`` (:func:`car_turn_limit`), at most
+        ``v2_max dt``.
+        """
+        turn = np.abs(speed) * self._tan / self.wheelbase  # car_turn_limit's order
+        if self._turn_capped:
+            turn = np.minimum(turn, self.v2_max)
+        return turn * dt
 
     @classmethod
     def of(cls, **values: object) -> CarLimits:
@@ -405,7 +428,7 @@ class CarLimits:
         """
         n = len(np.atleast_1d(values["wheelbase"]))
         out = {}
-        for name in cls.__slots__:
+        for name in cls.FIELDS:
             value = values.get(name, np.inf)
             out[name] = np.ascontiguousarray(
                 np.broadcast_to(np.asarray(value, dtype=float), (n,))
@@ -414,4 +437,4 @@ class CarLimits:
 
     def rows(self, index: np.ndarray) -> CarLimits:
         """The limits of the rows ``index`` (copies)."""
-        return CarLimits(*(getattr(self, name)[index] for name in self.__slots__))
+        return CarLimits(*(getattr(self, name)[index] for name in self.FIELDS))
