@@ -7,6 +7,7 @@ unicycle with the turn rate ``v1 tan(delta) / L``; every command it executes kee
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import warnings
@@ -278,3 +279,30 @@ def test_a_car_parks_at_a_point_instead_of_orbiting_it() -> None:
     late = run.t > 5.0
     assert run.formation_error[late, 0].max() < 0.05  # never leaves the point again
     assert m["converged"] is True
+
+
+def test_a_platoons_vehicle_section_makes_its_vehicles_cars() -> None:
+    car = ["wheelbase=1", "max_steer=0.5", "model=bicycle"]
+    sc = load_scenario(
+        "traffic/intersection_two",
+        overrides=[f"platoons[1].vehicle.{c}" for c in car] + ["duration=1"],
+    )
+    assert [v.model for v in sc.vehicles] == ["unicycle"] * 3 + ["bicycle"] * 3
+    assert load_scenario(sc.to_dict()) == sc  # the document reads back the same
+    run = Simulation(sc).run()
+    assert np.isnan(run.steer[:, :3]).all() and np.isfinite(run.steer[:, 3:]).all()
+    assert run.platoon("north").steer.shape == (len(run.t), 3)
+
+
+def test_the_pictures_draw_the_cars_steering() -> None:
+    from sandbox.render.animation import render_frame
+    from sandbox.render.replay import replay_html
+
+    run, _ = run_scenario(FULL_LOCK, duration=1.0)
+    frame = render_frame(run, size=200)
+    straight = dataclasses.replace(run, steer=np.zeros_like(run.steer))
+    assert not np.array_equal(frame, render_frame(straight, size=200))
+    page = replay_html(run)
+    assert "function drawCars" in page and '"cars":' in page
+    uni, _ = run_scenario(circle_platoon("unicycle"), duration=0.5)
+    assert "drawCars" not in replay_html(uni)
