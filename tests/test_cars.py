@@ -120,20 +120,19 @@ def test_metrics_report_the_time_at_the_steering_limit() -> None:
 
 
 def test_the_steering_angle_is_saved_and_loaded_with_the_run(tmp_path) -> None:
-    run, _ = run_scenario(circle_platoon(), duration=1.0)
-    run.save_npz(tmp_path / "run.npz")
-    back = load_run(tmp_path) if (tmp_path / "scenario.yaml").exists() else None
-    if back is None:
-        from sandbox.run.record import Run
+    from helpers import write_yaml
 
-        back = Run.load_npz(tmp_path / "run.npz")
-    assert np.array_equal(back.steer, run.steer)
-    uni, _ = run_scenario(circle_platoon("unicycle"), duration=1.0)
-    assert uni.steer is None  # a run without cars keeps its members
-    uni.save_npz(tmp_path / "uni.npz")
-    from sandbox.run.record import Run
+    from sandbox.cli import main
 
-    assert Run.load_npz(tmp_path / "uni.npz").steer is None
+    path = write_yaml(tmp_path, {**circle_platoon(), "duration": 1.0})
+    assert main(["run", str(path), "--out", str(tmp_path / "car")]) == 0
+    car = load_run(tmp_path / "car")
+    alone = Simulation(load_scenario(path)).run()
+    assert car.steer.shape == (101, 3) and np.array_equal(car.steer, alone.steer)
+    doc = {**circle_platoon("unicycle"), "duration": 1.0}
+    uni = write_yaml(tmp_path, doc, "u.yaml")
+    assert main(["run", str(uni), "--out", str(tmp_path / "uni")]) == 0
+    assert load_run(tmp_path / "uni").steer is None  # a run without cars as before
 
 
 def test_a_mixed_world_records_nan_for_its_unicycles() -> None:

@@ -76,9 +76,8 @@ def car_lines(
     >>> chassis.tolist(), wheels[1].round(3).tolist()
     ([[[0.0, 0.0], [1.0, 0.0]]], [[1.0, -0.25], [1.0, 0.25]])
     """
-    ok = np.isfinite(steer) & np.isfinite(pose).all(axis=1) & np.isfinite(wheelbase)
-    p, th, delta = pose[ok, :2], pose[ok, 2], steer[ok]
-    ahead = np.stack((np.cos(th), np.sin(th)), axis=-1)
+    ok, p, th, ahead = _cars(pose, steer, wheelbase)
+    delta = steer[ok]
     front = p + wheelbase[ok, None] * ahead
     half = 0.5 * WHEEL_FRACTION * diameter[ok, None]
     turned = np.stack((np.cos(th + delta), np.sin(th + delta)), axis=-1)
@@ -111,11 +110,19 @@ def car_bodies(
     >>> car_bodies(np.zeros((1, 3)), np.zeros(1), np.ones(1), np.ones(1)).tolist()
     [[[-0.3, -0.4], [1.3, -0.4], [1.3, 0.4], [-0.3, 0.4]]]
     """
-    ok = np.isfinite(steer) & np.isfinite(pose).all(axis=1) & np.isfinite(wheelbase)
-    p, th, d = pose[ok, :2], pose[ok, 2], diameter[ok, None]
-    ahead = np.stack((np.cos(th), np.sin(th)), axis=-1)
+    ok, p, th, ahead = _cars(pose, steer, wheelbase)
+    d = diameter[ok, None]
     left = np.stack((-np.sin(th), np.cos(th)), axis=-1)
     back = p - OVERHANG * d * ahead
     front = p + (wheelbase[ok, None] + OVERHANG * d) * ahead
     side = 0.5 * BODY_WIDTH * d * left
     return np.stack((back - side, front - side, front + side, back + side), axis=1)
+
+
+def _cars(
+    pose: np.ndarray, steer: np.ndarray, wheelbase: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The drawn cars' rows, rear axles (m, 2), headings (m,) and unit headings."""
+    ok = np.isfinite(steer) & np.isfinite(pose).all(axis=1) & np.isfinite(wheelbase)
+    th = pose[ok, 2]
+    return ok, pose[ok, :2], th, np.stack((np.cos(th), np.sin(th)), axis=-1)

@@ -535,6 +535,20 @@ def _platoons(
     ]
 
 
+def page_samples(run: Run, data: dict[str, Any]) -> np.ndarray:
+    """The record's samples a page shows: every ``data["stride"]``-th, and the last.
+
+    >>> from types import SimpleNamespace
+    >>> page_samples(SimpleNamespace(t=np.arange(5)), {"stride": 2}).tolist()
+    [0, 2, 4]
+    """
+    T = len(run.t)
+    keep = np.arange(0, T, int(data["stride"]))
+    if keep[-1] != T - 1:
+        keep = np.append(keep, T - 1)
+    return keep
+
+
 def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
     """The range sensors' scans for the page, on its samples; None without scans.
 
@@ -545,11 +559,7 @@ def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
     """
     if run.ranges is None or run.beam_angles is None:
         return None
-    T = len(run.t)
-    keep = np.arange(0, T, int(data["stride"]))
-    if keep[-1] != T - 1:
-        keep = np.append(keep, T - 1)
-    ranges = np.asarray(run.ranges, dtype=float)[keep]
+    ranges = np.asarray(run.ranges, dtype=float)[page_samples(run, data)]
     specs = None
     if run.scenario is not None and hasattr(run.scenario, "range_specs"):
         specs = run.scenario.range_specs()
@@ -579,11 +589,7 @@ def car_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
     wheelbase = car_wheelbases(run)
     if wheelbase is None:
         return None
-    T = len(run.t)
-    keep = np.arange(0, T, int(data["stride"]))
-    if keep[-1] != T - 1:
-        keep = np.append(keep, T - 1)
-    steer = np.asarray(run.steer, dtype=float)[keep]
+    steer = np.asarray(run.steer, dtype=float)[page_samples(run, data)]
     return {
         "steer": pack(steer, STEPS["pose"], order=1),
         "wheelbase": [_rounded(w) for w in wheelbase],
