@@ -8,33 +8,46 @@ the folder in place (see ``sandbox/scenario/bundled.py``). The replay page's
 templates, style and script (``sandbox/render/replay/assets/``) are package data too.
 Everything else is declared in ``pyproject.toml``.
 
-Optional C extensions take the per-period work whose numpy calls are too small to
-pay for themselves (``ARCHITECTURE.md``, "The optional C loops"): ``_cstep``, the loop
-that steps a batch of pymunk worlds through a whole control period in one call, which
-calls pymunk's functions through their addresses (nothing of Chipmunk is linked); and
-the loops of ``EXACT`` below, which give numpy's numbers to the bit beside their numpy
-definitions and share ``sandbox/numpy_rules.h``. They read an ndarray's data through
-numpy's C API where numpy's headers are there at build time (``pyproject.toml`` asks
-for numpy in the build), else through the buffer interface. They are optional: where
-one cannot be compiled the install goes on without it (setuptools prints the error)
-and the numpy path runs instead, with the same results. An editable install (``pip
-install -e .``) compiles them next to their sources. The exact loops are compiled
-without contracting a multiplication and an addition into one fused operation, which
-rounds once instead of twice and would change the numbers.
+The optional C extensions are the compiled paths of ``sandbox/accel.py``, the
+registry that imports them (``ARCHITECTURE.md``, "Compiled paths"): ``_cstep``, which
+steps a batch of pymunk worlds through a whole control period in one call through
+pymunk's own functions' addresses (nothing of Chipmunk is linked); ``_draws``, which
+draws every world's sensing noise through numpy's random C API (linked with the
+``npyrandom`` library numpy ships for extensions); and the loops that share
+``sandbox/accel.h``, which read an ndarray's data through numpy's C API
+where numpy's headers are there at build time (``pyproject.toml`` asks for numpy in
+the build), else through the buffer interface. They are optional: where one cannot
+be compiled the install goes on without it (setuptools prints the error), its path
+is off and ``sandbox info`` says so. An editable install (``pip install -e .``)
+compiles them next to their sources.
+
+Every build starts from an empty ``build/lib.*`` and ``build/temp.*`` of its own: a
+later ``pip install .`` never ships a module or an object file that an earlier build
+left there and the sources no longer have.
 """
 
+import shutil
+from pathlib import Path
+
 from setuptools import Extension, find_packages, setup
-from setuptools.command.build_ext import build_ext
+from setuptools.command.build import build
 
 CSTEP = Extension("sandbox.physics._cstep", ["sandbox/physics/_cstep.c"], optional=True)
+
+#: The headers the loops include.
+HEADERS = [
+    "sandbox/accel.h",
+    "sandbox/motor_model.h",
+    "sandbox/behaviour/safety/qp_project.h",
+]
 
 
 def _numpy_api() -> dict:
     """The compile options for numpy's headers, where numpy is there at build time.
 
     With them the C loops read an ndarray's data through numpy's C API, much
-    cheaper per array than the buffer interface (``sandbox/numpy_rules.h``); without
-    them they read every array through the buffer interface, with the same numbers.
+    cheaper per array than the buffer interface (``sandbox/accel.h``); without
+    them they read every array through the buffer interface.
     """
     try:
         import numpy
@@ -46,58 +59,81 @@ def _numpy_api() -> dict:
     }
 
 
-def _exact(source: str) -> Extension:
-    """An optional extension of the C loop ``source`` that gives numpy's numbers."""
+def _loop(source: str) -> Extension:
+    """The optional extension of the C loop ``source``."""
     name = source.removesuffix(".c").replace("/", ".")
-    return Extension(
-        name,
-        [source],
-        depends=[
-            "sandbox/numpy_rules.h",
-            "sandbox/motor_model.h",
-            "sandbox/behaviour/safety/qp_project.h",
-        ],
-        optional=True,
-        **_numpy_api(),
-    )
+    return Extension(name, [source], depends=HEADERS, optional=True, **_numpy_api())
 
 
-#: The extensions whose loops give numpy's numbers to the bit, compiled with no fused
-#: multiply-add.
-EXACT = tuple(
-    _exact(source)
+#: The C loops that share ``sandbox/accel.h``.
+LOOPS = tuple(
+    _loop(source)
     for source in (
         "sandbox/model/_kernels.c",
         "sandbox/model/_laws.c",
         "sandbox/behaviour/_pair_field.c",
         "sandbox/physics/_motors.c",
-        "sandbox/behaviour/safety/_qp.c",
         "sandbox/behaviour/safety/_filter.c",
         "sandbox/loop/_period.c",
         "sandbox/behaviour/_fits.c",
-        "sandbox/behaviour/_draws.c",
         "sandbox/behaviour/_residual.c",
     )
 )
 
 
-class BuildExt(build_ext):
-    """``build_ext`` with the kernels' floating-point flag where the compiler has it."""
+def _draws() -> list[Extension]:
+    """The sensing draws' extension, which links numpy's random C API (npyrandom).
 
-    def build_extension(self, ext):
-        """Compile ``ext``; the kernels with no contracted floating point."""
-        if ext in EXACT and self.compiler.compiler_type == "unix":
-            ext.extra_compile_args = ["-ffp-contract=off", "-fno-fast-math"]
-        super().build_extension(ext)
+    None without numpy at build time (its headers and its library come with it).
+    """
+    try:
+        import numpy.random
+    except ImportError:
+        return []
+    return [
+        Extension(
+            "sandbox.behaviour._draws",
+            ["sandbox/behaviour/_draws.c"],
+            depends=HEADERS,
+            optional=True,
+            library_dirs=[str(Path(numpy.random.__file__).parent / "lib")],
+            libraries=["npyrandom", "m"],
+            **_numpy_api(),
+        )
+    ]
 
+
+class FreshBuild(build):
+    """``build`` from an empty build directory of its own (nothing stale reused)."""
+
+    def run(self) -> None:
+        """Remove this build's ``build_lib`` and ``build_temp``, then build."""
+        for folder in (self.build_lib, self.build_temp):
+            if folder and Path(folder).is_dir():
+                shutil.rmtree(folder)
+        super().run()
+
+
+#: The scenarios' folders, each a package of data (``sandbox.scenarios.paper``, ...).
+SCENARIO_PACKAGES = [
+    f"sandbox.scenarios.{folder.name}"
+    for folder in sorted(Path("scenarios").iterdir())
+    if folder.is_dir()
+]
 
 setup(
-    ext_modules=[CSTEP, *EXACT],
-    cmdclass={"build_ext": BuildExt},
-    packages=[*find_packages(include=["sandbox", "sandbox.*"]), "sandbox.scenarios"],
+    ext_modules=[CSTEP, *LOOPS, *_draws()],
+    cmdclass={"build": FreshBuild},
+    packages=[
+        *find_packages(include=["sandbox", "sandbox.*"]),
+        "sandbox.render.replay.assets",
+        "sandbox.scenarios",
+        *SCENARIO_PACKAGES,
+    ],
     package_dir={"sandbox.scenarios": "scenarios"},
     package_data={
-        "sandbox.scenarios": ["*.yaml", "**/*.yaml"],
-        "sandbox.render.replay": ["assets/*"],
+        "sandbox.scenarios": ["*.yaml"],
+        **{name: ["*.yaml"] for name in SCENARIO_PACKAGES},
+        "sandbox.render.replay.assets": ["*"],
     },
 )

@@ -5,13 +5,13 @@ sweep's group) of the follower-stop platoon (``scenarios/failures/follower_stop.
 four vehicles, 8 s) with ``safety: {filter: cbf}``, run as one batch
 (``Simulation.batch``). Each period it times, per call:
 
-- ``stage``: the loop's safety stage (``WorldStages._safety``: the filter's context
+- ``stage``: the loop's safety stage (``Safety.commands``: the filter's context
   for the K worlds, the filter, its counters, the commands' copies);
 - ``filter``: :func:`~sandbox.behaviour.safety.cbf.filter_commands` alone;
 - ``counters``: :func:`~sandbox.behaviour.safety.accounting.account_worlds` alone.
 
 and the batch's time per run. The C path (``filter_kernel.py``, ``accounting.py``)
-and the numpy path (``USE_KERNEL = False`` in both) alternate in this process,
+and the numpy path (``sandbox.accel.switched_off("filter")``) alternate in this process,
 ``--repeat`` times each (default 3), so their ratio is measured on one machine state;
 the table gives each path's median over the repetitions of the mean per period, and
 the load averages before and after. Not a test: a table.
@@ -24,6 +24,7 @@ the load averages before and after. Not a test: a table.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import statistics
 import sys
@@ -33,8 +34,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from sandbox.behaviour.safety import accounting, cbf, filter_kernel  # noqa: E402
-from sandbox.loop import world_stages  # noqa: E402
+from sandbox import accel  # noqa: E402
+from sandbox.behaviour.safety import cbf  # noqa: E402
+from sandbox.loop.safety import Safety  # noqa: E402
 from sandbox.loop.simulation import Simulation  # noqa: E402
 from sandbox.scenario import load_scenario  # noqa: E402
 
@@ -51,7 +53,7 @@ class Timers:
     def install(self) -> None:
         """Wrap the three functions where the loop and the filter look them up."""
         for owner, name, key in (
-            (world_stages.WorldStages, "_safety", "stage"),
+            (Safety, "commands", "stage"),
             (cbf, "filter_commands", "filter"),
             (cbf, "account_worlds", "counters"),
         ):
@@ -78,16 +80,17 @@ class Timers:
 
 def measure(scenarios: list, use_c: bool) -> dict[str, float]:
     """Mean [ms] per period of each timed call, and [ms] per run, of one batch."""
-    filter_kernel.USE_KERNEL = accounting.USE_KERNEL = use_c
     timers = Timers()
     timers.install()
     try:
-        t0 = time.perf_counter()
-        Simulation.batch(scenarios, group_size=len(scenarios))
-        elapsed = time.perf_counter() - t0
+        with contextlib.ExitStack() as stack:
+            if not use_c:
+                stack.enter_context(accel.switched_off("filter"))
+            t0 = time.perf_counter()
+            Simulation.batch(scenarios, group_size=len(scenarios))
+            elapsed = time.perf_counter() - t0
     finally:
         timers.uninstall()
-        filter_kernel.USE_KERNEL = accounting.USE_KERNEL = True
     out = {k: 1e3 * statistics.fmean(v) for k, v in timers.times.items() if v}
     out["run"] = 1e3 * elapsed / len(scenarios)
     return out
@@ -107,9 +110,9 @@ def main(argv: list[str] | None = None) -> int:
         load_scenario(SCENARIO, overrides=[*sets, f"seed={s}"])
         for s in range(args.worlds)
     ]
-    if not filter_kernel.usable():
-        print("the C filter is not built or its check failed: numpy alone")
-    Simulation.batch(scenarios[:2])  # not timed: imports and the first-use checks
+    if accel.module("filter") is None:
+        print("the compiled path filter is off (sandbox info): numpy alone")
+    Simulation.batch(scenarios[:2])  # not timed: the imports
     load_before = os.getloadavg()
     found: dict[str, list[dict[str, float]]] = {"C": [], "numpy": []}
     for _ in range(args.repeat):

@@ -187,7 +187,10 @@ def profile_phases(
 
     import sandbox.behaviour.recovery as recovery
     import sandbox.loop.simulation as simulation
-    from sandbox.model.failures import FailureSchedule
+    from sandbox.loop.avoidance import Avoidance
+    from sandbox.loop.formation import Formation
+    from sandbox.model.failures import Failures
+    from sandbox.model.kernels import Controller
     from sandbox.run.metrics import compute_metrics
     from sandbox.run.output import write_csv
     from sandbox.run.recorder import Recorder
@@ -201,12 +204,11 @@ def profile_phases(
     timers.wrap(World, "step", f"physics (pymunk, {scenario.substeps} substeps)")
     timers.wrap(World, "read_state", "bulk read of poses (pymunk.batch)")
     timers.wrap(World, "write_commands", "bulk write of commands (pymunk.batch)")
-    timers.wrap(simulation.Simulation, "_targets", "reference + formation law")
+    timers.wrap(Formation, "targets", "reference + formation law")
     timers.wrap(recovery.NeighbourList, "near", "neighbour search (Verlet list)")
-    timers.wrap(simulation, "avoidance_shift", "recovery (incl. neighbour search)")
-    for name in ("extension_rate", "advance_extension", "flat_inputs"):
-        timers.wrap(simulation, name, "controller, eqs. (5)-(6)")
-    timers.wrap(FailureSchedule, "apply", "failures")
+    timers.wrap(Avoidance, "targets", "recovery (incl. neighbour search)")
+    timers.wrap(Controller, "step", "controller, eqs. (5)-(6)")
+    timers.wrap(Failures, "apply", "failures")
     timers.wrap(simulation, "diverged", "divergence check")
     every = scenario.record_every
     timers.wrap(Recorder, "append", f"recording (every {every} steps)")

@@ -19,9 +19,6 @@ from typing import TYPE_CHECKING, Any
 
 import sandbox._startup  # noqa: F401  (first: quiet Ctrl-C while the command starts)
 from sandbox._about import __version__ as __version__
-from sandbox._moved import install as _install_moved_paths
-
-_install_moved_paths()  # the v0.2 module paths, for one release (sandbox._moved)
 
 #: Public name -> (module, attribute) it is imported from on first use.
 _EXPORTS = {

@@ -1,11 +1,8 @@
 /* The residual detector's motor model of one control period, for one vehicle.
  *
  * Included by sandbox/model/_kernels.c (motor_model, the model alone) and
- * sandbox/behaviour/_residual.c (the detector's whole pass of a period): the
- * operations of sandbox/behaviour/detection.py's _advance_model on one row, in its
- * order, with numpy's clip on ties and NaN (numpy_rules.h, included first). The C
- * library's hypot, sin and cos are checked against numpy's by each includer's
- * first-use check.
+ * sandbox/behaviour/_residual.c (the detector's whole pass of a period), after
+ * accel.h: what the residual detector's numpy motor model does to one row.
  */
 
 #ifndef SANDBOX_MOTOR_MODEL_H
@@ -36,11 +33,11 @@ motor_period(double *p, double *v, double *w, double *travel, double v1, double 
         double q = d0 * d0 + d1 * d1;
         if (!(q < 0.25 * lin * lin && lin > 1e-100)) {
             double norm = hypot(d0, d1);
-            scale = norm > lin ? lin / np_maximum(norm, 1e-300) : 1.0;
+            scale = norm > lin ? lin / larger(norm, 1e-300) : 1.0;
         }
         vx = vx + d0 * scale;
         vy = vy + d1 * scale;
-        rate = rate + clip_rows(v2 - rate, -ang, ang);
+        rate = rate + clamp(v2 - rate, -ang, ang);
     }
     v[0] = vx;
     v[1] = vy;

@@ -15,8 +15,9 @@ from sandbox.cli import main
 from sandbox.loop import plan as planning
 from sandbox.loop.plan import structure_key
 from sandbox.loop.simulation import Simulation
-from sandbox.loop.stepping import WorldsPhysics
 from sandbox.loop.tally import row_reduce, row_sum
+from sandbox.physics.stepping import WorldStepper
+from sandbox.run.output import load_run_dir
 from sandbox.study import engine, store
 
 #: The form-up's slots lie within recovery.R of each other (so avoidance stays on, as
@@ -207,7 +208,7 @@ def test_a_batch_that_raises_gives_the_single_runs(tmp_path, monkeypatch):
         assert json.dumps(got[run_id]) == json.dumps(engine.run_task(*job))
 
 
-def test_fast_stepping_gives_the_bytes_of_world_by_world(tmp_path, monkeypatch):
+def test_stepping_together_gives_the_bytes_of_world_by_world(tmp_path, monkeypatch):
     # Without recovery the form-ups collide: contact episodes open and close while
     # every world is stepped substep by substep (the static body of the obstacle
     # reorders the bulk read).
@@ -218,7 +219,7 @@ def test_fast_stepping_gives_the_bytes_of_world_by_world(tmp_path, monkeypatch):
     fast_runs = fast.run_all()
     stepper = fast.physics._stepper
     assert stepper is not None and stepper._order is not None
-    monkeypatch.setattr(WorldsPhysics, "fast_stepping", False)
+    monkeypatch.setattr(WorldStepper, "build", classmethod(lambda cls, *a: None))
     slow = Simulation.stacked(scenarios)
     slow_runs = slow.run_all()
     assert slow.physics._stepper is None
@@ -280,3 +281,72 @@ def test_buffered_loop_metrics_match_with_weak_motors(tmp_path):
     motors = [r.info["loop_metrics"]["motor"] for r in runs]
     assert all(m["saturated_fraction"] > 0 for m in motors)
     assert all(m["max_velocity_error_free"] > 0.01 for m in motors)
+
+
+def test_a_world_of_a_structure_of_its_own_is_a_batch_of_one(monkeypatch):
+    # Three worlds of one structure and one of another: the batch steps a loop of
+    # three and a loop of one, and every run is the run alone.
+    sc = load_scenario(PAPER / "fig15_continuous_beta1.yaml", overrides=["duration=1"])
+    scenarios = [sc.with_overrides(f"seed={s}") for s in range(3)]
+    scenarios.insert(1, sc.with_overrides("sensing.position_noise=0.01"))
+    sizes = []
+    real = Simulation.stacked.__func__
+
+    def counted(cls, group, worlds=None):
+        sizes.append(len(group))
+        return real(cls, group, worlds)
+
+    monkeypatch.setattr(Simulation, "stacked", classmethod(counted))
+    runs = Simulation.batch(scenarios)
+    assert sorted(sizes) == [1, 3]
+    monkeypatch.undo()
+    for one, run in zip(scenarios, runs, strict=True):
+        assert_same_run(Simulation(one).run(), run)
+
+
+def test_a_stack_of_one_world_takes_and_gives_the_batch_shapes():
+    fig15 = PAPER / "fig15_continuous_beta1.yaml"
+    sc = load_scenario(fig15, overrides=["duration=0.5"])
+    stack, alone = Simulation.stacked([sc]), Simulation(sc)
+    first = stack.observe()
+    assert isinstance(first, list) and len(first) == 1
+    assert first[0].pose.tobytes() == alone.observe().pose.tobytes()
+    rng = np.random.default_rng(3)
+    while not alone.done:
+        speeds = rng.uniform(-0.4, 0.4, size=(1, 3, 2))
+        speeds[:, 0] = np.nan  # the leader keeps its controller
+        shifts = [{"red": (0.05, 0.0)}]
+        got = stack.step(commands=speeds, shifts=shifts)
+        want = alone.step(commands=speeds[0], shifts=shifts[0])
+        assert isinstance(got, list) and len(got) == 1
+        assert got[0].pose.tobytes() == want.pose.tobytes()
+        assert got[0].mode.tobytes() == want.mode.tobytes()
+    assert stack.done and stack.statuses == ["ok"]
+    assert_same_run(alone.result(), stack.results()[0])
+    with pytest.raises(ValueError, match=r"shape \(1, 3, 2\)"):
+        Simulation.stacked([sc]).step(commands=np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="expected 1 overrides, got 2"):
+        Simulation.stacked([sc]).step(commands=[None, None])
+
+
+def test_a_sweep_group_of_one_world_stores_its_run_alone(tmp_path, monkeypatch):
+    base = write_yaml(tmp_path, {**formup_doc(), "duration": 1.5}, "base.yaml")
+    sizes = []
+    real = Simulation.stacked.__func__
+
+    def counted(cls, group, worlds=None):
+        sizes.append(len(group))
+        return real(cls, group, worlds)
+
+    monkeypatch.setattr(Simulation, "stacked", classmethod(counted))
+    out = tmp_path / "sweep"
+    grid = ["--grid", "recovery.strategy=continuous,smooth", "--seeds", "1:2"]
+    assert main(["sweep", str(base), *grid, "--keep-runs", "--out", str(out)]) == 0
+    assert sizes == [1, 1]  # the strategy is structure: two groups of one world
+    monkeypatch.undo()
+    kept = sorted((out / "run_dirs").iterdir())
+    assert len(kept) == 2
+    for run_dir in kept:
+        stored = load_run_dir(run_dir)
+        alone = Simulation(load_scenario(run_dir / "scenario.yaml")).run()
+        assert_same_run(alone, stored)

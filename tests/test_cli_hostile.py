@@ -190,7 +190,7 @@ def test_a_gif_on_a_full_or_read_only_disk_names_the_users_path(
 def test_a_full_disk_while_writing_a_run_names_the_run_directory(
     src: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
 ) -> None:
-    import sandbox.run.output as output
+    import sandbox.run.run_dir as output  # where the writer lives
 
     def full(*args):
         raise OSError(28, "No space left on device")

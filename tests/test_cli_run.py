@@ -239,3 +239,17 @@ def test_python_dash_m_sandbox(tmp_path: Path) -> None:
         timeout=120,
     )
     assert proc.returncode == 0 and "validate" in proc.stdout
+
+
+def test_the_summary_lists_the_deadlocks_of_metrics_json(tmp_path, capsys) -> None:
+    # head-on without recovery: the two stall face to face from 0.96 s to the end
+    argv = ["run", "safety/head_on_swap", "--set", "recovery.strategy=none"]
+    assert main([*argv, "--out", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    metrics = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    (entry,) = metrics["deadlocks"]
+    assert out[2] == (
+        f"deadlocks: 1 ({', '.join(entry['vehicles'])} from {entry['t']:.2f} s to the "
+        "end)"
+    )
+    assert out[2] == "deadlocks: 1 (west, east from 0.96 s to the end)"

@@ -3,7 +3,7 @@
 Each case starts from a valid run directory and breaks its ``run.npz`` one way (shapes,
 dtypes, members, metadata, sizes that would inflate far beyond the file); ``sandbox
 render`` and ``sandbox plot`` must answer ``not a valid run directory: ...`` with exit
-status 1 and no traceback, without allocating what the file claims.
+status 2 and no traceback, without allocating what the file claims.
 """
 
 from __future__ import annotations
@@ -136,7 +136,7 @@ def refused(run_dir: Path, text: str, capsys: pytest.CaptureFixture[str]) -> Non
         ["render", str(run_dir), "--gif", str(run_dir.parent / "x.gif")],
         ["plot", str(run_dir)],
     ):
-        assert main(argv) == 1
+        assert main(argv) == 2  # invalid input
         err = capsys.readouterr().err
         assert err.startswith("error: not a valid run directory: ")
         assert "Traceback" not in err

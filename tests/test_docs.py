@@ -151,6 +151,9 @@ def test_the_site_builds_strictly(tmp_path: Path) -> None:
     assert "sandbox sweep table study/" in cli and "--retry-failed" in cli
     api = (site / "reference" / "api.html").read_text(encoding="utf-8")
     assert "with_overrides" in api and "assert_no_collisions" in api
+    # the step API's members are Simulation's own, each with its entry
+    for member in ("step", "observe", "result", "results", "done", "t", "status"):
+        assert f'id="sandbox.loop.simulation.Simulation.{member}"' in api, member
     assert (site / "renders" / "rotating_circle.gif").is_file()
 
 

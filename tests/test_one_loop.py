@@ -330,7 +330,7 @@ def test_worlds_that_re_form_apart_share_one_law_and_give_the_bytes_alone(
     name, fixed, tmp_path
 ):
     # The built-in law stays one call for all worlds through each world's handover
-    # and reassignment (loop/stacked_law.py); the worlds the virtual leader takes over
+    # and reassignment (loop/reforming.py); the worlds the virtual leader takes over
     # follow a second one.
     scenarios = [
         load_scenario(name, overrides=["duration=4", *fixed, *extra])
@@ -338,15 +338,16 @@ def test_worlds_that_re_form_apart_share_one_law_and_give_the_bytes_alone(
     ]
     assert len({structure_key(sc) for sc in scenarios}) == 1
     sim = Simulation.stacked(scenarios)
-    assert sim._stacked_law is not None and not sim._law_per_world
+    formation = sim._formation  # one law for every world (loop/formation.py)
+    assert formation.reforming is not None and not formation.per_world
     runs = sim.run_all()
     changes = [len(r.info["leader_changes"]) for r in runs]
     assert changes == [1, 1, 0, 0]
     assert [len(r.info["reassignments"]) for r in runs] == [1, 1, 0, 1]
     virtual = scenarios[0].on_leader_failure == "virtual"  # a new law where it fails
-    assert sim._stacked_law.virtual.tolist() == [virtual, virtual, False, False]
+    assert formation.reforming.virtual.tolist() == [virtual, virtual, False, False]
     if not virtual:  # the new leader's pose is gathered in worlds 0 and 1 only
-        assert sim._stacked_law.leaders.tolist() == [1, 1, 0, 0]
+        assert formation.reforming.leaders.tolist() == [1, 1, 0, 0]
     assert_batch_is_alone(scenarios, tmp_path, runs)
 
 
@@ -368,7 +369,7 @@ def test_a_detector_that_clears_re_forms_each_world_at_its_own_events(tmp_path):
         for extra in starts
     ]
     sim = Simulation.stacked(scenarios)
-    assert sim._stacked_law is not None
+    assert sim._formation.reforming is not None
     runs = sim.run_all()
     events = [len(r.info["reassignments"]) for r in runs]
     assert events[0] >= 2 and events[1] >= 2 and events[2] == 0
@@ -377,9 +378,9 @@ def test_a_detector_that_clears_re_forms_each_world_at_its_own_events(tmp_path):
 
 def test_every_failure_kind_of_many_worlds_at_once_gives_the_bytes_alone(tmp_path):
     # Six worlds, each with its own failure of red: from four active failures on the
-    # loop applies the built-in kinds at once (StackedFailures, RULED_FROM), alone
+    # loop applies the built-in kinds at once (Failures, RULED_FROM), alone
     # each world calls its kind's function; the files must not tell them apart.
-    from sandbox.loop.worlds import RULED_FROM
+    from sandbox.model.failures import RULED_FROM
 
     kinds = [
         "{vehicle: red, at: 1.0, kind: stuck_steering}",
@@ -405,7 +406,7 @@ def test_every_failure_kind_of_many_worlds_at_once_gives_the_bytes_alone(tmp_pat
 def test_command_schedules_of_many_worlds_at_once_give_the_bytes_alone(tmp_path):
     # Each world's leader has its own schedule (rows at other times, another count,
     # zero before its first row): the loop looks the rows in force up for all worlds
-    # at once (StackedCommands), only when some schedule passes a row.
+    # at once (CommandSchedules), only when some schedule passes a row.
     schedules = [
         "[[0.0, 1.0, 0.2], [1.5, 1.0, 0.0]]",
         "[[0.5, 0.8, 0.1], [1.0, 1.2, -0.2], [2.5, 0.0, 0.0]]",
@@ -432,7 +433,7 @@ def test_the_platoons_sections_of_many_worlds_are_called_once_for_all(tmp_path):
     # Each recovery and safety section of the worlds' platoons is one call for all
     # worlds (loop/platoon_sections.py), a world's own beta on its rows; the files
     # are those of each world alone.
-    from sandbox.loop.platoon_sections import StackedSections
+    from sandbox.loop.platoon_sections import PlatoonSections
 
     scenarios = [
         load_scenario("traffic/head_on_narrow", overrides=["duration=6", *extra])
@@ -440,8 +441,9 @@ def test_the_platoons_sections_of_many_worlds_are_called_once_for_all(tmp_path):
     ]
     assert len({structure_key(sc) for sc in scenarios}) == 1
     sim = Simulation.stacked(scenarios)
-    assert isinstance(sim.strategy.__self__, StackedSections)
-    assert isinstance(sim._filter.__self__, StackedSections) and sim._filter_batched
+    assert isinstance(sim.strategy.__self__, PlatoonSections)
+    safety = sim._safety  # the safety stage (loop/safety.py)
+    assert isinstance(safety.filter.__self__, PlatoonSections) and safety.batched
     runs = sim.run_all()
     assert any(r.info["safety"]["active_steps"] for r in runs)  # the filter acted
     assert_batch_is_alone(scenarios, tmp_path, runs)
@@ -452,7 +454,9 @@ def test_the_platoons_sections_of_many_worlds_are_called_once_for_all(tmp_path):
         "tangential: 1.0, leader_avoids: true}"
     )
     apart = [scenarios[2], own]
-    assert StackedSections.build(Simulation.stacked(apart)) is None
+    sim = Simulation.stacked(apart)  # world by world
+    assert not isinstance(sim.strategy.__self__, PlatoonSections)
+    assert sim._safety.batched is False
     assert_batch_is_alone(apart, tmp_path / "apart")
 
 
@@ -495,7 +499,7 @@ def test_a_batched_plug_in_law_is_called_world_by_world_while_worlds_re_form(tmp
             for extra in (["seed=0"], ["seed=1", "failures[0].at=2.0"])
         ]
         sim = Simulation.stacked(scenarios)
-        assert sim._law_per_world and sim._stacked_law is None
+        assert sim._formation.per_world and sim._formation.reforming is None
         runs = sim.run_all()
         assert set(shapes) == {(len(scenarios[0].vehicles), 2)}  # one world's rows
         assert [len(r.info["reassignments"]) for r in runs] == [1, 1]

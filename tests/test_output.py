@@ -17,7 +17,7 @@ import pytest
 from sandbox.cli import main
 from sandbox.errors import OutputError
 from sandbox.loop.simulation import Simulation
-from sandbox.run import output
+from sandbox.run import run_dir as output  # the writers
 from sandbox.run.metrics import compute_metrics
 from sandbox.run.output import load_run_dir, write_json, write_run_dir
 from sandbox.run.record import Run
@@ -193,7 +193,7 @@ KILLED_WHILE_WRITING = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    import sandbox.run.output as output
+    import sandbox.run.run_dir as output
     from sandbox.run.metrics import compute_metrics
     from sandbox.scenario import load_scenario
     from sandbox.loop.simulation import Simulation
@@ -266,7 +266,7 @@ def test_damaged_run_directories_give_clear_errors(
     (out / "run.npz").write_bytes(b"\x89PNG not a zip")
     with pytest.raises(OutputError, match="damaged"):
         load_run_dir(out)
-    assert main(["render", str(out), "--gif", str(tmp_path / "x.gif")]) == 1
+    assert main(["render", str(out), "--gif", str(tmp_path / "x.gif")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "damaged" in err and "Traceback" not in err
     half = out / "run.npz"

@@ -29,7 +29,8 @@ def test_a_gif_target_that_is_a_scenario_is_refused(
     argv = ["run", str(mine), "--duration", "0.2", "--out", str(out)]
     assert main([*argv, "--gif", str(mine)]) == 2
     err = capsys.readouterr().err
-    assert "exists and is not a GIF file; not replaced" in err and "--force" in err
+    assert "exists and is not a GIF file, so it is not replaced" in err
+    assert "--force" in err
     assert mine.read_bytes() == before
     assert not out.exists()  # refused before the run
 

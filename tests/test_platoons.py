@@ -420,20 +420,31 @@ def test_pictures_label_by_platoon(tmp_path):
 
 
 def test_a_reconfiguring_platoon_sees_the_estimate_under_the_braking_barrier(
-    tmp_path,
+    tmp_path, monkeypatch
 ):
     # Under sensing and the braking barrier the law sees the others through their
     # estimate (Simulation.believed), a platoon with its own reconfiguration too:
     # its leader's pose in its law's context is the estimate, not the noisy copy.
+    from sandbox.behaviour.reconfigure import Reconfiguration
+
     text = RECONFIGURED.replace("duration: 12", "duration: 4") + (
         "sensing: {position_noise: 0.02, delay: 0.05}\n"
         "safety: {filter: cbf, barrier: braking}\n"
     )
+    seen_by = {}
+    react = Reconfiguration.react
+
+    def spy(self, state, t, known):
+        seen_by[state.names] = state  # what each platoon's reconfiguration reads
+        return react(self, state, t, known)
+
+    monkeypatch.setattr(Reconfiguration, "react", spy)
     sim = Simulation(load_scenario(_write(tmp_path, text)))
     for _ in range(20):
         sim.step()
     (view,) = [v for v in sim.platoons.views if v.group.name == "A"]
-    assert np.array_equal(view.believed, sim.believed[view.rows])
-    assert not np.allclose(view.believed, view.seen)
-    ctx = view.law_context(sim.t, None)
-    assert np.array_equal(ctx.leader_pos, view.believed[view.leader, :2])
+    state = seen_by[view.names]  # this period's, read at its plan
+    assert np.array_equal(state.believed, sim.believed[view.rows])
+    assert not np.allclose(state.believed, state.seen)
+    ctx = state.law_context(sim.t, state.offset, {})
+    assert np.array_equal(ctx.leader_pos, state.believed[state.leader, :2])

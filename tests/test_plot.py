@@ -307,12 +307,14 @@ def test_cli_plot_writes_into_the_run_directory_figures_that_a_rerun_keeps(
     assert main(["run", scenario, "--out", str(out), "--duration", "1"]) == 0
     assert main(["plot", str(out), "--format", "pdf", "--dpi", "50"]) == 0
     assert sorted(p.name for p in (out / "figures").iterdir()) == sorted(
-        f"{stem}.pdf" for stem in plot.FIGURES
-    )
+        [*(f"{stem}.pdf" for stem in plot.FIGURES), ".sandbox-outputs.json"]
+    )  # the figures, and the record that sandbox plot wrote them
     # a re-run into the directory keeps the figures (they are not the run's files)
     before = (out / "figures" / "trajectories.pdf").read_bytes()
     assert main(["run", scenario, "--out", str(out), "--duration", "0.5"]) == 0
     assert (out / "figures" / "trajectories.pdf").read_bytes() == before
+    # and sandbox plot replaces them again: they are still its own
+    assert main(["plot", str(out), "--format", "pdf", "--dpi", "50"]) == 0
 
 
 @pytest.mark.parametrize(

@@ -116,6 +116,7 @@ def test_hud_time_digits_keep_their_place() -> None:
 
 def test_auto_camera_follows_a_run_spread_along_a_line() -> None:
     run = make_run(n=2, duration=20.0, speed=1.0)  # 20 m along x1, 3 m across
+    run.pose[:, 1, 0] = run.pose[:, 0, 0]  # both drive, side by side: a platoon
     assert render.auto_follow(run) == "leader"
     auto = render.Camera.for_run(run, 320, "auto")
     whole = render.Camera.for_run(run, 320, None)
@@ -137,8 +138,15 @@ def test_cli_gif_uses_the_automatic_camera(tmp_path: Path) -> None:
     assert gif.read_bytes() != expected.read_bytes()
     whole = tmp_path / "whole.gif"
     assert main(["render", str(out), "--gif", str(whole), "--follow", "whole",
+                 "--size", "128", "--fps", "5", "--aspect", "square"]) == 0  # fmt: skip
+    assert whole.read_bytes() == expected.read_bytes()
+    # --follow whole frames the run in a frame of its own aspect (the default)
+    render.write_gif(run, expected, fps=5.0, size=128, follow=None, aspect="run")
+    assert main(["render", str(out), "--gif", str(whole), "--follow", "whole",
                  "--size", "128", "--fps", "5"]) == 0  # fmt: skip
     assert whole.read_bytes() == expected.read_bytes()
+    width, height = iio.improps(whole, index=0).shape[1::-1]
+    assert width == 128 and height < 128  # 4 m x 1 m: wider than high
 
 
 def test_render_needs_an_output(tmp_path: Path, capsys) -> None:

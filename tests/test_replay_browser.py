@@ -1,20 +1,19 @@
 """The replay page in a real browser: headless Chromium driven by Playwright.
 
-The browser is the system's (``/usr/bin/chromium``, Debian's ``chromium`` package that
-``.ci/run`` installs), never a download; the Python side is the ``view`` extra. The
-tests are skipped, saying why, only when one of the two is missing.
+The browser and its helpers are those of ``tests/browser.py``; the tests are skipped,
+saying why, only when the system's Chromium or Playwright is missing.
 """
 
 from __future__ import annotations
 
 import math
-import os
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+from browser import ARGS, CHROMIUM, TIMEOUT_MS, Page, require_browser, wait_until
+from crafted import crafted_run
 from helpers import SCENARIOS
 from PIL import Image, ImageColor
 
@@ -22,29 +21,10 @@ from sandbox import simulate
 from sandbox.render import render_frame
 from sandbox.render.camera import Camera
 from sandbox.render.replay import write_html
-from sandbox.run.record import Run
+from sandbox.run.record import CollisionEvent, Run
 from sandbox.scenario import load_scenario
 
-CHROMIUM = "/usr/bin/chromium"
-#: Longest wait for the page or an element [ms].
-TIMEOUT_MS = 20_000
-ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
-sync_api = pytest.importorskip(
-    "playwright.sync_api", reason="needs playwright (pip install 'sandbox[view]')"
-)
-if not os.access(CHROMIUM, os.X_OK):
-    pytest.skip(
-        f"needs the system's Chromium at {CHROMIUM} (apt-get install chromium)",
-        allow_module_level=True,
-    )
+sync_api = require_browser()
 
 
 @pytest.fixture(scope="module")
@@ -61,45 +41,6 @@ def collision_run() -> Run:
     run = simulate(load_scenario(SCENARIOS / "paper" / "fig12_no_recovery.yaml"))
     assert run.events
     return run
-
-
-def wait_until(page: object, expr: str) -> None:
-    """Poll ``expr`` in the page until it is true, for at most TIMEOUT_MS.
-
-    Not ``page.wait_for_function``: when its first check fails it polls through an
-    ``eval`` in the page, which the replay's content security policy forbids (a slow
-    machine then fails the test instead of waiting).
-    """
-    deadline = time.monotonic() + TIMEOUT_MS / 1000
-    while not page.evaluate(expr):
-        if time.monotonic() > deadline:
-            raise AssertionError(f"the page never showed {expr}")
-        page.wait_for_timeout(20)
-
-
-class Page:
-    """A replay page open in the browser, with the requests it made."""
-
-    def __init__(self, browser: object, path: Path) -> None:
-        self.url = path.resolve().as_uri()
-        self.context = browser.new_context(viewport={"width": 1200, "height": 800})
-        self.requests: list[str] = []
-        self.errors: list[str] = []
-        self.context.set_default_timeout(TIMEOUT_MS)
-        self.page = self.context.new_page()
-        self.page.on("request", lambda r: self.requests.append(r.url))
-        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
-        self.page.goto(self.url)
-        # bounded: a page that never gets ready fails the test, never hangs it
-        wait_until(self.page, "document.body.dataset.ready !== undefined")
-        assert self.page.evaluate("document.body.dataset.ready") == "1", self.errors
-        assert self.page.evaluate("window.sandboxReplay.ready") is True
-
-    def js(self, expr: str) -> object:
-        return self.page.evaluate(expr)
-
-    def canvas_box(self) -> dict:
-        return self.page.locator("#world").bounding_box()
 
 
 @pytest.fixture(scope="module")
@@ -534,6 +475,58 @@ def test_a_platoon_formed_by_a_split_shows_its_reference_from_the_split_on(
         legend = p.page.locator("#legend").inner_text()
         assert "C reference (from 14.00 s)" in legend
         assert "B reference (until 3.80 s)" in legend
+        assert p.errors == []
+    finally:
+        p.context.close()
+
+
+def test_home_after_a_jump_to_an_event_shows_the_vehicles(
+    browser: object, tmp_path: Path
+) -> None:
+    """A jump zooms in on a contact 90 m from the start; Home shows the start whole.
+
+    Two vehicles drive 100 m east side by side and touch at 9 s. Before, Home kept the
+    jump's view (zoomed in on the contact) and showed an empty canvas until ``f``.
+    """
+    t = np.linspace(0.0, 10.0, 101)
+    pose = np.zeros((101, 2, 3))
+    pose[:, :, 0] = 10.0 * t[:, None]  # [m] 10 m/s east
+    pose[:, 1, 1] = 2.1  # [m] side by side, 0.1 m apart
+    run = crafted_run(
+        t,
+        pose,
+        names=["a", "b"],
+        colors=["blue", "red"],
+        diameter=np.full(2, 2.0),
+        events=[CollisionEvent(9.0, "a", "b", "vehicle_vehicle", 9.1, True, 0.0)],
+    )
+    p = Page(browser, write_html(run, tmp_path / "jump.html"))
+    try:
+        box = p.canvas_box()
+
+        def in_view() -> list[bool]:
+            seen = []
+            state = p.js("window.sandboxReplay.state()")
+            for i, name in enumerate(run.names):
+                x, y = state["vehicles"][name]
+                u, v = p.js(f"window.sandboxReplay.worldToPixel({x}, {y})")
+                inside = 0 <= u < box["width"] and 0 <= v < box["height"]
+                r = run.diameter[i] / 2 * state["scale"]  # [px] off the heading line
+                rgb = ImageColor.getrgb(run.colors[i])
+                seen.append(inside and canvas_color(p, (u, v + 0.5 * r)) == rgb)
+            return seen
+
+        p.page.locator("#marks .mark[data-kind=collision]").first.click()
+        assert p.js("window.sandboxReplay.state()")["t"] == pytest.approx(9.0)
+        assert in_view() == [True, True]  # the jump shows the contact
+        p.page.locator("#view").focus()
+        p.page.keyboard.press("Home")
+        assert p.js("window.sandboxReplay.state()")["t"] == pytest.approx(0.0)
+        assert in_view() == [True, True]
+        p.page.locator("#marks .mark[data-kind=collision]").first.click()
+        p.page.keyboard.press("End")
+        assert p.js("window.sandboxReplay.state()")["t"] == pytest.approx(10.0)
+        assert in_view() == [True, True]
         assert p.errors == []
     finally:
         p.context.close()

@@ -25,7 +25,7 @@ import yaml
 from sandbox import SandboxWarning
 from sandbox.cli import main
 from sandbox.loop.simulation import Simulation
-from sandbox.loop.stepping import WorldsPhysics
+from sandbox.loop.stepping import LoopPhysics
 from sandbox.model.dynamics import wrap_angle
 from sandbox.run.metrics import compute_metrics
 from sandbox.run.output import CSV_HEADER, load_run_dir, write_run_dir
@@ -122,17 +122,17 @@ def test_a_non_finite_state_is_caught_and_named(
 ) -> None:
     # A NaN appearing in the physics (injected at t = 0.5 s for the second vehicle).
     sc = load_scenario(yaml.safe_load(LONG) | {"duration": 2.0})
-    read = WorldsPhysics.read
+    read = LoopPhysics.read
     calls = {"n": 0}
 
-    def poisoned(self: WorldsPhysics):
+    def poisoned(self: LoopPhysics):
         pos, theta, vel = read(self)
         calls["n"] += 1
         if calls["n"] > 50:
             pos[1, 0] = np.nan
         return pos, theta, vel
 
-    monkeypatch.setattr(WorldsPhysics, "read", poisoned)
+    monkeypatch.setattr(LoopPhysics, "read", poisoned)
     run = Simulation(sc).run()
     assert run.status == "diverged"
     assert run.info["diverged"] == {

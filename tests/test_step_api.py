@@ -249,19 +249,19 @@ def test_stepping_past_the_end_raises_and_an_early_result_is_interrupted() -> No
 
 def test_divergence_ends_a_stepped_run(monkeypatch: pytest.MonkeyPatch) -> None:
 
-    from sandbox.loop.stepping import WorldsPhysics
+    from sandbox.loop.stepping import LoopPhysics
 
-    read = WorldsPhysics.read
+    read = LoopPhysics.read
     calls = {"n": 0}
 
-    def poisoned(self: WorldsPhysics):
+    def poisoned(self: LoopPhysics):
         pos, theta, vel = read(self)
         calls["n"] += 1
         if calls["n"] > 20:
             pos[1, 0] = np.nan
         return pos, theta, vel
 
-    monkeypatch.setattr(WorldsPhysics, "read", poisoned)
+    monkeypatch.setattr(LoopPhysics, "read", poisoned)
     sim = Simulation(load_scenario(DUEL))
     while not sim.done:
         obs = sim.step()

@@ -114,3 +114,54 @@ def test_bad_actions_and_stepping_before_reset():
         env.step(np.array([[np.nan, 0.0], [0.0, 0.0]]))
     with pytest.raises(ValueError, match="finite"):
         env.step(np.array([["a", "b"], ["c", "d"]]))
+
+
+@pytest.mark.parametrize("agent", ["red", "blue"])
+def test_a_vector_env_of_one_world_is_the_single_env(agent):
+    # num_envs=1 is a batch of one: its world steps as the single env does
+    env = VehicleVectorEnv(DOC, num_envs=1, agent=agent, repeat=3)
+    single = VehicleEnv(DOC, agent=agent, repeat=3)
+    obs, _ = env.reset(seed=7)
+    want, _ = single.reset(seed=7)
+    assert obs.shape == (1, 25) and np.array_equal(obs[0], want)
+    rng = np.random.default_rng(1)
+    ended = False
+    for _ in range(40):  # past the end of the first episode: an autoreset
+        a = rng.uniform(-1, 1, size=(1, 2)).astype(np.float32)
+        obs, reward, terminated, truncated, _ = env.step(a)
+        if ended:
+            want, r, te, tr = single.reset()[0], 0.0, False, False
+        else:
+            want, r, te, tr, _ = single.step(a[0])
+        assert np.array_equal(obs[0], want)
+        assert reward[0] == r and terminated[0] == te and truncated[0] == tr
+        ended = te or tr
+
+
+def test_a_formation_vector_env_of_one_world_steps_every_agent():
+    env = FormationVectorEnv(DOC, num_envs=1, repeat=3)
+    obs, _ = env.reset(seed=2)
+    single = FormationEnv(DOC, repeat=3)
+    want, _ = single.reset(seed=2)
+    assert np.array_equal(obs[0], np.stack([want[a] for a in single.agents]))
+    actions = np.full((1, 2, 2), 0.25)
+    obs, rewards, terms, truncs, _ = env.step(actions)
+    got = single.step({a: actions[0, k] for k, a in enumerate(single.agents)})
+    assert np.array_equal(obs[0], np.stack([got[0][a] for a in single.agents]))
+    assert rewards.shape == terms.shape == truncs.shape == (1, 2)
+    assert rewards[0].tolist() == [got[1][a] for a in single.agents]
+
+
+def test_make_vec_of_one_world_steps():
+    env = gym.make_vec(
+        VEHICLE_ENV_ID,
+        num_envs=1,
+        vectorization_mode="vector_entry_point",
+        scenario=DOC,
+    )
+    assert isinstance(env.unwrapped, VehicleVectorEnv)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (1, 25)
+    for _ in range(3):
+        obs, reward, *_ = env.step(env.action_space.sample())
+        assert obs.shape == (1, 25) and reward.shape == (1,)

@@ -1,79 +1,73 @@
-/* The draws of many generators in one C call (sandbox/behaviour/sensing.py).
+/* The sensing draws of many worlds in one C call (sandbox/behaviour/sensing.py).
  *
- * StackedBroadcast draws each world's noise and packet losses from the world's own
- * generator. numpy's Generator.standard_normal and Generator.random fill their arrays
- * by numpy's own C functions (random_standard_normal_fill, random_standard_uniform_fill,
- * which numpy's random module exports) from the bit generator's bitgen_t (its
- * capsule); this calls the same function for every world in turn, so each world's
- * stream advances as the Generator method advances it and gives the same numbers.
- * sensing.py finds the functions, and checks them on copies of a generator, before it
- * uses this.
+ * StackedBroadcast draws each world's noise, then its packet losses, from the world's
+ * own Generator. Generator.standard_normal and Generator.random fill an array with
+ * numpy's random C API (random_standard_normal_fill, random_standard_uniform_fill of
+ * numpy/random/distributions.h, in the npyrandom library numpy ships for extensions
+ * in numpy/random/lib) on the bit generator's bitgen_t, which BitGenerator.capsule
+ * holds; this makes the same calls for every world in turn, so each world's stream
+ * advances as its Generator methods advance it. It is the compiled path ``draws`` of
+ * sandbox/accel.py.
  */
 
-#include "numpy_rules.h"
-#include <stdint.h>
+#include "accel.h"
+#include "numpy/random/distributions.h"
 
-/* numpy's fill functions: random_standard_normal_fill, random_standard_uniform_fill. */
-typedef void (*fill_t)(void *, Py_ssize_t, double *);
-
-PyDoc_STRVAR(fill_rows_doc,
-"fill_rows(fill, bitgens, out) -> None\n"
+PyDoc_STRVAR(fill_worlds_doc,
+"fill_worlds(capsules, noise, lost) -> None\n"
 "\n"
-"``fill`` the address of one of numpy's fill functions, ``bitgens`` (K,) uintp each\n"
-"world's bitgen_t (its BitGenerator's capsule): fills row w of ``out`` (K, m)\n"
-"float64 from world w's stream, as ``Generator`` fills an array.");
+"``capsules`` a list of K bit generators' capsules (``BitGenerator.capsule``):\n"
+"fills world w's rows of ``noise`` (K, n, 3) with its standard normals, then of\n"
+"``lost`` (K, n) with its uniforms in [0, 1), as ``standard_normal(out=...)`` then\n"
+"``random(out=...)`` of its Generator would.");
 
 static PyObject *
-fill_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+fill_worlds(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (nargs != 3) {
-        PyErr_SetString(PyExc_TypeError, "fill_rows takes 3 arguments");
+        PyErr_SetString(PyExc_TypeError, "fill_worlds takes 3 arguments");
         return NULL;
     }
-    void *address = PyLong_AsVoidPtr(args[0]);
-    if (address == NULL) {
-        if (!PyErr_Occurred()) {
-            PyErr_SetString(PyExc_ValueError, "fill_rows: no function");
-        }
+    PyObject *capsules = args[0];
+    if (!PyList_CheckExact(capsules)) {
+        PyErr_SetString(PyExc_TypeError, "fill_worlds: capsules must be a list");
         return NULL;
     }
-    Py_buffer bg;
-    Rows out;
-    if (PyObject_GetBuffer(args[1], &bg, PyBUF_C_CONTIGUOUS) < 0) {
+    Rows r[2];
+    if (get_all_rows(args + 1, r, 2, 0) < 0) {
         return NULL;
     }
-    if (get_rows(args[2], &out, 1) < 0) {
-        PyBuffer_Release(&bg);
+    Py_ssize_t K = PyList_GET_SIZE(capsules);
+    Py_ssize_t n = K ? r[1].len / K : 0;
+    if (K == 0 || r[1].len != K * n || r[0].len != 3 * K * n) {
+        release(r, 2);
+        PyErr_SetString(PyExc_ValueError, "fill_worlds: shapes differ");
         return NULL;
     }
-    Py_ssize_t K = bg.len / (Py_ssize_t)sizeof(uintptr_t);
-    if (bg.itemsize != (Py_ssize_t)sizeof(uintptr_t) || K == 0 || out.len % K != 0) {
-        PyBuffer_Release(&out.view);
-        PyBuffer_Release(&bg);
-        PyErr_SetString(PyExc_ValueError, "fill_rows: shapes differ");
-        return NULL;
-    }
-    Py_ssize_t m = out.len / K;
-    fill_t fill = (fill_t)address;
-    const uintptr_t *bitgens = bg.buf;
     for (Py_ssize_t w = 0; w < K; w++) {
-        fill((void *)bitgens[w], m, out.data + m * w);
+        bitgen_t *bitgen = (bitgen_t *)PyCapsule_GetPointer(
+            PyList_GET_ITEM(capsules, w), "BitGenerator");
+        if (bitgen == NULL) {
+            release(r, 2);
+            return NULL;
+        }
+        random_standard_normal_fill(bitgen, 3 * n, r[0].data + 3 * n * w);
+        random_standard_uniform_fill(bitgen, n, r[1].data + n * w);
     }
-    PyBuffer_Release(&out.view);
-    PyBuffer_Release(&bg);
+    release(r, 2);
     Py_RETURN_NONE;
 }
 
 static PyMethodDef methods[] = {
-    {"fill_rows", (PyCFunction)(void (*)(void))fill_rows, METH_FASTCALL,
-     fill_rows_doc},
+    {"fill_worlds", (PyCFunction)(void (*)(void))fill_worlds, METH_FASTCALL,
+     fill_worlds_doc},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_draws",
-    "The draws of many generators in C (see sandbox/behaviour/sensing.py).",
-    -1, methods,
+    "The sensing draws of many worlds in C (see sandbox/behaviour/sensing.py).", -1,
+    methods,
 };
 
 PyMODINIT_FUNC

@@ -8,15 +8,13 @@
  * any rounding of the same formula chooses rows among which the least sum is the
  * same (tracks.py's module docstring).
  *
- * fits: tracks.stop_fits whole, where its first-use check passes (tracks.fits_agree):
- * the grid of speeds (numpy's linspace), both models' estimates by prefix sums (any
- * rounding), the candidate rows, and each candidate's sum of squares as numpy takes
- * it in tracks.least_row: the same elementwise operations (numpy's minimum and clip,
- * numpy_rules.h) and numpy's pairwise summation of a contiguous row, compiled
- * without fused multiply-adds.
+ * fits: tracks.stop_fits whole, where the compiled path ``fits`` of sandbox/accel.py
+ * is on: the grid of speeds, both models' estimates by prefix sums, the candidate
+ * rows, and each candidate's sum of squares (a pairwise summation of the row), within
+ * the tolerance of sandbox/accel.py of tracks.fits_numpy.
  */
 
-#include "numpy_rules.h"
+#include "accel.h"
 
 /* numpy.searchsorted(t, x, side="left"): the first i with t[i] >= x (t sorted). */
 static inline Py_ssize_t
@@ -148,15 +146,7 @@ stop_estimates(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_RETURN_NONE;
 }
 
-/* numpy.minimum(a, b): a where a < b or a is NaN, else b (NaN kept). */
-static inline double
-np_minimum(double a, double b)
-{
-    return (a < b || a != a) ? a : b;
-}
-
-/* numpy's sum of a contiguous row of n doubles: its pairwise summation (8
- * accumulators up to 128 terms, halves beyond), added to the reduction's 0.0. */
+/* The sum of n doubles, pairwise: 8 accumulators up to 128 terms, halves beyond. */
 static double
 pairwise(const double *a, Py_ssize_t n)
 {
@@ -203,12 +193,12 @@ row_ssr(const double *t, const double *s, Py_ssize_t m, double vv, double tau,
 {
     double limit = vv / brake, half = 0.5 * brake;
     for (Py_ssize_t k = 0; k < m; k++) {
-        double run = np_minimum(t[k], tau), model;
+        double run = smaller(t[k], tau), model;
         if (crash) {
             model = vv * run;
         }
         else {
-            double braking = clip_rows(t[k] - tau, 0.0, limit);
+            double braking = clamp(t[k] - tau, 0.0, limit);
             model = vv * (run + braking) - half * (braking * braking);
         }
         r[k] = s[k] - model;
@@ -295,7 +285,7 @@ speed_grid(const double *t, const double *s, Py_ssize_t m, double *v, Py_ssize_t
     double fastest = 0.0;
     int has_nan = 0;
     for (Py_ssize_t k = 0; k + lag < m; k++) {
-        double speed = fabs(s[k + lag] - s[k]) / np_maximum(t[k + lag] - t[k], 1e-9);
+        double speed = fabs(s[k + lag] - s[k]) / larger(t[k + lag] - t[k], 1e-9);
         has_nan |= speed != speed;
         fastest = (k == 0 || speed > fastest) ? speed : fastest;
     }

@@ -1,18 +1,16 @@
 /* The vehicles' terms of the avoidance field, eqs. (22)-(27), in one C call.
  *
  * sandbox/behaviour/pair_field.py calls this where this optional extension is built
- * and its check passes. For the candidate pairs of a neighbour search it does what
+ * (the compiled path ``pair_field`` of sandbox/accel.py). For the candidate pairs of a neighbour search it does what
  * the neighbour list's filter and sandbox.behaviour.recovery.weighted_shift do with
  * numpy for the discontinuous and continuous weights without the tangential term:
  * keep the pairs closer than the search radius, weigh each one and add its terms to
  * both vehicles' sums, each vehicle's terms as numpy's bincount adds them (first
- * the pairs where it comes first, in order, then those where it comes second). The
- * same IEEE-754 double operations in the same order (compiled without fused
- * multiply-adds), numpy's rules for its maximum and clip, and the C library's sqrt,
- * which the check compares with numpy's.
+ * the pairs where it comes first, in order, then those where it comes second), with
+ * the C library's sqrt.
  */
 
-#include "numpy_rules.h"
+#include "accel.h"
 
 /* sandbox.model.obstacle_field.MIN_DIST: the least distance of eq. (25) [m]. */
 #define MIN_DIST 1e-6
@@ -24,14 +22,14 @@ weight(int kind, double dist, double R, double r)
     if (kind == 0) {
         return dist < R ? 1.0 : 0.0;
     }
-    return clip_scalars(1.0 - (dist - r) / (R - r), 0.0, 1.0);
+    return clamp(1.0 - (dist - r) / (R - r), 0.0, 1.0);
 }
 
 /* One side's distance of eq. (25) from its offset (x, y). */
 static inline double
 side_distance(double x, double y)
 {
-    return np_maximum(sqrt(x * x + y * y), MIN_DIST);
+    return larger(sqrt(x * x + y * y), MIN_DIST);
 }
 
 /* The pairs' terms of the field before beta, added to ``out`` (n, 2), which holds
@@ -62,7 +60,7 @@ add_terms(const double *p, const double *q, int qs, const Py_ssize_t *ci,
             double c0, c1, alpha;
             if (q == NULL) { /* alpha (rel / dist^2), -that on j */
                 double x = p[2 * i] - p[2 * j], y = p[2 * i + 1] - p[2 * j + 1];
-                double dist = np_maximum(sqrt(dd2[k]), MIN_DIST);
+                double dist = larger(sqrt(dd2[k]), MIN_DIST);
                 double dd = dist * dist;
                 alpha = weight(kind, dist, R, r);
                 c0 = alpha * (x / dd);

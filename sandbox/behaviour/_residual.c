@@ -1,7 +1,7 @@
 /* The residual detector's pass of one control period, every vehicle in one C call.
  *
  * sandbox/behaviour/residual_kernel.py calls this where this optional extension is
- * built and its first-use check passes. Row by row (every vehicle of every world;
+ * built (the compiled path ``residual`` of sandbox/accel.py). Row by row (every vehicle of every world;
  * the rows never mix), it does what sandbox/behaviour/detection.py's residual does
  * to the DetectorState between the history's append and the reading of a kind: the
  * motor model (_advance_model, motor_model.h), the age of the window and its
@@ -12,21 +12,12 @@
  * isolation. It lists the rows whose kind Python reads next (_isolate): those read
  * on while isolating, the cleared ones and the alarms.
  *
- * The operations are numpy's, element by element in its order (compiled without
- * fused multiply-adds), with numpy's rules on ties and NaN (numpy_rules.h) and its
- * floating remainder; sqrt, hypot, sin, cos, exp, log and log1p are the C
- * library's, which residual_kernel.py compares with numpy's before it uses this.
+ * sqrt, hypot, sin, cos, exp, log and log1p are the C library's; the numbers agree
+ * with the numpy path within the tolerance of sandbox/accel.py.
  */
 
-#include "numpy_rules.h"
+#include "accel.h"
 #include "motor_model.h"
-
-/* detection._wrap: (a + pi) % (2 pi) - pi. */
-static inline double
-wrap(double a)
-{
-    return np_remainder(a + M_PI, 2.0 * M_PI) - M_PI;
-}
 
 /* detection.llr of one |z| for the shift mu, and mu^2 / 2 as Python takes it. */
 static inline double
@@ -294,7 +285,7 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         /* the residual in the frame of the predicted heading */
         double d0 = o[0] - p[0], d1 = o[1] - p[1];
         double c = cos(p[2]), sn = sin(p[2]);
-        double raw[3] = {c * d0 + sn * d1, -sn * d0 + c * d1, wrap(o[2] - p[2])};
+        double raw[3] = {c * d0 + sn * d1, -sn * d0 + c * d1, wrapped(o[2] - p[2])};
         double moved = travel[i] * sigma_h;
         double sc = sqrt(sp * sp + moved * moved);
         double z[3] = {raw[0] / sp, raw[1] / sc, raw[2] / sh};
@@ -310,7 +301,7 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         }
         n_used++;
         double observed = hypot(o[0] - st[0], o[1] - st[1]);
-        double rotation = wrap(o[2] - st[2]);
+        double rotation = wrapped(o[2] - st[2]);
         double seconds = (double)age[i] * h;
         int add = 0;
         if (detected[i]) {
@@ -367,43 +358,9 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     return Py_BuildValue("(nnnn)", n_read, n_cleared, n_alarms, n_used);
 }
 
-PyDoc_STRVAR(elementwise_doc,
-"elementwise(op, a, b, out) -> None\n"
-"\n"
-"One of this module's scalar functions over arrays, for the check of\n"
-"sandbox/behaviour/residual_kernel.py: op 0 hypot, 1 sin, 2 cos, 3 sqrt, 4 exp,\n"
-"5 log, 6 log1p, 7 detection._wrap (b unused), 8 detection.llr of |z| ``a`` for\n"
-"the shift ``b``, 9 the hypot of three (a, b, a - b) as numpy's hypot.reduce.");
-
-/* This module's scalar functions, by their number. */
-static double
-scalar(long op, double a, double b)
-{
-    switch (op) {
-        case 0: return hypot(a, b);
-        case 1: return sin(a);
-        case 2: return cos(a);
-        case 3: return sqrt(a);
-        case 4: return exp(a);
-        case 5: return log(a);
-        case 6: return log1p(a);
-        case 7: return wrap(a);
-        case 8: return llr(a, b, 0.5 * b * b);
-        default: return hypot(hypot(a, b), a - b);
-    }
-}
-
-static PyObject *
-elementwise(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    return elementwise_over(args, nargs, scalar);
-}
-
 static PyMethodDef methods[] = {
     {"residual_period", (PyCFunction)(void (*)(void))residual_period, METH_FASTCALL,
      residual_period_doc},
-    {"elementwise", (PyCFunction)(void (*)(void))elementwise, METH_FASTCALL,
-     elementwise_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -45,26 +45,26 @@ The CUSUM
 
 Isolation
     At an alarm the residuals accumulated since ``g`` last left 0 name the kind, and
-    they are read again with every window for ``isolation`` seconds more (default
-    0.3 s), and at least until a failed drive could have braked to rest from the
-    commanded speed at its limit (the least of its declared ``max_accel`` and
-    ``motor_accel``) plus a window; the detection time stays the alarm's. A failed
-    drive reaches its faulty command within its limits, so a braking stop or spin,
-    or a runaway whose speed is near the commanded one, is plain only after a few
-    windows. A vehicle is *slow* when its speed observed lately (a line fitted to
-    its last :data:`RECENT_SPEED_WINDOW` s of broadcast positions) is below half the
-    model's, the commanded speed (or below ``STILL_SPEED``). Slow and turning (the
-    observed heading change after the first window, beyond 4 standard deviations) is
-    a ``spin``; slow, not turning and short of its predicted travel is a ``stop``,
-    or a ``crash`` when the vehicle was in contact within the last second or its
-    last :data:`SHAPE_HISTORY` seconds of observed track fit a crash better than a
-    braked stop (:func:`~sandbox.behaviour.tracks.stop_fits`: a wreck stops
-    within a substep, a deceleration no drive makes; see
+    they are read again with every window for ``isolation`` seconds more (default 0.3
+    s), and at least until a failed drive could have braked to rest from the commanded
+    speed at its limit (the least of its declared ``max_accel`` and ``motor_accel``)
+    plus a window; the detection time stays the alarm's. A failed drive reaches its
+    faulty command within its limits, so a braking stop or spin, or a runaway whose
+    speed is near the commanded one, is plain only after a few windows. A vehicle is
+    *slow* when its speed observed lately (a line fitted to its last
+    :data:`RECENT_SPEED_WINDOW` s of broadcast positions) is below half the model's, the
+    commanded speed (or below ``STILL_SPEED``). Slow and turning (the observed heading
+    change after the first window, beyond 4 standard deviations) is a ``spin``; slow,
+    not turning and short of its predicted travel is a ``stop``, or a ``crash`` when the
+    vehicle was in contact within the last second or its last
+    :data:`~sandbox.behaviour.residual_state.SHAPE_HISTORY` seconds of observed track
+    fit a crash better than a braked stop (:func:`~sandbox.behaviour.tracks.stop_fits`:
+    a wreck stops within a substep, a deceleration no drive makes; see
     :mod:`sandbox.model.failures`). Without a declared limit the two move alike and a
-    crash in free space reads as a stop. A moving vehicle whose
-    heading residual dominates (by summed magnitudes) is a ``stuck_steering``, or
-    ``uncontrolled`` when the along-track sum is beyond 2 standard deviations too.
-    Any other motion against the commands (too fast, sideways) is ``uncontrolled``.
+    crash in free space reads as a stop. A moving vehicle whose heading residual
+    dominates (by summed magnitudes) is a ``stuck_steering``, or ``uncontrolled`` when
+    the along-track sum is beyond 2 standard deviations too. Any other motion against
+    the commands (too fast, sideways) is ``uncontrolled``.
 
 Studies
     With ``memory["trace"]`` set to a list (``Simulation.detection.memory``), every
@@ -82,16 +82,20 @@ from __future__ import annotations
 
 import copy
 from collections import deque
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from sandbox.behaviour import residual_kernel
-from sandbox.behaviour.isolation import SHAPE_HISTORY, read_kinds
-from sandbox.behaviour.tracks import TrackHistory
+from sandbox.behaviour.isolation import read_kinds
+from sandbox.behaviour.residual_state import (
+    DetectorState,
+    advance_model,
+    shape_history,
+    start_state,
+    wrap_difference,
+)
 from sandbox.behaviour.tracks import stop_fits as stop_fits  # its documented path
-from sandbox.model.kernels import motor_model
 from sandbox.plugins.registration import (
     DetectorContext,
     Param,
@@ -175,104 +179,6 @@ def llr(z_norm: np.ndarray, mu: float) -> np.ndarray:
     return np.where(small, x * x / 6.0, big) - 0.5 * mu * mu
 
 
-@dataclass
-class DetectorState:
-    """What the residual detector keeps between control periods, per vehicle."""
-
-    pose: np.ndarray  # predicted pose since the window's start (n, 3)
-    start: np.ndarray  # observed pose at the window's start (n, 3) [m, m, rad]
-    vel: np.ndarray  # the model body's velocity (n, 2) [m/s]
-    rate: np.ndarray  # the model body's turn rate (n,) [rad/s]
-    age: np.ndarray  # periods since the window's start (n,)
-    pending: np.ndarray  # the next window starts at the next observation (n,) bool
-    travel: np.ndarray  # predicted travel over the window (n,) [m]
-    gate: np.ndarray  # periods of the window in or just after contact (n,)
-    last_contact: np.ndarray  # time of the last contact (n,) [s]
-    g: np.ndarray  # the CUSUM (n,)
-    clear: np.ndarray  # the clearing CUSUM of detected vehicles (n,)
-    acc: np.ndarray  # normalised residuals summed since g left 0 (n, 3)
-    acc_abs: np.ndarray  # their magnitudes summed (n, 3)
-    acc_raw: np.ndarray  # raw residuals summed since g left 0 (n, 3)
-    acc_obs: np.ndarray  # observed travel since g left 0 (n,) [m]
-    acc_pred: np.ndarray  # predicted travel since g left 0 (n,) [m]
-    acc_t: np.ndarray  # time since g left 0 (n,) [s]
-    acc_rot: np.ndarray  # observed rotation since g left 0 (n,) [rad]
-    acc_rot0: np.ndarray  # that of the first window (n,) [rad]
-    acc_n: np.ndarray  # windows summed since g left 0 (n,)
-    detected: np.ndarray  # latched (n,) bool
-    isolating: np.ndarray  # until when the kind is still read (n,) [s]
-    kinds: list  # the kind of each latched detection (n,)
-    history: TrackHistory | None = None  # the last SHAPE_HISTORY s of seen xy
-
-
-def _start(ctx: DetectorContext) -> DetectorState:
-    n = len(ctx.pos)
-    z = np.zeros(n)
-    return DetectorState(
-        pose=ctx.seen.copy(),
-        start=ctx.seen.copy(),
-        vel=np.array(ctx.vel, dtype=float),
-        rate=z.copy(),
-        age=np.zeros(n, dtype=int),
-        pending=np.zeros(n, dtype=bool),
-        travel=z.copy(),
-        gate=np.zeros(n, dtype=int),
-        last_contact=np.full(n, -np.inf),
-        g=z.copy(),
-        clear=z.copy(),
-        acc=np.zeros((n, 3)),
-        acc_abs=np.zeros((n, 3)),
-        acc_raw=np.zeros((n, 3)),
-        acc_obs=z.copy(),
-        acc_pred=z.copy(),
-        acc_t=z.copy(),
-        acc_rot=z.copy(),
-        acc_rot0=z.copy(),
-        acc_n=np.zeros(n, dtype=int),
-        detected=np.zeros(n, dtype=bool),
-        isolating=np.full(n, -np.inf),
-        kinds=[""] * n,
-    )
-
-
-def shape_history(ctx: DetectorContext, shape: tuple[int, ...] = (2,)) -> TrackHistory:
-    """The last :data:`SHAPE_HISTORY` s of every vehicle's observations."""
-    length = int(round(SHAPE_HISTORY / ctx.dt)) + 1
-    return TrackHistory(length, len(ctx.pos), shape)
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
-
-
-def _advance_model(st: DetectorState, ctx: DetectorContext) -> None:
-    """One control period of the motor model (see the module docstring)."""
-    h, s = ctx.dt, max(1, int(ctx.substeps))
-    moved = motor_model(
-        st.pose, st.vel, st.rate, st.travel, ctx.commands, ctx.motor_accel,
-        ctx.turn_accel, h, s,
-    )  # fmt: skip
-    if moved is not None:  # the same numbers in one C call
-        st.vel, st.rate = moved
-        return
-    dts = h / s
-    v1, v2 = ctx.commands[:, 0], ctx.commands[:, 1]
-    heading = st.pose[:, 2] + 0.5 * v2 * h
-    target = np.column_stack((v1 * np.cos(heading), v1 * np.sin(heading)))
-    lin = ctx.motor_accel * dts  # inf: reached within one substep
-    ang = ctx.turn_accel * dts
-    start = st.pose[:, :2].copy()
-    for _ in range(s):
-        st.pose[:, :2] += st.vel * dts
-        st.pose[:, 2] += st.rate * dts
-        dv = target - st.vel
-        norm = np.hypot(dv[:, 0], dv[:, 1])
-        scale = np.where(norm > lin, lin / np.maximum(norm, 1e-300), 1.0)
-        st.vel = st.vel + dv * scale[:, None]
-        st.rate = st.rate + np.clip(v2 - st.rate, -ang, ang)
-    st.travel += np.hypot(*(st.pose[:, :2] - start).T)
-
-
 def _accumulate(st: DetectorState, i: np.ndarray, k: np.ndarray, sums: tuple) -> None:
     """Add windows ``k`` (of the due rows) to vehicles ``i``'s sums for isolation.
 
@@ -308,11 +214,11 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     st: DetectorState | None = ctx.memory.get("state")
     if st is None or ctx.commands is None:
         # The first poses (or, with a delay, the first copies held): start from them.
-        st = ctx.memory["state"] = _start(ctx)
+        st = ctx.memory["state"] = start_state(ctx)
         return st.detected.copy(), list(st.kinds)
     if st.history is None:
         st.history = shape_history(ctx)
-    if residual_kernel.usable():  # the same numbers in one C call
+    if residual_kernel.usable():  # the compiled path: the pass in one C call
         events = residual_kernel.ResidualPass.of(ctx).run(
             st, ctx.t, ctx.seen, ctx.fresh, ctx.in_contact, ctx.commands,
             ctx.memory.get("trace"),
@@ -344,7 +250,7 @@ def residual_pass(st: DetectorState, ctx: DetectorContext) -> tuple:
     window = max(1, int(round(p["window"] / ctx.dt)))
     sp = np.sqrt(2.0 * ctx.position_noise**2 + p["noise_floor"] ** 2)
     sh = np.sqrt(2.0 * ctx.heading_noise**2 + p["heading_floor"] ** 2)
-    _advance_model(st, ctx)
+    advance_model(st, ctx)
     st.age += 1
     # Windows start from a new observation (never the last one's end), so that no two
     # windows share a pose's noise: independent windows.
@@ -371,7 +277,7 @@ def residual_pass(st: DetectorState, ctx: DetectorContext) -> tuple:
         (
             c * d[:, 0] + s * d[:, 1],
             -s * d[:, 0] + c * d[:, 1],
-            _wrap(seen[:, 2] - pred[:, 2]),
+            wrap_difference(seen[:, 2] - pred[:, 2]),
         )
     )
     travel = st.travel[rows]
@@ -387,7 +293,7 @@ def residual_pass(st: DetectorState, ctx: DetectorContext) -> tuple:
             for i, x in zip(rows[used], inc[used], strict=True)
         )
     observed = np.hypot(*(seen[:, :2] - st.start[rows, :2]).T)
-    rotation = _wrap(seen[:, 2] - st.start[rows, 2])
+    rotation = wrap_difference(seen[:, 2] - st.start[rows, 2])
     seconds = st.age[rows] * ctx.dt
     window_sums = (z, raw, observed, travel, seconds, rotation)
     # Each vehicle's CUSUM alone, all vehicles at once: the rows never mix. Vehicles

@@ -8,16 +8,17 @@ needs about ``2 lambda / delta^2`` windows. ``glr`` instead tests for a fault of
 unknown size, with the noise estimated from the run:
 
 The innovation
-    The motor model of ``residual`` (:func:`sandbox.behaviour.detection._advance_model`)
-    predicts each vehicle's pose from its broadcast commands over one control period,
-    restarted from every observation received (a lost packet stretches the step to
-    the next one). The innovation ``d_k`` is the observed pose minus the predicted
-    one (world ``x, y`` [m] and heading [rad]); its running sum ``C_k = sum_j d_j``
-    telescopes, ``C_k = e_k - e_0 + f_k``: the pose noise ``e_k`` of one observation
-    (white, ``sigma`` per coordinate), a constant, and what the commands do not
-    explain, ``f_k``. A fault that moves the vehicle at a rate ``mu`` off its
-    commands from ``tau`` on (a speed or a turn-rate error: a mean shift ``mu h`` of
-    the innovation) makes ``f`` a ramp, ``f(t) = mu (t - tau)^+``.
+    The motor model of ``residual``
+    (:func:`sandbox.behaviour.residual_state.advance_model`) predicts each vehicle's
+    pose from its broadcast commands over one control period, restarted from every
+    observation received (a lost packet stretches the step to the next one). The
+    innovation ``d_k`` is the observed pose minus the predicted one (world ``x, y`` [m]
+    and heading [rad]); its running sum ``C_k = sum_j d_j`` telescopes, ``C_k = e_k -
+    e_0 + f_k``: the pose noise ``e_k`` of one observation (white, ``sigma`` per
+    coordinate), a constant, and what the commands do not explain, ``f_k``. A fault that
+    moves the vehicle at a rate ``mu`` off its commands from ``tau`` on (a speed or a
+    turn-rate error: a mean shift ``mu h`` of the innovation) makes ``f`` a ramp, ``f(t)
+    = mu (t - tau)^+``.
 
 The statistic
     Over the last ``window`` seconds (``m`` observations at times ``t_j``), for each
@@ -75,20 +76,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sandbox.behaviour.detection import (
-    RESIDUAL_PARAMS,
-    DetectorState,
-    _advance_model,
-    _start,
-    _wrap,
-    shape_history,
-)
+from sandbox.behaviour.detection import RESIDUAL_PARAMS
 from sandbox.behaviour.isolation import (
     CRASH_CONTACT_WINDOW,
     RECENT_SPEED_WINDOW,
     STILL_SPEED,
     recent_speed,
     stopped_by_impact,
+)
+from sandbox.behaviour.residual_state import (
+    DetectorState,
+    advance_model,
+    shape_history,
+    start_state,
+    wrap_difference,
 )
 from sandbox.behaviour.tracks import TrackHistory
 from sandbox.plugins.registration import DetectorContext, Param, register_detector
@@ -316,7 +317,7 @@ def _init(ctx: DetectorContext) -> GlrState:
             math.hypot(ctx.heading_noise, p["heading_floor"]),
         ]
     )
-    model = _start(ctx)
+    model = start_state(ctx)
     model.history = shape_history(ctx)
     return GlrState(
         model=model,
@@ -386,7 +387,9 @@ def _kind(st: GlrState, i: int, t: float, ctx: DetectorContext, fit: tuple) -> s
         # Turning: the observed heading over the last RECENT_SPEED_WINDOW s moves
         # beyond 4 standard deviations of a difference of two noisy headings.
         times, h = st.headings.track(i, t - RECENT_SPEED_WINDOW - 1e-9)
-        turn = abs(float(_wrap(np.array(h[-1] - h[0])))) if len(times) else 0.0
+        turn = 0.0
+        if len(times):
+            turn = abs(float(wrap_difference(np.array(h[-1] - h[0]))))
         if turn > 4.0 * math.sqrt(2.0) * st.sigma[i, 2]:
             return "spin"
         if t - model.last_contact[i] <= CRASH_CONTACT_WINDOW:
@@ -410,7 +413,7 @@ def glr(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     model = st.model
     model.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
     st.headings.append(ctx.t, ctx.seen[:, 2], ctx.fresh)
-    _advance_model(model, ctx)
+    advance_model(model, ctx)
     contact = ctx.in_contact
     model.last_contact = np.where(contact, ctx.t, model.last_contact)
     st.gate = np.where(contact, ctx.t + CONTACT_GATE, st.gate)
@@ -419,7 +422,8 @@ def glr(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         return st.detected.copy(), list(st.kinds)
     seen = ctx.seen[rows]
     pred = model.pose[rows]
-    d = np.column_stack((seen[:, :2] - pred[:, :2], _wrap(seen[:, 2] - pred[:, 2])))
+    turned = wrap_difference(seen[:, 2] - pred[:, 2])
+    d = np.column_stack((seen[:, :2] - pred[:, :2], turned))
     # Restart the prediction from the observation: consecutive innovations share it,
     # so their sum telescopes.
     model.pose[rows] = seen

@@ -3,7 +3,8 @@
 At an alarm, and with every window read while isolating, the residuals summed since
 the CUSUM left 0 and the observed track name the kind (``Isolation`` in
 :mod:`sandbox.behaviour.detection`): :func:`isolate`, from one vehicle's row of the
-:class:`~sandbox.behaviour.detection.DetectorState` and its observed history alone.
+:class:`~sandbox.behaviour.residual_state.DetectorState` and its observed history
+alone.
 :func:`read_kinds` reads the kinds of the rows a period's pass names. The ``glr``
 detector reads the speed and the stop-or-crash fit here too.
 """
@@ -18,7 +19,7 @@ from sandbox.behaviour import residual_kernel
 from sandbox.behaviour.tracks import stop_fits
 
 if TYPE_CHECKING:
-    from sandbox.behaviour.detection import DetectorState
+    from sandbox.behaviour.residual_state import DetectorState
     from sandbox.plugins.contexts import DetectorContext
 
 #: Speed below which a vehicle counts as still, for isolation [m/s].
@@ -27,8 +28,6 @@ STILL_SPEED = 0.1
 CRASH_CONTACT_WINDOW = 1.0
 #: Over how long the speed observed lately is fitted, for isolation [s].
 RECENT_SPEED_WINDOW = 0.2
-#: How much of the observed track the crash-or-stop fit reads [s].
-SHAPE_HISTORY = 1.0
 
 
 def recent_speed(st: DetectorState, i: int) -> float | None:

@@ -136,7 +136,10 @@ def near_obstacles(
 
 
 class RangeSensor:
-    """The range sensors of a fleet, scanned by the loop at every control period.
+    """The range sensors of one world's fleet, scanned by the loop every period.
+
+    One world's: its beams are cast in that world's Space, its noise drawn from that
+    world's own stream (:class:`RangeReadings` holds those of a loop's K worlds).
 
     Parameters
     ----------
@@ -319,14 +322,22 @@ class RangeSensor:
         return {"ranges": ranges, "beam_angles": self.beam_angles.copy()}
 
 
-class StackedRanges:
-    """The range sensors of K worlds of ``n`` vehicles, as one for the loop's rows.
+class RangeReadings:
+    """The range sensors of K worlds of ``n`` vehicles, read as the loop's rows.
 
     Each world's :class:`RangeSensor` casts in its own world, with its own noise
-    stream, as alone; the readings, the beam angles and the sensed points are its
-    rows of the stacked views (:attr:`ranges`, :attr:`beam_angles`, :attr:`field`,
-    the points' owners offset by ``w n``), so that a batched strategy or filter sees
-    each world's obstacles only through its own vehicles.
+    stream, as alone (a world's Space and random stream are its own); the readings,
+    the beam angles and the sensed points are its rows of the loop's arrays
+    (:attr:`ranges`, :attr:`beam_angles`, :attr:`field`, the points' owners offset
+    by ``w n``), so that a strategy or filter called once for all worlds sees each
+    world's obstacles only through its own vehicles.
+
+    Parameters
+    ----------
+    sensors : list of RangeSensor
+        Each world's sensors, in world order.
+    n : int
+        Vehicles per world.
     """
 
     def __init__(self, sensors: list[RangeSensor], n: int) -> None:
@@ -334,6 +345,19 @@ class StackedRanges:
         self.beam_angles = np.concatenate([s.beam_angles for s in sensors])
         self.ranges = np.concatenate([s.ranges for s in sensors])
         self.field = SensedField()
+
+    @classmethod
+    def make(
+        cls, scenarios: list[Any], worlds: list[Any], field: ObstacleField, n: int
+    ) -> RangeReadings | None:
+        """The sensors of every world (:meth:`RangeSensor.make`), or None without."""
+        sensors = [
+            RangeSensor.make(sc, w, field)
+            for sc, w in zip(scenarios, worlds, strict=True)
+        ]
+        if sensors[0] is None:
+            return None
+        return cls(sensors, n)
 
     def update(self, t: float, pos: np.ndarray, theta: np.ndarray) -> None:
         """Every world's scans due at ``t`` [s] (:meth:`RangeSensor.update`)."""
@@ -360,12 +384,12 @@ class StackedRanges:
             sensor.record()
 
     def part(self, w: int) -> RangeSensor:
-        """World ``w``'s own sensor."""
+        """World ``w``'s own sensors."""
         return self.parts[w]
 
 
 def avoid_field(
-    sensor: RangeSensor | None, field: ObstacleField, recovery: Any
+    sensor: RangeSensor | RangeReadings | None, field: ObstacleField, recovery: Any
 ) -> ObstacleField | SensedField:
     """The obstacles recovery and the safety filter avoid (``recovery.obstacles``).
 
@@ -377,7 +401,9 @@ def avoid_field(
     return field
 
 
-def context_fields(sensor: RangeSensor | None) -> dict[str, np.ndarray]:
+def context_fields(
+    sensor: RangeSensor | RangeReadings | None,
+) -> dict[str, np.ndarray]:
     """The ``ranges`` and ``beam_angles`` of a plug-in context (none: no sensor)."""
     if sensor is None:
         return {}

@@ -42,9 +42,12 @@ to everyone: recovery avoids every vehicle believed failed. Nothing happens betw
 events, so an assignment never chatters. A vehicle whose fault clears is reassigned
 with the others at that event; the lead is not handed back.
 
-Reassigning a vehicle changes the offset it tracks (``Fleet.offset`` and the law's
-``delta``); the commands stay within each vehicle's limits because the flatness
-controller saturates its speed, acceleration and turn rate
+A reconfiguration reads one formation as it is (:class:`FormationState`: one world's,
+or one platoon's of a world with ``platoons:``) and returns what changes
+(:class:`Reform`: the offsets, the leader, the law, the tracked rows, who may avoid);
+the loop applies it. Reassigning a vehicle changes the offset it tracks (the fleet's
+offset and the law's ``delta``); the commands stay within each vehicle's limits
+because the flatness controller saturates its speed, acceleration and turn rate
 (:func:`~sandbox.model.flatness.advance_extension`). The events are recorded in the
 run's ``info`` as ``reassignments`` (``{t, assignment}``, the slot of each vehicle,
 null for none) and ``leader_changes`` (``{t, from, to, mode}``, ``to`` null for the
@@ -58,25 +61,166 @@ where it changes; ``t`` is the first period of the new configuration, the event'
 from __future__ import annotations
 
 import copy
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from sandbox.plugins.registration import get, make_law
+from sandbox.plugins.registration import LawContext, get, make_law
+from sandbox.scenario import Scenario
 
-if TYPE_CHECKING:
-    from sandbox.loop.simulation import Simulation
+
+@dataclass(frozen=True)
+class FormationState:
+    """One formation as a reconfiguration reads it: a world's, or a platoon's.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The vehicles' names, in row order.
+    h : float [s]
+        The control period.
+    pos, theta, vel : ndarray, shapes (n, 2), (n,), (n, 2)
+        The true positions [m], headings [rad] and velocities [m/s].
+    seen : ndarray, shape (n, 3), or None
+        The broadcast copies every vehicle agrees on (None: the truth).
+    believed : ndarray, shape (n, 3), or None
+        What the law sees of the others (the copies, or their estimate).
+    offset : ndarray, shape (n, 2) [m]
+        The offsets the vehicles track now.
+    commanded : ndarray, shape (n,), bool
+        The vehicles driven open loop.
+    leader : int
+        The vehicle that leads (-1: none).
+    tracks_reference : ndarray, shape (n,), bool
+        The vehicles that track the reference.
+    avoid_candidates : ndarray, shape (n,), bool
+        The vehicles that may avoid (recovery).
+    law : object
+        The formation law (``make_law``), evaluated on these rows alone.
+    law_params, law_memory : dict
+        The law's values and memory.
+    reference : object or None
+        The built reference (``evaluate(t)``).
+    context : dict
+        Further fields of the law's context (the range readings).
+    """
+
+    names: tuple[str, ...]
+    h: float
+    pos: np.ndarray
+    theta: np.ndarray
+    vel: np.ndarray
+    seen: np.ndarray | None
+    believed: np.ndarray | None
+    offset: np.ndarray
+    commanded: np.ndarray
+    leader: int
+    tracks_reference: np.ndarray
+    avoid_candidates: np.ndarray
+    law: Any
+    law_params: dict[str, Any]
+    law_memory: dict[str, Any]
+    reference: Any
+    context: dict[str, Any] = field(default_factory=dict)
+
+    def law_context(
+        self,
+        t: float,
+        offset: np.ndarray,
+        memory: dict[str, Any],
+        leader: int | None = None,
+        params: dict[str, Any] | None = None,
+    ) -> LawContext:
+        """What the law sees at ``t`` with ``offset`` and ``memory``.
+
+        The followers read the leader's believed pose (the truth without sensing);
+        ``leader`` and ``params`` default to the formation's.
+        """
+        lead = self.leader if leader is None else leader
+        seen = self.believed
+        if lead < 0:
+            leader_pos = leader_theta = None
+        elif seen is None:
+            leader_pos, leader_theta = self.pos[lead], float(self.theta[lead])
+        else:
+            leader_pos, leader_theta = seen[lead, :2], float(seen[lead, 2])
+        ref = self.reference.evaluate(t) if self.reference is not None else None
+        return LawContext(
+            t=t,
+            dt=self.h,
+            pos=self.pos,
+            theta=self.theta,
+            vel=self.vel,
+            offset=offset,
+            leader=lead,
+            leader_pos=leader_pos,
+            leader_theta=leader_theta,
+            reference=ref,
+            params=self.law_params if params is None else params,
+            memory=memory,
+            **self.context,
+        )
+
+    def positions(self) -> np.ndarray:
+        """The positions every vehicle agrees on: the broadcast copies, or the truth."""
+        return self.pos if self.seen is None else self.seen[:, :2]
+
+
+@dataclass(frozen=True)
+class Reform:
+    """What a reconfiguration changes at an event; the loop applies it.
+
+    Attributes
+    ----------
+    reset_shift : bool
+        Restart the estimate of the recovery shift now (the period after an event).
+    offset : ndarray, shape (n, 2) [m], or None
+        The new offsets (NaN: no slot); None: unchanged, and so are the fields below.
+    leader : int
+        The vehicle that leads (-1: none).
+    law : object
+        The law, re-seeded on the new configuration (or the virtual leader's).
+    law_params, law_memory : dict
+    tracks_reference, avoid_candidates : ndarray, shape (n,), bool
+    """
+
+    reset_shift: bool = False
+    offset: np.ndarray | None = None
+    leader: int = -1
+    law: Any = None
+    law_params: dict[str, Any] | None = None
+    law_memory: dict[str, Any] | None = None
+    tracks_reference: np.ndarray | None = None
+    avoid_candidates: np.ndarray | None = None
+
+    @property
+    def re_formed(self) -> bool:
+        """Whether the configuration changed (a new leader, law or offsets)."""
+        return self.offset is not None
 
 
 class Reconfiguration:
-    """Slot assignment and leader handover of one run, updated on events.
+    """Slot assignment and leader handover of one formation, updated on events.
 
     Build it with :meth:`build` (None when the scenario asks for neither).
 
     Parameters
     ----------
-    sim : Simulation
-        The run; its leader, law and offsets are changed in place at events.
+    scenario : Scenario
+        The formation's scenario (its ``reconfigure``, ``on_leader_failure``,
+        ``formation`` and ``recovery``).
+    names : sequence of str
+        The vehicles' names, in row order.
+    offset : ndarray, shape (n, 2) [m]
+        The offsets at the start: slot ``k`` is row ``k``'s (NaN: no slot).
+    commanded : ndarray, shape (n,), bool
+        The vehicles driven open loop (they hold no slot).
+    leader : int
+        The vehicle that leads at the start (-1: none).
+    tracks_reference : ndarray, shape (n,), bool
+        The vehicles that track the reference at the start.
 
     Attributes
     ----------
@@ -85,48 +229,80 @@ class Reconfiguration:
     slot_of : ndarray, shape (n,), int
         The slot each vehicle tracks, -1 for none.
     reassignments, leader_changes : list of dict
-        The recorded events (also in ``sim.info``).
+        The recorded events (:meth:`records`).
+    slots : dict of str to list
+        Each vehicle's slots over time: ``[[t, slot or None], ...]`` by name.
     """
 
-    def __init__(self, sim: Simulation) -> None:
-        sc, fleet, n = sim.scenario, sim.fleet, sim.fleet.n
+    def __init__(
+        self,
+        scenario: Scenario,
+        names: Sequence[str],
+        offset: np.ndarray,
+        commanded: np.ndarray,
+        leader: int,
+        tracks_reference: np.ndarray,
+    ) -> None:
+        sc, n = scenario, len(names)
         self.assign = sc.reconfigure.assign
         self.close_gap = sc.reconfigure.close_gap
         self.on_leader_failure = sc.on_leader_failure
-        self.formation = fleet.offset.copy()
+        self.frame = get("law", sc.formation.law).options["frame"]
+        self.leader_avoids = sc.recovery.leader_avoids
+        self.formation = np.array(offset, dtype=float)
         # A slot is an offset: a vehicle without one (open loop, or left without a
         # slot before a merge or split formed this platoon) holds none.
         self.slot_of = np.where(
-            fleet.commanded | ~np.isfinite(self.formation).all(axis=1), -1, np.arange(n)
+            commanded | ~np.isfinite(self.formation).all(axis=1), -1, np.arange(n)
         )
         #: Which slots exist (a finite offset of a vehicle not driven open loop).
         self.slot_exists = self.slot_of >= 0
-        lead = sim.leader
         #: The slot of the vehicle that tracks the reference (-1: none).
-        self.leader_slot = lead if lead >= 0 and sim.tracks_reference[lead] else -1
+        self.leader_slot = leader if leader >= 0 and tracks_reference[leader] else -1
         #: The slot each failed vehicle held when it failed (kept empty).
         self.held: dict[int, int] = {}
         self.known = np.zeros(n, dtype=bool)
         self._reset_shift = False
         self.reassignments: list[dict[str, Any]] = []
         self.leader_changes: list[dict[str, Any]] = []
-        sim.info["reassignments"] = self.reassignments
-        sim.info["leader_changes"] = self.leader_changes
-        #: Each vehicle's slots over time: ``[[t, slot or None], ...]`` by name.
         self.slots: dict[str, list[list]] = {
-            name: [[0.0, _slot(self.slot_of[i])]] for i, name in enumerate(sim.names)
+            name: [[0.0, _slot(self.slot_of[i])]] for i, name in enumerate(names)
         }
-        sim.info["slots"] = self.slots
 
     @classmethod
-    def build(cls, sim: Simulation) -> Reconfiguration | None:
-        """The run's reconfiguration, or None (today's behaviour, untouched)."""
-        sc = sim.scenario
-        if sim.law is None or (
+    def build(
+        cls,
+        scenario: Scenario,
+        names: Sequence[str],
+        offset: np.ndarray,
+        commanded: np.ndarray,
+        leader: int,
+        tracks_reference: np.ndarray,
+        law: Any,
+    ) -> Reconfiguration | None:
+        """The formation's reconfiguration, or None (today's behaviour, untouched).
+
+        None without a law (``law`` None) or with neither ``reconfigure:`` nor
+        ``on_leader_failure:``; the other parameters as for the class.
+        """
+        sc = scenario
+        if law is None or (
             sc.reconfigure.assign == "none" and sc.on_leader_failure == "keep"
         ):
             return None
-        return cls(sim)
+        return cls(scenario, names, offset, commanded, leader, tracks_reference)
+
+    def records(self) -> dict[str, Any]:
+        """The run's ``reassignments``, ``leader_changes`` and ``slots``, kept here.
+
+        The lists and the dict are this reconfiguration's own, filled as events
+        come (a description may hold them from the start).
+        """
+        return {
+            "reassignments": self.reassignments,
+            "leader_changes": self.leader_changes,
+            "slots": self.slots,
+        }
 
     # ------------------------------------------------------------------ the event
     @property
@@ -137,7 +313,9 @@ class Reconfiguration:
         """
         return self._reset_shift
 
-    def react(self, sim: Simulation, t: float, known: np.ndarray) -> bool:
+    def react(
+        self, state: FormationState, t: float, known: np.ndarray
+    ) -> Reform | None:
         """Handle a change of the believed failures at ``t_k``, from ``t_k+1`` on.
 
         The plan of ``t_k`` is kept (the law has already been evaluated for it); the
@@ -148,105 +326,111 @@ class Reconfiguration:
 
         Parameters
         ----------
-        sim : Simulation
+        state : FormationState
+            The formation now.
         t : float [s]
         known : ndarray, shape (n,), bool
             The vehicles believed failed now.
 
         Returns
         -------
-        bool
-            Whether the configuration changed (a new leader, law or offsets).
+        Reform or None
+            What changes (None: nothing).
         """
-        if self._reset_shift:  # the first target of the new slots: restart there
-            sim.shift_motion.reset()
-            self._reset_shift = False
+        reset = self._reset_shift  # the first target of the new slots: restart there
+        self._reset_shift = False
         known = np.asarray(known, dtype=bool)
         if np.array_equal(known, self.known):
-            return False
+            return Reform(reset_shift=True) if reset else None
         for i in np.flatnonzero(known & ~self.known):
             if self.slot_of[i] >= 0 and self.slot_of[i] != self.leader_slot:
                 self.held[int(i)] = int(self.slot_of[i])
         for i in np.flatnonzero(~known & self.known):
             self.held.pop(int(i), None)
         self.known = known.copy()
-        lead = sim.leader
+        now = _Now(state)
         changed = False
+        lead = state.leader
         if self.on_leader_failure != "keep" and lead >= 0 and known[lead]:
-            changed = self._hand_over(sim, t, lead)
+            changed = self._hand_over(state, now, t, lead)
         if self.assign == "hungarian":
-            self._reassign(sim, t)
+            self._reassign(state, now, t)
             changed = True
-        if changed:
-            self._apply(sim, t)
-            self._record_slots(sim, t)
-        return changed
+        if not changed:
+            return Reform(reset_shift=True) if reset else None
+        offset = self._apply(state, now, t)
+        self._record_slots(state, t)
+        return Reform(
+            reset_shift=reset,
+            offset=offset,
+            leader=now.leader,
+            law=now.law,
+            law_params=now.law_params,
+            law_memory=now.law_memory,
+            tracks_reference=now.tracks_reference,
+            avoid_candidates=now.avoid_candidates,
+        )
 
     # ------------------------------------------------------------------ handover
-    def _hand_over(self, sim: Simulation, t: float, lead: int) -> bool:
+    def _hand_over(self, state: FormationState, now: _Now, t: float, lead: int) -> bool:
         """Replace the failed leader ``lead``; False if no vehicle can take over."""
-        fleet = sim.fleet
         if self.on_leader_failure == "virtual":
-            sc = sim.scenario
-            frame = get("law", sc.formation.law).options["frame"]
-            if frame == "world":
+            if self.frame == "world":
                 rotate = False
-            elif frame in ("reference", "leader_reference"):
-                rotate = bool(sim.law_params.get("rotate", False))
+            elif self.frame in ("reference", "leader_reference"):
+                rotate = bool(now.law_params.get("rotate", False))
             else:  # offsets in the leader's frame: turned with the reference
                 rotate = True
-            sim.law_params = {"rotate": rotate}
-            sim.law = make_law("virtual", sim.law_params, fleet.offset, sim.h)
+            now.law_params = {"rotate": rotate}
+            now.law = make_law("virtual", now.law_params, now.offset, state.h)
             # The tangent of eq. (15) until the reference moves: the leader's heading.
-            sim.law._tangent = float(fleet.theta[lead])
-            sim.law_memory = {}
-            self._set_leader(sim, -1)
+            now.law._tangent = float(state.theta[lead])
+            now.law_memory = {}
+            self._set_leader(state, now, -1)
             self.held[lead] = self.leader_slot  # empty unless a gap closes
             self.leader_slot = -1  # the leader's slot is an ordinary one now
             new = None
         else:
-            healthy = ~self.known & ~fleet.commanded
+            healthy = ~self.known & ~state.commanded
             healthy[lead] = False
             rows = np.flatnonzero(healthy)
-            if len(rows) == 0 or sim.reference is None:
+            if len(rows) == 0 or state.reference is None:
                 return False
-            point = sim.reference.evaluate(t)[0]
-            seen = _positions(sim)[rows] - point
+            point = state.reference.evaluate(t)[0]
+            seen = state.positions()[rows] - point
             new = int(rows[np.argmin(seen[:, 0] ** 2 + seen[:, 1] ** 2)])
             self.held.pop(new, None)
             self.slot_of[new] = self.leader_slot
-            self._set_leader(sim, new)
+            self._set_leader(state, now, new)
         self.slot_of[lead] = -1 if new is not None else self.slot_of[lead]
         self.leader_changes.append(
             {
                 "t": round(t, 9),
-                "from": sim.names[lead],
-                "to": None if new is None else sim.names[new],
+                "from": state.names[lead],
+                "to": None if new is None else state.names[new],
                 "mode": self.on_leader_failure,
             }
         )
         return True
 
-    @staticmethod
-    def _set_leader(sim: Simulation, new: int) -> None:
+    def _set_leader(self, state: FormationState, now: _Now, new: int) -> None:
         """Make ``new`` (-1: none) the vehicle that leads and tracks the reference."""
-        old, fleet = sim.leader, sim.fleet
-        sim.tracks_reference[:] = False
+        old = now.leader
+        now.tracks_reference[:] = False
         if new >= 0:
-            sim.tracks_reference[new] = True
-        sim._track_rows = np.flatnonzero(sim.tracks_reference)
-        sim._avoid_candidates[old] = not fleet.commanded[old]
+            now.tracks_reference[new] = True
+        now.avoid_candidates[old] = not state.commanded[old]
         if new >= 0:
-            sim._avoid_candidates[new] = sim.rec.leader_avoids
-        sim.leader = new
+            now.avoid_candidates[new] = self.leader_avoids
+        now.leader = new
 
     # ------------------------------------------------------------------ assignment
-    def _reassign(self, sim: Simulation, t: float) -> None:
+    def _reassign(self, state: FormationState, now: _Now, t: float) -> None:
         """Healthy vehicles to slots, minimum total squared distance (Hungarian)."""
-        fleet, n = sim.fleet, sim.fleet.n
-        movable = ~self.known & ~fleet.commanded
-        if sim.leader >= 0 and sim.tracks_reference[sim.leader]:
-            movable[sim.leader] = False
+        n = len(state.names)
+        movable = ~self.known & ~state.commanded
+        if now.leader >= 0 and now.tracks_reference[now.leader]:
+            movable[now.leader] = False
         rows = np.flatnonzero(movable)
         free = [j for j in range(n) if self.slot_exists[j] and j != self.leader_slot]
         if self.close_gap:
@@ -255,13 +439,13 @@ class Reconfiguration:
             held = set(self.held.values())
             cols = np.array([j for j in free if j not in held], dtype=np.intp)
         for i in range(n):  # everyone but the leader loses the slot, then assigned
-            if i != sim.leader or not sim.tracks_reference[i]:
-                self.slot_of[i] = -1 if not fleet.commanded[i] else self.slot_of[i]
+            if i != now.leader or not now.tracks_reference[i]:
+                self.slot_of[i] = -1 if not state.commanded[i] else self.slot_of[i]
         if len(rows) and len(cols):
             from scipy.optimize import linear_sum_assignment  # only at an event
 
-            where = self.slot_points(sim, t)[cols]
-            rel = _positions(sim)[rows, None, :] - where[None, :, :]
+            where = self._slot_points(state, now, t)[cols]
+            rel = state.positions()[rows, None, :] - where[None, :, :]
             cost = rel[..., 0] ** 2 + rel[..., 1] ** 2  # [m^2]
             r, c = linear_sum_assignment(cost)
             self.slot_of[rows[r]] = cols[c]
@@ -270,65 +454,77 @@ class Reconfiguration:
                 "t": round(t, 9),
                 "assignment": {
                     name: (int(self.slot_of[i]) if self.slot_of[i] >= 0 else None)
-                    for i, name in enumerate(sim.names)
+                    for i, name in enumerate(state.names)
                 },
             }
         )
 
-    def slot_points(self, sim: Simulation, t: float) -> np.ndarray:
+    def _slot_points(self, state: FormationState, now: _Now, t: float) -> np.ndarray:
         """Where every formation slot is at ``t``, shape (n, 2) [m].
 
         The law evaluated on a copy (its memory untouched) with the formation's
         offsets, around the current leader (or the reference, law ``virtual``).
         """
-        law = copy.deepcopy(sim.law)
+        law = copy.deepcopy(now.law)
         if hasattr(law, "delta"):
             law.delta = self.formation.copy()
-        ctx = _law_context(sim, t, self.formation.copy(), copy.deepcopy(sim.law_memory))
+        ctx = state.law_context(
+            t,
+            self.formation.copy(),
+            copy.deepcopy(now.law_memory),
+            leader=now.leader,
+            params=now.law_params,
+        )
         slot = np.array(law.targets(ctx)[0], dtype=float)
         if self.leader_slot >= 0 and ctx.reference is not None:
             slot[self.leader_slot] = ctx.reference[0]  # the leader's: the reference
         return slot
 
-    def _record_slots(self, sim: Simulation, t: float) -> None:
+    def _record_slots(self, state: FormationState, t: float) -> None:
         """Append the slots that changed, held from the next period ``t + dt``."""
-        start = round(t + sim.h, 9)
-        for i, name in enumerate(sim.names):
+        start = round(t + state.h, 9)
+        for i, name in enumerate(state.names):
             slot = _slot(self.slot_of[i])
             if self.slots[name][-1][1] != slot:
                 self.slots[name].append([start, slot])
 
     # ------------------------------------------------------------------ applying
-    def _apply(self, sim: Simulation, t: float) -> None:
+    def _apply(self, state: FormationState, now: _Now, t: float) -> np.ndarray:
         """Offsets from the assignment; the estimators re-seeded on them at ``t``."""
-        fleet = sim.fleet
-        offset = fleet.offset.copy()
+        offset = now.offset.copy()
         has = self.slot_of >= 0
         offset[has] = self.formation[self.slot_of[has]]
-        offset[~has & ~fleet.commanded] = np.nan  # no slot
-        fleet.offset = offset
-        if hasattr(sim.law, "delta"):
-            sim.law.delta = offset
-        if hasattr(sim.law, "reseed"):
-            sim.law.reseed()
-        sim.law_memory.clear()
+        offset[~has & ~state.commanded] = np.nan  # no slot
+        law = now.law
+        if hasattr(law, "delta"):
+            law.delta = offset
+        if hasattr(law, "reseed"):
+            law.reseed()
+        now.law_memory = {}  # the law's memory starts afresh with its estimators
         # Re-seed: the law's differences start from the new configuration at t_k
         # (the next period's velocity is a first difference, never a jump / h).
-        sim.law.targets(_law_context(sim, t, offset, sim.law_memory))
+        law.targets(
+            state.law_context(
+                t, offset, now.law_memory, leader=now.leader, params=now.law_params
+            )
+        )
         self._reset_shift = True
+        return offset
 
 
-def _law_context(sim: Simulation, t: float, offset: np.ndarray, memory: dict):
-    """What the law sees at ``t`` with ``offset`` and ``memory``."""
-    ref = sim.reference.evaluate(t) if sim.reference is not None else None
-    return sim.law_context(t, ref, offset, memory)
+class _Now:
+    """The formation being changed at an event: the state's values, then the new."""
+
+    def __init__(self, state: FormationState) -> None:
+        self.offset = state.offset
+        self.leader = state.leader
+        self.law = state.law
+        self.law_params = state.law_params
+        self.law_memory = state.law_memory
+        self.tracks_reference = state.tracks_reference.copy()
+        self.avoid_candidates = state.avoid_candidates.copy()
 
 
 def _slot(k: int) -> int | None:
     """A slot index as recorded: an int, or None for no slot (-1)."""
     return int(k) if k >= 0 else None
-
-
-def _positions(sim: Simulation) -> np.ndarray:
-    """The positions every vehicle agrees on: the broadcast copies, else the truth."""
-    return sim.fleet.pos if sim.seen is None else sim.seen[:, :2]

@@ -54,11 +54,12 @@ Derivatives fed to eq. (6) with the shifted target (``recovery.target_derivative
 
 Obstacles are the other vehicles (centre-to-centre distance) and the static obstacles
 (distance from the vehicle centre to the nearest surface point, pushing away from it).
-Numpy, with the vehicles' pair terms of the discontinuous and continuous weights in
-one C call where that optional extension is built (:mod:`sandbox.behaviour.pair_field`,
-the same numbers); neighbours come from a KD-tree (scipy) above a few dozen vehicles,
-kept between control steps as a Verlet list (:class:`NeighbourList`), so the cost per
-step stays about linear in the number of vehicles.
+Numpy, with the vehicles' pair terms of the discontinuous and continuous weights in one
+C call where the compiled path ``pair_field`` is on
+(:mod:`sandbox.behaviour.pair_field`, within rtol 1e-12); neighbours come from a KD-tree
+(scipy) above a few dozen vehicles, kept between control steps as a Verlet list
+(:class:`NeighbourList`), so the cost per step stays about linear in the number of
+vehicles.
 """
 
 from __future__ import annotations
@@ -322,8 +323,8 @@ def weighted_shift(
     goal = slot_directions(pos, ctx.slot) if kappa > 0 else None
     kind = _C_KINDS.get(weight) if goal is None and neighbours is not None else None
     if kind is not None and pair_field.usable():
-        # The pairs' terms in one C call (the numpy below, bit for bit), and without
-        # static obstacles, for one beta of all rows, the field finished there too.
+        # The pairs' terms in one C call (the numpy below, within rtol 1e-12), and
+        # without static obstacles, for one beta of all rows, the field finished too.
         one_beta = not isinstance(beta, np.ndarray) or beta.ndim == 0
         if obstacles.empty and one_beta:
             pair_field.add_pair_terms(

@@ -16,20 +16,19 @@ crc32("sensing")])``: adding sensing changes no other draw of a scenario, and th
 scenario and seed give the same copies. With every value 0 no broadcast is made at all
 (:func:`make_broadcast` returns None) and runs are bit-identical to runs without the
 section. The worlds of a batch (:class:`StackedBroadcast`) draw, each from its own
-generator, in two C calls for all of them where the optional extension
-``sandbox.behaviour._draws`` is built (:func:`stacked_draws`: numpy's own fill
-functions on each world's bit generator, the same numbers).
+generator in the order it draws alone, into their rows of two stacked buffers: in one
+C call for all of them where the compiled path ``draws`` is on (:mod:`sandbox.accel`;
+numpy's random C API on each world's bit generator, the numbers of its Generator).
 """
 
 from __future__ import annotations
 
-import copy
-import ctypes
 import zlib
 from collections import deque
-from collections.abc import Callable
 
 import numpy as np
+
+from sandbox import accel
 
 #: The stream of the sensing draws, mixed with the scenario's seed.
 SENSING_STREAM = zlib.crc32(b"sensing")
@@ -157,17 +156,18 @@ class StackedBroadcast:
             (b.rng.standard_normal, self._noise[w], b.rng.random, self._draws[w])
             for w, b in enumerate(broadcasts)
         ]
-        # Every world's draws in two C calls, where they give the same numbers.
-        self._stacked = stacked_draws([b.rng for b in broadcasts], n)
+        # Or every world's in one C call, on their bit generators' capsules.
+        self._c = accel.module("draws")
+        self._capsules = [b.rng.bit_generator.capsule for b in broadcasts]
         for w, b in enumerate(broadcasts):
             b.stack = (self, slice(w * n, (w + 1) * n))
 
     def update(self, pos: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """:meth:`Broadcast.update` of every world, shape (K n, 3)."""
-        if self._stacked is not None:  # each world: its normals, then its uniforms
-            self._stacked(self._noise, self._draws)
+        if self._c is not None:
+            self._c.fill_worlds(self._capsules, self._noise, self._draws)
         else:
-            for normal, noise, uniform, draws in self._calls:
+            for normal, noise, uniform, draws in self._calls:  # normals, uniforms
                 normal(out=noise)
                 uniform(out=draws)
         lost = self._draws.reshape(-1) < self.loss
@@ -182,86 +182,6 @@ class StackedBroadcast:
             self.seen = np.where(lost[:, None], self.seen, arrived)
             self.fresh = ~lost
         return self.seen
-
-
-try:
-    from sandbox.behaviour import _draws
-except ImportError:  # pragma: no cover - built without a C compiler
-    _draws = None
-
-#: Draw the worlds' noise and losses in two C calls where that extension is built and
-#: numpy's fill functions are found (False: each world's Generator methods).
-USE_KERNEL = True
-
-
-def _fill_functions() -> tuple[int, int] | None:
-    """The addresses of numpy's normal and uniform fill functions, or None."""
-    try:
-        from numpy.random import _generator
-
-        lib = ctypes.CDLL(_generator.__file__)
-        normal = lib.random_standard_normal_fill
-        uniform = lib.random_standard_uniform_fill
-    except (ImportError, OSError, AttributeError):  # another numpy build
-        return None
-    address = ctypes.c_void_p
-    return ctypes.cast(normal, address).value, ctypes.cast(uniform, address).value
-
-
-#: ``PyCapsule_GetPointer``'s prototype (not the one ``ctypes.pythonapi`` shares).
-_CAPSULE_POINTER = ctypes.PYFUNCTYPE(ctypes.c_void_p, ctypes.py_object, ctypes.c_char_p)
-
-
-def _bitgens(generators: list[np.random.Generator]) -> np.ndarray:
-    """Each generator's ``bitgen_t`` (the address its bit generator's capsule holds)."""
-    pointer = _CAPSULE_POINTER(("PyCapsule_GetPointer", ctypes.pythonapi))
-    return np.array(
-        [pointer(g.bit_generator.capsule, b"BitGenerator") for g in generators],
-        dtype=np.uintp,
-    )
-
-
-def stacked_draws(
-    generators: list[np.random.Generator], n: int
-) -> Callable[[np.ndarray, np.ndarray], None] | None:
-    """A function drawing every world's ``(n, 3)`` normals, then its ``n`` uniforms.
-
-    ``draw(noise, lost)`` fills ``noise`` (K, n, 3) and ``lost`` (K, n) as each
-    world's ``standard_normal(out=noise[w])`` then ``random(out=lost[w])`` would, in
-    two C calls through numpy's own fill functions. None where the extension is not
-    built, :data:`USE_KERNEL` is False, the functions are not found, or a check on
-    copies of the first generator finds another number.
-    """
-    if _draws is None or not USE_KERNEL or not generators or not n:
-        return None
-    functions = _fill_functions()
-    if functions is None:
-        return None
-    normal, uniform = functions
-    try:
-        bitgens = _bitgens(generators)
-    except (AttributeError, TypeError, ValueError):  # pragma: no cover
-        return None
-
-    def draw(noise: np.ndarray, lost: np.ndarray) -> None:
-        _draws.fill_rows(normal, bitgens, noise)
-        _draws.fill_rows(uniform, bitgens, lost)
-
-    # The check: copies of the first generator, drawn both ways, twice.
-    probe, twin = copy.deepcopy(generators[0]), copy.deepcopy(generators[0])
-    probe_bitgens = _bitgens([probe])
-    for _ in range(2):
-        got_noise, got_lost = np.empty((1, n, 3)), np.empty((1, n))
-        _draws.fill_rows(normal, probe_bitgens, got_noise)
-        _draws.fill_rows(uniform, probe_bitgens, got_lost)
-        want_noise, want_lost = twin.standard_normal((n, 3)), twin.random(n)
-        if not (
-            np.array_equal(got_noise[0].view(np.uint64), want_noise.view(np.uint64))
-            and np.array_equal(got_lost[0].view(np.uint64), want_lost.view(np.uint64))
-        ):
-            return None
-    draw.keep = (generators, probe)  # the bit generators stay alive with it
-    return draw
 
 
 def make_broadcast(spec, dt: float, seed: int) -> Broadcast | None:

@@ -35,19 +35,19 @@ whole grid, in about 0.5 ms. Where the estimates cannot be trusted (a non-finite
 sample, times not in order, a braking limit that is not a positive number) or leave
 too many rows, the whole grid is evaluated, a block of rows at a time.
 
-Where the optional extension ``sandbox.behaviour._fits`` (``_fits.c``) is built, the
-whole fit is one C call (about 0.05 ms): the grid of speeds, both models' estimates
-(any rounding of them chooses rows among which the least sum is the same), the
-candidate rows, and each candidate's sum of squares as numpy takes it (its minimum,
-its clip, its pairwise sums of a row). :func:`fits_agree` compares it with
-:func:`fits_numpy` on a few tracks at the first use, and the C fit is used only if
-every result is the same number; :data:`USE_KERNEL` False forces numpy.
+Where the compiled path ``fits`` is on (:mod:`sandbox.accel`; ``_fits.c``), the whole
+fit is one C call (about 0.05 ms): the grid of speeds, both models' estimates, the
+candidate rows and each candidate's sum of squares, within rtol 1e-9 of
+:func:`fits_numpy`, the reference (``tests/test_compiled_paths.py``).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from sandbox import accel
 from sandbox.model.kernels import c_float64
 
 #: The speeds of the grid, from 0 to 1.5 times the fastest speed observed [1].
@@ -58,69 +58,6 @@ MARGIN = 1e-8
 MOST_ROWS = 0.25
 #: Rows of the grid evaluated at once [1] (the arrays of a block stay small).
 BLOCK_ROWS = 2048
-
-try:
-    from sandbox.behaviour import _fits
-except ImportError:  # pragma: no cover - built without a C compiler
-    _fits = None
-
-#: The fits in C where that extension is built (False: numpy).
-USE_KERNEL = True
-_fits_agreed: bool | None = None
-
-
-def fits_agree() -> bool:
-    """Whether the whole fit in C gives :func:`fits_numpy`'s numbers here (once).
-
-    On 24 random tracks: braked stops and crashes with and without noise, of 10 to
-    150 samples (numpy's sums of up to 128 terms and of more), still and constant
-    ones, and untrusted ones (a NaN, times out of order, no braking limit).
-    """
-    global _fits_agreed
-    if _fits_agreed is None:
-        _fits_agreed = _fits is not None and _fits_check()
-    return _fits_agreed
-
-
-def _fits_check() -> bool:
-    rng = np.random.default_rng(20261209)
-    with np.errstate(all="ignore"):
-        for k in range(24):
-            t, s, brake = sample_track(rng, k)
-            got = _fits.fits(t, s, brake, SPEEDS, MOST_ROWS, MARGIN)
-            want = fits_numpy(*_numpy_grid(t, s), brake)
-            for x, y in zip(got, want, strict=True):
-                if not (x == y or (np.isnan(x) and np.isnan(y))):
-                    return False
-                if np.signbit(x) != np.signbit(y) and not np.isnan(x):
-                    return False
-    return True
-
-
-def sample_track(
-    rng: np.random.Generator, k: int
-) -> tuple[np.ndarray, np.ndarray, float]:
-    """Track ``k`` of the check: times [s], positions [m], a braking limit."""
-    # short where every row of the grid is evaluated (untrusted or still)
-    short = k % 12 in (5, 7, 9) or k % 8 == 3
-    m = [10, 11, 19][k % 3] if short else [101, 10, 37, 130, 23, 150][k % 6]
-    t = np.sort(rng.uniform(0.0, 1.5, m))
-    t -= t[0]
-    onset, v0 = rng.uniform(0.0, 1.2), rng.uniform(0.1, 2.0)
-    start = [0.0, 3.01, 117.3][k % 3]  # the times of a run, from its start
-    brake = [0.5, 2.0, 5.0, 50.0][k % 4] if m < 100 else 5.0
-    braked = v0 * v0 / (2.0 * brake) * (1.0 - np.exp(-3.0 * (t - onset)))
-    s = np.where(t < onset, v0 * t, v0 * onset + (braked if k % 2 else 0.0))
-    s = s + rng.normal(0.0, 0.01 * (k % 3), m)
-    if k % 8 == 3:
-        s = np.zeros(m) if k % 16 == 3 else np.full(m, -0.0)  # still
-    if k % 12 == 5:
-        s[m // 2] = np.nan
-    if k % 12 == 7:
-        t[[1, 2]] = t[[2, 1]] + 1e-3  # out of order
-    if k % 12 == 9:
-        brake = [0.0, np.inf][k // 12 % 2]
-    return t + start, s, brake
 
 
 class TrackHistory:
@@ -206,7 +143,8 @@ def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]
     s : ndarray (m,) [m]
         The positions along the direction of travel.
     brake : float [m/s^2]
-        The drive's braking limit (finite).
+        The drive's braking limit (finite, above 0; for others the numpy form
+        evaluates the whole grid and the compiled form's numbers are its own).
 
     Returns
     -------
@@ -219,8 +157,9 @@ def stop_fits(t: np.ndarray, s: np.ndarray, brake: float) -> tuple[float, float]
     >>> bool(crash < stop)
     True
     """
-    if _fits is not None and USE_KERNEL and fits_agree():  # the same numbers in C
-        return _fits.fits(
+    c = accel.module("fits")
+    if c is not None:  # the whole fit in one C call
+        return c.fits(
             c_float64(t), c_float64(s), float(brake), SPEEDS, MOST_ROWS, MARGIN
         )
     return fits_numpy(*_numpy_grid(t, s), brake)
@@ -239,10 +178,9 @@ def _numpy_grid(t: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, ...]:
 def fits_numpy(
     t: np.ndarray, s: np.ndarray, v: np.ndarray, brake: float
 ) -> tuple[float, float]:
-    """:func:`stop_fits` after its grid of speeds ``v``, by numpy (the definition).
+    """:func:`stop_fits` after its grid of speeds ``v``, by numpy (the reference).
 
-    ``t`` (m,) from 0 [s], ``s`` (m,) [m]; the braked stop's estimates in C where
-    that loop is built (they only choose rows).
+    ``t`` (m,) from 0 [s], ``s`` (m,) [m].
     """
     trusted = (
         bool(np.all(np.isfinite(t)) and np.all(np.isfinite(s)))
@@ -368,19 +306,20 @@ def stop_estimates(
     est : ndarray (SPEEDS, m) [m^2]
     margin : ndarray (SPEEDS, 1) [m^2]
     """
-    if _fits is not None and USE_KERNEL:
-        return _stop_estimates_c(t, s, v, brake)
+    c = accel.module("fits")
+    if c is not None:
+        return _stop_estimates_c(c, t, s, v, brake)
     return stop_estimates_numpy(t, s, v, brake)
 
 
 def _stop_estimates_c(
-    t: np.ndarray, s: np.ndarray, v: np.ndarray, brake: float
+    c: Any, t: np.ndarray, s: np.ndarray, v: np.ndarray, brake: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`stop_estimates` by one C loop (the same formula; see the module)."""
     m = len(t)
     s1, s2 = float(s.sum()), float(s @ s)
     est = np.empty((len(v), m))
-    _fits.stop_estimates(
+    c.stop_estimates(
         c_float64(t), c_float64(s), c_float64(v), float(brake), s1, s2, est
     )
     vv = v[:, None]
@@ -392,7 +331,7 @@ def _stop_estimates_c(
 def stop_estimates_numpy(
     t: np.ndarray, s: np.ndarray, v: np.ndarray, brake: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`stop_estimates` by numpy (the definition)."""
+    """:func:`stop_estimates` by numpy (the reference)."""
     m = len(t)
     powers = t[None, :] ** np.arange(5)[:, None]  # (5, m)
     terms = np.concatenate((powers, powers[:3] * s))  # t^q, then s t^q

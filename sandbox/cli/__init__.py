@@ -32,6 +32,7 @@ from sandbox.cli import (
     check,
     compare,
     figures,
+    info,
     plugins,
     run,
     scenarios,
@@ -52,7 +53,18 @@ from sandbox.cli.common import (
 from sandbox.errors import PluginError, SandboxError, SandboxWarning, ScenarioError
 
 #: The command modules, in the order their commands appear in ``sandbox --help``.
-COMMANDS = (run, validate, check, scenarios, figures, view, compare, sweep, plugins)
+COMMANDS = (
+    run,
+    validate,
+    check,
+    scenarios,
+    figures,
+    view,
+    compare,
+    sweep,
+    plugins,
+    info,
+)
 
 EPILOG = """\
 examples:
@@ -150,9 +162,9 @@ def _dispatch(argv: list[str] | None) -> int:
     except GifOptionError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
-    except SandboxError as exc:
+    except SandboxError as exc:  # bad input (a user's file in the way, ...) says so
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_FAILED
+        return getattr(exc, "exit_status", EXIT_FAILED)
     except BrokenPipeError:
         # The reader of our output went away (e.g. `sandbox schema | head`).
         sys.stderr.close()

@@ -227,8 +227,8 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
     """Render ``run`` to ``args.gif`` and/or ``args.mp4`` (each atomically).
 
     The camera is ``args.follow``: ``auto`` (the default: the gallery's automatic
-    camera, following the leader of a run spread along a line), ``leader`` or
-    ``whole`` (frame the whole run).
+    camera, following what happens in a run spread along a line), ``leader`` or
+    ``whole`` (frame the whole run); the frames' aspect is ``args.aspect``.
     """
     from sandbox.render.animation import write_gif
 
@@ -239,6 +239,7 @@ def render_gif(run: Run, args: argparse.Namespace) -> None:
         "speed": args.speed,
         "zones": args.zones,
         "follow": follow,
+        "aspect": getattr(args, "aspect", "run"),
     }
     if getattr(args, "show_beams", False):
         options["show_beams"] = True
@@ -281,30 +282,25 @@ def check_mp4(args: argparse.Namespace) -> None:
         require_video()
 
 
-#: How the first bytes of an earlier output of each kind begin.
-_MAGIC = {
-    "gif": lambda head: head[:6] in (b"GIF87a", b"GIF89a"),
-    "mp4": lambda head: head[4:8] == b"ftyp",
-}
-
-
 def check_target(target: str | None, kind: str, force: bool) -> None:
-    """Refuse to replace a file that is not an earlier ``kind`` output (``--force``)."""
-    if not target or force:
-        return
-    path = Path(target)
-    if not path.exists() or path.is_dir():  # a directory: the write names it (exit 1)
-        return
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(12)
-    except OSError:
-        head = b""
-    if not path.is_file() or not _MAGIC[kind](head):
-        raise GifOptionError(
-            f"--{kind} {target}: exists and is not a {kind.upper()} file; not "
-            "replaced (give another path, or --force to replace it)"
-        )
+    """Refuse to replace a file that is not an earlier ``kind`` output (``--force``).
+
+    ``kind`` is ``gif`` or ``mp4``: an earlier output is recognised by its first
+    bytes (:func:`sandbox.run.output_guard.is_gif`, ``is_mp4``).
+    """
+    if not target or (Path(target).is_dir() and not Path(target).is_symlink()):
+        return  # a directory: the write names it (exit status 1)
+    from sandbox.run import output_guard as guard
+
+    guard.check_target(
+        target,
+        kind,
+        force=force,
+        recognise={"gif": guard.is_gif, "mp4": guard.is_mp4}[kind],
+        what=f"a {kind.upper()} file",
+        hint="give another path, or --force to replace it",
+        label=f"--{kind} {target}",
+    )
 
 
 class GifOptionError(SandboxError):
@@ -358,6 +354,31 @@ def bounded(kind: type, low: float, high: float) -> Callable[[str], float]:
         return value
 
     return parse
+
+
+def frame_aspect(text: str) -> float | str:
+    """An argparse type for ``--aspect``: ``run``, ``square``, ``W:H`` or a number.
+
+    Returns ``"run"`` or the width over height, from 1/4 to 4.
+    """
+    from sandbox.render.camera import MAX_FRAME_ASPECT
+
+    words = {"run": "run", "square": 1.0}
+    if text in words:
+        return words[text]
+    try:
+        parts = [float(x) for x in text.split(":")]
+        value = parts[0] / parts[1] if len(parts) == 2 else parts[0]
+        if len(parts) > 2:
+            raise ValueError(text)
+    except (ValueError, ZeroDivisionError):
+        value = float("nan")
+    if not (1.0 / MAX_FRAME_ASPECT <= value <= MAX_FRAME_ASPECT):  # NaN fails too
+        raise argparse.ArgumentTypeError(
+            f"expected run, square, W:H or a number from {1 / MAX_FRAME_ASPECT:g} "
+            f"to {MAX_FRAME_ASPECT:g} (width over height), got {text!r}"
+        )
+    return value
 
 
 def nonempty(text: str) -> str:
@@ -421,7 +442,7 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
         "--size",
         type=bounded(int, *GIF_SIZE),
         default=640,
-        help=f"frame size in pixels, {GIF_SIZE[0]} to {GIF_SIZE[1]} (default 640)",
+        help=f"frame width in pixels, {GIF_SIZE[0]} to {GIF_SIZE[1]} (default 640)",
     )
     p.add_argument(
         "--speed",
@@ -446,8 +467,18 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
         "--follow",
         choices=("auto", "leader", "whole"),
         default="auto",
-        help="camera: auto (default: follow the leader of a run spread along a line, "
-        "else frame the whole run, as the gallery does), leader, or whole",
+        help="camera: auto (default: for a run spread along a line, a window that "
+        "follows what happens, the healthy vehicles, a failed vehicle near them and "
+        "the obstacles near them; else the whole run, as the gallery does), leader, "
+        "or whole",
+    )
+    p.add_argument(
+        "--aspect",
+        type=frame_aspect,
+        default="run",
+        help="frame width over height: run (default: the framed area's own when the "
+        "whole run is framed, square when the camera moves), square, W:H such as "
+        "16:9, or a number from 0.25 to 4; --size is the width",
     )
     p.add_argument(
         "--mp4",
@@ -455,6 +486,15 @@ def add_gif_options(p: argparse.ArgumentParser) -> None:
         metavar="OUT.mp4",
         help="also write an MP4 video of the same frames (needs the extra 'video')",
     )
+
+
+def add_force_option(p: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--force``: replace ``what``, which the command otherwise refuses to.
+
+    Without it an output replaces only an earlier output of the same command (see
+    :mod:`sandbox.run.output_guard`).
+    """
+    p.add_argument("--force", action="store_true", help=f"replace {what} all the same")
 
 
 def add_plugin_option(p: argparse.ArgumentParser, trust: bool = False) -> None:

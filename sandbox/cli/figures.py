@@ -11,6 +11,7 @@ from sandbox.cli.common import (
     EXIT_INVALID,
     EXIT_OK,
     add_command,
+    add_force_option,
     add_gif_options,
     add_plugin_option,
     check_gif_frames,
@@ -51,38 +52,71 @@ def _gallery_folder(text: str) -> Path:
 
 
 def cmd_gallery(args: argparse.Namespace) -> int:
-    """``sandbox gallery``: run and render every scenario of the given folders."""
+    """``sandbox gallery``: run and render every scenario of the given folders.
+
+    Each ``OUT/NAME.gif`` replaces only an earlier GIF of the gallery (``--force``:
+    any file); all of them are checked before the first run, and each is put in
+    place as soon as it is rendered.
+    """
     from sandbox.render.gallery import render_gallery, scenario_files
+    from sandbox.run.output_guard import check_targets, staged
 
     folders = [_gallery_folder(f) for f in (args.folders or ["paper", "failures"])]
     missing = [str(f) for f in folders if not f.is_dir()]
     if missing:
         print(f"error: no such folder: {', '.join(missing)}", file=sys.stderr)
         return EXIT_FAILED
-    with progress(len(scenario_files(folders)), "gallery", unit="gif") as bar:
+    out = Path(args.out)
+    files = scenario_files(folders)
+    check_targets([out / f"{f.stem}.gif" for f in files], "gallery", force=args.force)
+    with (
+        staged(out, "gallery", args.force) as stage,
+        progress(len(files), "gallery", unit="gif") as bar,
+    ):
 
         def log(line: str) -> None:
-            bar.write(line)
+            stage.commit()  # the GIF just rendered, in place at once
+            bar.write(line.replace(str(stage.path), str(out)))
             bar.advance()
 
-        render_gallery(folders, Path(args.out), zones=args.zones, log=log)
+        render_gallery(folders, stage.path, zones=args.zones, log=log)
     return EXIT_OK
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    """``sandbox plot RUN_DIR``: the four report figures, in ``RUN_DIR/figures/``."""
-    from sandbox.render.figures import plot_run
-    from sandbox.run.output import load_run_dir
+    """``sandbox plot RUN_DIR``: the four report figures, in ``RUN_DIR/figures/``.
 
-    run = load_run_dir(Path(args.run_dir))
+    A figure replaces only an earlier figure of ``sandbox plot`` (``--force``: any
+    file); every name is checked before the run is read, the figures are drawn into a
+    stage and put in place together.
+    """
+    from sandbox.render.figures import FIGURES, plot_run
+    from sandbox.run.output import load_run_dir
+    from sandbox.run.output_guard import check_targets, staged
+
     out = Path(args.out) if args.out else Path(args.run_dir) / "figures"
     if args.scan is not None:
-        return _plot_scan(run, out, args)
-    with progress(4, "plotting", unit="figure") as bar:
-        paths = plot_run(run, out, dpi=args.dpi, fmt=args.format, progress=bar)
-    for path in paths:
-        print(path)
+        names = [scan_name(args.scan, args.format)]
+    else:
+        names = [f"{stem}.{args.format}" for stem in FIGURES]
+    check_targets([out / name for name in names], "plot", force=args.force)
+    run = load_run_dir(Path(args.run_dir))
+    with staged(out, "plot", args.force) as stage:
+        if args.scan is not None:
+            status = _plot_scan(run, stage.path, args)
+            if status != EXIT_OK:
+                return status
+        else:
+            with progress(4, "plotting", unit="figure") as bar:
+                plot_run(run, stage.path, dpi=args.dpi, fmt=args.format, progress=bar)
+    for name in names:  # in the figures' order
+        print(out / name)
     return EXIT_OK
+
+
+def scan_name(t: float, fmt: str) -> str:
+    """The file of the figure of the scan nearest ``t`` [s]: ``scan_T.FMT``."""
+    return f"scan_{t:g}.{fmt}"
 
 
 def _plot_scan(run: object, out: Path, args: argparse.Namespace) -> int:
@@ -95,10 +129,7 @@ def _plot_scan(run: object, out: Path, args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"error: sandbox plot --scan: {exc}", file=sys.stderr)
         return EXIT_INVALID
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / f"scan_{args.scan:g}.{args.format}"
-    save_figure(fig, path, args.dpi, args.format)
-    print(path)
+    save_figure(fig, out / scan_name(args.scan, args.format), args.dpi, args.format)
     return EXIT_OK
 
 
@@ -155,8 +186,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="scenario folders, or bundled ones such as paper (default: the bundled "
         "paper and failures)",
     )
-    p.add_argument("--out", default="renders", help="output folder (default renders/)")
+    p.add_argument(
+        "--out",
+        default="renders",
+        help="output folder (default renders/); a GIF there is replaced only if the "
+        "gallery wrote it",
+    )
     p.add_argument("--zones", action="store_true", help="draw the R (and r) safe zones")
+    add_force_option(p, "a GIF of the --out folder that the gallery did not write")
     add_plugin_option(p)
     p.set_defaults(func=cmd_gallery)
     p = add_command(
@@ -172,7 +209,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("run_dir", help="a run directory written by sandbox run")
     p.add_argument(
-        "--out", help="directory for the figures (default: RUN_DIR/figures/)"
+        "--out",
+        help="directory for the figures (default: RUN_DIR/figures/); a file there is "
+        "replaced only if sandbox plot wrote it",
+    )
+    add_force_option(
+        p, "a figure of the --out directory that sandbox plot did not write"
     )
     p.add_argument(
         "--format",

@@ -22,6 +22,7 @@ from sandbox.cli.common import (
     render_gif,
     scenario_file,
 )
+from sandbox.cli.info import not_built_warnings
 from sandbox.errors import Problem, ScenarioError
 
 
@@ -69,7 +70,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         metrics = compute_metrics(run)
         write_run_dir(run, metrics, out_dir, trajectory=args.format)
     _print_summary(scenario.name, metrics, out_dir, args.format)
-    for line in metrics.get("warnings", []):
+    for line in [*metrics.get("warnings", []), *not_built_warnings()]:
         print(f"warning: {line}", file=sys.stderr)
     if stop() and run.status != STATUS_INTERRUPTED:
         # The signal came after the last step, while the outputs were written: they
@@ -136,19 +137,24 @@ def _blame_duration_option(exc: ScenarioError, duration: float | None) -> Scenar
 
 
 def _print_summary(name: str, metrics: dict, out_dir: Path, fmt: str) -> None:
-    from sandbox.run.metrics import summary_rows
+    from sandbox.run.metrics import (
+        convergence_summary,
+        deadlock_summary,
+        summary_rows,
+    )
 
     col = metrics["collisions"]
     md = metrics["min_distance"]
     print(
         f"{name}: status {metrics['status']}, {metrics['duration']:.2f} s simulated, "
-        f"converged: {'yes' if metrics['converged'] else 'no'}"
+        f"converged: {convergence_summary(metrics)}"
     )
     print(
         f"collisions: {col['total']} (vehicle-vehicle {col['vehicle_vehicle']}, "
         f"vehicle-obstacle {col['vehicle_obstacle']}); min distance: "
         f"{'-' if md is None else f'{md:.3f} m'}"
     )
+    print(deadlock_summary(metrics))
     for pname, p in metrics.get("platoons", {}).items():  # with platoons: only
         st = p["settling_time"]
         print(

@@ -180,18 +180,24 @@ def _table(args: argparse.Namespace, root: Path) -> int:
 
 
 def _plot(args: argparse.Namespace, root: Path) -> int:
+    """``sandbox sweep plot DIR``: the figures, replacing only earlier ones.
+
+    They are drawn into a stage in the output directory and put in place together:
+    a file there that ``sweep plot`` did not write is replaced only with ``--force``.
+    """
+    from sandbox.run.output_guard import staged
     from sandbox.study.figures import plot_sweep
     from sandbox.study.spec import SweepError
 
+    out = Path(args.out) if args.out else root / "figures"
     try:
-        written = plot_sweep(
-            root, Path(args.out) if args.out else root / "figures", args.by
-        )
+        with staged(out, "sweep plot", args.force) as stage:
+            drawn = plot_sweep(root, stage.path, args.by)
     except (SweepError, SandboxError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
-    for path in written:
-        print(f"figure: {path}")
+    for path in drawn:
+        print(f"figure: {out / path.name}")
     return EXIT_OK
 
 
@@ -264,6 +270,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--out",
         help="results directory (sweep); figures directory (plot, default "
         "DIR/figures); the page (view, default DIR/sweep.html)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="plot: replace files of the --out directory that sweep plot did not write",
     )
     p.add_argument(
         "--keep-runs",

@@ -59,17 +59,47 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
-    """``sandbox schema [--out FILE]``: the JSON Schema of the scenario format."""
-    from sandbox.run.output import write_text_atomic
+    """``sandbox schema [--out FILE]``: the JSON Schema of the scenario format.
+
+    ``--out`` replaces only an earlier schema (its ``$id`` is the format's), else the
+    command refuses in one line (``--force`` replaces it all the same).
+    """
+    from sandbox.run.output_guard import write_output
     from sandbox.scenario.schema import schema_json
 
     text = schema_json()
     if not args.out:
         sys.stdout.write(text)
         return EXIT_OK
-    write_text_atomic(Path(args.out), text)
+    write_output(
+        Path(args.out),
+        text,
+        "schema",
+        force=args.force,
+        recognise=is_schema,
+        mark=False,
+    )
     print(f"schema: {args.out}")
     return EXIT_OK
+
+
+#: The largest file read to recognise an earlier schema [bytes] (it is about 100 kB).
+SCHEMA_MAX_BYTES = 2**22
+
+
+def is_schema(path: Path) -> bool:
+    """Whether ``path`` is a schema ``sandbox schema`` wrote (by its ``$id``)."""
+    import json
+
+    from sandbox.scenario.schema import SCHEMA_ID
+
+    try:
+        if path.stat().st_size > SCHEMA_MAX_BYTES:
+            return False
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(doc, dict) and doc.get("$id") == SCHEMA_ID
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -110,6 +140,15 @@ def register(sub: argparse._SubParsersAction) -> None:
             "sandbox schema | head",
         ],
     )
-    p.add_argument("--out", help="write it to this file instead of printing it")
+    p.add_argument(
+        "--out",
+        help="write it to this file instead of printing it (an existing file is "
+        "replaced only if it is an earlier schema)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace the --out file even if it is not an earlier schema",
+    )
     add_plugin_option(p)
     p.set_defaults(func=cmd_schema)

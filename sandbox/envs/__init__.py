@@ -6,13 +6,19 @@
 - :class:`VehicleVectorEnv` and :class:`FormationVectorEnv`: ``num_envs`` worlds in
   the one loop (:mod:`sandbox.envs.vector`); ``gymnasium.make_vec("sandbox/Vehicle-v0",
   num_envs=K, vectorization_mode="vector_entry_point", scenario=...)`` builds the
-  first.
+  first;
+- :class:`SB3VecEnv` (:mod:`sandbox.envs.sb3`, extra ``sb3``): the vector environment
+  as a stable-baselines3 ``VecEnv``, to train SB3's algorithms on every world in one
+  loop; imported on first use, so that the rest needs no stable-baselines3.
 
 Observations, actions and rewards are defined in :mod:`sandbox.envs.core`. Install
-with ``pip install 'platoon-sandbox[rl]'`` (gymnasium and pettingzoo).
+with ``pip install 'platoon-sandbox[rl]'`` (gymnasium and pettingzoo), or
+``'platoon-sandbox[sb3]'`` (those, stable-baselines3 and PyTorch).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from sandbox._about import install_hint
 
@@ -39,6 +45,16 @@ if VEHICLE_ENV_ID not in gymnasium.registry:
         entry_point="sandbox.envs.vehicle:VehicleEnv",
         vector_entry_point="sandbox.envs.vector:VehicleVectorEnv",
     )
+
+
+def __getattr__(name: str) -> Any:
+    """``SB3VecEnv``, imported on first use (it needs the extra ``sb3``)."""
+    if name == "SB3VecEnv":
+        from sandbox.envs.sb3 import SB3VecEnv
+
+        return SB3VecEnv
+    raise AttributeError(f"module 'sandbox.envs' has no attribute {name!r}")
+
 
 __all__ = [
     "VEHICLE_ENV_ID",

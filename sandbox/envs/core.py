@@ -62,7 +62,13 @@ import numpy as np
 from sandbox.loop.observation import Observation
 from sandbox.loop.simulation import Simulation
 from sandbox.render.animation import render_frame
-from sandbox.run.record import MODE_EXTERNAL, MODE_FAILED, Run
+from sandbox.run.record import (
+    MODE_EXTERNAL,
+    MODE_FAILED,
+    STATUS_DIVERGED,
+    STATUS_ERROR,
+    Run,
+)
 from sandbox.scenario import Scenario, load_scenario
 
 #: Action kinds, the ``action`` argument of both environments.
@@ -366,7 +372,7 @@ class Task:
         self.sim = Simulation(self.source.load(seed))
         self.terms = np.zeros((len(self.agents), 3))
         self.obs = self.sim.observe()
-        self.history = [(self.obs, self.sim.plan.point.copy())]
+        self.history = [(self.obs, reference_point(self.sim))]
         return self.obs
 
     def advance(self, actions: np.ndarray) -> np.ndarray:
@@ -413,7 +419,7 @@ class Task:
             effort = change[:, 0] + 0.5 * self.diameter * change[:, 1]
             step_terms = np.stack((sim.h * error, hits, effort), -1)
             terms += step_terms[self.rows]
-            self.history.append((self.obs, sim.plan.point.copy()))
+            self.history.append((self.obs, reference_point(sim)))
         self.terms = terms
         return -terms @ np.array([w.error, w.collision, w.effort])
 
@@ -580,6 +586,17 @@ def driven_commands(
         v1, delta = rows[..., car, 0], rows[..., car, 1]
         rows[..., car, 1] = v1 * np.tan(delta) / wheelbase[car]
     return rows
+
+
+def reference_point(sim: Simulation) -> np.ndarray:
+    """The reference point [m] the run plans with now, (2,) (NaN: none, or undefined).
+
+    A run that ended with its plan undefined (diverged, a plug-in that failed) has
+    none.
+    """
+    if sim.status in (STATUS_DIVERGED, STATUS_ERROR):
+        return np.full(2, np.nan)
+    return sim.plan.point[0].copy()
 
 
 def features_of(

@@ -156,11 +156,11 @@ class VectorTask:
         rows[local[:, None], task.rows[None, :]] = part
         kwargs = {"commands" if task.action == "commands" else "shifts": rows}
         terms = np.zeros((Kc, self.m, 3))
-        fleet = sim.fleet
+        fleet, physics = sim.fleet, sim.physics.worlds
         for _ in range(task.repeat):
             if sim.done:
                 break
-            before = [len(sim.physics.worlds[j].events) for j in range(Kc)]
+            before = [len(world.events) for world in physics]
             last = np.stack((fleet.v1, fleet.v2), -1).reshape(Kc, n, 2)
             started = sim.k
             sim.step(**kwargs, observe=False)
@@ -171,8 +171,8 @@ class VectorTask:
             error = np.linalg.norm(slot - pos, axis=-1)
             error = np.where(np.isfinite(error), error, 0.0)
             hits = np.zeros((Kc, n))
-            for j in range(Kc):
-                for e in sim.physics.worlds[j].events[before[j] :]:
+            for j, world in enumerate(physics):
+                for e in world.events[before[j] :]:
                     for who in (e.a, e.b):
                         if who in self._index:
                             hits[j, self._index[who]] += 1
@@ -181,8 +181,9 @@ class VectorTask:
             step_terms = np.stack((sim.h * error, hits, effort), -1)
             terms += step_terms[:, task.rows]
         self.last_terms[mine] = terms[local]
+        live, done = sim.live, sim.done
         for j, k in zip(local, mine, strict=True):
-            if not sim.live[j] or sim.done:
+            if not live[j] or done:
                 self.ended[k] = True
         w = task.weights
         return -terms[local] @ np.array([w.error, w.collision, w.effort])
@@ -216,9 +217,11 @@ class VectorTask:
         """Per world: whether its episode terminated (diverged), truncated (ended)."""
         terminated = np.zeros(self.K, dtype=bool)
         for c, (sim, worlds) in enumerate(self.cohorts):
+            statuses = None
             for j, k in enumerate(worlds):
                 if self.where[k, 0] == c and self.ended[k]:
-                    terminated[k] = sim.states[j].status == "diverged"
+                    statuses = sim.statuses if statuses is None else statuses
+                    terminated[k] = statuses[j] == "diverged"
         return terminated, self.ended & ~terminated
 
     def times(self) -> np.ndarray:

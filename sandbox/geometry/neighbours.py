@@ -9,15 +9,27 @@ strategies, the safety filter and the plug-in contexts alike.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Protocol
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from sandbox.model.obstacle_field import ObstacleField
-
 #: Below this many vehicles all pairs are checked directly (cheaper than a tree).
 BRUTE_FORCE_MAX = 48
+
+
+class Obstacles(Protocol):
+    """What a neighbour list asks of a set of obstacles (an ``ObstacleField``).
+
+    ``candidates(pos, radius)`` gives the sorted ``(vehicle, obstacle)`` pairs whose
+    obstacle's bounding circle lies within ``radius`` [m] of the vehicle's position;
+    a set whose obstacles change between calls may say so with ``dynamic = True``.
+    """
+
+    def candidates(
+        self, pos: np.ndarray, radius: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The candidate pairs ``(vehicle, obstacle)`` within ``radius`` [m]."""
+        ...
 
 
 def neighbour_pairs(pos: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -116,7 +128,7 @@ class NeighbourList:
         return self._i.take(keep), self._j.take(keep), np.take(rel, keep, axis=0)
 
     def obstacle_pairs(
-        self, pos: np.ndarray, field: ObstacleField
+        self, pos: np.ndarray, field: Obstacles
     ) -> tuple[np.ndarray, np.ndarray]:
         """Candidate ``(vehicle, obstacle)`` pairs: all obstacles closer than radius.
 
@@ -129,7 +141,7 @@ class NeighbourList:
         Parameters
         ----------
         pos : ndarray, shape (n, 2) [m]
-        field : ObstacleField
+        field : Obstacles
             The same field at every call; a field whose obstacles change between
             calls (``field.dynamic``, e.g. sensed points) is searched afresh.
         """
@@ -209,6 +221,8 @@ class WorldPairs:
         i, j, _ = self.near(pos)
         return i, j
 
-    def obstacle_pairs(self, pos: np.ndarray, field: Any) -> tuple[np.ndarray, ...]:
+    def obstacle_pairs(
+        self, pos: np.ndarray, field: Obstacles
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Candidate ``(vehicle, obstacle)`` pairs (see ``NeighbourList``)."""
         return self._obstacles.obstacle_pairs(pos, field)

@@ -2,16 +2,14 @@
  *
  * healthy: the divergence check's fast path (sandbox/loop/divergence.py), whether a
  * fleet is clearly healthy: every position within the bound, every heading finite,
- * every speed and extension squared within the bound (a NaN fails every comparison,
- * as it fails numpy's reductions). Only a yes or a no: the slow path, in numpy,
- * finds the vehicle and the reason.
+ * every speed and extension squared within the bound (a NaN fails every
+ * comparison). Only a yes or a no: the slow path, in numpy, finds the vehicle and
+ * the reason.
  *
  * buffer_period: what the loop metrics copy of a period into their buffers
  * (sandbox/loop/tally.py, LoopTally._buffer): the pairs' squared distances, the
  * commands, the velocities, the free flags and the commanded velocities along the
- * mean heading, the same operations in numpy's order (compiled without fused
- * multiply-adds), with the C library's sin and cos, which sandbox/model/kernels.py
- * checks give numpy's numbers before the loop uses this.
+ * mean heading, with the C library's sin and cos.
  *
  * record_sample: a sample of every world into the record's buffers
  * (sandbox/loop/recording.py, WorldsRecorder.append): copies only.
@@ -24,10 +22,14 @@
  * along the mean heading (WorldsPhysics.advance): copies only.
  *
  * flush_periods: the loop metrics' buffered periods accounted for at once
- * (sandbox/loop/tally.py, LoopTally.flush), numpy's operations in its order.
+ * (sandbox/loop/tally.py, LoopTally.flush): the efforts summed period after period,
+ * the extremes and the counts.
+ *
+ * Where they compute, the numbers agree with the numpy path within the tolerance
+ * of sandbox/accel.py (this is the compiled path ``period``).
  */
 
-#include "numpy_rules.h"
+#include "accel.h"
 
 PyDoc_STRVAR(healthy_doc,
 "healthy(pos, theta, vel, chi, bound, speed2) -> bool\n"
@@ -196,13 +198,6 @@ done:
     return result;
 }
 
-/* numpy.minimum(a, b): a where a < b or a is NaN, else b (b on a tie). */
-static inline double
-np_minimum(double a, double b)
-{
-    return (a < b || a != a) ? a : b;
-}
-
 PyDoc_STRVAR(flush_periods_doc,
 "flush_periods(m, K, n, rel_tol, abs_tol, has_prev, has_cmd, d2, v, vel, cmd,\n"
 "              free, best, effort_v1, effort_v2, peak_v1, prev, commanded,\n"
@@ -213,8 +208,8 @@ PyDoc_STRVAR(flush_periods_doc,
 "``d2`` (m, K, P) (P = 0: no pairs), ``v`` (m, 2, N), ``vel``, ``cmd`` (m, N, 2),\n"
 "``free`` (m, N) bool; updates ``best`` (K,), the efforts and ``peak_v1`` (N,),\n"
 "``prev`` (2, N), ``commanded`` (N, 2) and ``was_free`` (N,) (the last period's,\n"
-"read where ``has_prev``, ``has_cmd``), the errors (K,) and the counts (K,) int64,\n"
-"numpy's operations in numpy's order.");
+"read where ``has_prev``, ``has_cmd``), the errors (K,) and the counts (K,)\n"
+"int64.");
 
 static PyObject *
 flush_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -282,12 +277,12 @@ flush_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 const double *row = d2->data + (t * K + w) * P;
                 double low = row[0];
                 for (Py_ssize_t c = 1; c < P; c++) {
-                    low = np_minimum(low, row[c]);
+                    low = smaller(low, row[c]);
                 }
                 low = sqrt(low);
-                least = t == 0 ? low : np_minimum(least, low);
+                least = t == 0 ? low : smaller(least, low);
             }
-            best->data[w] = np_minimum(best->data[w], least);
+            best->data[w] = smaller(best->data[w], least);
         }
     }
     /* control effort, period after period as the loop adds them, and |v1|'s peak */
@@ -304,14 +299,12 @@ flush_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         }
     }
     for (Py_ssize_t i = 0; i < N; i++) {
-        /* np.fmax: the non-NaN one, the first where both are NaN */
+        /* the largest, NaN left out (fmax) */
         double top = fabs(v0[i]);
         for (Py_ssize_t t = 1; t < m; t++) {
-            double x = fabs(v->data[t * 2 * N + i]);
-            top = (x > top || top != top) ? x : top;
+            top = fmax(top, fabs(v->data[t * 2 * N + i]));
         }
-        double p = peak->data[i];
-        peak->data[i] = (top > p || p != p) ? top : p;
+        peak->data[i] = fmax(peak->data[i], top);
     }
     memcpy(prev->data, v->data + (m - 1) * 2 * N, 2 * N * sizeof(double));
     /* the motor check: each period's velocities read against the last commanded */
@@ -331,14 +324,14 @@ flush_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 double want = hypot(c[0], c[1]);
                 double err = hypot(got_v[0] - c[0], got_v[1] - c[1]);
                 double speed_err = fabs(hypot(got_v[0], got_v[1]) - want);
-                worst_v = np_maximum(worst_v, err);
-                worst_s = np_maximum(worst_s, speed_err);
+                worst_v = larger(worst_v, err);
+                worst_s = larger(worst_s, speed_err);
                 checked++;
-                over += err > np_maximum(rel_tol * want, abs_tol);
+                over += err > larger(rel_tol * want, abs_tol);
             }
         }
-        mve->data[w] = np_maximum(mve->data[w], worst_v);
-        mse->data[w] = np_maximum(mse->data[w], worst_s);
+        mve->data[w] = larger(mve->data[w], worst_v);
+        mse->data[w] = larger(mse->data[w], worst_s);
         free_periods[w] += checked;
         saturated[w] += over;
     }

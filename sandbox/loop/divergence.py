@@ -11,12 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from sandbox import accel
 from sandbox.loop.state import Fleet
-
-try:
-    from sandbox.loop import _period
-except ImportError:  # pragma: no cover - built without a C compiler
-    _period = None
 
 #: A state beyond these bounds is reported as ``diverged`` [m], [m/s].
 DIVERGED_POSITION = 1e6
@@ -46,9 +42,10 @@ def healthy(fleet: Fleet | RowsView) -> bool:
     """
     vel, chi = fleet.vel, fleet.chi
     speed2 = (0.999 * DIVERGED_SPEED) ** 2
-    if _period is not None:
+    period = accel.module("period")
+    if period is not None:
         try:
-            return _period.healthy(
+            return period.healthy(
                 fleet.pos, fleet.theta, vel, chi, DIVERGED_POSITION, speed2
             )
         except (BufferError, TypeError, ValueError):  # not float64 C arrays

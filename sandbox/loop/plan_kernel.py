@@ -16,19 +16,18 @@ C calls do the same, where they cover the loop's configuration:
 
 Everything else keeps the numpy path: plug-in laws and strategies, the ``smooth``
 weight, the tangential term, obstacles, platoons and reconfiguration. Each C call
-is used only where its check agreed (:func:`~sandbox.model.law_kernel.
-kernel_agrees`, :func:`~sandbox.behaviour.pair_field.shift_agrees`) and its switch
-is on (``law_kernel.USE_KERNEL``, ``pair_field.USE_KERNEL``); the numbers are the
-numpy path's (``tests/test_plan_kernel.py`` compares whole runs).
+is used only where its compiled path (``laws``, ``pair_field``; :mod:`sandbox.accel`)
+is on; the two agree with the numpy path within rtol 1e-12
+(``tests/test_compiled_paths.py`` compares whole runs).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from sandbox import accel
 from sandbox.behaviour import pair_field
 from sandbox.behaviour.pair_field import ShiftKernel
-from sandbox.model import law_kernel
 from sandbox.model.kernels import c_float64
 from sandbox.model.law_kernel import LawKernel
 from sandbox.model.obstacle_field import ObstacleField
@@ -53,7 +52,6 @@ def law_kernel_of(sim: Simulation) -> LawKernel | None:
         or sim.platoons is not None
         or not sim._law_inputs
         or (sim.reference is not None and sim._ref_table is None)
-        or not law_kernel.USE_KERNEL
     ):
         return None
     return LawKernel.make(sim.law, sim.leader)
@@ -74,12 +72,16 @@ def shift_kernel_of(sim: Simulation) -> ShiftKernel | None:
         or type(field) is not ObstacleField
         or not field.empty
         or sim.neighbours is None
-        or not pair_field.USE_KERNEL
-        or not pair_field.shift_agrees()
+        or accel.module("pair_field") is None
     ):
         return None
     return ShiftKernel(
-        sim.neighbours, sim.rec.R, params.get("r"), _KINDS[name], params["beta"]
+        sim.neighbours,
+        sim.rec.R,
+        params.get("r"),
+        _KINDS[name],
+        params["beta"],
+        accel.module("pair_field"),
     )
 
 

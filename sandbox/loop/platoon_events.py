@@ -62,8 +62,8 @@ def merge(
 
     Parameters
     ----------
-    into, source : _One
-        The platoons (:class:`sandbox.loop.platoons._One`).
+    into, source : PlatoonGroup
+        The platoons (:class:`sandbox.loop.platoons.PlatoonGroup`).
     t, h : float [s]
         Time of the event and control period.
     state : tuple of ndarray

@@ -1,15 +1,15 @@
 """Slot reassignment and leader handover inside one platoon of several.
 
-:class:`~sandbox.behaviour.reconfigure.Reconfiguration` reads and changes a
-simulation's leader, law, offsets and tracked rows. For a platoon of a world of
-several (``platoons:`` with ``reconfigure`` or ``on_leader_failure`` in an entry),
-:class:`PlatoonView` is that simulation restricted to the platoon's rows: the
-platoon's own reconfiguration reacts to what the platoon believes failed among its
-vehicles, on its own slots, and the changes are copied back to the platoon
-(:meth:`PlatoonView.sync`). Its records (``reassignments``, ``leader_changes``,
-``slots``) are merged into the run's, slots numbered in the fleet's vehicle order (slot
-``k``: ``vehicles[k].offset``). A vehicle of another platoon is never given a slot of
-this one.
+:class:`~sandbox.behaviour.reconfigure.Reconfiguration` reads one formation as it is
+and returns what changes. For a platoon of a world of several (``platoons:`` with
+``reconfigure`` or ``on_leader_failure`` in an entry), :class:`PlatoonView` gives it
+the platoon's rows as that formation: the platoon's own reconfiguration reacts to
+what the platoon believes failed among its vehicles, on its own slots, and what it
+returns is applied to the platoon (its leader, law, offsets, tracked rows, and who of
+its rows may avoid). Its records (``reassignments``, ``leader_changes``, ``slots``)
+are merged into the run's, slots numbered in the fleet's vehicle order (slot ``k``:
+``vehicles[k].offset``). A vehicle of another platoon is never given a slot of this
+one.
 
 With ``events:`` a platoon's configuration is formed anew at each merge or split that
 changes it: its view is then rebuilt on the new rows and offsets (the old one
@@ -24,108 +24,113 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.behaviour.reconfigure import Reconfiguration
-from sandbox.loop.worlds import law_context_of
-from sandbox.plugins.registration import LawContext
-
-
-class _FleetView:
-    """The fleet's arrays of one platoon's rows (``offset`` is the platoon's own)."""
-
-    def __init__(self, fleet: Any, rows: np.ndarray, offset: np.ndarray) -> None:
-        self._fleet, self._rows = fleet, rows
-        self.offset = offset.copy()
-        self.commanded = fleet.commanded[rows]
-        self.n = len(rows)
-
-    @property
-    def pos(self) -> np.ndarray:
-        return self._fleet.pos[self._rows]
-
-    @property
-    def theta(self) -> np.ndarray:
-        return self._fleet.theta[self._rows]
-
-    @property
-    def vel(self) -> np.ndarray:
-        return self._fleet.vel[self._rows]
+from sandbox.behaviour.reconfigure import FormationState, Reconfiguration
 
 
 class PlatoonView:
-    """A simulation as one platoon's reconfiguration sees it (see the module).
+    """One platoon's rows as its reconfiguration sees them (see the module).
 
     Parameters
     ----------
-    sim : Simulation
-        The world's simulation.
-    group : _One
-        The platoon (:class:`sandbox.loop.platoons._One`).
+    group : PlatoonGroup
+        The platoon (:class:`sandbox.loop.platoons.PlatoonGroup`).
     scenario : Scenario
         The platoon's own scenario (its ``reconfigure`` and ``on_leader_failure``).
+    names : list of str
+        The world's vehicle names, in row order.
+    commanded : ndarray, shape (n,), bool
+        The world's vehicles driven open loop.
+    avoid_candidates : ndarray, shape (n,), bool
+        Who of the world may avoid (the platoons' own array: the view writes its
+        rows).
+    h : float [s]
     since : float [s]
         When the platoon's configuration was formed (0, or a merge or split).
     """
 
-    def __init__(self, sim: Any, group: Any, scenario: Any, since: float = 0.0) -> None:
+    def __init__(
+        self,
+        group: Any,
+        scenario: Any,
+        names: list[str],
+        commanded: np.ndarray,
+        avoid_candidates: np.ndarray,
+        h: float,
+        since: float = 0.0,
+    ) -> None:
         rows = group.rows
-        self._sim, self._group, self.rows = sim, group, rows
-        self.group, self.since = group, round(since, 9)
-        self.scenario = scenario
-        self.h = sim.h
-        self.names = [sim.names[i] for i in rows]
-        self.fleet = _FleetView(sim.fleet, rows, group.offset)
-        self.leader = group.leader
-        self.law, self.law_params, self.law_memory = (
+        self.group, self.rows, self.since = group, rows, round(since, 9)
+        self.h = h
+        self.names = tuple(names[i] for i in rows)
+        self.commanded = commanded[rows]
+        self._avoid = avoid_candidates
+        self.reconfiguration = Reconfiguration.build(
+            scenario,
+            self.names,
+            group.offset,
+            self.commanded,
+            group.leader,
+            np.isin(rows, group.track),
             group.law,
-            group.params,
-            group.memory,
         )
-        self.reference = group.reference
-        self.tracks_reference = np.isin(rows, group.track)
-        self._track_rows = np.flatnonzero(self.tracks_reference)
-        self._avoid_candidates = sim._avoid_candidates[rows].copy()
-        self.rec = scenario.recovery
-        self.shift_motion = sim.shift_motion
-        self.info: dict[str, Any] = {}
-        self.reconfiguration = Reconfiguration.build(self)
 
-    @property
-    def seen(self) -> np.ndarray | None:
-        """The broadcast poses of the platoon's rows (None: the truth)."""
-        seen = self._sim.seen
-        return None if seen is None else seen[self.rows]
+    def state(
+        self,
+        pos: np.ndarray,
+        theta: np.ndarray,
+        vel: np.ndarray,
+        seen: np.ndarray | None,
+        believed: np.ndarray | None,
+    ) -> FormationState:
+        """The platoon's formation now, from its world's rows (``seen``: copies)."""
+        g, rows = self.group, self.rows
+        return FormationState(
+            names=self.names,
+            h=self.h,
+            pos=pos[rows],
+            theta=theta[rows],
+            vel=vel[rows],
+            seen=None if seen is None else seen[rows],
+            believed=None if believed is None else believed[rows],
+            offset=g.offset.copy(),
+            commanded=self.commanded,
+            leader=g.leader,
+            tracks_reference=np.isin(rows, g.track),
+            avoid_candidates=self._avoid[rows],
+            law=g.law,
+            law_params=g.params,
+            law_memory=g.memory,
+            reference=g.reference,
+        )
 
-    @property
-    def believed(self) -> np.ndarray | None:
-        """What the platoon's law sees of its rows: ``seen``, or its estimate."""
-        believed = self._sim.believed
-        return None if believed is None else believed[self.rows]
-
-    def law_context(
+    def react(
         self,
         t: float,
-        ref: Any,
-        offset: np.ndarray | None = None,
-        memory: dict | None = None,
-    ) -> LawContext:
-        """What the platoon's law sees at ``t`` (as ``Simulation.law_context``)."""
-        return law_context_of(self, t, ref, offset, memory)
+        known: np.ndarray,
+        pos: np.ndarray,
+        theta: np.ndarray,
+        vel: np.ndarray,
+        seen: np.ndarray | None,
+        believed: np.ndarray | None,
+    ) -> bool:
+        """React to the world's believed failures ``known`` (n,) at ``t``; apply it.
 
-    def react(self, t: float, known: np.ndarray) -> None:
-        """React to the fleet's believed failures ``known`` (n,) at ``t``; sync."""
+        Returns whether the world's recovery shift's estimate restarts now.
+        """
         if self.reconfiguration is None:
-            return
-        self.reconfiguration.react(self, t, known[self.rows])
-        self.sync()
-
-    def sync(self) -> None:
-        """Copy the leader, law, offsets and tracked rows back to the platoon."""
-        g, sim = self._group, self._sim
-        g.leader = self.leader
-        g.law, g.params, g.memory = self.law, self.law_params, self.law_memory
-        g.offset = self.fleet.offset
-        g.track = self.rows[self.tracks_reference]
-        sim._avoid_candidates[self.rows] = self._avoid_candidates
+            return False
+        state = self.state(pos, theta, vel, seen, believed)
+        reform = self.reconfiguration.react(state, t, known[self.rows])
+        if reform is None:
+            return False
+        if reform.re_formed:
+            g = self.group
+            g.leader = reform.leader
+            g.law, g.params, g.memory = reform.law, reform.law_params, reform.law_memory
+            g.offset = reform.offset
+            g.track = self.rows[reform.tracks_reference]
+            self._avoid[self.rows] = reform.avoid_candidates
+        return reform.reset_shift
 
     def records(self) -> dict[str, Any]:
         """The records of this platoon, slots numbered in the fleet's order.
@@ -138,7 +143,7 @@ class PlatoonView:
         def fleet_slot(k: int | None) -> int | None:
             return None if k is None else int(rows[k])
 
-        info = self.info
+        info = self.reconfiguration.records()
         return {
             "reassignments": [
                 {
@@ -147,15 +152,15 @@ class PlatoonView:
                         n: fleet_slot(k) for n, k in r["assignment"].items()
                     },
                 }
-                for r in info.get("reassignments", [])
+                for r in info["reassignments"]
             ],
-            "leader_changes": list(info.get("leader_changes", [])),
+            "leader_changes": list(info["leader_changes"]),
             "slots": {
                 n: [
                     [max(round(t - self.h, 9), self.since), fleet_slot(k)]
                     for t, k in steps
                 ]
-                for n, steps in info.get("slots", {}).items()
+                for n, steps in info["slots"].items()
             },
         }
 

@@ -6,8 +6,8 @@ call of its filter, on the whole fleet with only the section's rows kept
 (:meth:`~sandbox.loop.platoons.Platoons.strategy`,
 :meth:`~sandbox.loop.platoons.Platoons.filter`). The worlds of a loop share their
 platoons' structure (:func:`~sandbox.loop.plan.structure_key`), so section by
-section the call can take the stacked rows of all worlds instead of one world's:
-:class:`StackedSections` makes one call of each section for K worlds, with that
+section the call can take the rows of all worlds instead of one world's:
+:class:`PlatoonSections` makes one call of each section for K worlds, with that
 section's parameters (``beta`` a row each where the worlds differ), its neighbour
 pairs within each world (:class:`~sandbox.geometry.neighbours.WorldPairs`), one
 memory for the section, and each world's counters of the section, which it sums
@@ -23,29 +23,33 @@ called world by world. Each world's numbers are those it has alone
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, WorldPairs
-from sandbox.loop.platoons import sum_counters
+from sandbox.loop.platoons import Platoons, sum_counters
 from sandbox.plugins.registration import get
 
-if TYPE_CHECKING:
-    from sandbox.loop.simulation import Simulation
 
-
-class StackedSections:
+class PlatoonSections:
     """Each recovery and safety section of K worlds' platoons, one call for all.
 
     Build it with :meth:`build` (None where the worlds' sections differ or a
     section's plug-in is not batched).
+
+    Parameters
+    ----------
+    platoons : list of Platoons
+        Each world's platoons.
+    world_stats : list of dict
+        Each world's filter counters (the sections' are summed into them).
     """
 
-    def __init__(self, sim: Simulation) -> None:
-        self._sim = sim
-        self._platoons = [s.platoons for s in sim.states]
-        K, n = sim.K, sim.n
+    def __init__(self, platoons: list[Platoons], world_stats: list[dict]) -> None:
+        self._platoons = platoons
+        self._world_stats = world_stats
+        K, n = len(platoons), platoons[0].n
         first = self._platoons[0]
         self._recoveries = []
         for j, (spec, (strategy, _), mask) in enumerate(first.recoveries):
@@ -64,18 +68,25 @@ class StackedSections:
         ]
 
     @classmethod
-    def build(cls, sim: Simulation) -> StackedSections | None:
-        """The sections of the loop's K > 1 worlds, or None (world by world)."""
-        platoons = [s.platoons for s in sim.states]
-        if sim.K < 2 or platoons[0] is None or sim.n > BRUTE_FORCE_MAX:
-            return None
+    def build(
+        cls,
+        platoons: list[Platoons],
+        sensing: list[Any],
+        world_stats: list[dict],
+    ) -> PlatoonSections | None:
+        """The sections of a loop's worlds, or None (called world by world).
+
+        ``sensing`` is each world's ``sensing:`` values (None: no broadcast); the
+        worlds' filters are called once for all only where they are the same.
+        """
         first = platoons[0]
+        if first.n > BRUTE_FORCE_MAX:
+            return None
         for p in platoons[1:]:
             if not _same_sections(first.recoveries, p.recoveries, "beta"):
                 return None
             if not _same_sections(first.filters, p.filters, None):
                 return None
-        sensing = [s.sensing if s.broadcast is not None else None for s in sim.states]
         if any(x != sensing[0] for x in sensing):
             return None
         for spec, _, _ in first.recoveries:
@@ -86,7 +97,12 @@ class StackedSections:
                 "batched", False
             ):
                 return None
-        return cls(sim)
+        return cls(platoons, world_stats)
+
+    @property
+    def filtered(self) -> bool:
+        """Whether some section has a safety filter."""
+        return any(flt is not None for flt, _, _, _ in self._filters)
 
     def _index(self) -> np.ndarray:
         """Each vehicle's platoon in its world (merges and splits change it)."""
@@ -133,13 +149,14 @@ class StackedSections:
                 params=dict(params),
                 memory=memory,
                 platoon=index,
+                stats=self._platoons[0].filter_stats[j],  # a filter of one world's
                 world_stats=[p.filter_stats[j] for p in self._platoons],
             )
             out = flt(sub)
             v1[rows] = np.broadcast_to(np.asarray(out[0], dtype=float), (N,))[rows]
             v2[rows] = np.broadcast_to(np.asarray(out[1], dtype=float), (N,))[rows]
-        for state, p in zip(self._sim.states, self._platoons, strict=True):
-            state.filter_stats.update(sum_counters(p.filter_stats))
+        for stats, p in zip(self._world_stats, self._platoons, strict=True):
+            stats.update(sum_counters(p.filter_stats))
         return v1, v2
 
 

@@ -23,12 +23,16 @@ whatever their platoons; only the formation law is per platoon.
 
 The contexts passed to plug-ins carry ``platoon``, the index of each vehicle's
 platoon (for a law: of its rows). Everything here takes and returns arrays, so that
-it can serve any loop that holds the fleet as arrays.
+it can serve any loop that holds the fleet as arrays: a world's platoons change only
+themselves, and :meth:`Platoons.prepare` returns what the loop takes of a change
+(:class:`PlatoonChange`: the records of the run's description, a restart of the
+recovery shift's estimate).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -36,11 +40,10 @@ import numpy as np
 from sandbox.geometry.neighbours import NeighbourList
 from sandbox.loop import platoon_events
 from sandbox.loop.platoon_reconfigure import PlatoonView, merged_records
-from sandbox.loop.platoon_targets import platoon_targets
 from sandbox.plugins.registration import get, make_law, runnable
 
 
-class _One:
+class PlatoonGroup:
     """One platoon's reference, law and the rows they drive.
 
     Parameters
@@ -96,8 +99,10 @@ class _One:
         self.reference_rows: tuple[int, Any] = (0, None)
 
     @classmethod
-    def of(cls, group: Any, offset: np.ndarray, commanded: np.ndarray, h: float):
-        """The platoon of a ``platoons:`` entry (a :class:`PlatoonGroup`)."""
+    def of(
+        cls, group: Any, offset: np.ndarray, commanded: np.ndarray, h: float
+    ) -> PlatoonGroup:
+        """The platoon of a ``platoons:`` entry (a scenario's ``PlatoonSpec``)."""
         sc = group.scenario
         spec = sc.formation
         rows = np.asarray(group.rows, dtype=np.intp)
@@ -114,8 +119,27 @@ class _One:
         )
 
 
+@dataclass(frozen=True)
+class PlatoonChange:
+    """What the loop takes of a world's platoons' merges, splits and reconfigurations.
+
+    Attributes
+    ----------
+    records : dict or None
+        The entries of the run's description that changed (None: none).
+    reset_shift : bool
+        Restart the world's recovery shift's estimate now (after a reconfiguration).
+    """
+
+    records: dict[str, Any] | None = None
+    reset_shift: bool = False
+
+
 class Platoons:
     """The platoons of one world (``platoons:``); see the module docstring.
+
+    A world's platoons are its own: its merges, splits and reconfigurations happen
+    at its own times (a loop of K worlds keeps one :class:`Platoons` a world).
 
     Parameters
     ----------
@@ -134,7 +158,9 @@ class Platoons:
     ) -> None:
         self.h = h
         self.n = len(offset)
-        self.groups = [_One.of(g, offset, commanded, h) for g in scenario.platoons]
+        self.groups = [
+            PlatoonGroup.of(g, offset, commanded, h) for g in scenario.platoons
+        ]
         self.commanded = commanded
         #: The events still to fire (``events:``), and the record of those fired.
         self.events = list(scenario.events)
@@ -172,36 +198,32 @@ class Platoons:
         self._filter_memory: list[dict] = [{} for _ in self.filters]
         #: Each safety section's counters (summed into the run's by :meth:`filter`).
         self.filter_stats: list[dict] = [{} for _ in self.filters]
-        #: The platoons' own reconfigurations (:meth:`attach`), those retired by a
-        #: merge or split, and the simulation.
-        self.views: list[PlatoonView] = []
-        self._retired: list[PlatoonView] = []
-        #: How many reconfiguration records the run's ``info`` holds (-1: none yet).
-        self._records = -1
-        self._sim: Any = None
         #: Each vehicle's platoon and offset over time (with ``events:``).
         self.timeline: dict[str, list[list]] | None = None
         #: Each platoon's own scenario by name (a split's: the one it leaves).
         self._scenarios = {p.name: p.scenario for p in scenario.platoons}
+        #: The platoons' own reconfigurations, and those retired by a merge or split.
+        self.views: list[PlatoonView] = []
+        self._retired: list[PlatoonView] = []
+        #: How many reconfiguration records the run's ``info`` holds (-1: none yet).
+        self._records = -1
+        self._first: dict[str, Any] = {}
+        if scenario.events:
+            self._first["platoon_events"] = self.fired
+            self.timeline = {name: [] for name in self.vehicle_names}
+            self._note_formation(0.0)
+            self._first["formation_timeline"] = self.timeline
+        self._view_platoons(0.0)
+        self._first.update(self._record_reconfiguration() or {})
 
-    @classmethod
-    def build(cls, sim: Any) -> Platoons | None:
-        """The platoons of a simulation's scenario, or None with one platoon.
+    def records(self) -> dict[str, Any]:
+        """The entries of the run's description at the start, in order.
 
-        With ``events:``, the record of the events fired is ``sim.info
-        ["platoon_events"]`` (a list filled as they fire).
+        With ``events:``, ``platoon_events`` (the record of the events fired, a list
+        filled as they fire) and ``formation_timeline``; with a reconfiguring
+        platoon, the merged ``reassignments``, ``leader_changes`` and ``slots``.
         """
-        sc = sim.scenario
-        if not sc.platoons:
-            return None
-        made = cls(sc, sim.fleet.offset, sim.fleet.commanded, sim.h)
-        made.vehicle_names = list(sim.names)
-        if sc.events:
-            sim.info["platoon_events"] = made.fired
-            made.timeline = {name: [] for name in made.vehicle_names}
-            made._note_formation(0.0)
-            sim.info["formation_timeline"] = made.timeline
-        return made
+        return dict(self._first)
 
     def _note_formation(self, t: float) -> None:
         """Append to :attr:`timeline` each vehicle whose platoon or offset changed.
@@ -222,44 +244,16 @@ class Platoons:
                 if not steps or steps[-1][1] != g.name or steps[-1][2] != held:
                     steps.append([round(t, 9), g.name, held])
 
-    @classmethod
-    def attach(cls, sim: Any) -> Platoons | None:
-        """:meth:`build`, and the simulation's strategy, filter and avoiders set.
-
-        The loop then calls :meth:`strategy` and :meth:`filter` where it called its
-        recovery strategy and safety filter (None: no platoon has a filter), and uses
-        :attr:`avoid_candidates` (every platoon's leader excluded unless it avoids).
-        """
-        made = cls.build(sim)
-        if made is not None:
-            sim.strategy = made.strategy
-            sim._filter = made.filter if made.filtered else None
-            sim._avoid_candidates = made.avoid_candidates
-            made._reconfigure(sim)
-        return made
-
-    def _reconfigure(self, sim: Any) -> None:
-        """Each platoon's own slot reassignment and leader handover, if it has any.
-
-        A platoon's reconfiguration (loop/platoon_reconfigure.py) reacts at the start
-        of a period to what was believed failed at the end of the last one (the
-        single-platoon loop reacts after planning the period: either way the new
-        configuration drives from the next period on).
-        """
-        self._sim = sim
-        self.views = []
-        self._view_platoons(0.0)
-        self._records = -1
-        self._record_reconfiguration()
-
     def _view_platoons(self, t: float) -> None:
         """Build the views the platoons now need, and retire those of platoons gone.
 
         A reconfiguring platoon without a view gets one: at the start, or when a merge
-        or split at ``t`` formed it.
+        or split at ``t`` formed it. Each platoon's own reconfiguration
+        (loop/platoon_reconfigure.py) reacts at the start of a period to what was
+        believed failed at the end of the last one (the single-platoon loop reacts
+        after planning the period: either way the new configuration drives from the
+        next period on).
         """
-        if self._sim is None:
-            return
         live = {id(g) for g in self.groups}
         self._retired += [v for v in self.views if id(v.group) not in live]
         self.views = [v for v in self.views if id(v.group) in live]
@@ -270,25 +264,34 @@ class Platoons:
                 sc.reconfigure.assign == "none" and sc.on_leader_failure == "keep"
             ):
                 continue
-            view = PlatoonView(self._sim, g, sc, since=t)
+            view = PlatoonView(
+                g,
+                sc,
+                self.vehicle_names,
+                self.commanded,
+                self.avoid_candidates,
+                self.h,
+                since=t,
+            )
             if view.reconfiguration is not None:
                 self.views.append(view)
 
-    def _record_reconfiguration(self) -> None:
-        """Merge the platoons' records into the run's ``info`` when they changed."""
+    def _record_reconfiguration(self) -> dict[str, Any] | None:
+        """The platoons' merged records when they changed (None: unchanged)."""
         views = self._retired + self.views
         if not views:
-            return
+            return None
         count = len(views) + sum(
-            len(v.info.get("reassignments", ()))
-            + len(v.info.get("leader_changes", ()))
-            + sum(len(s) for s in v.info.get("slots", {}).values())
+            len(v.reconfiguration.reassignments)
+            + len(v.reconfiguration.leader_changes)
+            + sum(len(s) for s in v.reconfiguration.slots.values())
             for v in views
         )
-        if count != self._records:
-            self._records = count
-            rows = [g.rows for g in self.groups]
-            self._sim.info.update(merged_records(views, self.vehicle_names, rows))
+        if count == self._records:
+            return None
+        self._records = count
+        rows = [g.rows for g in self.groups]
+        return merged_records(views, self.vehicle_names, rows)
 
     def of_vehicles(self) -> tuple[str, ...]:
         """The name of each vehicle's platoon, in vehicle order."""
@@ -299,58 +302,49 @@ class Platoons:
         """Whether some platoon has a safety filter."""
         return any(f is not None for _, f, _ in self.filters)
 
-    def targets(
+    def prepare(
         self,
         t: float,
         pos: np.ndarray,
         theta: np.ndarray,
         vel: np.ndarray,
         seen: np.ndarray | None,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Slots, ``x_ref'``, ``x_ref''`` of every vehicle and the reference point.
+        believed: np.ndarray | None,
+        known: np.ndarray,
+    ) -> PlatoonChange:
+        """The merges and splits due at ``t``, and each platoon's reconfiguration.
+
+        What precedes the laws' evaluation
+        (:func:`~sandbox.loop.platoon_targets.platoon_targets`, once for the
+        platoons of every world after each world's ``prepare``).
 
         Parameters
         ----------
         t : float [s]
         pos, theta, vel : ndarray, shapes (n, 2), (n,), (n, 2)
-            The fleet's positions [m], headings [rad] and velocities [m/s].
-        seen : ndarray, shape (n, 3), or None
-            The broadcast poses (None: the truth); a follower reads its leader's.
-
-        Returns
-        -------
-        slot, v_ref, a_ref : ndarray, shape (n, 2)
-            [m], [m/s], [m/s^2]; NaN slots for open-loop vehicles.
-        point : ndarray, shape (2,) [m]
-            The first platoon's reference point (NaN without one); each platoon's
-            reference is drawn from its own section.
-        """
-        self.prepare(t, pos, theta, vel)
-        slot, v_ref, a_ref, point = platoon_targets(
-            [(0, self)], t, pos, theta, vel, seen, self.n, 1
-        )
-        return slot, v_ref, a_ref, point[0]
-
-    def prepare(self, t: float, pos: np.ndarray, theta: np.ndarray, vel: np.ndarray):
-        """The merges and splits due at ``t``, and each platoon's reconfiguration.
-
-        What :meth:`targets` does before the laws are evaluated
-        (:func:`~sandbox.loop.platoon_targets.platoon_targets`, which a loop of K
-        worlds calls once for all of them after each world's ``prepare``).
+            The world's true positions [m], headings [rad] and velocities [m/s].
+        seen, believed : ndarray, shape (n, 3), or None
+            The broadcast copies and what the laws see of them (None: the truth).
+        known : ndarray, shape (n,), bool
+            What the world's platoons believe has failed (at the end of the last
+            period).
         """
         before = (len(self.fired), self._records)
         if self.events:  # merges and splits due now (loop/platoon_events.py)
             self._fire(t, (pos, theta, vel))
+        records = None
+        reset = False
         if self.views:  # each platoon's own reconfiguration
             for view in self.views:
-                view.react(t, self._sim.known_failed)
-            self._record_reconfiguration()
+                reset |= view.react(t, known, pos, theta, vel, seen, believed)
+            records = self._record_reconfiguration()
         if self.timeline is not None and before != (len(self.fired), self._records):
             # offsets change only at an event or a reconfiguration
             self._note_formation(t)
+        return PlatoonChange(records, reset)
 
-    def _make(self, name, rows, offset, law, params, reference, leader) -> _One:
-        return _One(
+    def _make(self, name, rows, offset, law, params, reference, leader) -> PlatoonGroup:
+        return PlatoonGroup(
             name, rows, offset, law, params, reference, leader, self.commanded, self.h
         )
 

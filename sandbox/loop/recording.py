@@ -11,18 +11,12 @@ to world by world.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
+from sandbox import accel
 from sandbox.run.recorder import Recorder
-
-try:
-    from sandbox.loop import _period
-except ImportError:  # pragma: no cover - built without a C compiler
-    _period = None
-
-#: Copy a sample of every world in one C call where ``sandbox.loop._period`` is built
-#: (False: numpy's assignments; a copy either way, the same bytes).
-USE_KERNEL = True
 
 #: The recorded arrays of one sample: name -> (trailing shape given n, dtype).
 _FIELDS = {
@@ -36,7 +30,7 @@ _FIELDS = {
 }
 
 
-class WorldsRecorder:
+class LoopRecord:
     """Samples of K worlds of ``n`` vehicles, at most ``capacity`` each.
 
     Parameters
@@ -80,7 +74,7 @@ class WorldsRecorder:
         mode: np.ndarray,
         failed: np.ndarray,
         point: np.ndarray,
-        worlds: list[int],
+        worlds: Sequence[int],
     ) -> None:
         """One sample of the live ``worlds`` (stacked rows ``(K n, ...)``).
 
@@ -98,10 +92,11 @@ class WorldsRecorder:
                 )
             self.count = c + 1
             return
-        if _period is not None and USE_KERNEL:
+        period = accel.module("period")  # a sample of every world in one C call
+        if period is not None:
             b = self._buf
             try:
-                _period.record_sample(
+                period.record_sample(
                     c, pos, theta, v1, v2, chi, slot, target, mode, failed,
                     b["pose"], b["cmd"], b["chi"], b["slot"], b["target"], b["mode"],
                     b["failed"],

@@ -1,76 +1,84 @@
 """The fixed-step simulation loop, for one world or K worlds of one structure at once.
 
-Every control period ``h = dt`` runs these stages over the stacked arrays of all
-worlds' vehicles (``K * n`` rows, world after world; a single run is K = 1):
+Every control period ``h = dt`` runs these stages over the rows of all worlds'
+vehicles (``K * n`` rows, world after world; a single run is a loop of one world):
 
-1. **sense** (:meth:`Simulation._sense`): read every world's poses from the physics;
-   a world whose state is non-finite or runaway ends alone as ``diverged``; each
-   world's broadcast (``sensing:``) draws from its own random stream;
-2. **plan** (:meth:`Simulation._plan`): evaluate the reference and the formation law
-   (each vehicle's slot, ``x_ref'``, ``x_ref''``), start the failures due now, ask
-   the detector what has failed, re-form on a change, shift the targets by the
-   recovery strategy (eqs. (21)-(27));
-3. **act** (:meth:`Simulation._act`): advance the flatness controller (eqs. (5)-(6)),
-   filter the commands for safety, then apply open-loop schedules, the user's
-   overrides and the failures, in that order;
+1. **sense**: read every world's poses from the physics; a world whose state is
+   non-finite or runaway ends alone as ``diverged``; every world's broadcast
+   (``sensing:``) draws from its own random stream
+   (:class:`~sandbox.loop.perception.Perception`);
+2. **plan**: evaluate the reference and the formation law (each vehicle's slot,
+   ``x_ref'``, ``x_ref''``, :class:`~sandbox.loop.formation.Formation`), start the
+   failures due now, ask the detector what has failed
+   (:class:`~sandbox.loop.detecting.Detecting`), re-form on a change, shift the
+   targets by the recovery strategy (eqs. (21)-(27),
+   :class:`~sandbox.loop.avoidance.Avoidance`);
+3. **act**: advance the flatness controller (eqs. (5)-(6)), filter the commands for
+   safety, then apply open-loop schedules, the user's overrides and the failures, in
+   that order (:class:`~sandbox.loop.acting.Acting`);
 4. **record** a sample every ``record_every`` periods, and the loop metrics;
 5. **advance**: write the commands to the physics and step it ``substeps`` times.
 
-The built-ins (laws, strategies, failure kinds, command schedules, filter,
-detectors, sensing, range sensors) and plug-ins registered with ``batched=True`` are
-called once for all worlds; a built-in law stays one call while the worlds re-form
-apart, each with its own leader and estimators (:mod:`sandbox.loop.stacked_law`). A
-reconfiguration's event and other plug-ins run world by world inside the same loop
-(:mod:`sandbox.loop.world_stages`), only for the worlds concerned. Each world's
-numbers are those it has alone: the functions are elementwise over rows, neighbour
-pairs never cross worlds, and every world keeps its own random streams, memories and
-contact episodes.
+Each stage receives what it reads and returns what it changes; the loop's values
+(the :class:`~sandbox.loop.layout.Layout` fixed at build, the
+:class:`~sandbox.loop.state.Fleet`, the :class:`~sandbox.loop.plan.Plan` of the
+period, the worlds' :class:`~sandbox.loop.liveness.Liveness`, the record and the
+loop metrics) are changed here only, from what the stages return
+(:mod:`sandbox.loop.building` makes them). The built-ins and plug-ins registered
+with ``batched=True`` are called once for all worlds; other plug-ins world by world
+inside the same pass, only for the live worlds. Each world's numbers are those it
+has alone: the functions are elementwise over rows, neighbour pairs never cross
+worlds, and every world keeps its own random streams, memories and contact
+episodes.
 
-:meth:`Simulation.step` runs one period with optional overrides and returns an
-:class:`~sandbox.loop.observation.Observation`; :meth:`Simulation.run` is the loop of
-steps without overrides; :meth:`Simulation.batch` runs many scenarios, stacking those
-of one structure. The physics is reached only through
-:class:`~sandbox.loop.stepping.WorldsPhysics`. Nothing here draws or computes metrics.
+:class:`Simulation` is the public face: built from one scenario it takes and gives
+one world's arrays (shape ``(n, 2)``) and one
+:class:`~sandbox.loop.observation.Observation`; built with
+:meth:`Simulation.stacked` it takes and gives the batch's (``(K, n, 2)`` or a
+sequence of K, a list of K observations), for any K. Nothing here draws or computes
+metrics.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
-from sandbox.behaviour.ranges import (
-    context_fields,
-)
+from sandbox.behaviour.detection import Detection
+from sandbox.behaviour.ranges import observation_fields
+from sandbox.behaviour.reconfigure import Reconfiguration
+from sandbox.behaviour.sensing import StackedBroadcast
 from sandbox.errors import PluginRunError
-from sandbox.loop.building import Building
+from sandbox.loop import plan as planning
+from sandbox.loop.building import LoopParts, build
 from sandbox.loop.collector import collector_off, frozen_heap
 from sandbox.loop.divergence import RowsView, diverged
-from sandbox.loop.ending import Ending
-from sandbox.loop.plan import Plan, structure_key
-from sandbox.loop.stacked_law import stacked_law_context, stacked_law_inputs
-from sandbox.loop.step_api import StepAPI
-from sandbox.loop.world_stages import WorldStages
-from sandbox.model.dynamics import CLIP
-from sandbox.model.law_kernel import overwrite_rows
-from sandbox.model.laws import LawInputs, spread
+from sandbox.loop.ending import make_run
+from sandbox.loop.observation import Observation, Overrides, override_rows
+from sandbox.loop.plan import Plan
+from sandbox.loop.platoons import Platoons
+from sandbox.loop.recording import LoopRecord
+from sandbox.loop.state import Fleet
+from sandbox.loop.stepping import LoopPhysics
+from sandbox.loop.tally import no_distances
 from sandbox.physics.interface import Physics
-from sandbox.plugins.registration import (
-    LawContext,
-    StrategyContext,
-)
+from sandbox.plugins.registration import LawContext
 from sandbox.run.record import (
-    MODE_EXTERNAL,
-    MODE_FAILED,
     STATUS_DIVERGED,
+    STATUS_ERROR,
     STATUS_INTERRUPTED,
     Run,
 )
 from sandbox.scenario import Scenario
 
+#: One kind of override in the loop's rows: the (N, 2) rows and the (N,) mask.
+Rows = tuple[np.ndarray, np.ndarray] | None
 
-class Simulation(Building, StepAPI, Ending, WorldStages):
+
+class Simulation:
     """One run of a scenario; or, built with :meth:`stacked`, K runs stepped together.
 
     Parameters
@@ -108,7 +116,7 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
 
     def __init__(self, scenario: Scenario, world: Physics | None = None) -> None:
         with collector_off():  # building makes no cyclic garbage (loop/collector.py)
-            self._build([scenario], [world])
+            self._start(build([scenario], [world]), batch=False)
 
     @classmethod
     def stacked(
@@ -118,8 +126,10 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
     ) -> Simulation:
         """K runs of one structure (:func:`~sandbox.loop.plan.structure_key`) at once.
 
-        The step API then takes and gives one world at a time (``world=w``) or
-        arrays with a leading world axis; :meth:`results` returns one
+        The step API then takes and gives the batch's arrays, with a leading world
+        axis, for any K (one included): :meth:`step` takes overrides of shape
+        ``(K, n, 2)`` or a sequence of K and returns a list of K observations,
+        :meth:`observe` a list of K (``world=w``: one), and :meth:`results` one
         :class:`~sandbox.Run` per world.
 
         Raises
@@ -130,7 +140,10 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         sim = cls.__new__(cls)
         scenarios = list(scenarios)
         with collector_off():
-            sim._build(scenarios, list(worlds) if worlds else [None] * len(scenarios))
+            parts = build(
+                scenarios, list(worlds) if worlds else [None] * len(scenarios)
+            )
+            sim._start(parts, batch=True)
         return sim
 
     @classmethod
@@ -151,7 +164,7 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         scenarios = list(scenarios)
         groups: dict[str, list[int]] = {}
         for k, sc in enumerate(scenarios):
-            groups.setdefault(structure_key(sc), []).append(k)
+            groups.setdefault(planning.structure_key(sc), []).append(k)
         out: list[Run | None] = [None] * len(scenarios)
         for members in groups.values():
             for start in range(0, len(members), group_size):
@@ -165,6 +178,63 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         return out  # type: ignore[return-value]
 
     # ------------------------------------------------------------------ set-up
+    def _start(self, parts: LoopParts, batch: bool) -> None:
+        """Take the built parts; sense and plan the first period."""
+        self._batch = batch
+        self._layout = parts.layout
+        #: The fleet's arrays: the state now and the commands of the last period.
+        self.fleet: Fleet = parts.fleet
+        #: The physics of every world.
+        self.physics: LoopPhysics = parts.physics
+        #: The record of every world's samples.
+        self.recorder: LoopRecord = parts.record
+        self._steering = parts.steering
+        self._formation = parts.formation
+        self._perception = parts.perception
+        self._avoidance = parts.avoidance
+        self._safety = parts.safety
+        self._detecting = parts.detecting
+        self._failures = parts.failures
+        self._acting = parts.acting
+        self._liveness = parts.liveness
+        self._tally = parts.tally
+        self._shift_motion = parts.shift_motion
+        N = parts.layout.N
+        #: The plan of the current period (None before the first).
+        self.plan: Plan | None = None
+        #: The broadcast poses received at ``t_k``, (N, 3) (None without sensing).
+        self.seen: np.ndarray | None = None
+        #: What the law and the recovery see: ``seen``, or its estimate (braking).
+        self.believed: np.ndarray | None = None
+        #: What the platoons believe has failed (the oracle: the truth), (N,) bool.
+        self.known_failed = np.zeros(N, dtype=bool)
+        self._failing = np.zeros(N, dtype=bool)
+        #: Whether every row's state is finite and within the bounds.
+        self.finite = True
+        #: The current step ``k`` (time ``t_k = k h``).
+        self.k = 0
+        self._contact: np.ndarray | None = None
+        self._recorded_target: np.ndarray | None = None
+        self._row_names: list[str] | None = None
+        self._estimate_shift = parts.layout.scenarios[0].recovery.target_derivatives
+        self._distances = getattr(parts.avoidance.neighbours, "distances", no_distances)
+        # Without failures, detection, reconfiguration and platoons, what the platoon
+        # believes has failed and who may avoid never change: made at the first plan.
+        formation = parts.formation
+        self._may_avoid_fixed = not (
+            len(parts.failures)
+            or parts.detecting.on
+            or formation.reconfiguring
+            or formation.platoons is not None
+        )
+        self._may_avoid: np.ndarray | None = None
+        self._fails = len(parts.failures) > 0  # else no vehicle ever fails
+        self._wall = time.perf_counter()
+        #: Wall time spent planning and acting (law, recovery, controller, filters).
+        self._control_time = 0.0
+        if self._sense():
+            self._guarded(self._plan)
+
     # ------------------------------------------------------------------ stages
     def _sense(self) -> bool:
         """Read every live world's state at ``t_k``; False when none is left.
@@ -172,120 +242,32 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         A diverged world ends alone: its sample is recorded as it is (slots and
         targets NaN, the last commands and modes), its status becomes ``diverged``.
         """
-        fleet, t = self.fleet, self.k * self.h
+        layout, fleet, live = self._layout, self.fleet, self._liveness
+        t = self.k * layout.h
         pos, theta, vel = self.physics.read()
-        if self.K > 1 and not self.live.all():
-            chi = fleet.chi.reshape(self.K, self.n, 2)
-            chi[~self.live] = 0.0
+        if live.count < layout.K:  # the ended worlds' rows: a harmless state
+            chi = fleet.chi.reshape(layout.K, layout.n, 2)
+            chi[~live.live] = 0.0
         fleet.pos, fleet.theta, fleet.vel = pos, theta, vel
         self.finite = diverged(fleet) is None
         if not self.finite:
-            for w in self._live_worlds():
-                bad = diverged(RowsView(fleet, self._rows(w)))
+            for w in live.worlds():
+                bad = diverged(RowsView(fleet, layout.rows(w)))
                 if bad is None:
                     continue
-                state = self.states[w]
-                state.info["diverged"] = {
+                live.info[w]["diverged"] = {
                     "t": t,
-                    "vehicle": state.names[bad[0]],
+                    "vehicle": layout.names[w][bad[0]],
                     "reason": bad[1],
                 }
                 self._end_world(w, STATUS_DIVERGED)
-            self.finite = self.live.all() and diverged(fleet) is None
-        if not self._n_live:
+            self.finite = bool(live.live.all()) and diverged(fleet) is None
+        if not live.count:
             return False
-        if self._broadcast is not None:  # every world's copies, each its own draws
-            self.seen = self._broadcast.update(pos, theta).copy()
-        elif self._sensing:
-            seen = np.zeros((self.N, 3)) if self.seen is None else self.seen.copy()
-            for w in self._live_worlds():
-                rows = self._rows(w)
-                seen[rows] = self.states[w].broadcast.update(pos[rows], theta[rows])
-            self.seen = seen
-        self.believed = self.seen
-        if self._estimate is not None:  # the detector and the filter keep the copies
-            self.believed = self._estimate.update(self.seen, fleet.v1, fleet.v2)
-        if self.range_sensor is not None:
-            self.range_sensor.update(t, fleet.pos, fleet.theta)
-        self._views_at = -1  # the worlds' views see this period's arrays and copies
+        perception = self._perception
+        if perception.active:
+            self.seen, self.believed = perception.update(t, fleet, self.seen)
         return True
-
-    def _targets(self, t: float) -> tuple[np.ndarray, ...]:
-        """Slots, reference point, and the law's ``x_ref'``, ``x_ref''`` at ``t``."""
-        if self.platoons is not None:  # each platoon's own reference and law
-            fl = self.fleet
-            self._view_worlds()  # a platoon's reconfiguration reads its world's rows
-            if self.K == 1:
-                return self.platoons.targets(t, fl.pos, fl.theta, fl.vel, self.believed)
-            return self._platoon_targets(t)
-        K, n, N = self.K, self.n, self.N
-        if self._law_kernel is not None:  # the law's period in one C call
-            triple = self._kernel_targets()
-            if triple is not None:
-                return triple
-        if self._ref_table is not None:
-            k, (p, dp, ddp) = self.k, self._ref_table
-            ref = (p[k], dp[k], ddp[k])
-        elif self.reference is not None:
-            ref = self.reference.evaluate(t)
-        else:
-            ref = None
-        if self.law is None:
-            triple = [np.zeros((N, 2)), np.zeros((N, 2)), np.zeros((N, 2))]
-        elif self._law_per_world:
-            triple = self._world_law_targets(t, ref)
-        elif self._stacked_law is not None:
-            triple = self._stacked_law.targets(self, t, ref)
-        else:
-            slot, v_ref, a_ref = self.law.targets(self._law_context(t, ref))
-            if self._law_inputs:  # a built-in law class: (K, n, 2) float64 arrays
-                triple = [slot.reshape(N, 2), v_ref.reshape(N, 2), a_ref.reshape(N, 2)]
-            else:
-                shape = (K, n, 2)
-                triple = [
-                    _world_rows(slot, shape),
-                    _world_rows(v_ref, shape),
-                    _world_rows(a_ref, shape),
-                ]
-        # the reference-tracking rows and the commanded ones (copies where any)
-        slot, v_ref, a_ref = overwrite_rows(
-            triple, ref, self._track_rows, self._commanded_rows
-        )
-        point = ref[0] if ref is not None else np.full(2, np.nan)
-        return slot, v_ref, a_ref, point
-
-    def _kernel_targets(self) -> tuple[np.ndarray, ...] | None:
-        """:meth:`_targets` by the law's C call (plan_kernel.py); None: use numpy.
-
-        Not for a law replaced since, or whose ``targets`` was (a spy, a wrapper).
-        """
-        law = self.law
-        if law is not self._law_kernel.law or "targets" in law.__dict__:
-            return None
-        k, table, believed = self.k, self._kernel_table, self.believed
-        if believed is None:
-            pose, theta = self.fleet.pos, self.fleet.theta
-        else:
-            pose, theta = believed, None
-        try:
-            slot, v_ref, a_ref = self._law_kernel.targets(
-                pose, theta, table, k, self._track_rows, self._commanded_rows
-            )
-        except (BufferError, TypeError, ValueError):  # not such arrays: numpy
-            return None
-        point = self._ref_table[0][k] if table is not None else np.full(2, np.nan)
-        return slot, v_ref, a_ref, point
-
-    def _law_context(self, t: float, ref: tuple | None) -> LawContext | LawInputs:
-        """What the one law of all worlds sees: arrays with a leading world axis.
-
-        A built-in law class gets the part it reads (its leader and the reference).
-        """
-        if self._law_inputs:
-            return stacked_law_inputs(self, ref, self.leader)
-        return stacked_law_context(
-            self, t, ref, self.leader, self.law_params, self.law_memory
-        )
 
     def _plan(self) -> None:
         """What the built-in stack does at ``t_k``: slots, failures, recovery.
@@ -295,249 +277,110 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         recovery strategy (eqs. (21)-(27)). The result is :attr:`plan`, which
         :meth:`observe` shows and :meth:`_act` consumes (with any overrides).
         """
-        fleet, t = self.fleet, self.k * self.h
-        slot, v_ref, a_ref, point = self._targets(t)
+        layout, fleet, live = self._layout, self.fleet, self._liveness
+        formation, failed = self._formation, self._plugin_failed
+        t = self.k * layout.h
+        if formation.platoons is not None:  # merges, splits, each platoon's events
+            for w in formation.prepare_platoons(
+                t,
+                fleet,
+                self.seen,
+                self.believed,
+                self.known_failed,
+                live.worlds(),
+                live.info,
+            ):
+                self._shift_motion.reset(w)
+        slot, v_ref, a_ref, point = formation.targets(
+            t, self.k, fleet, self.believed, live.worlds(), failed
+        )
         failing = self._failing
-        fs = self.failures
-        if len(fs):
-            new = fs.start_new(t, self.live, fleet.v2)
+        fs = self._failures
+        if self._fails:
+            new = fs.start_new(t, live.live, fleet.v2)
             for j in new:
                 w = int(fs.world[j])
                 if fs.immovable[j]:
                     self.physics.immobilize(w, int(fs.local[j]))
-                self.states[w].failed_at.setdefault(fs.specs[j].vehicle, t)
-            failing = fs.active_vehicles(t, self.live)
+                live.failed_at[w].setdefault(fs.specs[j].vehicle, t)
+            failing = fs.active_vehicles(t, live.live)
         # What the platoon believes has failed; everything below reacts to this,
         # never to the truth. The oracle: the truth, known at once.
         known = failing
-        if self._detecting:
-            known = self._detect(t, failing)
+        if self._detecting.on:
+            known = self._detecting.known(
+                t, failing, fleet, self.seen, live.worlds(), failed
+            )
         self.known_failed = known
-        if self._reconfiguring:  # re-forms when `known` changes
-            self._reconfigure(t, known)
-        if self.platoons is not None and self.K > 1:  # each world's platoons decide
-            for w, s in enumerate(self.states):
-                self._avoid_candidates[self._rows(w)] = s.platoons.avoid_candidates
+        if formation.reconfiguring:  # re-forms when `known` changes
+            for w in formation.react(
+                t, known, fleet, self.seen, self.believed, live.live, failed
+            ):
+                self._shift_motion.reset(w)
+        if formation.platoons is not None:  # each world's platoons decide
+            candidates = formation.platoon_candidates()
+        else:
+            candidates = formation.avoid_candidates
         if not self._may_avoid_fixed:
-            may_avoid = self._avoid_candidates & ~known
-        elif self._may_avoid is None:  # the same every period (building.py)
-            may_avoid = self._may_avoid = self._avoid_candidates & ~known
+            may_avoid = candidates & ~known
+        elif self._may_avoid is None:  # the same every period
+            may_avoid = self._may_avoid = candidates & ~known
             may_avoid.flags.writeable = False
         else:
             may_avoid = self._may_avoid
-        shifted = None
-        if self._shift_kernel is not None:  # eqs. (22)-(27) in one C call
-            shifted = self._kernel_shift(slot, may_avoid)
-        if shifted is not None:
-            target, shift, active = shifted
-        else:
-            shift, active = self._shift(t, slot, may_avoid, known)
-            target = slot + shift  # eq. (22) / (26)
-        if self.rec.target_derivatives == "estimate":
-            d_shift, dd_shift = self.shift_motion.update(shift)
-            v_ref = v_ref + d_shift
-            a_ref = a_ref + dd_shift
+        target, shift, active = self._avoidance.targets(
+            t, fleet, slot, may_avoid, known, self.believed, live.worlds(), failed
+        )
+        if self._estimate_shift == "estimate":
+            K, n, N = layout.K, layout.n, layout.N
+            d_shift, dd_shift = self._shift_motion.update(shift.reshape(K, n, 2))
+            v_ref = v_ref + d_shift.reshape(N, 2)
+            a_ref = a_ref + dd_shift.reshape(N, 2)
         self._failing = failing
-        if self.K > 1:
-            point = spread(point, (self.K, 2))
-        if self.K == 1 and not self.live[0]:
-            return  # a plug-in failed: the plan stays undefined
         self.plan = Plan(slot, target, v_ref, a_ref, point, active, failing)
 
-    def _shift(self, t, slot, may_avoid, known) -> tuple[np.ndarray, np.ndarray]:
-        """The strategy's shift and avoiding vehicles of ``t`` (numpy, plug-ins)."""
-        if self._strategy_per_world:
-            shift, active = self._world_strategy(t, slot, may_avoid, known)
-        else:
-            shift, active = self.strategy(
-                self._strategy_context(t, slot, may_avoid, known)
-            )
-        # a strategy never moves a vehicle that may not avoid (where every vehicle
-        # may, a float (N, 2) shift is kept as it is: the same values; a built-in
-        # one's stacked shift and flags are masked already)
-        if self._strategy_per_world or not self._strategy_built_in:
-            if not (
-                type(shift) is np.ndarray
-                and shift.dtype == np.float64
-                and shift.shape == (self.N, 2)
-                and np.count_nonzero(may_avoid) == self.N
-            ):
-                shift = np.where(may_avoid[:, None], shift, 0.0)
-            active = np.asarray(active, dtype=bool) & may_avoid
-        return shift, active
+    def _act(self, commands: Rows, targets: Rows, shifts: Rows) -> np.ndarray:
+        """Commands for the period from ``t_k`` (:class:`~sandbox.loop.acting.Acting`).
 
-    def _kernel_shift(self, slot, may_avoid) -> tuple[np.ndarray, ...] | None:
-        """Targets, shift, active by the strategy's C call; None: use numpy.
-
-        Not for a strategy replaced since the loop was built.
+        Sets ``fleet.v1, v2, failed, mode``; returns ``chi`` for ``t_k+1``.
         """
-        if self.strategy is not self._kernel_strategy:
-            return None
-        try:
-            return self._shift_kernel.shifted(
-                self.fleet.pos, self.believed, may_avoid, slot
-            )
-        except (BufferError, TypeError, ValueError):  # not such arrays: numpy
-            return None
-
-    def _strategy_context(self, t, slot, may_avoid, known) -> StrategyContext:
-        """The strategy's context of ``t``: a new one, or a built-in's one, updated.
-
-        A built-in strategy reads its context during its call only, so one context
-        serves it every period, its fields of the period set anew.
-        """
-        fl = self.fleet
-        ctx = self._strategy_ctx
-        if ctx is not None:
-            ctx.t, ctx.slot, ctx.may_avoid, ctx.failed = t, slot, may_avoid, known
-            ctx.pos, ctx.theta, ctx.vel = fl.pos, fl.theta, fl.vel
-            ctx.obstacle_field, ctx.neighbours = self._avoid_field, self.neighbours
-            ctx.params, ctx.R = self.strategy_params, self.rec.R
-            ctx.seen_pos = None if self.believed is None else self.believed[:, :2]
-            if self.range_sensor is not None:
-                ctx.ranges = self.range_sensor.ranges
-                ctx.beam_angles = self.range_sensor.beam_angles
-            return ctx
-        ctx = StrategyContext(
-            t=t,
-            dt=self.h,
-            pos=fl.pos,
-            theta=fl.theta,
-            vel=fl.vel,
-            slot=slot,
-            diameter=fl.diameter,
-            may_avoid=may_avoid,
-            failed=known,
-            params=self.strategy_params,
-            R=self.rec.R,
-            obstacle_field=self._avoid_field,
-            neighbours=self.neighbours,
-            seen_pos=None if self.believed is None else self.believed[:, :2],
-            **context_fields(self.range_sensor),
+        fleet, live = self.fleet, self._liveness
+        acted = self._acting.commands(
+            self.k * self._layout.h,
+            fleet,
+            self.plan,
+            self.known_failed,
+            self.seen,
+            live.live,
+            commands,
+            targets,
+            shifts,
+            self._plugin_failed,
+            live.worlds,
         )
-        if self._strategy_built_in:
-            self._strategy_ctx = ctx
-        return ctx
-
-    def _act(
-        self,
-        commands: tuple[np.ndarray, np.ndarray] | None,
-        targets: tuple[np.ndarray, np.ndarray] | None,
-        shifts: tuple[np.ndarray, np.ndarray] | None = None,
-    ) -> np.ndarray:
-        """Commands for the period from ``t_k``: controller, overrides, failures.
-
-        Advances the flatness controller (eqs. (5)-(6)) for every vehicle towards the
-        planned targets (or the overridden ones), filters them for safety, applies the
-        open-loop schedules, the user's command overrides (within the vehicle's
-        limits) and the failures, in that order. Sets ``fleet.v1, v2, failed, mode``;
-        returns ``chi`` for ``t_k+1``.
-        """
-        fleet, plan, h, t = self.fleet, self.plan, self.h, self.k * self.h
-        target, v_ref, a_ref = plan.target, plan.v_ref, plan.a_ref
-        external = None
-        if shifts is not None:
-            # Moves the planned target; the law's feed-forward motion is kept.
-            rows, external = shifts
-            target = np.where(external[:, None], target + rows, target)
-        if targets is not None:
-            # A set-point: the given point, with no feed-forward motion.
-            rows, mask = targets
-            external = mask if external is None else external | mask
-            target = np.where(mask[:, None], rows, target)
-            v_ref = np.where(mask[:, None], 0.0, v_ref)
-            a_ref = np.where(mask[:, None], 0.0, a_ref)
-        chi_next, v1, v2 = self._controller.step(
-            fleet.pos, fleet.chi, fleet.theta, target, v_ref, a_ref
-        )
-        cars = self._cars
-        if cars is not None:  # the cars' rows by their own anti-windup (steering.py)
-            cars.control(fleet, target, v_ref, a_ref, chi_next, v1, v2)
-        if self._filter is not None:  # after the controller, before the failures
-            v1, v2 = self._safety(t, v1, v2)
-        # Vehicles not driven by the controller this period.
-        passive = fleet.commanded
-        if self._schedules:
-            if external is not None:  # an override of the target drives the vehicle
-                v1c, v2c = v1.copy(), v2.copy()
-                self._schedules.apply(t, v1, v2)
-                v1[external], v2[external] = v1c[external], v2c[external]
-                passive = passive & ~external
-            else:
-                self._schedules.apply(t, v1, v2)
-        if commands is not None:
-            rows, mask = commands
-            v1 = np.where(mask, self._command_limits(rows[:, 0]), v1)
-            v2 = np.where(mask, CLIP(rows[:, 1], -self._v2_max, self._v2_max), v2)
-            passive = passive | mask
-            external = mask if external is None else external | mask
-        if cars is not None:  # what a car executes: its steering's turn rate
-            v2, steer = cars.steer(v1, v2, fleet.steer)
-        if self._detection is not None:  # what the controllers ask for, broadcast
-            intended = np.empty((len(v1), 2))  # np.column_stack's, in two copies
-            intended[:, 0], intended[:, 1] = v1, v2
-            self._detection.intended = intended
-        elif self._detecting:
-            for w in self._live_worlds():
-                rows = self._rows(w)
-                self.states[w].detection.intended = np.column_stack(
-                    (v1[rows], v2[rows])
-                )
-        # The drive executes a failure within its acceleration limit (a crash aside).
-        v1, v2, failed, frozen, errors = self.failures.apply(
-            t, self.live, v1, v2, fleet.v1, self._accel_max * h
-        )
-        for w, exc in errors:  # a failure plug-in failed: its world ends now
-            self._plugin_failed(w, exc)
-        if cars is not None:  # a failure's commands steered too
-            if len(self.failures):
-                v2, steer = cars.steer(v1, v2, fleet.steer, steer, failed)
-            fleet.steer = steer
-        if self._detecting:
-            # A failed controller does not know: it keeps its own state until the
-            # failure ends (then it resumes from the applied velocity).
-            frozen = frozen & ~self.failures.active_vehicles(t + h, self.live)
-        # chi follows the applied velocity of passive vehicles, so that the law resumes
-        # without a jump when the failure or the override ends.
-        if len(self.failures):  # else no vehicle is frozen
-            passive = frozen | passive
-        if (passive is not fleet.commanded or len(self._commanded_rows)) and (
-            np.count_nonzero(passive)
-        ):
-            rows = passive.nonzero()[0]
-            theta, speed = fleet.theta[rows], v1[rows]
-            chi_next[rows, 0] = speed * np.cos(theta)
-            chi_next[rows, 1] = speed * np.sin(theta)
-        fleet.v1, fleet.v2, fleet.failed = v1, v2, failed
-        if len(self.failures):  # else never set: an episode now is healthy
-            self.physics.failed[:] = failed  # an episode starting now is not healthy
-        mode = plan.active.astype(np.int8)  # MODE_FORMATION 0, MODE_AVOID 1
-        if external is not None:
-            mode[external] = MODE_EXTERNAL
-        if len(self.failures):  # else no vehicle has failed
-            mode[failed] = MODE_FAILED
-        fleet.mode = mode
-        if external is not None:
-            self._recorded_target = target
-        return chi_next
-
-    def _command_limits(self, v1: np.ndarray) -> np.ndarray:
-        """User speeds within ``v1_max`` and, from the last speed, ``max_accel``."""
-        v1 = np.clip(v1, -self._v1_max, self._v1_max)
-        step = self._accel_max * self.h
-        return np.clip(v1, self.fleet.v1 - step, self.fleet.v1 + step)
+        fleet.v1, fleet.v2, fleet.failed = acted.v1, acted.v2, acted.failed
+        fleet.steer = acted.steer
+        if self._fails:  # else never set: an episode now is healthy
+            self.physics.failed[:] = acted.failed  # an episode now is not healthy
+        fleet.mode = acted.mode
+        if acted.target is not None:
+            self._recorded_target = acted.target
+        return acted.chi
 
     def _record(self, plan: Plan) -> None:
         """The loop metrics, and the sample of ``t_k`` every ``record_every`` steps."""
-        fleet = self.fleet
+        fleet, layout = self.fleet, self._layout
         contact = self.physics.in_contact()
         self._contact = contact
-        self.tally.update(self, contact, None)
-        if self.k % self.record_every:
+        self._tally.update(fleet, self.k, self.finite, self._distances, contact, None)
+        if self.k % layout.record_every:
             return
         target = self._recorded_target
+        steering, index = self._steering, self.recorder.count
+        if steering is not None:  # the cars' angles of the same sample
+            steering.append(index, fleet.steer)
         self.recorder.append(
-            self.k * self.h,
+            self.k * layout.h,
             fleet.pos,
             fleet.theta,
             fleet.v1,
@@ -548,26 +391,24 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             fleet.mode,
             fleet.failed,
             plan.point,
-            self._live_worlds(),
+            self._liveness.worlds(),
         )
-        if self._cars is not None:
-            self._cars.record(self.recorder.count - 1, fleet.steer)
-        if self.range_sensor is not None:
-            self.range_sensor.record()
+        ranges = self._perception.ranges
+        if ranges is not None:
+            ranges.record()
 
     def _advance(self, chi_next: np.ndarray) -> None:
         """Write the commands to the physics and step it to ``t_k+1``."""
-        fleet, h = self.fleet, self.h
+        fleet, h = self.fleet, self._layout.h
         fleet.chi = chi_next
-        tally = self.tally
+        tally = self._tally
         commanded = tally.commanded if tally.commanded_at == self.k else None
-        contact = self._contact
         self.physics.advance(
             fleet.theta,
             fleet.v1,
             fleet.v2,
             commanded,
-            self.physics.free_of(contact),
+            self.physics.free_of(self._contact),
             self.k * h,
             h,
             first=self.k == 0,
@@ -576,30 +417,31 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
 
     def _step(
         self,
-        commands: tuple[np.ndarray, np.ndarray] | None = None,
-        targets: tuple[np.ndarray, np.ndarray] | None = None,
+        commands: Rows = None,
+        targets: Rows = None,
         should_stop: Callable[[], bool] | None = None,
-        shifts: tuple[np.ndarray, np.ndarray] | None = None,
+        shifts: Rows = None,
     ) -> None:
         """One control period: act, record, advance, sense and plan the next."""
+        live = self._liveness
         self._recorded_target = None
         start = time.perf_counter()
         try:
             chi_next = self._act(commands, targets, shifts)
         except PluginRunError as exc:  # a batched plug-in: every world ends
-            for w in self._live_worlds():
+            for w in live.worlds():
                 self._plugin_failed(w, exc)
-            self._closed = True
+            live.closed = True
             return
         self._control_time += time.perf_counter() - start
         self._record(self.plan)
-        if not self._n_live:
-            self._closed = True
+        if not live.count:
+            live.closed = True
             return
         if should_stop is not None and should_stop():
-            self._stopped = True
-            for w in self._live_worlds():
-                self.states[w].info["interrupted"] = {"t": self.k * self.h}
+            live.stopped = True
+            for w in live.worlds():
+                live.info[w]["interrupted"] = {"t": self.k * self._layout.h}
                 self._end_world(w, STATUS_INTERRUPTED, last=False)
             return
         self._advance(chi_next)
@@ -608,15 +450,453 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
             self._guarded(self._plan)
             self._control_time += time.perf_counter() - start
         else:
-            self._closed = True
+            live.closed = True
 
     def _guarded(self, stage: Callable[[], None]) -> None:
         """Run a stage over all worlds; a plug-in that fails there ends every world."""
         try:
             stage()
         except PluginRunError as exc:
-            for w in self._live_worlds():
+            for w in self._liveness.worlds():
                 self._plugin_failed(w, exc)
+
+    def _loop(
+        self,
+        progress: Callable[[int, int], None] | None,
+        should_stop: Callable[[], bool] | None,
+    ) -> bool:
+        """Steps until done; True when ``should_stop`` stopped them."""
+        steps = self._layout.steps
+        report_every = max(1, steps // 100)
+        with frozen_heap():
+            while not self.done:
+                k = self.k
+                self._step(should_stop=should_stop)
+                if self._liveness.stopped:
+                    return True
+                if progress is not None and k % report_every == 0 and k < self.k:
+                    progress(k, steps)
+        return False
+
+    # ------------------------------------------------------------------ endings
+    def _plugin_failed(self, w: int, exc: PluginRunError) -> None:
+        """End world ``w`` with status ``error``: a plug-in raised or returned NaN.
+
+        The sample of the time it happened is recorded as a diverged state's is (the
+        plan undefined, the last commands), and ``info["error"]`` names the plug-in.
+        """
+        self._liveness.info[w]["error"] = {
+            "t": self.k * self._layout.h,
+            "plugin": exc.plugin,
+            "message": exc.message,
+        }
+        self._end_world(w, STATUS_ERROR)
+
+    def _end_world(self, w: int, status: str, last: bool = True) -> None:
+        """World ``w`` ends now with ``status``; its run is made at once.
+
+        ``last``: record its sample of now first, with the plan undefined.
+        """
+        live, fleet, layout = self._liveness, self.fleet, self._layout
+        if not live.live[w]:
+            return
+        live.status[w] = status
+        if last:
+            if self._steering is not None:
+                self._steering.append(self.recorder.count, fleet.steer, w)
+            nan = np.full((layout.N, 2), np.nan)
+            arrays = self.recorder.append_last(
+                w,
+                self.k * layout.h,
+                fleet.pos,
+                fleet.theta,
+                fleet.v1,
+                fleet.v2,
+                fleet.chi,
+                nan,
+                nan,
+                fleet.mode,
+                fleet.failed,
+                np.full(2, np.nan),
+            )
+            self._tally.update(
+                fleet,
+                self.k,
+                self.finite,
+                self._distances,
+                self.physics.in_contact(),
+                np.array([w]),
+            )
+        else:
+            arrays = self.recorder.arrays(w)
+        self.physics.stop(w)
+        live.end(w, self._make_run(w, arrays, status), undefined=last)
+
+    def _finish_all(self) -> None:
+        """End the live worlds at ``t_k``: the last sample, the controller's commands.
+
+        Before the duration the worlds end ``interrupted``.
+        """
+        live, layout = self._liveness, self._layout
+        worlds = live.worlds()
+        if not worlds:
+            live.closed = True
+            return
+        for w in worlds:
+            if self.k < layout.steps:
+                live.status[w] = STATUS_INTERRUPTED
+                live.info[w]["interrupted"] = {"t": self.k * layout.h}
+        self._recorded_target = None
+        try:
+            self._act(None, None, None)
+        except PluginRunError as exc:
+            for w in live.worlds():
+                self._plugin_failed(w, exc)
+        else:
+            self._record(self.plan)
+        for w in live.worlds():
+            status = live.status[w]
+            live.end(w, self._make_run(w, self.recorder.arrays(w), status), False)
+        live.closed = True
+
+    def _make_run(self, w: int, arrays: dict, status: str) -> Run:
+        """World ``w``'s run (:func:`~sandbox.loop.ending.make_run`)."""
+        layout, live, safety = self._layout, self._liveness, self._safety
+        ranges = self._perception.ranges
+        if self._steering is not None:  # a world with cars: their angles
+            arrays = {**arrays, **self._steering.arrays(w, len(arrays["t"]))}
+        return make_run(
+            layout,
+            w,
+            live.info[w],
+            status,
+            arrays,
+            failed_at=live.failed_at[w],
+            detection=self._detecting.worlds[w],
+            loop_metrics=self._tally.result(w),
+            wall_time=(time.perf_counter() - self._wall) / layout.K,
+            control_time=self._control_time / layout.K,
+            safety=None if safety.filter is None else safety.world_stats[w],
+            steps=self.k,
+            diameter=self.fleet.diameter[layout.rows(w)].copy(),
+            leader=int(self._formation.leaders[w]),
+            events=list(self.physics.worlds[w].events),
+            ranges={} if ranges is None else ranges.part(w).arrays(),
+        )
+
+    # ------------------------------------------------------------------ the API
+    @property
+    def K(self) -> int:
+        """The number of worlds stepped together (1 for a single run)."""
+        return self._layout.K
+
+    @property
+    def n(self) -> int:
+        """The number of vehicles of each world."""
+        return self._layout.n
+
+    @property
+    def N(self) -> int:
+        """The number of rows of the loop's arrays, ``K n``."""
+        return self._layout.N
+
+    @property
+    def h(self) -> float:
+        """The control period ``h = dt`` [s]."""
+        return self._layout.h
+
+    @property
+    def steps(self) -> int:
+        """The control periods of the whole duration."""
+        return self._layout.steps
+
+    @property
+    def scenario(self) -> Scenario:
+        """The scenario (of the first world of a batch)."""
+        return self._layout.scenarios[0]
+
+    @property
+    def t(self) -> float:
+        """Current simulated time ``t_k = k h`` [s]."""
+        return self.k * self._layout.h
+
+    @property
+    def done(self) -> bool:
+        """Whether the run has reached its duration, diverged or been stopped.
+
+        Of a batch: whether every world has ended.
+        """
+        live = self._liveness
+        return live.closed or self.k >= self._layout.steps or not live.count
+
+    @property
+    def live(self) -> np.ndarray:
+        """Which worlds are still stepped, shape (K,), bool."""
+        return self._liveness.live
+
+    @property
+    def names(self) -> list[str]:
+        """Vehicle names, in row order (of the first world of a batch)."""
+        return list(self._layout.names[0])
+
+    @property
+    def world(self) -> Physics:
+        """The physics of the run (of the first world of a batch)."""
+        return self.physics.worlds[0]
+
+    @property
+    def status(self) -> str:
+        """The run's status: ``ok``, ``diverged``, ``error``, ``interrupted``.
+
+        Of a batch: the first world's (:attr:`statuses`: every world's).
+        """
+        return self._liveness.status[0]
+
+    @property
+    def statuses(self) -> list[str]:
+        """Every world's status, in world order (a list of one for a single run)."""
+        return list(self._liveness.status)
+
+    @property
+    def info(self) -> dict:
+        """The run's description, ``Run.info`` in the making (of the first world)."""
+        return self._liveness.info[0]
+
+    @property
+    def failed_at(self) -> dict[str, float]:
+        """When each failed vehicle failed [s] (of the first world of a batch)."""
+        return self._liveness.failed_at[0]
+
+    @property
+    def detection(self) -> Detection | None:
+        """The detector that runs, None for the oracle.
+
+        A detector registered with ``batched=True`` is one for the rows of every
+        world (its events the first world's); any other is each world's own (the
+        first world's is given).
+        """
+        detecting = self._detecting
+        return detecting.worlds[0] if detecting.batch is None else detecting.batch
+
+    @property
+    def reconfiguration(self) -> Reconfiguration | None:
+        """The run's reconfiguration, None: slots kept (of the first world)."""
+        return self._formation.reconfigurations[0]
+
+    @property
+    def broadcast(self) -> StackedBroadcast | None:
+        """The broadcast of every world's rows (``sensing:``), None without sensing.
+
+        Each world draws from its own random stream; ``seen``, ``fresh`` and
+        ``sigma`` have a row per vehicle of every world.
+        """
+        return self._perception.broadcast
+
+    @property
+    def platoons(self) -> Platoons | None:
+        """The run's platoons (``platoons:``; of the first world), None: one platoon."""
+        platoons = self._formation.platoons
+        return None if platoons is None else platoons[0]
+
+    @property
+    def leader(self) -> int:
+        """The vehicle that leads now, -1 for none (of the first world of a batch)."""
+        return int(self._formation.leaders[0])
+
+    @property
+    def law(self) -> Any:
+        """The formation law (None without ``formation:``).
+
+        The one law of every world, or the first world's own where each world's
+        law is evaluated on its rows (a plug-in without ``batched=True``).
+        """
+        formation = self._formation
+        return formation.laws[0] if formation.per_world else formation.law
+
+    @property
+    def law_params(self) -> dict:
+        """The formation law's values (of the first world's own law, where each has)."""
+        formation = self._formation
+        return formation.params[0] if formation.per_world else formation.law_params
+
+    @property
+    def law_memory(self) -> dict:
+        """The formation law's memory (of the first world's own law, where each has)."""
+        formation = self._formation
+        return formation.memory[0] if formation.per_world else formation.law_memory
+
+    @property
+    def strategy(self) -> Any:
+        """The recovery strategy as the loop calls it.
+
+        Replacing it (a wrapper, a spy) makes the loop call the replacement, on the
+        numpy path (the strategy's C call computes the built-in's only).
+        """
+        return self._avoidance.strategy
+
+    @strategy.setter
+    def strategy(self, value: Any) -> None:
+        self._avoidance.strategy = value
+
+    def law_context(
+        self,
+        t: float,
+        ref: tuple | None,
+        offset: np.ndarray | None = None,
+        memory: dict | None = None,
+    ) -> LawContext:
+        """What the law of the run (of the first world) sees at ``t``.
+
+        Parameters
+        ----------
+        t : float [s]
+        ref : tuple of ndarray or None
+            The reference's ``(p, p', p'')`` at ``t`` (None: no reference).
+        offset : ndarray, shape (n, 2) [m], optional
+            The offsets (default: the fleet's).
+        memory : dict, optional
+            The law's memory (default: the first world's law's).
+        """
+        return self._formation.world_context(
+            0, t, ref, self.fleet, self.believed, offset, memory
+        )
+
+    def observe(self, world: int | None = None) -> Observation | list[Observation]:
+        """The world now, and what the built-in stack plans for this period.
+
+        Parameters
+        ----------
+        world : int, optional
+            One world of a batch. Default: the run's observation, or of a batch
+            (:meth:`stacked`) a list of every world's.
+
+        Returns
+        -------
+        Observation, or list of Observation (one per world)
+        """
+        if world is None:
+            if self._batch:
+                return [self._observe(w) for w in range(self._layout.K)]
+            world = 0
+        return self._observe(world)
+
+    def _observe(self, world: int) -> Observation:
+        """World ``world``'s :class:`~sandbox.loop.observation.Observation` now."""
+        layout, live = self._layout, self._liveness
+        fleet, plan, rows = self.fleet, self.plan, layout.rows(world)
+        ended = not live.live[world] or live.closed
+        if live.undefined[world]:  # ended with its plan undefined
+            nan = np.full((layout.n, 2), np.nan)
+            slot, target, failing = nan, nan.copy(), fleet.failed[rows].copy()
+        else:
+            slot = np.array(plan.slot[rows], dtype=float)
+            target = np.array(plan.target[rows], dtype=float)
+            failing = plan.failing[rows].copy()
+        ranges = self._perception.ranges
+        platoons = self._formation.platoons
+        scenario = layout.scenarios[world]
+        return Observation(
+            t=self.k * layout.h,
+            names=layout.names[world],
+            pose=np.concatenate((fleet.pos[rows], fleet.theta[rows, None]), axis=1),
+            vel=fleet.vel[rows].copy(),
+            chi=fleet.chi[rows].copy(),
+            slot=slot,
+            target=target,
+            mode=fleet.mode[rows].copy() if ended else plan.mode(layout.N)[rows],
+            failed=failing,
+            **observation_fields(
+                None if ranges is None else ranges.part(world),
+                self._perception.obstacles,
+                scenario,
+                fleet.pos[rows],
+            ),
+            platoon=None if platoons is None else platoons[world].of_vehicles(),
+        )
+
+    def step(
+        self,
+        commands: Overrides | Sequence[Overrides] = None,
+        targets: Overrides | Sequence[Overrides] = None,
+        shifts: Overrides | Sequence[Overrides] = None,
+        observe: bool = True,
+    ) -> Observation | list[Observation] | None:
+        """Advance one control period ``h = dt``, with optional overrides.
+
+        Parameters
+        ----------
+        commands : mapping of str to (v1, v2), or ndarray (n, 2), optional
+            Commands [m/s, rad/s] replacing the controller's for the named vehicles
+            this period, within the vehicle's ``v1_max``, ``v2_max`` and (on v1)
+            ``max_accel``. Failures still act on top of them.
+        targets : mapping of str to (x1, x2), or ndarray (n, 2), optional
+            Points [m] the controller tracks this period instead of the planned
+            target, as set-points (no feed-forward velocity); recovery does not shift
+            them. An array takes NaN rows for "no override".
+        shifts : mapping of str to (dx1, dx2), or ndarray (n, 2), optional
+            Displacements [m] added to the planned target (slot plus recovery) this
+            period, the law's feed-forward motion kept: a zero shift drives as the
+            built-in stack does. ``targets`` win where both are given.
+        observe : bool
+            Whether to return the observation (False: None, the arrays untouched
+            in :attr:`fleet` and :attr:`plan`).
+
+        Returns
+        -------
+        Observation, or list of Observation (one per world)
+            At the next step ``t_k+1``.
+
+        Raises
+        ------
+        RuntimeError
+            When the run is :attr:`done`.
+        ValueError
+            An unknown vehicle name or a malformed value.
+
+        Notes
+        -----
+        Built with :meth:`stacked` (K worlds, any K) each override is an array
+        ``(K, n, 2)`` or a sequence of K of the above (None for none), and a list of
+        K observations is returned.
+        """
+        if self.done:
+            raise RuntimeError(
+                f"the run is over (status {self.status!r} at t = {self.t:g} s); "
+                "call result()"
+            )
+        cmd = self._override_rows(commands, "commands")
+        tgt = self._override_rows(targets, "targets")
+        shf = self._override_rows(shifts, "shifts")
+        self._step(cmd, tgt, shifts=shf)
+        if not observe:
+            return None
+        return self.observe()
+
+    def _override_rows(self, values: Any, what: str) -> Rows:
+        """The ``(N, 2)`` rows and ``(N,)`` mask of one kind of override."""
+        layout = self._layout
+        if not self._batch or values is None:
+            return override_rows(values, layout.names[0], what)
+        K, n, N = layout.K, layout.n, layout.N
+        if isinstance(values, np.ndarray):
+            if values.shape != (K, n, 2):
+                raise ValueError(
+                    f"{what}: expected an array of shape ({K}, {n}, 2) or "
+                    f"a sequence of {K} overrides, got shape {values.shape}"
+                )
+            names = self._row_names
+            if names is None:  # every row named by its world, for the errors
+                names = [f"world {w} {v}" for w in range(K) for v in layout.names[w]]
+                self._row_names = names
+            return override_rows(values.reshape(N, 2), names, what)
+        if len(values) != K:
+            raise ValueError(f"{what}: expected {K} overrides, got {len(values)}")
+        rows, mask = np.full((N, 2), np.nan), np.zeros(N, dtype=bool)
+        for w, part in enumerate(values):
+            got = override_rows(part, layout.names[w], what)
+            if got is not None:
+                rows[layout.rows(w)], mask[layout.rows(w)] = got
+        return (rows, mask) if mask.any() else None
 
     def run(
         self,
@@ -645,30 +925,28 @@ class Simulation(Building, StepAPI, Ending, WorldStages):
         stopped = self._loop(None, should_stop)
         return None if stopped else self.results()
 
-    def _loop(self, progress, should_stop) -> bool:
-        """Steps until done; True when ``should_stop`` stopped them."""
-        report_every = max(1, self.steps // 100)
-        with frozen_heap():
-            while not self.done:
-                k = self.k
-                self._step(should_stop=should_stop)
-                if self._stopped:
-                    return True
-                if progress is not None and k % report_every == 0 and k < self.k:
-                    progress(k, self.steps)
-        return False
+    def result(self, world: int = 0) -> Run:
+        """The recorded run so far (the whole run once :attr:`done`).
+
+        The sample of the last time is recorded with the controller's own commands.
+        Called before the run is done, the run ends here with status ``interrupted``.
+        Further calls return the same :class:`~sandbox.run.record.Run`.
+
+        Parameters
+        ----------
+        world : int
+            The world of a batch (0: the run's).
+        """
+        runs = self._liveness.runs
+        if world not in runs:
+            self._finish_all()
+        return runs[world]
+
+    def results(self) -> list[Run]:
+        """One :class:`~sandbox.run.record.Run` per world (see :meth:`result`)."""
+        return [self.result(w) for w in range(self._layout.K)]
 
 
-def _world_rows(a: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray:
-    """A law's array of every world, shape (K, n, 2) or broadcasting to it, as rows.
-
-    Float64, shape (K n, 2): a view where it is float64 of the shape, else a new
-    array of its values.
-    """
-    a = np.asarray(a, dtype=float)
-    return (a if a.shape == shape else spread(a, shape)).reshape(-1, 2)
-
-
-def simulate(scenario: Scenario, **kwargs) -> Run:
+def simulate(scenario: Scenario, **kwargs: Any) -> Run:
     """Run a scenario; return its :class:`~sandbox.Run` (:meth:`Simulation.run`)."""
     return Simulation(scenario).run(**kwargs)

@@ -1,8 +1,8 @@
-"""Fleet: the struct-of-arrays state of all vehicles.
+"""Fleet: the struct-of-arrays state of all vehicles of all worlds of a loop.
 
-One array per quantity, indexed by vehicle; one numpy expression updates the whole
-fleet.
-No per-vehicle Python object is touched on the hot path.
+One array per quantity, indexed by row (``K n`` rows, world after world); one numpy
+expression updates the whole fleet. No per-vehicle Python object is touched on the
+hot path.
 """
 
 from __future__ import annotations
@@ -130,8 +130,6 @@ class Fleet:
     @classmethod
     def stack(cls, fleets: list[Fleet]) -> Fleet:
         """The fleets of K worlds as one, rows world after world (copies)."""
-        if len(fleets) == 1:
-            return fleets[0]
 
         def cat(name: str) -> np.ndarray:
             return np.concatenate([getattr(f, name) for f in fleets])
@@ -152,3 +150,17 @@ def uniform(values: np.ndarray) -> float | np.ndarray:
     """
     first = values[0]
     return float(first) if np.all(values == first) else values
+
+
+def limits(
+    fleet: Fleet, rows: slice = slice(None)
+) -> tuple[float | np.ndarray, float | np.ndarray, float | np.ndarray]:
+    """The ``v1_max``, ``v2_max``, ``accel_max`` of ``rows`` (:func:`uniform` each).
+
+    [m/s], [rad/s], [m/s^2]: scalars where equal over the rows, else row arrays.
+    """
+    return (
+        uniform(fleet.v1_max[rows]),
+        uniform(fleet.v2_max[rows]),
+        uniform(fleet.accel_max[rows]),
+    )

@@ -1,20 +1,23 @@
 """The cars of the loop: their controller rows, their steering, their record.
 
 A fleet may hold cars (``model: bicycle``, :mod:`sandbox.model.bicycle`) among its
-unicycles, in any world of a batch. The loop leaves the unicycles' path as it is and
-adds, where some row is a car (:meth:`CarDrive.build` gives None otherwise):
+unicycles, in any world of a batch. The loop leaves the unicycles' rows as they are
+and adds, where some row is a car (both :meth:`CarDrive.build` and
+:meth:`SteeringRecord.build` give None otherwise):
 
-1. after the controller (:meth:`CarDrive.control`): the cars' rows computed again by
-   :func:`~sandbox.model.bicycle.car_controller_step`, with the car's anti-windup in
-   place of the unicycle's turn limit;
-2. after the safety filter, the schedules and the overrides, and again after the
-   failures for the rows they hit (:meth:`CarDrive.steer`): the asked turn rate made
-   a steering angle within the car's limits, and the turn rate the car executes,
-   ``v1 tan(delta) / L``; every command a car executes (a filter's, a user's, a
-   failure's) is one it can;
-3. the steering angle of each sample in the record (:meth:`CarDrive.record`), given to
-   each world's :class:`~sandbox.run.record.Run` as ``steer`` where the world has a
-   car (NaN on its unicycles' rows).
+1. in the act stage (:class:`~sandbox.loop.acting.Acting`, which holds the
+   :class:`CarDrive`), after the controller (:meth:`CarDrive.control`): the cars'
+   rows computed again by :func:`~sandbox.model.bicycle.car_controller_step`, with
+   the car's anti-windup in place of the unicycle's turn limit;
+2. there too, after the safety filter, the schedules and the overrides, and again
+   after the failures for the rows they hit (:meth:`CarDrive.steer`): the asked
+   turn rate made a steering angle within the car's limits, and the turn rate the
+   car executes, ``v1 tan(delta) / L``; every command a car executes (a filter's, a
+   user's, a failure's) is one it can. The steering angles of the period are
+   returned with the commands and become the fleet's ``steer``;
+3. the steering angle of each sample (:class:`SteeringRecord`, written by the loop
+   beside its record), given to each world's :class:`~sandbox.run.record.Run` as
+   ``steer`` where the world has a car (NaN on its unicycles' rows).
 
 Every step is elementwise over rows: a world's cars have the numbers they have alone.
 """
@@ -29,23 +32,20 @@ from sandbox.model.flatness import Gains
 
 
 class CarDrive:
-    """The car rows of a loop of ``K`` worlds of ``n`` vehicles.
+    """The car rows of a loop's fleet: their gains and limits, fixed at build.
 
     Parameters
     ----------
     fleet : Fleet
-        The stacked fleet (rows world after world).
-    K, n : int
+        The stacked fleet (rows world after world) with at least one car.
     dt : float [s]
         The control period.
-    capacity : int
-        Samples of the record.
     """
 
-    def __init__(self, fleet: Fleet, K: int, n: int, dt: float, capacity: int) -> None:
-        self.rows = np.flatnonzero(fleet.bicycle)
-        self.K, self.n, self.dt = K, n, dt
-        rows = self.rows
+    def __init__(self, fleet: Fleet, dt: float) -> None:
+        #: The car rows of the loop's arrays.
+        self.rows = rows = np.flatnonzero(fleet.bicycle)
+        self.dt = dt
         self.gains = Gains(
             **{k: getattr(fleet.gains, k)[rows] for k in ("k1", "k2", "k3", "k4", "kp")}
         )
@@ -57,21 +57,15 @@ class CarDrive:
             fleet.accel_max[rows],
             fleet.v2_max[rows],
         )
-        #: Whether every row is a car.
-        self.every = len(self.rows) == len(fleet.bicycle)
-        #: Which worlds hold a car (only they record ``steer``).
-        self.worlds = fleet.bicycle.reshape(K, n).any(axis=1)
-        self._unicycle = ~fleet.bicycle
-        self._record = np.full((capacity, K * n), np.nan)
+        #: Whether every row is a car (then no row is copied out).
+        self.every = len(rows) == len(fleet.bicycle)
 
     @classmethod
-    def build(
-        cls, fleet: Fleet, K: int, n: int, dt: float, capacity: int
-    ) -> CarDrive | None:
+    def build(cls, fleet: Fleet, dt: float) -> CarDrive | None:
         """The loop's cars, or None where every row is a unicycle."""
         if not np.count_nonzero(fleet.bicycle):
             return None
-        return cls(fleet, K, n, dt, capacity)
+        return cls(fleet, dt)
 
     def control(
         self,
@@ -87,9 +81,10 @@ class CarDrive:
 
         :func:`~sandbox.model.bicycle.car_controller_step` on the car rows of the
         period's state and targets; ``chi_next``, ``v1`` and ``v2`` (the
-        controller's, shape (K n, ...)) take its results on those rows.
+        controller's outputs of this period, shape (N, ...)) take its results on
+        those rows.
         """
-        r = slice(None) if self.every else self.rows  # a fleet of cars: no copies
+        r = slice(None) if self.every else self.rows
         nxt, u1, u2 = car_controller_step(
             fleet.pos[r],
             fleet.chi[r],
@@ -118,22 +113,22 @@ class CarDrive:
 
         Parameters
         ----------
-        v1, v2 : ndarray, shape (K n,) [m/s], [rad/s]
+        v1, v2 : ndarray, shape (N,) [m/s], [rad/s]
             The commands as they stand.
-        held : ndarray, shape (K n,) [rad]
+        held : ndarray, shape (N,) [rad]
             The steering angles of the last period (``Fleet.steer``).
-        steer : ndarray, shape (K n,) [rad], optional
+        steer : ndarray, shape (N,) [rad], optional
             The angles an earlier call of this period gave; with ``only``, the rows
             outside ``only`` keep them.
-        only : ndarray, shape (K n,), bool, optional
+        only : ndarray, shape (N,), bool, optional
             Steer these rows again (those a failure changed), the others as given.
 
         Returns
         -------
-        v2 : ndarray, shape (K n,) [rad/s]
-            A new array.
-        steer : ndarray, shape (K n,) [rad]
-            A new array.
+        v2 : ndarray, shape (N,) [rad/s]
+            A new array (``v2`` itself where ``only`` picks no car).
+        steer : ndarray, shape (N,) [rad]
+            A new array (``steer`` itself where ``only`` picks no car).
         """
         r = self.rows
         limits = self.limits
@@ -148,20 +143,55 @@ class CarDrive:
         v2[r], out[r] = u2, angle
         return v2, out
 
-    def record(self, index: int, steer: np.ndarray, world: int | None = None) -> None:
-        """Keep the steering angles as sample ``index`` (of every world, or one)."""
-        if index >= len(self._record):
+
+class SteeringRecord:
+    """The cars' steering angle at each recorded sample of K worlds of ``n`` rows.
+
+    Kept in memory beside the loop's record (:class:`~sandbox.loop.recording.
+    LoopRecord`), at the same sample indices; NaN on the unicycles' rows.
+
+    Parameters
+    ----------
+    bicycle : ndarray, shape (K n,), bool
+        The car rows.
+    capacity, K, n : int
+        Samples of the record, worlds, vehicles of each.
+    """
+
+    def __init__(self, bicycle: np.ndarray, capacity: int, K: int, n: int) -> None:
+        self.n = n
+        self._unicycle = ~bicycle
+        #: Which worlds hold a car (only their runs get ``steer``).
+        self.worlds = bicycle.reshape(K, n).any(axis=1)
+        self._angles = np.full((capacity, K * n), np.nan)
+
+    @classmethod
+    def build(
+        cls, fleet: Fleet, capacity: int, K: int, n: int
+    ) -> SteeringRecord | None:
+        """The record of the loop's cars, or None where every row is a unicycle."""
+        if not np.count_nonzero(fleet.bicycle):
+            return None
+        return cls(fleet.bicycle, capacity, K, n)
+
+    def append(self, index: int, steer: np.ndarray, world: int | None = None) -> None:
+        """Sample ``index`` of every world's rows (or of world ``world``'s alone).
+
+        ``steer`` is the fleet's, shape (K n,) [rad]; a sample beyond the capacity
+        is not kept (as the loop's record keeps none).
+        """
+        if index >= len(self._angles):
             return
         angles = np.where(self._unicycle, np.nan, steer)
         if world is None:
-            self._record[index] = angles
+            self._angles[index] = angles
         else:
             rows = slice(world * self.n, (world + 1) * self.n)
-            self._record[index, rows] = angles[rows]
+            self._angles[index, rows] = angles[rows]
 
     def arrays(self, world: int, count: int) -> dict[str, np.ndarray]:
         """World ``world``'s ``steer`` (count, n) [rad], or nothing without a car."""
         if not self.worlds[world]:
             return {}
         rows = slice(world * self.n, (world + 1) * self.n)
-        return {"steer": np.ascontiguousarray(self._record[:count, rows])}
+        return {"steer": np.ascontiguousarray(self._angles[:count, rows])}

@@ -1,6 +1,6 @@
 """The physics of K worlds as the loop reaches it: read all, write all, step all.
 
-:class:`WorldsPhysics` holds one physics back-end per world. When every world is a
+:class:`LoopPhysics` holds one physics back-end per world. When every world is a
 pymunk :class:`~sandbox.physics.world.World` the worlds are read, written and stepped
 together: their motor arrays become views of stacked ones (sized at once by
 :func:`~sandbox.physics.world.motor_limits`), their control bodies read their
@@ -18,12 +18,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from sandbox import accel
 from sandbox.physics.interface import Physics
-
-try:
-    from sandbox.loop import _period
-except ImportError:  # pragma: no cover - built without a C compiler
-    _period = None
 from sandbox.physics.stepping import WorldStepper
 from sandbox.physics.world import MAX_FORCE_SETTER, World, motor_limits
 
@@ -40,7 +36,7 @@ _MOTOR_ARRAYS = (
 )
 
 
-class WorldsPhysics:
+class LoopPhysics:
     """K worlds of ``n`` vehicles each, stepped together (see the module docstring).
 
     Parameters
@@ -50,10 +46,6 @@ class WorldsPhysics:
         Vehicles per world.
     substeps : int
     """
-
-    #: Step pymunk worlds with :class:`~sandbox.physics.stepping.WorldStepper` from the
-    #: second period on (False: world by world in Python; the same numbers).
-    fast_stepping = True
 
     def __init__(self, worlds: Sequence[Physics], n: int, substeps: int) -> None:
         self.worlds = list(worlds)
@@ -109,14 +101,15 @@ class WorldsPhysics:
                 np.concatenate([s.vel for s in states]),
             )
         rows = self._rows
-        if len(self.live) == K and _period is not None:  # the copies in one C call
-            if _period.ALLOCATES:  # the call makes the three arrays
+        period = accel.module("period")
+        if len(self.live) == K and period is not None:  # the copies in one C call
+            if period.ALLOCATES:  # the call makes the three arrays
                 out = (None, None, None)
             else:
                 N = self.N
                 out = (np.empty((N, 2)), np.empty(N), np.empty((N, 2)))
             try:
-                return _period.read_state(rows, self._measured, *out)
+                return period.read_state(rows, self._measured, *out)
             except (BufferError, TypeError, ValueError):  # not such arrays: numpy
                 pass
         self._measured.reshape(K, n, 3)[...] = rows[..., 3:6]  # (v_x1, v_x2, omega)
@@ -191,7 +184,7 @@ class WorldsPhysics:
         out = self._out
         if commanded is not None:
             try:  # the copies in one C call
-                _period.command_rows(commanded, v2, out)
+                accel.module("period").command_rows(commanded, v2, out)
             except (AttributeError, BufferError, TypeError, ValueError):  # numpy's
                 out[:, :2] = commanded
                 out[:, 2] = v2
@@ -235,7 +228,7 @@ class WorldsPhysics:
                     if world._open:
                         world._update_episodes(ends[s])
             state[w] = world.read_rows(measure=False)
-        if first and self.fast_stepping:  # every body is checked in now
+        if first:  # every body is checked in now
             self._stepper = WorldStepper.build(self.worlds, out, state, substeps)
             if self._stepper is not None:
                 self._stepper.live(self.live)

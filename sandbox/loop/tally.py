@@ -24,26 +24,18 @@ short axis at a fraction of their cost.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from sandbox.model.kernels import kernels_agree
+from sandbox import accel
 from sandbox.run.metrics import (
     ALL_PAIRS_MAX,
     MOTOR_ABS_TOL,
     MOTOR_REL_TOL,
     ClosestApproach,
 )
-
-try:
-    from sandbox.loop import _period
-except ImportError:  # pragma: no cover - built without a C compiler
-    _period = None
-
-#: Copy a period into the buffers in one C call where ``sandbox.loop._period`` is
-#: built and the C library's sine and cosine are numpy's (False: numpy).
-USE_KERNEL = True
 
 #: Periods buffered before :meth:`LoopTally.flush` accounts for them.
 CHUNK = 64
@@ -77,26 +69,33 @@ class LoopTally:
         self._prev: np.ndarray | None = None  # (2, N): the last v1, v2
         self._commanded: np.ndarray | None = None
         self._was_free: np.ndarray | None = None
-        i, j = np.triu_indices(n, 1)
-        self._i, self._j = i, j
+        # Every pair of a world, where every pair is checked (a large fleet: none).
+        empty = np.zeros(0, dtype=np.intp)
+        self._i, self._j = (empty, empty) if pairs == 0 else np.triu_indices(n, 1)
         #: The commanded velocities ``(v_x1, v_x2)`` of the period last accounted
         #: for, and its step index (the batch writes them to the physics).
         self.commanded: np.ndarray | None = None
         self.commanded_at = -1
 
     def update(
-        self, sim: Any, contact: np.ndarray | None, worlds: np.ndarray | None
+        self,
+        fleet: Any,
+        k: int,
+        finite: bool,
+        distances: Callable[[np.ndarray], np.ndarray | None],
+        contact: np.ndarray | None,
+        worlds: np.ndarray | None,
     ) -> None:
         """Account for period ``k`` of all worlds (or only ``worlds``).
 
-        ``sim`` gives the state at ``t_k`` and the commands from it (``sim.fleet``),
-        ``contact`` the rows in an open contact episode (None: unknown, no motor
-        check). With every world and every position finite the period is buffered
-        (see the module docstring); else the buffer is accounted for and the period at
-        once. The pair distances of the neighbour search of this period are reused
-        where it ran on these positions.
+        ``fleet`` gives the state at ``t_k`` and the commands from it, ``finite``
+        whether every position is finite, ``distances(pos)`` the pair distances the
+        neighbour search computed on these very positions (None: none), ``contact``
+        the rows in an open contact episode (None: unknown, no motor check). With
+        every world and every position finite the period is buffered (see the module
+        docstring); else the buffer is accounted for and the period at once.
         """
-        b = _State(sim)
+        b = _State(fleet, k, finite, distances)
         if contact is None:  # no contact flags: no vehicle is checked
             contact = np.ones(self.K * self.n, dtype=bool)
         if self._closest is not None:
@@ -116,9 +115,10 @@ class LoopTally:
     def _buffer(self, b: Any, contact: np.ndarray) -> None:
         """Copy what period ``b.k`` accounts for into the buffers."""
         K, n, m = self.K, self.n, self._m
-        if _period is not None and USE_KERNEL and kernels_agree():
+        period = accel.module("period")
+        if period is not None:
             try:
-                self._buffer_c(b, contact)
+                self._buffer_c(period, b, contact)
                 return
             except (BufferError, TypeError, ValueError):  # not C arrays: numpy
                 pass
@@ -142,7 +142,7 @@ class LoopTally:
         if self._m == CHUNK:
             self.flush()
 
-    def _buffer_c(self, b: Any, contact: np.ndarray) -> None:
+    def _buffer_c(self, period: Any, b: Any, contact: np.ndarray) -> None:
         """:meth:`_buffer` in one C call (the same numbers)."""
         m = self._m
         i = j = d2 = None
@@ -151,7 +151,7 @@ class LoopTally:
             if d2 is None:
                 i, j = self._i, self._j
         commanded = self._buf_cmd[m]  # valid until the slot is written again
-        _period.buffer_period(
+        period.buffer_period(
             b.pos, i, j, b.v1, b.v2, b.vel, contact, b.theta, float(self.h),
             self._buf_d2[m], self._buf_v[m], self._buf_vel[m], self._buf_free[m],
             commanded, d2,
@@ -167,7 +167,8 @@ class LoopTally:
         if not m:
             return
         self._m = 0
-        if _period is not None and USE_KERNEL and kernels_agree() and self._flush_c(m):
+        period = accel.module("period")
+        if period is not None and self._flush_c(period, m):
             return
         if n >= 2 and self._closest is None:
             d2 = self._buf_d2[:m].reshape(m * K, -1)
@@ -199,7 +200,7 @@ class LoopTally:
         self._commanded = cmd_now[m - 1].copy()
         self._was_free = free[m - 1].copy()
 
-    def _flush_c(self, m: int) -> bool:
+    def _flush_c(self, period: Any, m: int) -> bool:
         """:meth:`flush` of ``m`` periods in one C call (the same numbers).
 
         False where the call refuses the arrays (nothing is changed then).
@@ -210,7 +211,7 @@ class LoopTally:
         commanded = self._commanded if has_cmd else np.empty((K * n, 2))
         was_free = self._was_free if has_cmd else np.empty(K * n, dtype=bool)
         try:
-            _period.flush_periods(
+            period.flush_periods(
                 m, K, n, MOTOR_REL_TOL, MOTOR_ABS_TOL, has_prev, has_cmd,
                 self._buf_d2[:m], self._buf_v[:m], self._buf_vel[:m],
                 self._buf_cmd[:m], self._buf_free[:m], self.best, self.effort_v1,
@@ -382,13 +383,13 @@ def _raised_max(
 class _State:
     """What the tally reads of the loop at ``t_k``."""
 
-    def __init__(self, sim: Any) -> None:
-        fleet = sim.fleet
+    def __init__(self, fleet: Any, k: int, finite: bool, distances: Callable) -> None:
         self.pos, self.theta, self.vel = fleet.pos, fleet.theta, fleet.vel
         self.v1, self.v2 = fleet.v1, fleet.v2
-        self.k, self.finite = sim.k, sim.finite
-        self.distances = getattr(sim.neighbours, "distances", _no_distances)
+        self.k, self.finite = k, finite
+        self.distances = distances
 
 
-def _no_distances(pos: np.ndarray) -> None:
+def no_distances(pos: np.ndarray) -> None:
+    """No pair distances known (a neighbour search that keeps none)."""
     return None

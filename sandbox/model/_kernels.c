@@ -1,36 +1,31 @@
-/* The flatness controller of one control period, row by row, in two C calls, and
- * the residual detector's motor model of a period in one.
+/* The flatness controller of one control period, row by row, in one C call, and the
+ * residual detector's motor model of a period in one.
  *
- * sandbox/model/kernels.py calls these where this optional extension is built and
- * its checks pass. They compute, element by element and in the same order, the
- * operations of the numpy functions of sandbox/model/flatness.py as the loop calls
+ * sandbox/model/kernels.py calls these where this optional extension is built (the
+ * compiled path ``controller`` of sandbox/accel.py). controller_step does for every
+ * vehicle what the numpy functions of sandbox/model/flatness.py do as the loop calls
  * them (extension_rate, advance_extension, limit_turn, flat_inputs and the clip of
- * v2), and of sandbox/behaviour/detection.py's _advance_model: the same IEEE-754
- * double operations (the extension is compiled without contraction into fused
- * multiply-adds), numpy's own rules where it has them (its maximum and clip on ties
- * and NaN, its floating remainder), and the C library's sqrt, hypot, sin and cos,
- * which kernels.py checks give numpy's numbers on this machine before it uses them.
- * The angles of chi come in computed by numpy's arctan2 (flat_step), or are taken
- * from the C library's atan2 where kernels.py checks that it gives numpy's numbers
- * (controller_step, the period in one call).
+ * v2); motor_model what sandbox/behaviour/detection.py's numpy motor model does. The
+ * C library's sqrt, hypot, sin, cos and atan2; the numbers agree with the numpy
+ * functions within the tolerance of sandbox/accel.py.
  *
  * Arrays are C-contiguous float64; a parameter array of length 1 is one value for
  * every row (stride 0). Every pointer argument is an object with the buffer
  * interface (a numpy array).
  */
 
-#include "numpy_rules.h"
+#include "accel.h"
 #include "motor_model.h"
 
 /* The controller's constants (sandbox/model/flatness.py). */
 #define CHI_HOLD 1e-3
 #define CHI_REG 0.01
 
-/* sandbox.model.dynamics.wrap_angle: (a + pi) % (2 pi) - pi, pi folded to -pi. */
+/* sandbox.model.dynamics.wrap_angle: wrapped into [-pi, pi), pi folded to -pi. */
 static inline double
 wrap_angle(double a)
 {
-    double w = np_remainder(a + M_PI, 2.0 * M_PI) - M_PI;
+    double w = wrapped(a);
     return (w >= M_PI) ? -M_PI : w;
 }
 
@@ -52,14 +47,14 @@ extension_row(const double *p, const double *c, const double *g, const double *v
     double step_norm = hypot(s0, s1);
     double limit = accel * dt;
     if (step_norm > limit) {
-        double scale = limit / np_maximum(step_norm, 1e-300);
+        double scale = limit / larger(step_norm, 1e-300);
         s0 = s0 * scale;
         s1 = s1 * scale;
     }
     double x0 = c[0] + s0, x1 = c[1] + s1;
     double norm = hypot(x0, x1);
     if (norm > vmax) {
-        double scale = vmax / np_maximum(norm, 1e-300);
+        double scale = vmax / larger(norm, 1e-300);
         x0 = x0 * scale;
         x1 = x1 * scale;
         norm = hypot(x0, x1);
@@ -85,9 +80,8 @@ flat_row(double th, const double *c, const double *x, double norm, double angle_
         double lim = turn * dt;
         int outside = (fabs(off) > lim) && (norm >= CHI_HOLD);
         if (outside) {
-            double edge = (flags & 2) ? clip_scalars(off, -lim, lim)
-                                      : clip_rows(off, -lim, lim);
-            double along = np_maximum(norm * cos(off - edge), 0.0);
+            double edge = clamp(off, -lim, lim);
+            double along = larger(norm * cos(off - edge), 0.0);
             double direction = th + edge;
             out0 = along * cos(direction);
             out1 = along * sin(direction);
@@ -102,7 +96,7 @@ flat_row(double th, const double *c, const double *x, double norm, double angle_
     double norm2 = c1 * c1 + c2 * c2;
     double v1 = sqrt(norm2);
     int defined = norm2 >= CHI_HOLD * CHI_HOLD;
-    double safe = np_maximum(norm2, CHI_REG * CHI_REG);
+    double safe = larger(norm2, CHI_REG * CHI_REG);
     double feedforward = (-c2 * cd0 + c1 * cd1) / safe;
     double heading_error = wrap_angle(th - angle_chi);
     double v2 = defined ? feedforward - k * heading_error : 0.0;
@@ -110,134 +104,21 @@ flat_row(double th, const double *c, const double *x, double norm, double angle_
         double toward = -k * wrap_angle(th - aim);
         v2 = (defined ? feedforward : 0.0) + toward;
     }
-    v2 = (flags & 4) ? clip_scalars(v2, -vmax, vmax) : clip_rows(v2, -vmax, vmax);
+    v2 = clamp(v2, -vmax, vmax);
     *v1_out = defined ? v1 : 0.0;
     *v2_out = v2;
-}
-
-PyDoc_STRVAR(extension_step_doc,
-"extension_step(pos, chi, target, v_ref, a_ref, k1, k2, k3, k4, accel_max,\n"
-"               v1_max, dt, nxt, norm) -> None\n"
-"\n"
-"Eq. (6) and the Euler step of advance_extension with its two clamps, for n\n"
-"vehicles: ``pos, chi, target, v_ref, a_ref`` (n, 2) (a NaN target coordinate\n"
-"aims at the position's), the gains and limits (n,) or (1,), ``dt`` [s]. Writes\n"
-"chi before the turn limit to ``nxt`` (n, 2) and its norm to ``norm`` (n,).");
-
-static PyObject *
-extension_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    if (nargs != 14) {
-        PyErr_SetString(PyExc_TypeError, "extension_step takes 14 arguments");
-        return NULL;
-    }
-    Rows r[13];
-    int got = 0;
-    static const int out_at[] = {12, 13};
-    for (int k = 0; k < 14; k++) {
-        if (k == 11) {
-            continue;
-        }
-        int idx = k < 11 ? k : k - 1;
-        int writable = (k == out_at[0] || k == out_at[1]);
-        if (get_rows(args[k], &r[idx], writable) < 0) {
-            release(r, got);
-            return NULL;
-        }
-        got++;
-    }
-    double dt = PyFloat_AsDouble(args[11]);
-    if (dt == -1.0 && PyErr_Occurred()) {
-        release(r, got);
-        return NULL;
-    }
-    Rows *pos = &r[0], *chi = &r[1], *target = &r[2], *v_ref = &r[3], *a_ref = &r[4];
-    Rows *k1 = &r[5], *k2 = &r[6], *k3 = &r[7], *k4 = &r[8];
-    Rows *accel = &r[9], *v1_max = &r[10], *nxt = &r[11], *norm_out = &r[12];
-    Py_ssize_t n = norm_out->len;
-    if (pos->len != 2 * n || chi->len != 2 * n || target->len != 2 * n ||
-        v_ref->len != 2 * n || a_ref->len != 2 * n || nxt->len != 2 * n) {
-        release(r, got);
-        PyErr_SetString(PyExc_ValueError, "extension_step: shapes differ");
-        return NULL;
-    }
-    for (Py_ssize_t i = 0; i < n; i++) {
-        extension_row(pos->data + 2 * i, chi->data + 2 * i, target->data + 2 * i,
-                      v_ref->data + 2 * i, a_ref->data + 2 * i,
-                      k1->data[i * k1->step], k2->data[i * k2->step],
-                      k3->data[i * k3->step], k4->data[i * k4->step],
-                      accel->data[i * accel->step], v1_max->data[i * v1_max->step],
-                      dt, nxt->data + 2 * i, norm_out->data + i);
-    }
-    release(r, got);
-    Py_RETURN_NONE;
-}
-
-PyDoc_STRVAR(flat_step_doc,
-"flat_step(theta, chi, nxt, norm, angle_nxt, angle_chi, kp, turn_max, v2_max,\n"
-"          dt, flags, chi_next, v1, v2) -> None\n"
-"\n"
-"limit_turn (where ``flags & 1``; ``angle_nxt`` the angle of ``nxt``),\n"
-"the applied rate, flat_inputs (``angle_chi`` the angle of ``chi``) and the clip of\n"
-"v2 to ``v2_max``: writes ``chi_next`` (n, 2), ``v1`` and ``v2`` (n,). ``flags &\n"
-"2``: the turn limit was given as one value (numpy's scalar clip); ``flags & 4``:\n"
-"``v2_max`` was.");
-
-static PyObject *
-flat_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    if (nargs != 14) {
-        PyErr_SetString(PyExc_TypeError, "flat_step takes 14 arguments");
-        return NULL;
-    }
-    double dt = PyFloat_AsDouble(args[9]);
-    long flags = PyLong_AsLong(args[10]);
-    if ((dt == -1.0 || flags == -1) && PyErr_Occurred()) {
-        return NULL;
-    }
-    Rows r[12];
-    int got = 0;
-    for (int k = 0; k < 14; k++) {
-        if (k == 9 || k == 10) {
-            continue;
-        }
-        int idx = k < 9 ? k : k - 2;
-        if (get_rows(args[k], &r[idx], k >= 11) < 0) {
-            release(r, got);
-            return NULL;
-        }
-        got++;
-    }
-    Rows *theta = &r[0], *chi = &r[1], *nxt = &r[2], *norm = &r[3];
-    Rows *angle_nxt = &r[4], *angle_chi = &r[5], *kp = &r[6], *turn = &r[7];
-    Rows *v2_max = &r[8], *chi_next = &r[9], *v1_out = &r[10], *v2_out = &r[11];
-    Py_ssize_t n = theta->len;
-    int turning_limit = (int)(flags & 1);
-    if (chi->len != 2 * n || nxt->len != 2 * n || norm->len != n ||
-        angle_chi->len != n || chi_next->len != 2 * n || v1_out->len != n ||
-        v2_out->len != n || (turning_limit && angle_nxt->len != n)) {
-        release(r, got);
-        PyErr_SetString(PyExc_ValueError, "flat_step: shapes differ");
-        return NULL;
-    }
-    for (Py_ssize_t i = 0; i < n; i++) {
-        flat_row(theta->data[i], chi->data + 2 * i, nxt->data + 2 * i, norm->data[i],
-                 turning_limit ? angle_nxt->data[i] : 0.0, angle_chi->data[i],
-                 kp->data[i * kp->step], turn->data[i * turn->step],
-                 v2_max->data[i * v2_max->step], dt, flags, chi_next->data + 2 * i,
-                 v1_out->data + i, v2_out->data + i);
-    }
-    release(r, got);
-    Py_RETURN_NONE;
 }
 
 PyDoc_STRVAR(controller_step_doc,
 "controller_step(pos, chi, theta, target, v_ref, a_ref, k1, k2, k3, k4, accel_max,\n"
 "                v1_max, kp, turn_max, v2_max, dt, flags, chi_next, v1, v2) -> None\n"
 "\n"
-"extension_step and flat_step of a period in one call, the angles of chi and of\n"
-"the stepped chi by the C library's atan2 (used where kernels.py checks that it\n"
-"gives numpy's arctan2): the same operations, the same numbers.");
+"The flatness controller of a period for n vehicles: ``pos, chi, target, v_ref,\n"
+"a_ref`` (n, 2) (a NaN target coordinate aims at the position's), ``theta`` (n,),\n"
+"the gains, limits and ``kp`` (n,) or (1,), ``dt`` [s], ``flags & 1`` where the\n"
+"turn rate is limited (anti-windup). Writes ``chi_next`` (n, 2), ``v1`` and ``v2``\n"
+"(n,): eq. (6)'s Euler step with its clamps, the turn limit, eq. (5) and the clip\n"
+"of v2 to ``v2_max``.");
 
 static PyObject *
 controller_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -297,37 +178,6 @@ controller_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_RETURN_NONE;
 }
 
-PyDoc_STRVAR(elementwise_doc,
-"elementwise(op, a, b, out) -> None\n"
-"\n"
-"One of this module's scalar functions over arrays, for the checks of\n"
-"sandbox/model/kernels.py: op 0 hypot, 1 sin, 2 cos, 3 wrap_angle (b unused), 4\n"
-"numpy's maximum, 5 numpy's clip with scalar bounds (-b, b), 6 with array bounds,\n"
-"7 sqrt, 8 atan2(a, b).");
-
-/* This module's scalar functions, by their number. */
-static double
-scalar(long op, double a, double b)
-{
-    switch (op) {
-        case 0: return hypot(a, b);
-        case 1: return sin(a);
-        case 2: return cos(a);
-        case 3: return wrap_angle(a);
-        case 4: return np_maximum(a, b);
-        case 5: return clip_scalars(a, -b, b);
-        case 6: return clip_rows(a, -b, b);
-        case 8: return atan2(a, b);
-        default: return sqrt(a);
-    }
-}
-
-static PyObject *
-elementwise(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    return elementwise_over(args, nargs, scalar);
-}
-
 PyDoc_STRVAR(motor_model_doc,
 "motor_model(pose, vel, rate, commands, accel, turn_accel, h, substeps, travel)\n"
 "    -> None\n"
@@ -381,16 +231,10 @@ motor_model(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 }
 
 static PyMethodDef methods[] = {
-    {"extension_step", (PyCFunction)(void (*)(void))extension_step, METH_FASTCALL,
-     extension_step_doc},
-    {"flat_step", (PyCFunction)(void (*)(void))flat_step, METH_FASTCALL,
-     flat_step_doc},
     {"controller_step", (PyCFunction)(void (*)(void))controller_step, METH_FASTCALL,
      controller_step_doc},
     {"motor_model", (PyCFunction)(void (*)(void))motor_model, METH_FASTCALL,
      motor_model_doc},
-    {"elementwise", (PyCFunction)(void (*)(void))elementwise, METH_FASTCALL,
-     elementwise_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -1,20 +1,18 @@
 /* The built-in formation laws' targets of one control period, eqs. (7)-(20), in
  * one C call.
  *
- * sandbox/model/law_kernel.py calls this where this optional extension is built and
- * its check passes. For the K worlds of a loop it does what a built-in law class of
+ * sandbox/model/law_kernel.py calls this where this optional extension is built (the
+ * compiled path ``laws`` of sandbox/accel.py). For the K worlds of a loop it does what a built-in law class of
  * sandbox/model/laws.py does with numpy (fixed, rotating, virtual, leader_ref,
  * own_estimate; the offsets turned by the reference's tangent with ``rotate``), and
  * what the loop then does with the law's arrays (sandbox/loop/simulation.py,
  * ``_targets``): the rows that track the reference take the reference's point and
  * derivatives, the commanded rows a NaN slot. The law's backward differences of
- * eqs. (8)-(9) and (18)-(19) advance in place, in the arrays the caller owns. The
- * same IEEE-754 double operations in numpy's order (compiled without fused
- * multiply-adds), and the C library's sin, cos, hypot and atan2, which
- * sandbox/model/kernels.py checks give numpy's numbers before this is used.
+ * eqs. (8)-(9) and (18)-(19) advance in place, in the arrays the caller owns. The C
+ * library's sin, cos, hypot and atan2.
  */
 
-#include "numpy_rules.h"
+#include "accel.h"
 
 /* sandbox.model.laws.REST_SPEED: below it the tangent of eq. (15) is kept [m/s]. */
 #define REST_SPEED 1e-3

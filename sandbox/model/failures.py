@@ -28,10 +28,13 @@ When a failure clears (``until``), the vehicle resumes its law from where it is.
 
 from __future__ import annotations
 
+from bisect import bisect_right
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from sandbox.errors import PluginRunError
 from sandbox.plugins.registration import (
     FailureContext,
     Param,
@@ -140,29 +143,176 @@ def within_drives(v1: np.ndarray, last_v1: np.ndarray, step: np.ndarray) -> np.n
     return np.where(high < v1, high, v1)
 
 
-class FailureSchedule:
-    """The failures of a scenario, resolved to vehicle indices and kinds.
+#: From this many active failures on, the built-in kinds are applied at once.
+RULED_FROM = 4
 
-    The loop applies the schedules of all its worlds at once
-    (:class:`~sandbox.loop.worlds.StackedFailures`).
+
+class Failures:
+    """The failures of K worlds of ``n`` vehicles, a row per failure (world by world).
+
+    Each world's failures are resolved to its vehicles' stacked rows (``w n + i``)
+    and kinds. The built-in kinds of every world are applied at once by their
+    elementwise rules (:func:`ruled_commands`, from :data:`RULED_FROM` active
+    failures on), a plug-in kind's function failure after failure (and all of them
+    when one vehicle has two at once): the onsets, commands and acceleration limit
+    of each world alone.
 
     Parameters
     ----------
-    specs : sequence of FailureSpec
-    names : list of str
-        Vehicle names, in fleet order.
+    worlds : sequence of (sequence of FailureSpec, list of str)
+        Each world's failures and its vehicle names, in fleet order.
+    n : int
+        Vehicles per world.
     """
 
-    def __init__(self, specs: tuple[FailureSpec, ...], names: list[str]) -> None:
-        index = {name: i for i, name in enumerate(names)}
-        self.specs = specs
-        self.vehicle = np.array([index[s.vehicle] for s in specs], dtype=np.intp)
+    def __init__(
+        self, worlds: Sequence[tuple[Sequence[FailureSpec], list[str]]], n: int
+    ) -> None:
+        world, vehicle, local, kinds, specs = [], [], [], [], []
+        for w, (failures, names) in enumerate(worlds):
+            index = {name: i for i, name in enumerate(names)}
+            for spec in failures:
+                world.append(w)
+                local.append(index[spec.vehicle])
+                vehicle.append(w * n + index[spec.vehicle])
+                kinds.append(get("failure", spec.kind))
+                specs.append(spec)
+        self.world = np.array(world, dtype=np.intp)
+        self.vehicle = np.array(vehicle, dtype=np.intp)
+        self.local = np.array(local, dtype=np.intp)
+        self.kinds, self.specs = kinds, specs
+        #: The failure functions as the loop calls them (a user's code guarded).
+        self.funcs = [runnable(kind) for kind in kinds]
         self.start = np.array([s.at for s in specs], dtype=float)
         self.end = np.array(
             [s.until if s.until is not None else np.inf for s in specs], dtype=float
         )
-        self.kinds = [get("failure", s.kind) for s in specs]
-        #: The failure functions as the loop calls them (a user's code guarded).
-        self.funcs = [runnable(kind) for kind in self.kinds]
-        self.names = list(names)
-        self.n = len(names)
+        self.started = np.zeros(len(specs), dtype=bool)
+        self.v2_onset = np.zeros(len(specs))
+        self.params = [dict(s.params) for s in specs]
+        self.controlled = np.array(
+            [k.options["controlled_speed"] for k in kinds], dtype=bool
+        )
+        self.immovable = np.array([k.options["immovable"] for k in kinds], dtype=bool)
+        self.N = len(worlds) * n
+        # The built-in kinds' elementwise rules (rule 0: the function is called).
+        rules = [rule_of(f, p) for f, p in zip(self.funcs, self.params, strict=True)]
+        self.rule = np.array([r[0] for r in rules], dtype=np.intp)
+        self.v1_param = np.array([r[1] for r in rules], dtype=float)
+        self.v2_param = np.array([r[2] for r in rules], dtype=float)
+        # One failure a vehicle at most: every set of active failures is one a vehicle.
+        self._one_each = len(np.unique(self.vehicle)) == len(self.vehicle)
+        # The onsets and ends in order: between two of them the schedule is the same.
+        self._bounds = sorted({*self.start.tolist(), *self.end.tolist()})
+        self._on_at = -1
+        self._on = np.zeros(len(specs), dtype=bool)
+        self._waiting = len(specs)  # failures not started yet
+        #: No vehicle of any world (read-only: the flags of a period without failures).
+        self._none = np.zeros(self.N, dtype=bool)
+        self._none.flags.writeable = False
+
+    def __len__(self) -> int:
+        return len(self.specs)
+
+    def active(self, t: float, live: np.ndarray) -> np.ndarray:
+        """Active failures of the live worlds at ``t`` [s] (one flag per failure)."""
+        u = t + 1e-12
+        at = bisect_right(self._bounds, u)  # the same flags between two bounds
+        if at != self._on_at:
+            self._on = (self.start <= u) & (u < self.end)
+            self._on_at = at
+        return self._on & live[self.world]
+
+    def active_vehicles(self, t: float, live: np.ndarray) -> np.ndarray:
+        """Rows with an active failure at ``t`` [s], shape (N,) bool."""
+        out = np.zeros(self.N, dtype=bool)
+        out[self.vehicle[self.active(t, live)]] = True
+        return out
+
+    def start_new(self, t: float, live: np.ndarray, last_v2: np.ndarray) -> np.ndarray:
+        """The failures that start at ``t`` (each reported once), their onset noted."""
+        if not self._waiting:
+            return np.zeros(0, dtype=np.intp)
+        new = (self.active(t, live) & ~self.started).nonzero()[0]
+        self._waiting -= len(new)
+        self.started[new] = True
+        self.v2_onset[new] = last_v2[self.vehicle[new]]
+        return new
+
+    def apply(
+        self,
+        t: float,
+        live: np.ndarray,
+        v1: np.ndarray,
+        v2: np.ndarray,
+        last_v1: np.ndarray,
+        accel_step: float | np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]:
+        """Every world's active failures applied: commands, failed and frozen rows.
+
+        Also the ``(world, PluginRunError)`` of each world whose failure plug-in
+        raised (that world's other failures are skipped; the caller ends it).
+        """
+        N = self.N
+        errors: list[tuple[int, PluginRunError]] = []
+        if not len(self.specs):  # no vehicle ever fails: shared read-only flags
+            return v1, v2, self._none, self._none, errors
+        failed = np.zeros(N, dtype=bool)
+        frozen = np.zeros(N, dtype=bool)
+        v1, v2 = v1.copy(), v2.copy()
+        broken: set[int] = set()
+        active = self.active(t, live).nonzero()[0]
+        rows = self.vehicle[active]
+        # Built-in kinds only, one a vehicle, enough of them to pay the numpy calls:
+        # at once; else one after the other (the same numbers either way).
+        if (
+            len(active) >= RULED_FROM
+            and self.rule[active].all()
+            and (self._one_each or len(np.unique(rows)) == len(rows))
+        ):
+            self._apply_rules(active, v1, v2, last_v1, accel_step, failed, frozen)
+            return v1, v2, failed, frozen, errors
+        for k in active:
+            w = int(self.world[k])
+            if w in broken:
+                continue
+            i, spec = self.vehicle[k], self.specs[k]
+            ctx = FailureContext(
+                t=t,
+                since=t - spec.at,
+                vehicle=spec.vehicle,
+                index=int(self.local[k]),
+                v1=float(v1[i]),
+                v2=float(v2[i]),
+                v2_onset=float(self.v2_onset[k]),
+                params=dict(self.params[k]),
+            )
+            try:
+                v1[i], v2[i] = self.funcs[k](ctx)
+            except PluginRunError as exc:
+                broken.add(w)
+                errors.append((w, exc))
+                continue
+            if not self.immovable[k]:  # within the drive's max_accel, as alone
+                step = float(accel_step if np.ndim(accel_step) == 0 else accel_step[i])
+                v1[i] = within_drive(float(v1[i]), float(last_v1[i]), step)
+            failed[i] = True
+            frozen[i] |= not self.controlled[k]
+        return v1, v2, failed, frozen, errors
+
+    def _apply_rules(self, ruled, v1, v2, last_v1, accel_step, failed, frozen) -> None:
+        """The built-in failures ``ruled`` at once, each on its own vehicle."""
+        i = self.vehicle[ruled]
+        out_v1, out_v2 = ruled_commands(
+            self.rule[ruled],
+            self.v1_param[ruled],
+            self.v2_param[ruled],
+            v1[i],
+            self.v2_onset[ruled],
+        )
+        step = np.broadcast_to(accel_step, (self.N,))[i]
+        movable = ~self.immovable[ruled]  # within the drive's max_accel, as alone
+        v1[i] = np.where(movable, within_drives(out_v1, last_v1[i], step), out_v1)
+        v2[i] = out_v2
+        failed[i] = True
+        frozen[i] |= ~self.controlled[ruled]

@@ -10,132 +10,25 @@ and the clip of ``v2`` to ``v2_max``. Those numpy functions are the definition; 
 50 numpy calls a period, whose fixed cost (half a microsecond each) is most of a small
 fleet's controller.
 
-Where the optional extension ``sandbox.model._kernels`` (``_kernels.c``) is built, the
-same composition runs as one C loop over the vehicles where the C library's ``atan2``
-gives numpy's ``arctan2`` (:func:`atan2_agrees`, checked once), else as two, between
-which numpy computes the two arctangents. The C loops do the operations of the numpy
-functions in their order, with numpy's rules for its maximum and clip on ties and NaN
-and for its floating remainder, so the numbers are numpy's to the bit. They also take
-``sqrt``, ``hypot``, ``sin`` and ``cos`` from the C library: at the first use,
-:func:`kernels_agree` compares them, and every rule above, with numpy on a few thousand
-arguments (special values included), and the C loops are used only if every result has
-the same bits (``tests/test_kernels.py`` compares whole controller steps).
-:data:`USE_KERNELS` False forces the numpy path.
+Where the compiled path ``controller`` is on (:mod:`sandbox.accel`; ``_kernels.c``),
+the same composition runs as one C loop over the vehicles, with the C library's
+``atan2``, ``hypot``, ``sin`` and ``cos``: within rtol 1e-12 of the numpy functions
+(``tests/test_compiled_paths.py``), which stay the reference
+(:meth:`Controller.step_numpy`) and run where the path is off.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from sandbox.model.dynamics import CLIP, wrap_angle
+from sandbox import accel
+from sandbox.model.dynamics import CLIP
 from sandbox.model.flatness import (
     Gains,
     advance_extension,
     extension_rate,
     flat_inputs,
 )
-
-try:
-    from sandbox.model import _kernels
-except ImportError:  # pragma: no cover - built without a C compiler
-    _kernels = None
-
-#: Use the C loops where they are built and agree with numpy (False: numpy only).
-USE_KERNELS = True
-_agreed: bool | None = None
-_atan2_agreed: bool | None = None
-
-
-def kernels_agree() -> bool:
-    """Whether the C loops' functions give numpy's bits here (checked once)."""
-    global _agreed
-    if _agreed is None:
-        _agreed = _kernels is not None and _check()
-    return _agreed
-
-
-def _samples() -> tuple[np.ndarray, np.ndarray]:
-    """Arguments of the check: random magnitudes, angles and special values."""
-    rng = np.random.default_rng(20261205)
-    special = np.array(
-        [0.0, -0.0, np.nan, -np.nan, np.inf, -np.inf, np.pi, -np.pi, 2 * np.pi]
-        + [np.nextafter(-np.pi, -np.inf), np.nextafter(np.pi, np.inf), 1e-300, 5e-324]
-    )
-    a = np.concatenate(
-        (
-            rng.uniform(-10.0, 10.0, 2048),
-            rng.uniform(-1e3, 1e3, 512),
-            rng.normal(0.0, 1e-3, 512),
-            np.repeat(special, len(special)),
-        )
-    )
-    b = np.concatenate(
-        (
-            rng.uniform(-10.0, 10.0, 2048),
-            rng.uniform(0.0, 5.0, 512),
-            rng.normal(0.0, 1e-3, 512),
-            np.tile(special, len(special)),
-        )
-    )
-    return a, b
-
-
-def _same(x: np.ndarray, y: np.ndarray) -> bool:
-    return bool(np.array_equal(x.view(np.uint64), y.view(np.uint64)))
-
-
-def _check() -> bool:
-    with np.errstate(all="ignore"):
-        return _agrees(*_samples())
-
-
-def _agrees(a: np.ndarray, b: np.ndarray) -> bool:
-    bound = np.abs(b)
-    expected = {
-        0: np.hypot(a, b),
-        1: np.sin(a),
-        2: np.cos(a),
-        3: wrap_angle(a),
-        4: np.maximum(a, b),
-        6: CLIP(a, -bound, bound),
-        7: np.sqrt(np.abs(a)),
-    }
-    for op, want in expected.items():
-        got = np.empty_like(a)
-        first = np.abs(a) if op == 7 else a
-        second = bound if op == 6 else b
-        _kernels.elementwise(op, first, second, got)
-        if not _same(got, want):
-            return False
-    for hi in (0.0, 0.5, 3.0, np.inf):  # the clip with scalar bounds
-        got = np.empty_like(a)
-        _kernels.elementwise(5, a, np.full_like(a, hi), got)
-        if not _same(got, CLIP(a, -hi, hi)):
-            return False
-    return True
-
-
-def atan2_agrees() -> bool:
-    """Whether the C library's atan2 gives numpy's arctan2 here (checked once).
-
-    Where it does, the controller's period is one C call (``controller_step``,
-    the angles of chi computed inside); else two, numpy's arctan2 between them.
-    """
-    global _atan2_agreed
-    if _atan2_agreed is None:
-        _atan2_agreed = kernels_agree() and _atan2_check()
-    return _atan2_agreed
-
-
-def _atan2_check() -> bool:
-    a, b = _samples()
-    got = np.empty_like(a)
-    with np.errstate(all="ignore"):
-        _kernels.elementwise(8, a, b, got)
-        if not _same(got, np.arctan2(a, b)):
-            return False
-        _kernels.elementwise(8, b, a, got)  # the arguments' roles swapped
-        return _same(got, np.arctan2(b, a))
 
 
 def _rows(value: float | np.ndarray) -> np.ndarray:
@@ -185,11 +78,8 @@ class Controller:
         self._accel, self._v1 = _rows(accel_max), _rows(v1_max)
         self._v2 = _rows(v2_max)
         self._turn = _rows(np.inf if turn_max is None else turn_max)
-        self._flags = (
-            (0 if turn_max is None else 1)
-            | (2 if np.ndim(turn_max) == 0 else 0)
-            | (4 if np.ndim(v2_max) == 0 else 0)
-        )
+        self._flags = 0 if turn_max is None else 1  # the turn-rate limit
+        self._c = accel.module("controller")
 
     def step(
         self,
@@ -217,12 +107,12 @@ class Controller:
         v2 : ndarray (n,) [rad/s]
             Within ``v2_max``.
         """
-        if USE_KERNELS and kernels_agree():
+        if self._c is not None:
             return self._step_c(pos, chi, theta, target, v_ref, a_ref)
         return self.step_numpy(pos, chi, theta, target, v_ref, a_ref)
 
     def step_numpy(self, pos, chi, theta, target, v_ref, a_ref):
-        """:meth:`step` by the numpy functions (the definition)."""
+        """:meth:`step` by the numpy functions (the reference)."""
         if np.count_nonzero(np.isnan(target)):
             aim = np.where(np.isnan(target), pos, target)
         else:
@@ -254,28 +144,14 @@ class Controller:
             return self._step_arrays(*map(c_float64, arrays))
 
     def _step_arrays(self, pos, chi, theta, target, v_ref, a_ref):
-        """The C calls on C-contiguous float64 arrays (else an error, no write)."""
+        """The C call on C-contiguous float64 arrays (else an error, no write)."""
         n = len(theta)
         k1, k2, k3, k4 = self._k
-        if atan2_agrees():  # the period in one call
-            chi_next, v1, v2 = np.empty((n, 2)), np.empty(n), np.empty(n)
-            _kernels.controller_step(
-                pos, chi, theta, target, v_ref, a_ref, k1, k2, k3, k4, self._accel,
-                self._v1, self._kp, self._turn, self._v2, self.dt, self._flags,
-                chi_next, v1, v2,
-            )  # fmt: skip
-            return chi_next, v1, v2
-        nxt, norm = np.empty((n, 2)), np.empty(n)
-        _kernels.extension_step(
-            pos, chi, target, v_ref, a_ref, k1, k2, k3, k4, self._accel, self._v1,
-            self.dt, nxt, norm,
-        )  # fmt: skip
-        angle_chi = np.arctan2(chi[:, 1], chi[:, 0])
-        angle_nxt = norm if self.turn_max is None else np.arctan2(nxt[:, 1], nxt[:, 0])
         chi_next, v1, v2 = np.empty((n, 2)), np.empty(n), np.empty(n)
-        _kernels.flat_step(
-            theta, chi, nxt, norm, angle_nxt, angle_chi, self._kp, self._turn,
-            self._v2, self.dt, self._flags, chi_next, v1, v2,
+        self._c.controller_step(
+            pos, chi, theta, target, v_ref, a_ref, k1, k2, k3, k4, self._accel,
+            self._v1, self._kp, self._turn, self._v2, self.dt, self._flags,
+            chi_next, v1, v2,
         )  # fmt: skip
         return chi_next, v1, v2
 
@@ -286,7 +162,7 @@ def motor_model(
     rate: np.ndarray,
     travel: np.ndarray,
     commands: np.ndarray,
-    accel: np.ndarray,
+    motor_accel: np.ndarray,
     turn_accel: np.ndarray,
     h: float,
     substeps: int,
@@ -295,10 +171,11 @@ def motor_model(
 
     ``pose`` (n, 3) and ``travel`` (n,) advance in place; returns the new ``vel``
     (n, 2) and ``rate`` (n,) (new arrays, as the numpy model makes). None where the
-    C loop cannot run (not built, the check failed, :data:`USE_KERNELS` False, or an
-    array that is not C-contiguous float64): the caller runs the numpy model.
+    C loop cannot run (the compiled path ``controller`` off, or an array that is not
+    C-contiguous float64): the caller runs the numpy model.
     """
-    if not (USE_KERNELS and kernels_agree()):
+    c = accel.module("controller")
+    if c is None:
         return None
     n = len(pose)
     if not all(
@@ -307,13 +184,13 @@ def motor_model(
     ) or not (
         pose.shape == (n, 3)
         and np.shape(vel) == np.shape(commands) == (n, 2)
-        and np.shape(rate) == np.shape(travel) == np.shape(accel) == (n,)
+        and np.shape(rate) == np.shape(travel) == np.shape(motor_accel) == (n,)
         and np.shape(turn_accel) == (n,)
     ):
         return None
     vel, rate = np.array(vel, dtype=float), np.array(rate, dtype=float)
-    _kernels.motor_model(
-        pose, vel, rate, c_float64(commands), c_float64(accel),
+    c.motor_model(
+        pose, vel, rate, c_float64(commands), c_float64(motor_accel),
         c_float64(turn_accel), float(h), int(substeps), travel,
     )  # fmt: skip
     return vel, rate

@@ -5,19 +5,13 @@ and ``x_ref''`` in about ten numpy calls (the rotating law with its leader's bac
 differences, about fifteen), and the loop then gives the rows that track the
 reference the reference's own point and derivatives and the commanded rows a NaN
 slot (:func:`overwrite_rows`): for a small fleet the fixed cost of those calls (half
-a microsecond each) is most of the period's law. Where the optional extension
-``sandbox.model._laws`` (``_laws.c``) is built, :class:`LawKernel` does the same for
-K worlds in one C call: the law's numbers row by row in numpy's order, the backward
-differences of eqs. (8)-(9) and (18)-(19) advanced in place in the law's own
-estimator, and the tangent angle of eq. (15) returned to the law, so the law object
-holds the state the numpy path leaves in it.
-
-The C loop takes ``sin``, ``cos``, ``hypot`` and ``atan2`` from the C library: it is
-used only where :func:`~sandbox.model.kernels.kernels_agree` and
-:func:`~sandbox.model.kernels.atan2_agrees` found them to be numpy's, and where
-:func:`kernel_agrees` (checked once) finds the C call and the numpy law to give the
-same bits on a few hundred periods of random fleets of every law (tests in
-``tests/test_plan_kernel.py``). :data:`USE_KERNEL` False forces the numpy path.
+a microsecond each) is most of the period's law. Where the compiled path ``laws`` is
+on (:mod:`sandbox.accel`; ``_laws.c``), :class:`LawKernel` does the same for K worlds
+in one C call: the law's numbers row by row, the backward differences of eqs.
+(8)-(9) and (18)-(19) advanced in place in the law's own estimator, and the tangent
+angle of eq. (15) returned to the law, so the law object holds the state the numpy
+path leaves in it. The law classes stay the reference; the two agree within rtol
+1e-12 (``tests/test_compiled_paths.py``).
 """
 
 from __future__ import annotations
@@ -26,24 +20,16 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.model.kernels import atan2_agrees, c_float64, kernels_agree
+from sandbox import accel
 from sandbox.model.laws import (
     BackwardDifference,
     FixedFormation,
-    LawInputs,
     LeaderReferenceFormation,
     OwnEstimateFormation,
     RotatingFormation,
     VirtualLeaderFormation,
 )
 
-try:
-    from sandbox.model import _laws
-except ImportError:  # pragma: no cover - built without a C compiler
-    _laws = None
-
-#: Use the C loop where it is built and agrees with numpy (False: numpy only).
-USE_KERNEL = True
 #: The law classes the C loop computes, by the number it knows them by.
 KINDS: dict[type, int] = {
     FixedFormation: 0,
@@ -54,22 +40,8 @@ KINDS: dict[type, int] = {
 }
 #: The estimator of each law class with one (eqs. (8)-(9) or (18)-(19)).
 _MOTION = {0: "leader_motion", 1: "leader_motion", 4: "slot_motion"}
-_agreed: bool | None = None
 #: The C call's outputs made by the call itself (numpy's C API).
 _NEW = (None, None, None)
-
-
-def usable() -> bool:
-    """Whether :class:`LawKernel` may run (built, agreeing, not switched off)."""
-    return USE_KERNEL and kernel_agrees()
-
-
-def kernel_agrees() -> bool:
-    """Whether the C loop gives the numpy laws' bits here (checked once)."""
-    global _agreed
-    if _agreed is None:
-        _agreed = _laws is not None and kernels_agree() and atan2_agrees() and _check()
-    return _agreed
 
 
 def overwrite_rows(
@@ -109,8 +81,9 @@ class LawKernel:
         The leader's row in each world (negative: none, for ``virtual`` only).
     """
 
-    def __init__(self, law: Any, leader: int) -> None:
+    def __init__(self, law: Any, leader: int, c: Any) -> None:
         self.law = law
+        self._c = c
         self.kind = KINDS[type(law)]
         self.leader = max(int(leader), 0)
         self.turns = bool(law.rotate) and self.kind in (2, 3)
@@ -122,10 +95,11 @@ class LawKernel:
 
     @classmethod
     def make(cls, law: Any, leader: int) -> LawKernel | None:
-        """The kernel of ``law``; None where the C loop cannot run or not cover it."""
-        if not (covers(law, leader) and usable()):
+        """The kernel of ``law``; None where the path is off or does not cover it."""
+        c = accel.module("laws")
+        if c is None or not covers(law, leader):
             return None
-        return cls(law, leader)
+        return cls(law, leader, c)
 
     def targets(
         self,
@@ -171,10 +145,11 @@ class LawKernel:
                 self._adopt(motion)
             prev_x, prev_v = self._prev
         p, dp, ddp = (None, None, None) if table is None else table
-        slot, v_ref, a_ref, tangent = _laws.law_targets(
+        c = self._c
+        slot, v_ref, a_ref, tangent = c.law_targets(
             self.kind, law.delta, self.n, pose, theta, self.leader, p, dp, ddp, row,
             self.turns, law._tangent, law.h, count, prev_x, prev_v, track, commanded,
-            *(_NEW if _laws.ALLOCATES else _empty(len(pose))),
+            *(_NEW if c.ALLOCATES else _empty(len(pose))),
         )  # fmt: skip
         if motion is not None:
             motion.count = count + 1
@@ -226,110 +201,3 @@ def covers(law: Any, leader: int) -> bool:
         return False
     motion = getattr(law, _MOTION.get(kind, ""), None)
     return kind not in _MOTION or type(motion) is BackwardDifference
-
-
-def numpy_targets(
-    law: Any,
-    pose: np.ndarray,
-    theta: np.ndarray | None,
-    leader: int,
-    ref: tuple | None,
-    track: np.ndarray,
-    commanded: np.ndarray,
-) -> list[np.ndarray]:
-    """What :meth:`LawKernel.targets` computes, by the law's own numpy (the check's).
-
-    The leader's pose as the loop gathers it (``stacked_law_inputs``), the law's
-    ``targets``, its arrays as rows, then :func:`overwrite_rows`.
-    """
-    K, n = law.delta.shape[:2]
-    N = K * n
-    if theta is None:
-        pos, theta = pose[:, :2], pose[:, 2]
-    else:
-        pos = pose
-    if leader < 0:
-        lead_pos = lead_theta = None
-    else:
-        lead_pos = np.ascontiguousarray(pos.reshape(K, n, 2)[:, leader : leader + 1])
-        lead_theta = np.ascontiguousarray(theta.reshape(K, n)[:, leader : leader + 1])
-    triple = [
-        a.reshape(N, 2) for a in law.targets(LawInputs(lead_pos, lead_theta, ref))
-    ]
-    return overwrite_rows(triple, ref, track, commanded)
-
-
-def _check() -> bool:
-    """Both paths on random fleets of every law, period after period, bit for bit."""
-    from sandbox.plugins.registration import make_law
-
-    names = ("fixed", "rotating", "virtual", "leader_ref", "own_estimate")
-    rng = np.random.default_rng(20261207)
-    for trial in range(60):
-        name = names[trial % 5]
-        K, n = int(rng.integers(1, 4)), int(rng.integers(1, 6))
-        delta = rng.uniform(-3.0, 3.0, (K, n, 2))
-        rotate = name in ("virtual", "leader_ref") and bool(trial % 2)
-        params = {"rotate": rotate} if rotate else {}
-        laws = [make_law(name, params, delta, 0.01) for _ in range(2)]
-        leader = int(rng.integers(0, n))
-        if trial % 7 == 0 and name == "virtual":
-            leader = -1  # the virtual leader's law reads no leader
-        if not covers(laws[0], leader):
-            return False
-        kernel = LawKernel(laws[0], leader)
-        if not _agree_periods(kernel, laws[1], rng, K, n, leader, trial):
-            return False
-    return True
-
-
-def _agree_periods(kernel, law, rng, K, n, leader, trial) -> bool:
-    """Ten periods of one law by both paths: the arrays and the law's state."""
-    N = K * n
-    T = 12
-    table = tuple(c_float64(rng.normal(0.0, 1.0, (T, 2))) for _ in range(3))
-    table[1][3:6] = 0.0  # a reference at rest: the tangent is kept
-    table[1][8] = (1e-3, 0.0)  # at REST_SPEED exactly: a new tangent
-    if trial % 3 == 0:
-        table[1][0] = np.nan
-    track = np.flatnonzero(rng.random(N) < 0.3)
-    commanded = np.flatnonzero(rng.random(N) < 0.2)
-    with_ref = kernel.kind in (2, 3) or trial % 4
-    for k in range(T):
-        pose = rng.normal(0.0, 2.0, (N, 3))
-        if k == 5 and trial % 5 == 0:
-            pose[:, 0] = np.nan
-        theta = None if trial % 2 else c_float64(pose[:, 2])
-        given = pose if theta is None else c_float64(pose[:, :2])
-        ref = (table[0][k], table[1][k], table[2][k]) if with_ref else None
-        got = kernel.targets(
-            given, theta, table if with_ref else None, k, track, commanded
-        )
-        want = numpy_targets(law, given, theta, leader, ref, track, commanded)
-        if not all(_same(a, b) for a, b in zip(got, want, strict=True)):
-            return False
-        if not _same_state(kernel.law, law):
-            return False
-    return True
-
-
-def _same_state(a: Any, b: Any) -> bool:
-    """Whether two laws hold the same tangent and estimator history, bit for bit."""
-    if not _same(np.float64(a._tangent), np.float64(b._tangent)):
-        return False
-    for name in ("leader_motion", "slot_motion"):
-        ma, mb = getattr(a, name, None), getattr(b, name, None)
-        if ma is None:
-            continue
-        if ma.count != mb.count or not (
-            _same(ma.prev_x, mb.prev_x) and _same(ma.prev_v, mb.prev_v)
-        ):
-            return False
-    return True
-
-
-def _same(x: Any, y: Any) -> bool:
-    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    return x.shape == y.shape and bool(
-        np.array_equal(x.view(np.uint64), y.view(np.uint64))
-    )

@@ -99,6 +99,76 @@ class BackwardDifference:
         self.prev_x = self.prev_v = None
 
 
+class BatchDifference(BackwardDifference):
+    """A :class:`BackwardDifference` of K worlds' signals, a history per world.
+
+    The signal has a leading world axis; world ``w``'s estimates are the numbers a
+    :class:`BackwardDifference` of that world alone gives, its history forgotten by
+    :meth:`reset` or replaced by :meth:`restart` without the others'.
+
+    Parameters
+    ----------
+    h : float [s]
+        Control period.
+    K : int
+        The number of worlds.
+
+    Examples
+    --------
+    >>> d = BatchDifference(0.5, 2)
+    >>> _ = d.update(np.array([[0.0], [0.0]]))
+    >>> d.reset(1)
+    >>> d.update(np.array([[1.0], [1.0]]))[0].tolist()  # world 1 starts again
+    [[2.0], [0.0]]
+    """
+
+    def __init__(self, h: float, K: int) -> None:
+        super().__init__(h)
+        self.count = np.zeros(K, dtype=np.int64)
+
+    @classmethod
+    def taking_over(cls, shared: BackwardDifference, K: int) -> BatchDifference:
+        """The estimator of K worlds that shared ``shared``'s history so far."""
+        made = cls(shared.h, K)
+        made.count[:] = shared.count
+        made.prev_x, made.prev_v = shared.prev_x, shared.prev_v
+        return made
+
+    def update(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Feed every world's value at the current step; return ``(x', x'')``."""
+        x = np.array(x, dtype=float)
+        if self.prev_x is None:  # no world has a history yet
+            v, a = np.zeros_like(x), np.zeros_like(x)
+        else:
+            count = self.count.reshape((-1,) + (1,) * (x.ndim - 1))
+            v = np.where(count >= 1, (x - self.prev_x) / self.h, 0.0)  # eq. (8)
+            a = np.where(count >= 2, (v - self.prev_v) / self.h, 0.0)  # eq. (9)
+        self.prev_x, self.prev_v = x, v
+        self.count += 1
+        return v, a
+
+    def reset(self, w: int | None = None) -> None:
+        """Forget world ``w``'s history (None: every world's)."""
+        if w is None:
+            self.count[:] = 0
+        else:
+            self.count[w] = 0
+
+    def restart(self, w: int, alone: BackwardDifference) -> None:
+        """Give world ``w`` the history of ``alone``, its estimator in a run alone.
+
+        The arrays are replaced, not written into: the estimates handed out this
+        period may view them.
+        """
+        self.count[w] = alone.count
+        if alone.prev_x is None or self.prev_x is None:
+            return
+        for name in ("prev_x", "prev_v"):
+            mine = np.array(getattr(self, name), dtype=float)
+            mine[w] = getattr(alone, name)
+            setattr(self, name, mine)
+
+
 @dataclass
 class LawInputs:
     """What a formation law may read at one control step.

@@ -1,15 +1,13 @@
 /* The tracking motors' force limits of a period (motor_limits) in one C call.
  *
- * sandbox/physics/world.py calls this where this optional extension is built and its
- * check passes: for every vehicle, the force that takes its body from the velocity
+ * sandbox/physics/world.py calls this where this optional extension is built (the
+ * compiled path ``motors`` of sandbox/accel.py): for every vehicle, the force that takes its body from the velocity
  * read to the commanded one within one substep (with the headroom; zero in contact),
  * bounded below by the least force, and whether its joints must change (the limit
- * grows, or can shrink by half). The same IEEE-754 double operations as the numpy
- * function, in its order (compiled without fused multiply-adds), numpy's maximum on
- * ties and NaN, and the C library's hypot, which the check compares with numpy's.
+ * grows, or can shrink by half), with the C library's hypot.
  */
 
-#include "numpy_rules.h"
+#include "accel.h"
 
 /* A bool array (numpy's, one byte an element) and its length. */
 static int
@@ -89,8 +87,8 @@ motor_limits(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         double d2 = cmd[3 * i + 2] - meas[3 * i + 2];
         double linear = (free_[i] ? hypot(d0, d1) : 0.0) / substep;
         double angular = (free_[i] ? fabs(d2) : 0.0) / substep;
-        double fi = np_maximum(least_f[i], headroom * mass[i] * linear);
-        double ti = np_maximum(least_t[i], headroom * moment[i] * angular);
+        double fi = larger(least_f[i], headroom * mass[i] * linear);
+        double ti = larger(least_t[i], headroom * moment[i] * angular);
         int grow = (fi > cur_f[i]) || (ti > cur_t[i]);
         int shrink = (fi < 0.5 * cur_f[i]) || (ti < 0.5 * cur_t[i]);
         force[i] = fi;

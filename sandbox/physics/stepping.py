@@ -18,18 +18,16 @@ batch's stacked arrays in place:
   only worlds with open contact episodes (:meth:`World._update_episodes`) are visited
   in Python.
 
-When the optional C extension ``sandbox.physics._cstep`` is built (``setup.py``
-compiles it at install where a C compiler is found; an editable install puts it next
-to ``_cstep.c``) and no world has an open contact episode, a whole period is one C
-call: the commands written, each substep's clock written and every live world
-stepped, the state read, through the addresses of pymunk's own ``cpSpaceStep``,
-``cpSpaceEachBody`` and batched iterators (``ffi.addressof``; nothing is linked
-against Chipmunk). The clock is a numpy array of two doubles that the worlds' ``begin``
-callbacks read and that the C loop writes; a callback that opens a contact episode
-raises its second value, and the C loop then returns after that substep, so that
-the episodes are updated and the period finished by the Python path: the same calls,
-in the same order, with the same arguments. Without the extension, or with
-:attr:`WorldStepper.one_call` False, every period takes the Python path.
+Where the compiled path ``stepping`` is on (:mod:`sandbox.accel`; ``_cstep.c``) and
+no world has an open contact episode, a whole period is one C call: the commands
+written, each substep's clock written and every live world stepped, the state read,
+through the addresses of pymunk's own ``cpSpaceStep``, ``cpSpaceEachBody`` and
+batched iterators (``ffi.addressof``; nothing is linked against Chipmunk). The clock
+is a numpy array of two doubles that the worlds' ``begin`` callbacks read and that
+the C loop writes; a callback that opens a contact episode raises its second value,
+and the C loop then returns after that substep, so that the episodes are updated
+and the period finished by the Python path: the same calls, in the same order, with
+the same arguments. Where the path is off, every period takes the Python path.
 
 Worlds are independent (each its own Space; a callback touches only its own world), so
 stepping substep by substep across the worlds, rather than world by world, computes
@@ -46,12 +44,8 @@ from typing import Any
 
 import numpy as np
 
+from sandbox import accel
 from sandbox.physics.world import World
-
-try:
-    from sandbox.physics import _cstep
-except ImportError:  # not compiled: the Python path steps every period
-    _cstep = None
 
 #: Fields of one body in the bulk read: x1, x2, x3, v_x1, v_x2, omega.
 FIELDS = 6
@@ -136,9 +130,10 @@ class WorldStepper:
         self._write_num = np.frombuffer(ffi.buffer(self._write_arrays), np.int32)[::4]
         self._keep = (commands, self._read)  # the memory the records point into
         self._one_call = None
-        if _cstep is not None and self.one_call:
+        cstep = accel.module("stepping")
+        if cstep is not None:
             address = self._address
-            self._one_call = _cstep.advance
+            self._one_call = cstep.advance
             self._functions = tuple(
                 address(ffi.addressof(lib, name))
                 for name in (
@@ -149,11 +144,6 @@ class WorldStepper:
                 )
             )
         self.live(list(range(K)))
-
-    #: Step a period in one C call where :mod:`sandbox.physics._cstep` is built and no
-    #: world has an open contact episode (False: always the Python path; the same
-    #: numbers). Read when a stepper is built.
-    one_call = True
 
     def _address(self, pointer: Any) -> int:
         """The address a cffi pointer holds, as an int."""

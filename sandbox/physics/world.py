@@ -8,8 +8,8 @@ velocity, and a ``PivotJoint`` and a ``GearJoint`` with ``max_bias = 0`` and fin
 vehicles really collide, stop at walls and can be shoved. Control bodies live in a
 second, never-stepped Space so that the bulk reads and writes of ``pymunk.batch``
 cover exactly the vehicles. The motors' force limits of each period are sized by
-:func:`motor_limits`, in C where the optional extension ``sandbox.physics._motors``
-is built (the same numbers).
+:func:`motor_limits`, in C where the compiled path ``motors`` is on
+(:mod:`sandbox.accel`).
 
 Collisions are counted as contact *episodes* (:class:`ContactEpisodes`): a pair's
 ``begin`` callback opens one, and it closes only once ``separate`` has fired and the
@@ -28,6 +28,7 @@ import numpy as np
 import pymunk
 import pymunk.batch
 
+from sandbox import accel
 from sandbox.run.record import CollisionEvent
 from sandbox.scenario import ObstacleSpec, VehicleSpec
 
@@ -226,13 +227,14 @@ def motor_limits(
         Their new limits (read at ``rows``).
     """
     m = motors
-    if USE_MOTOR_KERNEL and (_motors_agreed or motor_kernel_agrees()):
+    c = accel.module("motors")
+    if c is not None:
         n = len(m._mass)
         if out is None:
             out = np.empty(n), np.empty(n), np.empty(n, bool)
         force, torque, change = out
         try:
-            changed = _motors.motor_limits(
+            changed = c.motor_limits(
                 command, measured, free, substep, MOTOR_HEADROOM, m._mass, m._moment,
                 m._least_force, m._least_torque, m._force, m._torque, m._tracking,
                 force, torque, change,
@@ -256,7 +258,7 @@ def motor_limits_numpy(
     substep: float,
     motors: World,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`motor_limits` by numpy (the definition)."""
+    """:func:`motor_limits` by numpy (the reference)."""
     delta = command - measured
     linear = np.where(free, np.hypot(delta[:, 0], delta[:, 1]), 0.0) / substep
     angular = np.where(free, np.abs(delta[:, 2]), 0.0) / substep
@@ -266,61 +268,6 @@ def motor_limits_numpy(
     grow = (force > m._force) | (torque > m._torque)
     shrink = (force < 0.5 * m._force) | (torque < 0.5 * m._torque)
     return np.flatnonzero(m._tracking & (grow | shrink)), force, torque
-
-
-try:
-    from sandbox.physics import _motors
-except ImportError:  # pragma: no cover - built without a C compiler
-    _motors = None
-
-#: Size the motors in C where that extension is built and agrees with numpy.
-USE_MOTOR_KERNEL = True
-_motors_agreed: bool | None = None
-
-
-def motor_kernel_agrees() -> bool:
-    """Whether the C :func:`motor_limits` gives numpy's bits here (checked once).
-
-    On random commands, limits and contact flags (ties and NaN included), against
-    :func:`motor_limits_numpy`.
-    """
-    global _motors_agreed
-    if _motors_agreed is None:
-        _motors_agreed = _motors is not None and _check_motors()
-    return _motors_agreed
-
-
-def _check_motors() -> bool:
-    from types import SimpleNamespace
-
-    global _motors_agreed
-    rng = np.random.default_rng(20261206)
-    n = 4096
-    current = rng.uniform(0.0, 50.0, n)
-    fleet = SimpleNamespace(
-        _mass=rng.uniform(0.5, 5.0, n),
-        _moment=rng.uniform(0.01, 1.0, n),
-        _least_force=rng.uniform(0.0, 40.0, n),
-        _least_torque=rng.uniform(0.0, 4.0, n),
-        _force=np.where(rng.random(n) < 0.1, np.inf, current),
-        _torque=np.where(rng.random(n) < 0.1, 2.0 * current, 0.1 * current),
-        _tracking=rng.random(n) < 0.9,
-    )
-    command = rng.normal(0.0, 1.0, (n, 3))
-    measured = np.where(rng.random((n, 3)) < 0.1, command, rng.normal(0.0, 1.0, (n, 3)))
-    command[rng.random((n, 3)) < 0.01] = np.nan
-    free = rng.random(n) < 0.8
-    _motors_agreed = True  # provisionally: the C path runs within the check
-    try:
-        got = motor_limits(command, measured, free, 0.0025, fleet)
-    finally:
-        _motors_agreed = None
-    want = motor_limits_numpy(command, measured, free, 0.0025, fleet)
-    return bool(
-        np.array_equal(got[0], want[0])
-        and np.array_equal(got[1].view(np.uint64), want[1].view(np.uint64))
-        and np.array_equal(got[2].view(np.uint64), want[2].view(np.uint64))
-    )
 
 
 @dataclass

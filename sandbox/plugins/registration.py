@@ -28,6 +28,7 @@ from sandbox.plugins.contexts import (
     StrategyContext,
 )
 from sandbox.plugins.params import REQUIRED, Param, declare
+from sandbox.plugins.returns import RETURNS, Returned
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -638,13 +639,28 @@ def _law_non_finite(out: Any, ctx: Any) -> bool:
 
 
 def _guard_call(
-    func: Callable[..., Any], label: str, law: bool = False
+    func: Callable[..., Any],
+    label: str,
+    law: bool = False,
+    returned: Returned | None = None,
 ) -> Callable[..., Any]:
+    """``func`` guarded: what it raises or returns wrong ends its run, naming it.
+
+    ``returned`` checks the type and shape of what it returns (see
+    :mod:`sandbox.plugins.returns`; None: not checked, a class being built); ``law``
+    allows NaN targets where a vehicle has no slot.
+    """
+
     def guarded(*args: Any, **kwargs: Any) -> Any:
         try:
             out = func(*args, **kwargs)
+        except PluginRunError:  # a guard inside this one named the plug-in already
+            raise
         except (Exception, SystemExit) as exc:  # a user's code may raise anything
             raise PluginRunError(label, _raised(exc)) from None
+        wrong = returned(out, args) if returned is not None and args else None
+        if wrong:
+            raise PluginRunError(label, wrong)
         bad = _law_non_finite(out, args[0]) if law and args else _non_finite(out)
         if bad:
             raise PluginRunError(label, "returned a NaN or an infinity")
@@ -661,13 +677,13 @@ class _GuardedInstance:
     a copy of the law) guards the copy's own method.
     """
 
-    _OWN = ("_inner", "_method", "_label")
+    _OWN = ("_inner", "_method", "_label", "_kind")
 
-    def __init__(self, inner: Any, method: str, label: str) -> None:
-        for name, value in zip(self._OWN, (inner, method, label), strict=True):
+    def __init__(self, inner: Any, method: str, label: str, kind: str) -> None:
+        for name, value in zip(self._OWN, (inner, method, label, kind), strict=True):
             object.__setattr__(self, name, value)
-        law = method == _METHODS["law"]  # NaN targets allowed where no slot is
-        guarded = _guard_call(getattr(inner, method), label, law)
+        law = kind == "law"  # NaN targets allowed where no slot is
+        guarded = _guard_call(getattr(inner, method), label, law, RETURNS[kind])
         object.__setattr__(self, method, guarded)
 
     def __getattr__(self, name: str) -> Any:
@@ -682,7 +698,7 @@ class _GuardedInstance:
         import copy
 
         inner = copy.deepcopy(self._inner, memo)
-        return _GuardedInstance(inner, self._method, self._label)
+        return _GuardedInstance(inner, self._method, self._label, self._kind)
 
 
 def _raised(exc: BaseException) -> str:
@@ -704,23 +720,28 @@ def runnable(plugin: Plugin) -> Any:
 
     A built-in is returned as it is. A user's function (or, for a class, the
     instance's ``targets`` / ``evaluate``) is wrapped so that an exception it raises,
-    ``SystemExit`` included, or a NaN or infinity among the numbers it returns becomes
-    a :class:`~sandbox.errors.PluginRunError` naming the plug-in: the run ends with
+    ``SystemExit`` included, a value of the wrong type or shape for its kind
+    (:data:`sandbox.plugins.returns.RETURNS`: None, a text, an ``(n, 3)`` array) or a
+    NaN or infinity among the numbers it returns becomes a
+    :class:`~sandbox.errors.PluginRunError` naming the plug-in: the run ends with
     status ``error`` instead of a traceback (or a silent ``ok``).
     """
     obj = plugin.obj
     if plugin.origin.startswith("built-in") or plugin.kind not in RUNTIME_KINDS:
         return obj
     label = _label(plugin)
+    kind = plugin.kind
     if inspect.isclass(obj):
-        method = _METHODS.get(plugin.kind)
+        method = _METHODS.get(kind)
 
         def build(*args: Any, **kwargs: Any) -> Any:
             made = _guard_call(obj, label)(*args, **kwargs)
-            return made if method is None else _GuardedInstance(made, method, label)
+            if method is None:
+                return made
+            return _GuardedInstance(made, method, label, kind)
 
         return build
-    return _guard_call(obj, label)
+    return _guard_call(obj, label, kind == "law", RETURNS[kind])
 
 
 # ------------------------------------------------------------------ building plug-ins
@@ -747,7 +768,7 @@ def make_law(name: str, params: Mapping[str, Any], delta: np.ndarray, h: float) 
     plugin = get("law", name)
     if inspect.isclass(plugin.obj):
         return runnable(plugin)(delta, h, **dict(params))
-    law = FunctionLaw(plugin.obj)
+    law = FunctionLaw(runnable(plugin))  # a user's function: what it returns checked
     if plugin.origin.startswith("built-in"):
         return law
-    return _GuardedInstance(law, "targets", _label(plugin))  # its broadcast too
+    return _GuardedInstance(law, "targets", _label(plugin), "law")  # its broadcast

@@ -167,6 +167,7 @@ def _indexed_frames(
     fps: float,
     legend: bool = True,
     show_beams: bool = False,
+    aspect: float | str = 1.0,
 ) -> tuple[Scene, Iterator[np.ndarray]]:
     _check_follow(follow)
     scene = Scene(
@@ -178,6 +179,7 @@ def _indexed_frames(
         step=speed / fps,
         legend=legend,
         beams=show_beams,
+        aspect=aspect,
     )
     return scene, (scene.draw(int(k)) for k in plan.index)
 
@@ -194,6 +196,7 @@ def render_frames(
     trail_seconds: float = 3.0,
     legend: bool = True,
     show_beams: bool = False,
+    aspect: float | str = 1.0,
 ) -> Iterator[np.ndarray]:
     """Frames of an animation of ``run``, drawn lazily.
 
@@ -203,7 +206,7 @@ def render_frames(
     fps : float [1/s]
         Frames per second of playback.
     size : int [px]
-        Width and height of every frame.
+        Width of every frame.
     speed : float
         Playback speed: simulated seconds per second of playback (2 plays twice as fast,
         with half the frames).
@@ -223,10 +226,14 @@ def render_frames(
         thin grey line from each vehicle's centre to each reading, a red dot where
         the beam hit (not drawn above :data:`~sandbox.render.camera.LARGE_FLEET`
         vehicles, nor for runs without scans).
+    aspect : float or "run"
+        Width over height of the frames: 1 (square, the default), a number from 1/4
+        to 4, or ``"run"``, the aspect of the whole run's area when the camera frames
+        it whole (:func:`~sandbox.render.camera.frame_height`).
 
     Yields
     ------
-    ndarray, shape (size, size, 3), uint8
+    ndarray, shape (height, size, 3), uint8
         One RGB frame per entry of :func:`frame_plan`.
     """
     plan = frame_plan(run, fps, speed)
@@ -241,6 +248,7 @@ def render_frames(
         fps=fps,
         legend=legend,
         show_beams=show_beams,
+        aspect=aspect,
     )
     for canvas in frames:
         yield scene.to_rgb(canvas)
@@ -294,6 +302,7 @@ def write_gif(
     legend: bool = True,
     progress: Callable[[int, int], None] | None = None,
     show_beams: bool = False,
+    aspect: float | str = 1.0,
 ) -> dict[str, Any]:
     """Write an animated GIF of ``run``, atomically.
 
@@ -309,7 +318,7 @@ def write_gif(
         Output file; its directory is created if needed.
     fps : float [1/s]
         ``0 < fps <= 50``; see the module docstring for delays.
-    size, speed, zones, follow, trail_seconds, legend, show_beams
+    size, speed, zones, follow, trail_seconds, legend, show_beams, aspect
         As in :func:`render_frames`.
     progress : callable, optional
         Called as ``progress(done, total)`` about a hundred times, in planned frames.
@@ -337,12 +346,13 @@ def write_gif(
         fps=fps,
         legend=legend,
         show_beams=show_beams,
+        aspect=aspect,
     )
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
     try:
         with open(tmp, "xb") as fh:
-            stream = _GifStream(fh, scene.size, scene.size, scene.rgb, loop=0)
+            stream = _GifStream(fh, scene.size, scene.height, scene.rgb, loop=0)
             held: list[np.ndarray] = []
             delays: list[int] = []
             total = len(plan.durations_ms)

@@ -88,7 +88,7 @@ def detection_marks(ax: Axes, run: Run, colors: list[str]) -> None:
             ax.plot([], [], ls="none", ms=9, color="0.35", label=label, **styles[label])
 
 
-def _changed(run: Run, event: dict) -> list[str]:
+def changed_slots(run: Run, event: dict) -> list[str]:
     """``"NAME→SLOT"`` of every vehicle whose slot an assignment changed."""
     slots = _info(run, "slots")
     out = []
@@ -124,7 +124,7 @@ def reconfiguration_marks(ax: Axes, run: Run, colors: list[str]) -> bool:
     mark = {"transform": above, "clip_on": False, "ls": "none", "ms": 8, "zorder": 6}
     labels: dict[float, list[str]] = {}
     for event in moves:
-        changed = _changed(run, event)
+        changed = changed_slots(run, event)
         if len(changed) > MAX_LISTED:
             extra = len(changed) - MAX_LISTED
             changed = changed[:MAX_LISTED] + [f"+{extra} more"]

@@ -142,7 +142,7 @@ def _draw_obstacles(ax: Axes, run: Run) -> None:
             ax.add_patch(Polygon(pts, closed=True, **style))
 
 
-def _reference_path(run: Run) -> np.ndarray | None:
+def reference_path(run: Run) -> np.ndarray | None:
     """Return the reference path (m, 2) [m]: ``info["reference_path"]`` or samples."""
     raw = _info(run, "reference_path")
     pts = np.asarray(raw, dtype=float) if raw is not None else None
@@ -270,7 +270,7 @@ def _series(
 
 
 # ------------------------------------------------------------------------- figures
-def _content_bounds(
+def content_bounds(
     run: Run, pos: np.ndarray, path: np.ndarray | None, reach: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """World box ``(lo, hi)`` [m] of the paths, reference and obstacles, padded.
@@ -323,8 +323,8 @@ def trajectories_figure(run: Run) -> Figure:
     pose = run.pose  # may be memory-mapped: read only the samples drawn
     pos = np.asarray(pose[_thin(run), :, :2], dtype=float)
     radius = np.asarray(run.diameter, dtype=float) / 2.0
-    path = _reference_path(run)
-    lo, hi = _content_bounds(run, pos, path, float(np.max(radius, initial=0.0)))
+    path = reference_path(run)
+    lo, hi = content_bounds(run, pos, path, float(np.max(radius, initial=0.0)))
     width, height, lo, hi = fit_box(lo, hi)
     wide = width >= 1.3 * height
     fig = Figure(

@@ -5,8 +5,10 @@ output ``renders/``) makes the GIFs committed in ``renders/`` and shown in the R
 GIF over the size budget is rendered again smaller (fewer pixels, then fewer frames per
 second) until it fits. A run that spreads along a line (a platoon on a straight
 reference) would be drawn tiny in a square frame that holds all of it: its camera
-follows the leader instead (:func:`sandbox.render.animation.auto_follow`, the camera of
-``sandbox run --gif`` too).
+follows what happens instead (``follow="auto"``:
+:func:`sandbox.render.camera.auto_follow` chooses,
+:func:`sandbox.render.camera.action_track` frames; the camera of ``sandbox run --gif``
+too).
 """
 
 from __future__ import annotations
@@ -37,10 +39,11 @@ def scenario_files(folders: list[Path]) -> list[Path]:
 
 
 def camera_follow(run: Run) -> str | None:
-    """``"leader"`` for a run spread along a line, else None (frame it whole).
+    """``"leader"`` for a run spread along a line (a moving camera), else None.
 
-    The automatic camera of :func:`sandbox.render.animation.auto_follow`, which
-    ``sandbox run --gif`` and ``sandbox render`` use too.
+    The choice of the automatic camera (:func:`sandbox.render.animation.auto_follow`),
+    which ``sandbox run --gif`` and ``sandbox render`` use too; the gallery's GIFs are
+    drawn with ``follow="auto"``, whose moving window follows what happens.
     """
     return auto_follow(run)
 
@@ -66,7 +69,7 @@ def render_gallery(
         target = out_dir / f"{path.stem}.gif"
         for size, fps in ATTEMPTS:
             info = write_gif(
-                run, target, fps=fps, size=size, zones=zones, follow=camera_follow(run)
+                run, target, fps=fps, size=size, zones=zones, follow="auto"
             )
             nbytes = target.stat().st_size
             if nbytes <= MAX_GIF_BYTES:

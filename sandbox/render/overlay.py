@@ -109,7 +109,7 @@ class Bands:
     Attributes
     ----------
     size : int [px]
-        Frame width and height.
+        Frame width.
     px : int [px]
         Font size.
     line : int [px]
@@ -130,12 +130,15 @@ class Bands:
     rows: tuple[tuple[tuple[LegendItem, int], ...], ...]
 
 
-def frame_bands(size: int, items: Sequence[LegendItem]) -> Bands:
+def frame_bands(
+    size: int, items: Sequence[LegendItem], height: int | None = None
+) -> Bands:
     """Lay out the bands of a frame ``size`` px wide with the legend ``items``.
 
     Items flow left to right and wrap onto new rows; the bottom band holds the scale
     bar row and every legend row. When the bands would take more than
-    :data:`MAX_BANDS` of the frame's height, the legend is left out.
+    :data:`MAX_BANDS` of the frame's height (``height``, default ``size``), the
+    legend is left out.
     """
     px = font_px(size)
     f = font(px)
@@ -155,7 +158,8 @@ def frame_bands(size: int, items: Sequence[LegendItem]) -> Bands:
     top = line + 6
     bar = line + 6
     bottom = bar + len(rows) * (line + 3) + 3
-    if top + bottom > MAX_BANDS * size:  # a small frame: no legend rather than no view
+    rows_px = size if height is None else height
+    if top + bottom > MAX_BANDS * rows_px:  # a small frame: no legend, not no view
         rows, bottom = [], bar + 3
     return Bands(size, px, line, top, bottom, tuple(tuple(r) for r in rows))
 

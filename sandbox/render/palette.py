@@ -49,7 +49,7 @@ _FALLBACK_COLORS = (
 )  # fmt: skip
 
 
-def _rgb(color: str, k: int) -> tuple[int, int, int]:
+def color_rgb(color: str, k: int) -> tuple[int, int, int]:
     """RGB of a colour name, or a default colour when Pillow cannot parse it."""
     try:
         rgb = ImageColor.getrgb(str(color))
@@ -70,7 +70,7 @@ def _build_palette(colors: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.nd
     trail : ndarray, shape (n, L), int
         Index of each vehicle's fading trail shades, newest first (``L`` may be 0).
     """
-    rgbs = [_rgb(c, k) for k, c in enumerate(colors)]
+    rgbs = [color_rgb(c, k) for k, c in enumerate(colors)]
     unique = list(dict.fromkeys(rgbs))
     room = 255 - len(_BASE_COLORS)
     if len(unique) > room:  # snap to a 6x6x6 colour cube

@@ -18,11 +18,11 @@ from PIL import Image, ImageDraw
 from sandbox.render.camera import (
     LARGE_FLEET,
     Camera,
-    _follow_track,
-    _obstacles,
-    _reference_path,
     _run_bands,
-    resolve_follow,
+    camera_track,
+    drawn_obstacles,
+    frame_height,
+    reference_path,
 )
 from sandbox.render.cars import car_bodies, car_lines, car_wheelbases
 from sandbox.render.overlay import (
@@ -69,22 +69,24 @@ class Scene:
         step: float,
         legend: bool = True,
         beams: bool = False,
+        aspect: float | str = 1.0,
     ) -> None:
         if int(size) < 64:
             raise ValueError(f"size: expected at least 64 px, got {size!r}")
-        follow = resolve_follow(run, follow)
         self.run = run
-        self.size = int(size)
+        self.size = int(size)  # [px] the width
+        self.height = frame_height(run, self.size, follow, aspect)  # [px]
         self.t = np.asarray(run.t, dtype=float)
         self.pos = np.asarray(run.pose[:, :, :2], dtype=float)
         self.theta = np.asarray(run.pose[:, :, 2], dtype=float)
         self.n = run.n_vehicles
         self.large = self.n > LARGE_FLEET
         self.rgb, self.body, self.trail_idx = _build_palette(run.colors)
-        self.camera = Camera.for_run(run, self.size, follow, legend)
-        self.bands = _run_bands(run, self.size, legend)
+        self.camera = Camera.for_run(run, self.size, follow, legend, aspect)
+        self.bands = _run_bands(run, self.size, legend, self.height)
         self.stamps = TextStamps(self.bands.px)
-        self.track = None if follow is None else _follow_track(run, follow)
+        framing = camera_track(run, follow)
+        self.track = None if framing is None else framing[0]
         self.radius_px = np.asarray(run.diameter, dtype=float) / 2.0 * self.camera.scale
         self.mode = np.asarray(run.mode)
         self.failed_raw = np.asarray(run.failed, dtype=bool)
@@ -103,7 +105,7 @@ class Scene:
         # Recovery zones.
         rec = run.info.get("recovery") if isinstance(run.info, dict) else None
         rec = rec if isinstance(rec, dict) else {}
-        self.strategy = str(rec.get("strategy", "-"))
+        self.strategy = recovery_label(run, str(rec.get("strategy", "-")))
         self.zone_radii = [
             float(v) for v in (rec.get("R"), rec.get("r")) if v is not None and v > 0
         ]
@@ -125,8 +127,8 @@ class Scene:
             self.steer = np.asarray(run.steer, dtype=float)
             self.diameter = np.asarray(run.diameter, dtype=float)
         # Static geometry.
-        self.obstacles = _obstacles(run)
-        path = _reference_path(run)
+        self.obstacles = drawn_obstacles(run)
+        path = reference_path(run)
         on, off = (v / self.camera.scale for v in _DASH_PX)
         self.dashes = np.zeros((0, 2, 2)) if path is None else _dashes(path, on, off)
         paths = platoon_paths(run)  # with platoons: every platoon's reference
@@ -184,7 +186,7 @@ class Scene:
 
     def _background(self, cam: Camera) -> Image.Image:
         """White canvas with obstacles and reference path."""
-        img = Image.new("L", (self.size, self.size), WHITE)
+        img = Image.new("L", (self.size, self.height), WHITE)
         draw = ImageDraw.Draw(img)
         for kind, geom in self.obstacles:
             if kind == "circle":
@@ -202,14 +204,15 @@ class Scene:
         if len(self.dashes):
             seg = cam.world_to_pixel(self.dashes)  # (k, 2, 2)
             lo, hi = seg.min(axis=1), seg.max(axis=1)
-            seen = (hi > -2).all(axis=1) & (lo < self.size + 2).all(axis=1)
+            edge = np.array([self.size, self.height]) + 2
+            seen = (hi > -2).all(axis=1) & (lo < edge).all(axis=1)
             for a in seg[seen]:
                 draw.line(_flat(a), fill=PATH, width=1)
         return img
 
     # ------------------------------------------------------------ one frame
     def draw(self, k: int) -> np.ndarray:
-        """Palette-index canvas (size, size) uint8 of recorded sample ``k``."""
+        """Palette-index canvas (height, size) uint8 of recorded sample ``k``."""
         cam = self.camera
         if self.track is not None:
             cam = cam.centered_on(self.track[k])
@@ -266,7 +269,7 @@ class Scene:
         self._draw_failures(draw, centers[failed], radius[failed])
         self._draw_flashes(draw, cam, self.t[k])
         self._draw_hud(draw, img, self.t[k])
-        img.paste(self.bottom_band, (0, self.size - self.bands.bottom))
+        img.paste(self.bottom_band, (0, self.height - self.bands.bottom))
         return np.asarray(img)
 
     def _draw_slots(self, draw: ImageDraw.ImageDraw, slots: np.ndarray) -> None:
@@ -442,15 +445,35 @@ class Scene:
         if len(self.reassign_t):
             moved = int(np.searchsorted(self.reassign_t, now, side="right"))
             x = self.stamps.paste(img, (x, y), f"reassigned: {moved}", BLACK)
-        last = f"recovery: {self.strategy}"
-        if x + self.stamps.mask(last).width <= self.size:  # whole, or not at all
-            self.stamps.paste(img, (x, y), last, BLACK)
+        for last in (f"recovery: {self.strategy}", "recovery: per platoon"):
+            if x + self.stamps.mask(last).width <= self.size:  # whole, or not at all
+                self.stamps.paste(img, (x, y), last, BLACK)
+                break
+            if ":" not in self.strategy:  # one strategy: no shorter form
+                break
 
     def to_rgb(self, canvas: np.ndarray) -> np.ndarray:
         """RGB image (H, W, 3) uint8 of a palette-index canvas."""
         img = Image.fromarray(canvas)
         img.putpalette(self.rgb.tobytes())
         return np.asarray(img.convert("RGB"))
+
+
+def recovery_label(run: Run, top: str) -> str:
+    """The recovery strategy the heads-up line names: ``top``, or each platoon's.
+
+    With ``platoons:`` whose strategies differ, each platoon's by its name
+    (``"east: continuous, north: none"``); one strategy shared by every platoon is
+    named once, as is the top-level ``top`` of a run of one platoon.
+    """
+    sc = run.scenario
+    groups = getattr(sc, "platoons", ()) if sc is not None else ()
+    if not groups:
+        return top
+    own = [(g.name, g.scenario.recovery.strategy) for g in groups]
+    if len({strategy for _, strategy in own}) == 1:
+        return own[0][1]
+    return ", ".join(f"{name}: {strategy}" for name, strategy in own)
 
 
 def _beam_reach(run: Run, ranges: np.ndarray) -> np.ndarray:

@@ -89,6 +89,7 @@ def write_mp4(
     legend: bool = True,
     progress: Callable[[int, int], None] | None = None,
     show_beams: bool = False,
+    aspect: float | str = 1.0,
 ) -> dict[str, Any]:
     """Write an MP4 video of ``run``, atomically (temporary file, then rename).
 
@@ -99,7 +100,7 @@ def write_mp4(
         Output file; its directory is created if needed.
     fps : float [1/s]
         ``0 < fps <=`` :data:`MAX_MP4_FPS`.
-    size, speed, zones, follow, trail_seconds, legend, show_beams
+    size, speed, zones, follow, trail_seconds, legend, show_beams, aspect
         As in :func:`sandbox.render.animation.render_frames`.
     progress : callable, optional
         Called as ``progress(done, total)`` about a hundred times, in frames.
@@ -138,13 +139,15 @@ def write_mp4(
         fps=fps,
         legend=legend,
         show_beams=show_beams,
+        aspect=aspect,
     )
-    side = scene.size + scene.size % 2  # [px] yuv420p needs even sides
+    wide = scene.size + scene.size % 2  # [px] yuv420p needs even sides
+    high = scene.height + scene.height % 2
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
     command = [
         imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-y",
-        "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{side}x{side}",
+        "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{wide}x{high}",
         "-framerate", f"{fps:.12g}", "-i", "pipe:0",
         "-an", "-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", str(MP4_CRF),
         "-threads", "1", "-fflags", "+bitexact", "-flags:v", "+bitexact",
@@ -157,12 +160,12 @@ def write_mp4(
         )
         try:
             assert proc.stdin is not None
-            frame = np.full((side, side, 3), 255, dtype=np.uint8)
+            frame = np.full((high, wide, 3), 255, dtype=np.uint8)
             with proc.stdin:
                 total = len(plan.durations_ms)
                 every = max(1, total // 100)
                 for canvas in frames:
-                    frame[: scene.size, : scene.size] = scene.to_rgb(canvas)
+                    frame[: scene.height, : scene.size] = scene.to_rgb(canvas)
                     proc.stdin.write(frame.tobytes())
                     count += 1
                     if progress is not None and (count % every == 0 or count == total):

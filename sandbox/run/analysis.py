@@ -12,6 +12,9 @@ pandas and pyarrow are the optional extra ``analysis`` (``pip install
 'platoon-sandbox[analysis]'``); without them the two table functions raise
 :class:`MissingExtraError`, a one-line message that says what to install.
 
+The functions read a run through its attributes only (``run: Any``, a
+:class:`~sandbox.run.record.Run`): the record imports this module, never the other way.
+
 Example (after ``sandbox run paper/rotating_circle``)::
 
     from sandbox import load_run
@@ -34,7 +37,7 @@ import numpy as np
 
 from sandbox._about import install_hint
 from sandbox.errors import SandboxError
-from sandbox.run.record import MODE_NAMES, Run
+from sandbox.run.codes import MODE_NAMES
 
 if TYPE_CHECKING:
     import pandas
@@ -142,7 +145,7 @@ class VehicleTrack:
         return np.linalg.norm(self.pose[:, :2] - self.slot, axis=-1)
 
 
-def vehicle_track(run: Run, name: str) -> VehicleTrack:
+def vehicle_track(run: Any, name: str) -> VehicleTrack:
     """The arrays of the vehicle called ``name`` in ``run``.
 
     Raises
@@ -174,12 +177,12 @@ def vehicle_track(run: Run, name: str) -> VehicleTrack:
     )
 
 
-def table_columns(run: Run, start: int = 0, stop: int | None = None) -> dict:
+def table_columns(run: Any, start: int = 0, stop: int | None = None) -> dict:
     """The long table of samples ``start:stop`` as one array per column.
 
     Rows run sample by sample, vehicles in scenario order within a sample (the order
     of ``trajectory.csv``). ``vehicle`` and ``mode`` are integer codes into
-    ``run.names`` and :data:`sandbox.run.record.MODE_NAMES`.
+    ``run.names`` and :data:`sandbox.run.codes.MODE_NAMES`.
 
     Returns
     -------
@@ -207,7 +210,7 @@ def table_columns(run: Run, start: int = 0, stop: int | None = None) -> dict:
     }
 
 
-def to_dataframe(run: Run) -> pandas.DataFrame:
+def to_dataframe(run: Any) -> pandas.DataFrame:
     """The run as a pandas DataFrame in long format, the columns :data:`COLUMNS`.
 
     ``vehicle`` and ``mode`` are categoricals (vehicles in scenario order), ``failed``
@@ -220,7 +223,7 @@ def to_dataframe(run: Run) -> pandas.DataFrame:
     return pd.DataFrame(cols, columns=list(COLUMNS))
 
 
-def write_parquet(run: Run, path: Path) -> None:
+def write_parquet(run: Any, path: Path) -> None:
     """Write the long table to a Parquet file (zstd-compressed), row group by group.
 
     The columns are those of ``trajectory.csv`` at full precision; ``vehicle`` and

@@ -35,6 +35,13 @@ Definitions (the keys of ``metrics.json``):
   (:mod:`sandbox.run.deadlock`).
 - ``converged``: every healthy vehicle (no failure active at the end of the run, with a
   slot) has a settling time.
+- ``steady_state`` (only for a law that keeps a steady error on a turning reference,
+  ``rotating`` and ``virtual`` with ``rotate``, see :mod:`sandbox.run.steady_state`):
+  the law, the reference's turn rate over the last ``settle_dwell`` [rad/s], each
+  follower's steady error by eq. (12) [m] (``errors``), its settling time to within
+  ``settle_tol`` of that error [s] (``settling_time``), and ``converged``, whether every
+  healthy follower has one: convergence to the law's own steady state, which
+  ``converged`` misses when the steady error exceeds ``settle_tol``.
 - ``detections`` and ``detection`` (with ``detection: {method: residual}`` only, added
   by the detector through :func:`sandbox.plugins.register_metrics`, see
   :func:`sandbox.behaviour.detection.detection_metrics`): every detection ``{vehicle,
@@ -68,9 +75,10 @@ import numpy as np
 from sandbox.geometry.planar import norms
 from sandbox.model.tunnelling import SUBSTEP_FRACTION
 from sandbox.plugins.registration import metric_contributions
+from sandbox.run.codes import MODE_AVOID, MODE_FORMATION
 from sandbox.run.deadlock import find_deadlocks
 from sandbox.run.platoons import platoon_metrics
-from sandbox.run.record import MODE_AVOID, MODE_FORMATION, Run
+from sandbox.run.steady_state import steady_state
 
 #: Above this many vehicles the minimum distance uses a KD-tree per sample.
 BRUTE_FORCE_MAX = 200
@@ -211,7 +219,7 @@ def mode_switches(mode: np.ndarray) -> int:
     return int(np.count_nonzero(np.diff(m) != 0))
 
 
-def healthy_events(run: Run) -> list[bool]:
+def healthy_events(run: Any) -> list[bool]:
     """Whether each collision event involved only vehicles without an active failure.
 
     A vehicle's failure state at an event is the one recorded for the control period the
@@ -233,7 +241,7 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]:
+def compute_metrics(run: Any, settle_tol: float | None = None) -> dict[str, Any]:
     """All metrics of a run, as written to ``metrics.json``.
 
     Parameters
@@ -259,6 +267,9 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     failed_at = run.info.get("failed_at", {})
     vehicles: dict[str, Any] = {}
     healthy_settled = []
+    steady = steady_state(run, dwell) if T else None
+    steady_settle: dict[str, float | None] = {}
+    healthy_steady = []
     # Vehicles in blocks of about a million samples: bounded temporaries whatever the
     # length of the run (the record may be memory-mapped from disk).
     block = max(1, 1_000_000 // max(T, 1))
@@ -275,12 +286,19 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
             largest = error.max(axis=0) if T else np.zeros(0)
         e = error[:, i % block]
         has_slot = T > 0 and bool(slotted[i % block])
-        settle = settling_time(t, e, settle_tol, dwell) if has_slot else None
-        if settle is not None and span > 0:
-            moved = offset[-1, i % block] - offset[window, i % block]
-            if float(np.hypot(moved[0], moved[1])) > settle_speed * span:
-                settle = None  # in band, but still crossing its slot
+        # In band but moving relative to its slot over the last settle_dwell: still
+        # crossing it, not settled.
+        moved = offset[-1, i % block] - offset[window, i % block] if T else 0.0
+        drifting = span > 0 and float(np.hypot(*moved)) > settle_speed * span
+        can_settle = has_slot and not drifting
+        settle = settling_time(t, e, settle_tol, dwell) if can_settle else None
         failed_end = bool(run.failed[-1, i]) if T else False
+        if steady is not None and name in steady["errors"]:
+            tol = settle_tol + steady["errors"][name]
+            got = settling_time(t, e, tol, dwell) if can_settle else None
+            steady_settle[name] = got
+            if has_slot and not failed_end:
+                healthy_steady.append(got is not None)
         vehicles[name] = {
             "formation_error": {
                 "final": _finite(e[-1]) if has_slot else None,
@@ -345,6 +363,12 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     for key in (*keys, "slots"):
         if key in run.info:
             out[key] = run.info[key]
+    if steady is not None:
+        out["steady_state"] = {
+            **steady,
+            "settling_time": steady_settle,
+            "converged": bool(healthy_steady) and all(healthy_steady),
+        }
     platoon_metrics(run, out)  # with platoons: only (run/platoons.py)
     for contribute in metric_contributions().values():  # e.g. the detector's blocks
         out.update(contribute(run))
@@ -352,7 +376,7 @@ def compute_metrics(run: Run, settle_tol: float | None = None) -> dict[str, Any]
     return out
 
 
-def steering_metrics(run: Run) -> dict[str, dict[str, Any]]:
+def steering_metrics(run: Any) -> dict[str, dict[str, Any]]:
     """Each car's steering (``model: bicycle``): how long it was at its limit.
 
     ``saturated_time`` [s] is the time the steering angle was at ``max_steer``
@@ -391,7 +415,7 @@ def steering_metrics(run: Run) -> dict[str, dict[str, Any]]:
     return out
 
 
-def _deadlocks(run: Run, spec: Any) -> list[dict[str, Any]]:
+def _deadlocks(run: Any, spec: Any) -> list[dict[str, Any]]:
     """The ``deadlocks`` of ``metrics.json``: :func:`find_deadlocks` of the run."""
     keys = {}
     if spec is not None:
@@ -434,7 +458,7 @@ def _effort(
     }
 
 
-def _tunnelling(run: Run, peak_v1: list[float] | None) -> dict[str, Any] | None:
+def _tunnelling(run: Any, peak_v1: list[float] | None) -> dict[str, Any] | None:
     """The vehicle that moved farthest beyond the tunnelling bound in one substep.
 
     From the commands applied during the run (``LoopMetrics.peak_v1``), not from the
@@ -484,6 +508,66 @@ def run_warnings(metrics: dict[str, Any]) -> list[str]:
             "for a motor that follows every command"
         )
     return out
+
+
+def convergence_summary(metrics: dict[str, Any]) -> str:
+    """The summary's word on convergence: ``yes``, or ``no`` and why.
+
+    When the law keeps a steady error on a turning reference (``steady_state``) and
+    ``converged`` says no, it also says whether the followers converged to that
+    steady state, and its size (eq. (12)).
+
+    >>> convergence_summary({"converged": True})
+    'yes'
+    >>> steady = {"law": "rotating", "converged": True, "errors": {"red": 0.0566}}
+    >>> convergence_summary({"converged": False, "settle_tol": 0.05,
+    ...                      "steady_state": steady})
+    "no (to settle_tol 0.05 m); yes to the rotating law's own steady state (eq. (12): 0.057 m off the slots)"
+    """  # noqa: E501
+    if metrics["converged"]:
+        return "yes"
+    steady = metrics.get("steady_state")
+    if not steady or not steady["errors"]:
+        return "no"
+    sizes = sorted(steady["errors"].values())
+    size = (
+        f"{sizes[0]:.3f}"
+        if sizes[-1] - sizes[0] < 5e-4
+        else (f"{sizes[0]:.3f}-{sizes[-1]:.3f}")
+    )
+    return (
+        f"no (to settle_tol {metrics['settle_tol']:g} m); "
+        f"{'yes' if steady['converged'] else 'no'} to the {steady['law']} law's own "
+        f"steady state (eq. (12): {size} m off the slots)"
+    )
+
+
+#: The terminal summary names at most this many deadlocks (metrics.json has them all).
+SUMMARY_DEADLOCKS = 3
+
+
+def deadlock_summary(metrics: dict[str, Any]) -> str:
+    """The summary's line of the ``deadlocks`` of ``metrics.json``.
+
+    Each deadlock by its vehicles, its start and its length [s] ("to the end" when it
+    lasts to the end of the run), at most :data:`SUMMARY_DEADLOCKS` of them.
+
+    >>> deadlock_summary({"deadlocks": [], "duration": 10.0})
+    'deadlocks: 0'
+    >>> entry = {"vehicles": ["red", "green"], "t": 4.0, "duration": 6.0}
+    >>> deadlock_summary({"deadlocks": [entry], "duration": 10.0})
+    'deadlocks: 1 (red, green from 4.00 s to the end)'
+    """
+    found = metrics.get("deadlocks") or []
+    end = float(metrics.get("duration", 0.0))
+    parts = []
+    for d in found[:SUMMARY_DEADLOCKS]:
+        stop = d["t"] + d["duration"]
+        span = "to the end" if stop >= end - 1e-6 else f"for {d['duration']:.2f} s"
+        parts.append(f"{', '.join(d['vehicles'])} from {d['t']:.2f} s {span}")
+    if len(found) > SUMMARY_DEADLOCKS:
+        parts.append(f"{len(found) - SUMMARY_DEADLOCKS} more in metrics.json")
+    return f"deadlocks: {len(found)}" + (f" ({'; '.join(parts)})" if parts else "")
 
 
 def summary_rows(metrics: dict[str, Any]) -> list[tuple[str, str, str, str, str, str]]:

@@ -13,31 +13,44 @@ Array shapes use ``T`` for recorded samples and ``n`` for vehicles.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sandbox.run.analysis import VehicleTrack, to_dataframe, vehicle_track
+from sandbox.run.codes import (
+    MODE_AVOID,
+    MODE_EXTERNAL,
+    MODE_FAILED,
+    MODE_FORMATION,
+    MODE_NAMES,
+    STATUS_DIVERGED,
+    STATUS_ERROR,
+    STATUS_INTERRUPTED,
+    STATUS_OK,
+)
+from sandbox.run.run_file import RunFileError, read_checked
+
 if TYPE_CHECKING:
     import pandas
 
-    from sandbox.run.analysis import VehicleTrack
-
-#: Integer codes of the ``mode`` array, and their names in ``trajectory.csv``.
-MODE_FORMATION = 0
-MODE_AVOID = 1
-MODE_FAILED = 2
-#: Driven this period by commands or targets given to ``Simulation.step``.
-MODE_EXTERNAL = 3
-MODE_NAMES = ("formation", "avoid", "failed", "external")
-
-#: Status values of a run (``metrics.json`` key ``status``).
-STATUS_OK = "ok"
-STATUS_DIVERGED = "diverged"
-STATUS_INTERRUPTED = "interrupted"
-#: A plug-in raised or returned non-finite numbers (``Run.info["error"]``).
-STATUS_ERROR = "error"
+__all__ = [
+    "MODE_AVOID",
+    "MODE_EXTERNAL",
+    "MODE_FAILED",
+    "MODE_FORMATION",
+    "MODE_NAMES",
+    "STATUS_DIVERGED",
+    "STATUS_ERROR",
+    "STATUS_INTERRUPTED",
+    "STATUS_OK",
+    "CollisionEvent",
+    "Run",
+    "RunFileError",
+]
 
 
 @dataclass
@@ -229,8 +242,6 @@ class Run:
         See :class:`sandbox.run.analysis.VehicleTrack`; raises ``KeyError`` (listing the
         names) for an unknown vehicle.
         """
-        from sandbox.run.analysis import vehicle_track
-
         return vehicle_track(self, name)
 
     def formation_at(self) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -261,9 +272,42 @@ class Run:
         One row per vehicle per sample, the columns of ``trajectory.csv``; needs the
         ``analysis`` extra. See :func:`sandbox.run.analysis.to_dataframe`.
         """
-        from sandbox.run.analysis import to_dataframe
-
         return to_dataframe(self)
+
+    def save(self, path: str | os.PathLike[str], trajectory: str = "csv") -> Path:
+        """Write the run's directory, as ``sandbox run`` does: metrics included.
+
+        ``trajectory.csv`` (or ``trajectory.parquet`` with ``trajectory="parquet"``,
+        the ``analysis`` extra), ``metrics.json`` (computed here, as ``sandbox run``
+        computes it), ``scenario.yaml``, ``run.npz`` and the manifest, written whole
+        (see :func:`sandbox.run.run_dir.write_run_dir`). ``sandbox view``, ``render``
+        and ``plot`` read the directory, and :func:`sandbox.load_run` gives the run
+        back. A stepped run (``Simulation.step``, then ``result()``) is saved the same
+        way.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The directory: missing, empty, or an earlier run directory (its manifest
+            lists what is replaced; other entries, such as ``figures/``, are kept).
+            Anything else is never replaced.
+
+        Returns
+        -------
+        Path
+            ``path``.
+
+        Raises
+        ------
+        OutputError
+            ``path`` is not a directory that may be replaced, or cannot be written.
+        """
+        from sandbox.run.metrics import compute_metrics
+        from sandbox.run.run_dir import check_out_dir, write_run_dir
+
+        out = Path(path)
+        check_out_dir(out)  # before the metrics, which a long run takes a while for
+        return write_run_dir(self, compute_metrics(self), out, trajectory=trajectory)
 
     # ------------------------------------------------------------------ persistence
     def save_npz(self, path: Path) -> None:
@@ -318,7 +362,7 @@ class Run:
         zero samples, or metadata that does not match the arrays. Sizes are checked
         from the zip directory and the ``.npy`` headers before anything is inflated.
         """
-        meta, arrays = _read_checked(path)
+        meta, arrays = read_checked(path)
         return cls(
             names=list(meta["names"]),
             colors=list(meta["colors"]),
@@ -329,165 +373,6 @@ class Run:
             scenario=scenario,
             **arrays,
         )
-
-
-class RunFileError(ValueError):
-    """A ``run.npz`` that is not a run written by :meth:`Run.save_npz`."""
-
-
-#: Members of ``run.npz``: name -> (dtype kind, shape in terms of T samples and n
-#: vehicles).
-_MEMBERS: dict[str, tuple[str, tuple[str | int, ...]]] = {
-    "t": ("f", ("T",)),
-    "pose": ("f", ("T", "n", 3)),
-    "cmd": ("f", ("T", "n", 2)),
-    "chi": ("f", ("T", "n", 2)),
-    "slot": ("f", ("T", "n", 2)),
-    "target": ("f", ("T", "n", 2)),
-    "mode": ("i", ("T", "n")),
-    "failed": ("b", ("T", "n")),
-    "reference": ("f", ("T", 2)),
-    "diameter": ("f", ("n",)),
-}
-#: Members of a run with range sensors (``B``: the most beams of a vehicle).
-_OPTIONAL: dict[str, tuple[str, tuple[str | int, ...]]] = {
-    "ranges": ("f", ("T", "n", "B")),
-    "beam_angles": ("f", ("n", "B")),
-}
-#: Largest metadata string of a run.npz [bytes] (names, colours, events, info).
-_META_MAX_BYTES = 256 * 2**20
-#: DEFLATE inflates at most about 1032 times; a member claiming more is a bomb.
-_MAX_INFLATION = 1100
-
-
-def _read_checked(path: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """The metadata and arrays of a ``run.npz``, each checked before it is read."""
-    import zipfile
-
-    with zipfile.ZipFile(path) as zf:
-        infos = {i.filename: i for i in zf.infolist()}
-        names = {k[: -len(".npy")] for k in infos if k.endswith(".npy")}
-        expected = {*_MEMBERS, "meta"}
-        members = dict(_MEMBERS)
-        if names & set(_OPTIONAL):  # both or neither
-            expected |= set(_OPTIONAL)
-            members.update(_OPTIONAL)
-        if "steer" in names:  # a run with cars
-            expected.add("steer")
-            members["steer"] = ("f", ("T", "n"))
-        missing = sorted(expected - names)
-        extra = sorted(set(infos) - {f"{k}.npy" for k in expected})
-        if missing or extra:
-            what = f"no {', '.join(missing)}" if missing else f"unknown {extra[0]!r}"
-            raise RunFileError(f"not the members of a run ({what})")
-        headers = {}
-        for key in sorted(expected):
-            info = infos[f"{key}.npy"]
-            if info.file_size > _MAX_INFLATION * max(info.compress_size, 1) + 4096:
-                raise RunFileError(
-                    f"{key}: claims {info.file_size:,} bytes from "
-                    f"{info.compress_size:,} compressed (a compression bomb)"
-                )
-            with zf.open(info) as fh:
-                try:
-                    version = np.lib.format.read_magic(fh)
-                    read_header = (
-                        np.lib.format.read_array_header_1_0
-                        if version == (1, 0)
-                        else np.lib.format.read_array_header_2_0
-                    )
-                    shape, _, dtype = read_header(fh, max_header_size=10000)
-                except (ValueError, SyntaxError, EOFError, TypeError) as exc:
-                    raise RunFileError(f"{key}: not an array ({exc})") from None
-                header = fh.tell() if fh.seekable() else None
-            if dtype.hasobject:
-                raise RunFileError(f"{key}: holds Python objects")
-            size = int(np.prod(shape, dtype=object)) * dtype.itemsize
-            if header is not None and size != info.file_size - header:
-                raise RunFileError(
-                    f"{key}: its header claims {size:,} bytes, it holds "
-                    f"{info.file_size - header:,}"
-                )
-            headers[key] = (shape, dtype)
-        m_shape, m_dtype = headers["meta"]
-        if m_shape != () or m_dtype.kind != "U":
-            raise RunFileError("meta: not a text")
-        if infos["meta.npy"].file_size > _META_MAX_BYTES:
-            raise RunFileError("meta: too large")
-        t_shape = headers["t"][0]
-        d_shape = headers["diameter"][0]
-        if len(t_shape) != 1 or len(d_shape) != 1:
-            raise RunFileError("t and diameter: not one-dimensional")
-        dims = {"T": t_shape[0], "n": d_shape[0]}
-        if "beam_angles" in headers:
-            b_shape = headers["beam_angles"][0]
-            dims["B"] = b_shape[-1] if len(b_shape) == 2 else -1
-        if dims["T"] < 1:
-            raise RunFileError("no recorded samples")
-        if dims["n"] < 1:
-            raise RunFileError("no vehicles")
-        for key, (kind, form) in members.items():
-            shape, dtype = headers[key]
-            want = tuple(dims[d] if isinstance(d, str) else d for d in form)
-            if tuple(shape) != want:
-                raise RunFileError(f"{key}: shape {tuple(shape)}, expected {want}")
-            if dtype.kind != kind:
-                raise RunFileError(f"{key}: dtype {dtype}, expected kind {kind!r}")
-        with zf.open("meta.npy") as fh:
-            text = str(np.lib.format.read_array(fh, allow_pickle=False))
-        arrays = {}
-        for key in members:
-            with zf.open(f"{key}.npy") as fh:
-                arrays[key] = np.lib.format.read_array(fh, allow_pickle=False)
-    try:
-        meta = json.loads(text)
-    except (ValueError, RecursionError):
-        raise RunFileError("meta: not JSON") from None
-    _check_meta(meta, dims["n"])
-    return meta, arrays
-
-
-def _check_meta(meta: Any, n: int) -> None:
-    """Check the metadata of a run against its ``n`` vehicles."""
-    if not isinstance(meta, dict):
-        raise RunFileError("meta: not a mapping")
-    for key in ("names", "colors"):
-        value = meta.get(key)
-        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise RunFileError(f"meta: {key} is not a list of texts")
-        if len(value) != n:
-            raise RunFileError(f"meta: {len(value)} {key} for {n} vehicles")
-    leader = meta.get("leader")
-    if isinstance(leader, bool) or not isinstance(leader, int) or not -1 <= leader < n:
-        raise RunFileError(f"meta: leader {leader!r} is not a vehicle index or -1")
-    if meta.get("status") not in (
-        STATUS_OK,
-        STATUS_DIVERGED,
-        STATUS_INTERRUPTED,
-        STATUS_ERROR,
-    ):
-        raise RunFileError(f"meta: unknown status {meta.get('status')!r}")
-    if not isinstance(meta.get("info"), dict):
-        raise RunFileError("meta: info is not a mapping")
-    events = meta.get("events")
-    if not isinstance(events, list):
-        raise RunFileError("meta: events is not a list")
-    for row in events:
-        ok = (
-            isinstance(row, list)
-            and len(row) == 7
-            and isinstance(row[0], int | float)
-            and isinstance(row[1], str)
-            and isinstance(row[2], str)
-            and isinstance(row[3], str)
-            and (row[4] is None or isinstance(row[4], int | float))
-            and (row[5] is None or isinstance(row[5], bool))
-            and isinstance(row[6], int | float)
-        )
-        if not ok:
-            raise RunFileError(
-                f"meta: an event is not [t, a, b, kind, ...]: {row!r:.60}"
-            )
 
 
 #: Keys of ``Run.info`` that differ between identical runs and are not saved.

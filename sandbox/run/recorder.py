@@ -5,6 +5,12 @@ streams its samples to ``.npy`` files in a private directory instead (memory-map
 when read back), removed when the run's arrays are no longer used, or by the next run
 after a crash (:func:`remove_dead_records`). Its :meth:`Recorder.arrays` become a
 :class:`~sandbox.run.record.Run`.
+
+A spill that cannot be written (the temporary directory's file system is full, or
+read-only) raises :class:`SpillError`, one line naming the directory and what the
+record needs there; every spill file is closed and the directory removed first, and a
+recorder dropped half-way (its run failed) closes and removes its files without an
+error of its own.
 """
 
 from __future__ import annotations
@@ -18,6 +24,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from sandbox.errors import OutputError
+from sandbox.run.output_guard import remove_dead_dirs
 
 #: Above this size [bytes] a run's record is streamed to files on disk (see
 #: :class:`Recorder`); smaller records stay in memory.
@@ -37,6 +46,10 @@ _FIELDS: dict[str, tuple[Any, Any]] = {
     "failed": (lambda n: (n,), np.bool_),
     "reference": (lambda n: (2,), np.float64),
 }
+
+
+class SpillError(OutputError):
+    """A run's record could not be spilled to disk (names the directory)."""
 
 
 class Recorder:
@@ -97,24 +110,49 @@ class Recorder:
             k: np.zeros((self._chunk, *shape), dtype)
             for k, (shape, dtype) in shapes.items()
         }
-        self._dir = Path(
-            tempfile.mkdtemp(prefix=f"sandbox-record-{os.getpid()}-", dir=where)
-        )
+        self._bytes = T * sample_bytes
+        try:
+            self._dir = Path(
+                tempfile.mkdtemp(prefix=f"sandbox-record-{os.getpid()}-", dir=where)
+            )
+        except OSError as exc:
+            raise SpillError(self._why(where, exc)) from None
         self._files: dict[str, Any] = {}
         # Closes and removes the files if the recorder is dropped before arrays() (a
         # run that failed).
         self._cleanup = weakref.finalize(self, _discard, self._files, self._dir)
         self._offsets: dict[str, int] = {}
-        for k, (shape, dtype) in shapes.items():
-            # Only the header is written now: the file grows as samples are appended
-            # (never a sparse file of the record's full size), and arrays() rewrites
-            # the header with the samples actually recorded.
-            header = _npy_header(dtype, (T, *shape))
-            fh = open(self._dir / f"{k}.npy", "w+b")  # closed by arrays()/_discard()
-            fh.write(header)
-            self._files[k] = fh
-            self._offsets[k] = len(header)
+        try:
+            for k, (shape, dtype) in shapes.items():
+                # Only the header is written now: the file grows as samples are
+                # appended (never a sparse file of the record's full size), and
+                # arrays() rewrites the header with the samples actually recorded.
+                header = _npy_header(dtype, (T, *shape))
+                fh = open(self._dir / f"{k}.npy", "w+b")  # closed by arrays()/_discard
+                self._files[k] = fh
+                fh.write(header)
+                fh.flush()
+                self._offsets[k] = len(header)
+        except OSError as exc:
+            self._fail(exc)
         self._flushed = 0
+
+    def _why(self, where: Path, exc: OSError) -> str:
+        """The one line of a spill that failed in ``where``."""
+        need = self._bytes / 1e6
+        return (
+            f"{where}: the run's record cannot be spilled there "
+            f"({exc.strerror or type(exc).__name__}; it needs about {need:,.0f} MB); "
+            "free space there, or set TMPDIR to a directory on a larger file system"
+        )
+
+    def _fail(self, exc: OSError) -> None:
+        """Close and remove the spill files, then raise :class:`SpillError`."""
+        directory = self._dir
+        self._cleanup.detach()
+        _discard(self._files, directory)
+        self._buffers = {}
+        raise SpillError(self._why(directory, exc)) from None
 
     def append(
         self,
@@ -152,10 +190,14 @@ class Recorder:
         rows = self.count - self._flushed
         if rows <= 0:
             return
-        for k, fh in self._files.items():
-            data = self._buffers[k][:rows]
-            fh.seek(self._offsets[k] + self._flushed * data[0].nbytes)
-            fh.write(data.tobytes())
+        try:
+            for k, fh in self._files.items():
+                data = self._buffers[k][:rows]
+                fh.seek(self._offsets[k] + self._flushed * data[0].nbytes)
+                fh.write(data.tobytes())
+                fh.flush()  # a full disk says so now, not at close
+        except OSError as exc:
+            self._fail(exc)
         self._flushed = self.count
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -167,16 +209,19 @@ class Recorder:
         if not self.on_disk:
             return {name: buf[:k] for name, buf in self._buffers.items()}
         self._flush()
-        for name, fh in self._files.items():
-            shape, dtype = self._shapes[name]
-            fh.seek(0)
-            fh.write(_npy_header(dtype, (k, *shape), self._offsets[name]))
-            fh.close()
+        try:
+            for name, fh in self._files.items():
+                shape, dtype = self._shapes[name]
+                fh.seek(0)
+                fh.write(_npy_header(dtype, (k, *shape), self._offsets[name]))
+                fh.close()
+            out = {
+                name: np.load(self._dir / f"{name}.npy", mmap_mode="r")[:k]
+                for name in self._shapes
+            }
+        except OSError as exc:
+            self._fail(exc)
         self._files.clear()
-        out = {
-            name: np.load(self._dir / f"{name}.npy", mmap_mode="r")[:k]
-            for name in self._shapes
-        }
         self._buffers = {}
         self._cleanup.detach()
         if os.name == "posix":  # the mappings keep the data; the names can go now
@@ -217,39 +262,19 @@ def remove_dead_records(directory: Path) -> None:
     Only directories named ``sandbox-record-<pid>-*`` whose process is dead and that
     hold nothing but a record's files are removed (a SIGKILL leaves them behind).
     """
-    for path in Path(directory).glob("sandbox-record-*-*"):
-        pid = path.name[len("sandbox-record-") :].split("-", 1)[0]
-        if not pid.isdigit() or _alive(int(pid)):
-            continue
-        try:
-            if path.is_symlink() or not path.is_dir():
-                continue
-            entries = list(path.iterdir())
-            if not {e.name for e in entries} <= _RECORD_FILES:
-                continue
-            for e in entries:
-                if e.is_file() and not e.is_symlink():
-                    e.unlink()
-            path.rmdir()
-        except OSError:
-            continue
-
-
-def _alive(pid: int) -> bool:
-    """Whether process ``pid`` exists (or may: it belongs to another user)."""
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except (PermissionError, OSError):
-        return True
-    return True
+    remove_dead_dirs(directory, "sandbox-record-", _RECORD_FILES)
 
 
 def _discard(files: dict[str, Any], directory: Path) -> None:
-    """Close a disk-backed record's files and remove them."""
+    """Close a disk-backed record's files and remove them, whatever fails.
+
+    A file whose buffered bytes cannot be written (a full disk) is closed all the
+    same; nothing here raises, so a finalizer never prints a traceback.
+    """
     for fh in files.values():
-        fh.close()
+        try:
+            fh.close()  # closes the file even when its buffer cannot be written
+        except OSError:
+            pass
+    files.clear()
     shutil.rmtree(directory, ignore_errors=True)

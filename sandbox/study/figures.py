@@ -4,7 +4,10 @@
   95 % interval; middle, the rate of runs not settled by the end, likewise; right, the
   worst healthy settling time (median, and the quartiles as a band) of the settled
   runs; all against the varied path ``x``, one line per value of the other varied
-  paths;
+  paths. The lines are set apart a little along ``x`` and drawn each with its own
+  marker and dashes, so that lines that coincide stay visible; categories (an ``x``
+  that is not numeric) are points with error bars, not joined by lines; a panel
+  without a settled run says so;
 - ``heatmap_<x>_<y>.png`` (two or more varied paths): the collision rate and the
   unsettled rate over ``x`` and ``y``, one pair of panels per value of the other paths.
 
@@ -33,6 +36,13 @@ MAX_PANELS = 6
 #: Joins the paths (and the values) of the zipped paths into one axis.
 AXIS_JOIN = " & "
 
+#: The lines of a rates figure are set apart along x by this fraction of the
+#: smallest step between two x values, in all (the first and the last line).
+DODGE = 0.2
+#: Markers and dashes of the lines, in turn.
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "<", ">", "*")
+DASHES = ("-", "--", "-.", ":")
+
 
 def save_figure(fig: Any, path: Path) -> None:
     """Write ``fig`` as a PNG at ``path``, whole or not at all.
@@ -49,6 +59,30 @@ def _numeric(values: list[str]) -> list[float] | None:
         return [float(v) for v in values]
     except ValueError:
         return None
+
+
+def _number(value: Any) -> float:
+    """A summary's number, NaN for a missing one (no settled run)."""
+    return math.nan if value is None else float(value)
+
+
+def dodges(xpos: list[float], lines: int) -> np.ndarray:
+    """How far each of ``lines`` lines is moved along x, shape (lines,).
+
+    The lines are spread over :data:`DODGE` of the smallest step between two x
+    values, centred on the true value (a single line is not moved).
+
+    >>> dodges([0.0, 1.0, 2.0], 3).tolist()
+    [-0.1, 0.0, 0.1]
+    >>> dodges([0.0, 1.0], 1).tolist()
+    [0.0]
+    """
+    if lines <= 1:
+        return np.zeros(max(lines, 0))
+    steps = np.diff(np.sort(np.asarray(xpos, dtype=float)))
+    steps = steps[steps > 0]
+    step = float(steps.min()) if len(steps) else 1.0
+    return (np.arange(lines) - (lines - 1) / 2.0) * (DODGE * step / (lines - 1))
 
 
 def _slug(path: str) -> str:
@@ -121,18 +155,25 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
     xnum = _numeric(xs)
     xpos = xnum if xnum is not None else list(range(len(xs)))
     combos = list(dict.fromkeys(tuple(r[p] for p in others) for r in rows))
+    shifts = dodges(xpos, len(combos))
 
     fig, (ax1, ax3, ax2) = plt.subplots(
         1, 3, figsize=(15, 4.4), constrained_layout=True
     )
+    settled_any = False
     for k, combo in enumerate(combos):
         label = ", ".join(f"{p}={v}" for p, v in zip(others, combo, strict=True))
-        color = f"C{k % 10}"
+        style = {
+            "color": f"C{k % 10}",
+            "marker": MARKERS[k % len(MARKERS)],
+            "linestyle": DASHES[k % len(DASHES)] if xnum is not None else "none",
+            "label": label or None,
+        }
         pts = [(xp, summary.get((xv, *combo))) for xp, xv in zip(xpos, xs, strict=True)]
         pts = [(xp, s) for xp, s in pts if s is not None and s["runs"] > 0]
         if not pts:
             continue
-        px = np.array([p for p, _ in pts], dtype=float)
+        px = np.array([p for p, _ in pts], dtype=float) + shifts[k]
         for ax, key in ((ax1, "collision"), (ax3, "unsettled")):
             rate = np.array([s[f"{key}_rate"] for _, s in pts])
             lo = np.array([s[f"{key}_low"] for _, s in pts])
@@ -141,16 +182,35 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
                 px,
                 100 * rate,
                 yerr=100 * np.clip(np.vstack((rate - lo, hi - rate)), 0, None),
-                marker="o",
                 capsize=3,
-                color=color,
-                label=label or None,
+                **style,
             )
-        med = np.array([s["settling_median"] for _, s in pts])
-        q1 = np.array([s["settling_q1"] for _, s in pts])
-        q3 = np.array([s["settling_q3"] for _, s in pts])
-        ax2.plot(px, med, marker="o", color=color, label=label or None)
-        ax2.fill_between(px, q1, q3, color=color, alpha=0.2, linewidth=0)
+        med, q1, q3 = (
+            np.array([_number(s[f"settling_{q}"]) for _, s in pts])
+            for q in ("median", "q1", "q3")
+        )
+        if not np.isfinite(med).any():
+            continue
+        settled_any = True
+        if xnum is None:  # categories: the quartiles as error bars, no band
+            spread = np.clip(np.vstack((med - q1, q3 - med)), 0, None)
+            ax2.errorbar(px, med, yerr=spread, capsize=3, **style)
+        else:
+            ax2.plot(px, med, **style)
+            ax2.fill_between(px, q1, q3, color=style["color"], alpha=0.2, linewidth=0)
+    if not settled_any:
+        ax2.text(
+            0.5,
+            0.5,
+            "no run settled",
+            ha="center",
+            va="center",
+            transform=ax2.transAxes,
+            fontsize=11,
+            color="0.3",
+        )
+        ax2.set_yticks([])
+        ax2.set_xlim(ax1.get_xlim())  # the x axis of the other panels, not 0..1
     n_runs = [s["runs"] for s in summary.values()]
     lo_n, hi_n = min(n_runs), max(n_runs)
     each = f"{lo_n}" if lo_n == hi_n else f"{lo_n}-{hi_n}"
@@ -176,7 +236,7 @@ def plot_sweep(root: Path, out: Path, by: list[str] | None = None) -> list[Path]
         ax.grid(alpha=0.3)
         if xnum is None:
             ax.set_xticks(xpos, [_tick(v) for v in xs], fontsize=7)
-        if combos != [()]:
+        if combos != [()] and ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
     path = out / f"rates_{_slug(x)}.png"
     save_figure(fig, path)

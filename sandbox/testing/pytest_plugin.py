@@ -13,7 +13,15 @@
   file is collected, so installing sandbox changes no other project's test session.
 - ``--sandbox-gifs DIR``: every failing test that ran a scenario (a ``test_*.yaml``
   item, or a test that used ``sandbox_run``) gets a GIF of its run in ``DIR``, and the
-  failure report names the file.
+  failure report names the file (a file there that is not such a GIF is never
+  replaced: the report says so instead).
+- Plug-in code: a scenario is data, so the code of the plug-ins a scenario lists
+  (``plugins:``) is run only on an explicit opt-in, as on the command line: pytest's
+  ``--trust-plugins``, the ini option ``sandbox_trust_plugins = true``, or
+  ``SANDBOX_TRUST_PLUGINS=1`` in the environment (:func:`trusted`). Without one, such a
+  scenario fails its test with the loader's one line naming the entries. Plug-ins the
+  test session imports itself (a ``conftest.py`` that imports them) are loaded already
+  and need no trust.
 
 Nothing of sandbox is imported until a scenario is run, so the plugin costs nothing in a
 session that does not use it.
@@ -35,7 +43,7 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
-    """Add ``--sandbox-gifs DIR`` and the ini option ``sandbox_yaml``."""
+    """Add ``--sandbox-gifs DIR``, ``--trust-plugins`` and the ini options."""
     group = parser.getgroup("sandbox", "sandbox scenarios")
     group.addoption(
         "--sandbox-gifs",
@@ -43,12 +51,40 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         default=None,
         help="write a GIF of the run of every failing sandbox test into DIR",
     )
+    group.addoption(
+        "--trust-plugins",
+        action="store_true",
+        default=False,
+        help="run the code of the plug-ins that sandbox scenarios list under plugins: "
+        "(without it, the ini option sandbox_trust_plugins or SANDBOX_TRUST_PLUGINS=1, "
+        "such a scenario fails its test)",
+    )
     parser.addini(
         "sandbox_yaml",
         type="bool",
         default=False,
         help="collect test_*.yaml scenario files with an expect: section as tests",
     )
+    parser.addini(
+        "sandbox_trust_plugins",
+        type="bool",
+        default=False,
+        help="run the code of the plug-ins that sandbox scenarios list under plugins:",
+    )
+
+
+def trusted(config: pytest.Config) -> bool | None:
+    """Whether the session trusts the plug-in code scenarios list.
+
+    True with ``--trust-plugins`` or the ini option ``sandbox_trust_plugins``; else
+    None, which leaves it to ``SANDBOX_TRUST_PLUGINS`` (see
+    :func:`sandbox.scenario.load_scenario`).
+    """
+    if config.getoption("trust_plugins", False) or config.getini(
+        "sandbox_trust_plugins"
+    ):
+        return True
+    return None
 
 
 # ---------------------------------------------------------------------------- fixture
@@ -77,6 +113,7 @@ def sandbox_run(
     """
     used = request.node.stash.setdefault(RUNS_KEY, [])
     here = Path(request.node.path).parent
+    trust = trusted(request.config)
 
     def factory(path: str | Path, set: str | Sequence[str] = ()) -> Any:  # noqa: A002
         from sandbox.loop.simulation import simulate
@@ -88,8 +125,7 @@ def sandbox_run(
             p = here / p
         key = (str(p.resolve()), overrides)
         if key not in sandbox_run_cache:
-            # the project's own files: their plug-ins are trusted
-            scenario = load_scenario(p, overrides=list(overrides), trust_plugins=True)
+            scenario = load_scenario(p, overrides=list(overrides), trust_plugins=trust)
             run = simulate(scenario)
             sandbox_run_cache[key] = _freeze(run)
         run = sandbox_run_cache[key]
@@ -160,7 +196,7 @@ class ScenarioItem(pytest.Item):
         from sandbox.testing.assertions import check_scenario
 
         try:
-            result = check_scenario(self.path, trust_plugins=True)
+            result = check_scenario(self.path, trust_plugins=trusted(self.config))
         except ScenarioError as exc:  # named as in the report: relative to rootdir
             raise ScenarioError(exc.problems, self._source()) from None
         result.source = self._source()
@@ -184,6 +220,7 @@ class ScenarioItem(pytest.Item):
 # -------------------------------------------------------------------------- GIFs
 def _write_gifs(item: pytest.Item, folder: Path) -> list[str]:
     from sandbox.render.animation import write_gif
+    from sandbox.run.output_guard import OutputRefused, check_target, is_gif
 
     runs = [r for r in item.stash.get(RUNS_KEY, []) if r is not None]
     unique = list({id(r): r for r in runs}.values())
@@ -193,7 +230,16 @@ def _write_gifs(item: pytest.Item, folder: Path) -> list[str]:
         name = run.scenario.name if run.scenario is not None else f"run{k}"
         target = folder / (f"{stem}.gif" if len(unique) == 1 else f"{stem}-{name}.gif")
         try:
+            check_target(
+                target,
+                "pytest --sandbox-gifs",
+                recognise=is_gif,
+                what="a GIF",
+                hint="choose another --sandbox-gifs DIR",
+            )
             write_gif(run, target)
+        except OutputRefused as exc:
+            lines.append(f"sandbox: GIF of {name} not written: {exc}")
         except Exception as exc:  # a failing GIF must not hide the test's failure
             lines.append(f"sandbox: GIF of {name} not written: {exc}")
         else:

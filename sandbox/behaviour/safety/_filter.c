@@ -1,68 +1,28 @@
 /* The velocity barrier's step of the CBF filter in one C call, and its counters.
  *
  * sandbox/behaviour/safety/filter_kernel.py calls velocity_step where this optional
- * extension is built and its check passes; it does, for the rows of every world at
+ * extension is built (the compiled path ``filter`` of sandbox/accel.py); it does, for the rows of every world at
  * once, what cbf.filter_commands does with numpy for ``barrier: velocity`` without a
  * priority: the boxes of the inputs (_box) and each vehicle's reach, the pairs of
  * the neighbour search's candidates closer than the range, the exact pruning of the
  * pairs that cannot bind, both directions of the rest (braking.pair_geometry) and
  * their half-planes (cbf.barrier_rows), the obstacles' rows (made by numpy, handed
  * in), the rotation into z = (v1, l v2) and the prune by reach, each vehicle's
- * rows in np.lexsort((b, veh))'s order cut at max_rows, the exact projection of its
+ * rows ordered by b (ties in the order they were made) and cut at max_rows, the exact projection of its
  * bounded problem (qp_project.h), the right-hand rule's second projection
  * (right_hand.pass_right), and the commands written back where they changed. A
  * vehicle whose problem, or whose turned problem, has no point (which needs
  * qp.min_violation, LAPACK's) is handed back to numpy with its problem.
  *
- * world_counts does the reductions of accounting.account_worlds.
+ * world_counts does the reductions of accounting.account_worlds, and project the
+ * exact projections of qp.project over many problems (the compiled path ``qp``).
  *
- * The same IEEE-754 double operations in numpy's order (compiled without fused
- * multiply-adds), numpy's rules for maximum, minimum and clip on ties and NaN, its
- * min reduction's NaN, its sort's order of NaN, einsum's sum from 0; the C library's
- * sin, cos and hypot, which the check compares with numpy's.
+ * The C library's sin, cos and hypot; the numbers agree with the numpy step within
+ * the tolerance of sandbox/accel.py.
  */
 
-#include "numpy_rules.h"
+#include "accel.h"
 #include "qp_project.h"
-
-/* numpy.minimum(a, b): a where a < b or a is NaN, else b (b on a tie). */
-static inline double
-np_minimum(double a, double b)
-{
-    return (a < b || a != a) ? a : b;
-}
-
-/* numpy's sort order of doubles: NaN after every number. */
-static inline int
-sorts_before(double a, double b)
-{
-    return a < b || (b != b && a == a);
-}
-
-/* A min reduction as numpy takes it (NaN if any is NaN), then Python's
- * ``min(least, that)``, which keeps ``least`` unless the new value is smaller. */
-typedef struct {
-    double value;
-    int any;
-} Least;
-
-static inline void
-least_add(Least *l, double x)
-{
-    if (!l->any) {
-        l->value = x;
-        l->any = 1;
-    }
-    else if (l->value == l->value && (x != x || x < l->value)) {
-        l->value = x;
-    }
-}
-
-static inline double
-least_merge(double least, const Least *l)
-{
-    return (l->any && l->value < least) ? l->value : least;
-}
 
 /* The float parameters, in filter_kernel.py's order. */
 enum {
@@ -103,7 +63,7 @@ let_go(Held *h)
 
 /* A C-contiguous array of ``len`` items (any length if len < 0) of the kind 'd'
  * (float64), 'b' (bool) or 'n' (intp): an ndarray's data through numpy's C API where
- * the build has it (numpy_rules.h), else the buffer interface (held in ``h`` for the
+ * the build has it (accel.h), else the buffer interface (held in ``h`` for the
  * release); None gives NULL if optional. An array of another kind raises TypeError,
  * of another length ValueError, before any write. */
 static int
@@ -315,9 +275,9 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             h1 = v1_max[v];
             if (prev) {
                 double step = accel[v] * dt;
-                l1 = np_maximum(l1, v1p[v] - step);
-                h1 = np_minimum(h1, v1p[v] + step);
-                l1 = np_minimum(l1, h1);
+                l1 = larger(l1, v1p[v] - step);
+                h1 = smaller(h1, v1p[v] + step);
+                l1 = smaller(l1, h1);
             }
             if (speed_only) {
                 l2 = h2 = z0[2 * v + 1];
@@ -333,8 +293,8 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         hi2[v] = h2;
         if (filt[v] && seen == NULL) { /* the pruning's reach (of filtered ones) */
             double zh0 = prev ? v1p[v] : 0.0, zh1 = prev ? look * v2p[v] : 0.0;
-            double r = hypot(np_maximum(fabs(l1 - zh0), fabs(h1 - zh0)),
-                             np_maximum(fabs(l2 - zh1), fabs(h2 - zh1)));
+            double r = hypot(larger(fabs(l1 - zh0), fabs(h1 - zh0)),
+                             larger(fabs(l2 - zh1), fabs(h2 - zh1)));
             reach[v] = r * (1.0 + 1e-9) + 1e-9;
         }
         if (by != NULL) {
@@ -363,19 +323,19 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         }
     }
     if (kept && seen == NULL) {
-        Least pair = {0.0, 0};
+        double pair = INFINITY;
         Py_ssize_t out = 0;
         for (Py_ssize_t q = 0; q < kept; q++) {
             Py_ssize_t k = near[q], i = ci[k], j = cj[k];
             double x = p[2 * i] - p[2 * j], y = p[2 * i + 1] - p[2 * j + 1];
-            double dist = np_maximum(hypot(x, y), min_dist);
+            double dist = larger(hypot(x, y), min_dist);
             double big_d = 0.5 * (diam[i] + diam[j]) + 2.0 * look + margin;
             double hh = dist * dist - big_d * big_d;
             int both = filt[i] && filt[j];
             if (filt[i] || filt[j]) {
-                least_add(&pair, hh);
+                pair = smaller(pair, hh);
                 if (by != NULL) {
-                    by[i] = np_minimum(by[i], hh);
+                    by[i] = smaller(by[i], hh);
                 }
             }
             double base = 0.25 * gamma * hh / dist, slack_i = base, slack_j = base;
@@ -397,13 +357,13 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 near[out++] = k;
             }
         }
-        least = least_merge(least, &pair);
+        least = smaller(least, pair);
         kept = out;
     }
 
     /* Both directions of each pair (pair_geometry), then the obstacles' rows. */
     Py_ssize_t made = 0;
-    Least made_least = {0.0, 0};
+    double made_least = INFINITY;
     for (int side = 0; side < 2; side++) {
         for (Py_ssize_t q = 0; q < kept; q++) {
             Py_ssize_t k = near[q];
@@ -420,16 +380,16 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 hh = pair_h[q];
             }
             else {
-                dist = np_maximum(hypot(x, y), min_dist);
+                dist = larger(hypot(x, y), min_dist);
                 double big_d = 0.5 * (diam[me] + diam[other]) +
                                (coop ? 2.0 * look : look) + margin;
                 hh = dist * dist - big_d * big_d;
             }
-            least_add(&made_least, hh);
+            made_least = smaller(made_least, hh);
             if (by != NULL) {
-                by[me] = np_minimum(by[me], hh);
+                by[me] = smaller(by[me], hh);
             }
-            double share = 0.0; /* einsum("kd,kd->k"): the products summed from 0 */
+            double share = 0.0;
             if (prev && broadcast) {
                 double s0 = w[2 * me] + w[2 * other];
                 double s1 = w[2 * me + 1] + w[2 * other + 1];
@@ -444,15 +404,15 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             r->b = -rhs / (2.0 * dist);
         }
     }
-    least = least_merge(least, &made_least);
-    Least wall = {0.0, 0};
+    least = smaller(least, made_least);
+    double wall = INFINITY;
     for (Py_ssize_t k = 0; k < no; k++) {
         Py_ssize_t v = orow[k];
         double clearance = 0.5 * diam[v] + look + margin;
         double g = signed_d[k] - clearance;
-        least_add(&wall, g);
+        wall = smaller(wall, g);
         if (by != NULL) {
-            by[v] = np_minimum(by[v], g);
+            by[v] = smaller(by[v], g);
         }
         Row *r = rows + made++;
         r->veh = v;
@@ -460,7 +420,7 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         r->a1 = -away[2 * k + 1];
         r->b = gamma * (signed_d[k] - clearance);
     }
-    least = least_merge(least, &wall);
+    least = smaller(least, wall);
 
     /* In z = (v1, l v2): a . w = (R^T a) . z; the rows no input within the bounds
      * can violate dropped, the rest counted per vehicle in their order. */
@@ -473,8 +433,8 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         Py_ssize_t v = r->veh;
         double c = cos_t[v], s = sin_t[v];
         double a0 = c * r->a0 + s * r->a1, a1 = -s * r->a0 + c * r->a1;
-        double most = np_maximum(a0 * lo1[v], a0 * hi1[v]) +
-                      np_maximum(a1 * lo2[v], a1 * hi2[v]);
+        double most = larger(a0 * lo1[v], a0 * hi1[v]) +
+                      larger(a1 * lo2[v], a1 * hi2[v]);
         if (most > r->b - tol) {
             r->a0 = a0;
             r->a1 = a1;
@@ -482,8 +442,8 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             count[v]++;
         }
     }
-    /* np.lexsort((b, veh)): by vehicle (a stable bucket), then by b (a stable
-     * insertion sort: ties keep the order the rows were made in). */
+    /* By vehicle (a stable bucket), then by b (a stable insertion sort: ties keep
+     * the order the rows were made in). */
     Py_ssize_t total = 0;
     for (Py_ssize_t v = 0; v < N; v++) {
         first[v] = total;
@@ -498,7 +458,7 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         Py_ssize_t *o = order + first[v];
         for (Py_ssize_t a = 1; a < count[v]; a++) {
             Py_ssize_t cur = o[a], b = a;
-            while (b > 0 && sorts_before(rows[cur].b, rows[o[b - 1]].b)) {
+            while (b > 0 && rows[cur].b < rows[o[b - 1]].b) {
                 o[b] = o[b - 1];
                 b--;
             }
@@ -522,8 +482,8 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         double x0 = z0[2 * v], y0 = z0[2 * v + 1], z[2];
         Py_ssize_t m = count[v];
         if (m == 0) {
-            z[0] = clip_rows(x0, lo1[v], hi1[v]);
-            z[1] = clip_rows(y0, lo2[v], hi2[v]);
+            z[0] = clamp(x0, lo1[v], hi1[v]);
+            z[1] = clamp(y0, lo2[v], hi2[v]);
         }
         else {
             double *a = m <= 16 ? mat : pmat + 2 * width * pending;
@@ -550,18 +510,18 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 double nominal = hypot(x0, y0);
                 double kept_speed =
                     z[0] == x0 && z[1] == y0 ? nominal : hypot(z[0], z[1]);
-                double cut = 1.0 - kept_speed / np_maximum(nominal, min_speed);
+                double cut = 1.0 - kept_speed / larger(nominal, min_speed);
                 double x =
-                    clip_scalars((cut - (1.0 - start)) / (start - full), 0.0, 1.0);
+                    clamp((cut - (1.0 - start)) / (start - full), 0.0, 1.0);
                 double ramp = x * x * (3.0 - 2.0 * x);
-                double turn = angle * ramp * np_minimum(nominal / slow, 1.0);
+                double turn = angle * ramp * smaller(nominal / slow, 1.0);
                 if (turn > 0) { /* clockwise by the turn */
                     double c = cos(turn), s = sin(turn);
                     ok = project_one(a, b, 4 + m, c * x0 + s * y0, c * y0 - s * x0,
                                      tol, z);
                 }
             }
-            if (!ok) { /* no point: numpy's min_violation, by the caller */
+            if (!ok) { /* no point: qp.min_violation, by the caller */
                 if (a != pmat + 2 * width * pending) {
                     memcpy(pmat + 2 * width * pending, a, sizeof(double) * 2 * (4 + m));
                     memcpy(poff + width * pending, b, sizeof(double) * (4 + m));
@@ -645,12 +605,9 @@ world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             if (fallback != NULL) {
                 fallen += fallback[k] != 0;
             }
-            double s = slack[k]; /* numpy's max and min reductions: NaN wins */
-            if (big == big && (s != s || s > big)) {
-                big = s;
-            }
-            if (by != NULL && small == small && (by[k] != by[k] || by[k] < small)) {
-                small = by[k];
+            big = larger(slack[k], big);
+            if (by != NULL) {
+                small = smaller(by[k], small);
             }
         }
         n_active[w] = on;
@@ -677,17 +634,71 @@ done:
     return result;
 }
 
+PyDoc_STRVAR(project_doc,
+"project(z0, a, b, tol, z, feasible) -> None\n"
+"\n"
+"``z0`` (n, 2), ``a`` (n, m, 2), ``b`` (n, m) float64; writes the nearest point of\n"
+"each polygon to ``z`` (n, 2) (``z0`` where it is empty) and ``feasible`` (n,) bool.");
+
+static PyObject *
+project(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "project takes 6 arguments");
+        return NULL;
+    }
+    double tol = PyFloat_AsDouble(args[3]);
+    if (tol == -1.0 && PyErr_Occurred()) {
+        return NULL;
+    }
+    Rows r[4];
+    Py_buffer ok;
+    int got = 0, got_ok = 0;
+    PyObject *result = NULL;
+    const int at[] = {0, 1, 2, 4};
+    for (int k = 0; k < 4; k++) {
+        if (get_rows(args[at[k]], &r[k], k == 3) < 0) goto done;
+        got++;
+    }
+    if (PyObject_GetBuffer(args[5], &ok, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0)
+        goto done;
+    got_ok = 1;
+    Py_ssize_t n = r[0].len / 2;
+    Py_ssize_t m = n ? r[2].len / n : 0;
+    if (r[0].len != 2 * n || r[2].len != n * m || r[1].len != 2 * n * m ||
+        r[3].len != 2 * n || ok.len != n || ok.itemsize != 1) {
+        PyErr_SetString(PyExc_ValueError, "project: shapes differ");
+        goto done;
+    }
+    const double *z0 = r[0].data, *A = r[1].data, *B = r[2].data;
+    double *z = r[3].data;
+    unsigned char *feasible = ok.buf;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        feasible[k] = (unsigned char)project_one(A + 2 * m * k, B + m * k, m, z0[2 * k],
+                                                 z0[2 * k + 1], tol, z + 2 * k);
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    release(r, got);
+    if (got_ok) {
+        PyBuffer_Release(&ok);
+    }
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"velocity_step", (PyCFunction)(void (*)(void))velocity_step, METH_FASTCALL,
      velocity_step_doc},
     {"world_counts", (PyCFunction)(void (*)(void))world_counts, METH_FASTCALL,
      world_counts_doc},
+    {"project", (PyCFunction)(void (*)(void))project, METH_FASTCALL, project_doc},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_filter",
-    "The CBF filter's velocity barrier and its counters in C (see filter_kernel.py).",
+    "The CBF filter's velocity barrier, its counters and its projections in C.",
     -1, methods,
 };
 

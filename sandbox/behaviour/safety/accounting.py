@@ -5,32 +5,24 @@ Split from :mod:`sandbox.behaviour.safety.cbf`, which adds each step of the filt
 its K stacked worlds through :func:`account_worlds` (the same counters, each world's
 reductions taken at once over a ``(K, n)`` view of the rows).
 
-Where the optional extension ``sandbox.behaviour.safety._filter`` is built, the
-reductions of :func:`account_worlds` and the choice of the worlds it writes are one
-C loop over the rows (``world_counts`` in ``_filter.c``: counts, numpy's max and
-min reductions with their NaN), and only the worlds whose counters change are
-touched from Python; :func:`account_worlds_numpy` is the definition, against which
-:func:`counts_agree` compares it on random steps at the first use.
-:data:`USE_KERNEL` False forces the numpy path.
+Where the compiled path ``filter`` is on (:mod:`sandbox.accel`), the reductions of
+:func:`account_worlds` and the choice of the worlds it writes are one C loop over
+the rows (``world_counts`` in ``_filter.c``: counts, maxima and minima), and only the
+worlds whose counters change are touched from Python; :func:`account_worlds_numpy`
+is the reference (``tests/test_compiled_paths.py``).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from sandbox import accel
 from sandbox.behaviour.safety.qp import TOLERANCE
 
-try:
-    from sandbox.behaviour.safety import _filter
-except ImportError:  # pragma: no cover - built without a C compiler
-    _filter = None
-
-#: Reduce the worlds' counters in C where that is built and agrees (False: numpy).
-USE_KERNEL = True
-_agreed: bool | None = None
 #: What a step changed of a world's counters (``world_counts``' flags).
 RAISED, LOWERED = 1, 2
 
@@ -159,11 +151,8 @@ def account_worlds(
     counters : WorldCounters
         The worlds' largest slack and least barrier so far (updated).
     """
-    if (
-        USE_KERNEL
-        and counts_agree()
-        and _account_c(world_stats, t, braking, step, counters)
-    ):
+    c = accel.module("filter")
+    if c is not None and _account_c(c, world_stats, t, braking, step, counters):
         return
     account_worlds_numpy(world_stats, t, braking, step, n, counters)
 
@@ -176,7 +165,7 @@ def account_worlds_numpy(
     n: int,
     counters: WorldCounters,
 ) -> None:
-    """:func:`account_worlds` by numpy (the definition)."""
+    """:func:`account_worlds` by numpy (the reference)."""
     k = len(world_stats)
     active = step.active.reshape(k, n).sum(axis=1)
     slack = step.slack.reshape(k, n)
@@ -211,6 +200,7 @@ def account_worlds_numpy(
 
 
 def _account_c(
+    c: Any,
     world_stats: list[dict],
     t: float,
     braking: bool,
@@ -232,7 +222,7 @@ def _account_c(
         counters.out = (*counts, np.zeros(k), np.zeros(k))
     active, bad, fallen, changes, touched, worst, least = counters.out
     try:  # the C loop holds every buffer before it writes any
-        count = _filter.world_counts(
+        count = c.world_counts(
             k, step.active, step.slack, step.by_vehicle,
             step.fallback if braking else None, counters.max_slack,
             counters.min_barrier, counters.started, active, bad, worst, least,
@@ -270,60 +260,4 @@ def _account_c(
             stats["min_barrier"] = small
         if fell:
             stats["fallback_steps"] += fell
-    return True
-
-
-def counts_agree() -> bool:
-    """Whether the C reductions give :func:`account_worlds_numpy`'s (checked once).
-
-    Four steps of random counters of one to five worlds (slack at and beyond the
-    tolerance, NaN and infinite barriers, with and without the braking's fallback),
-    each world's counters compared value for value.
-    """
-    global _agreed
-    if _agreed is None:
-        _agreed = _filter is not None and _check()
-    return _agreed
-
-
-def _check() -> bool:
-    global _agreed
-    rng = np.random.default_rng(20261208)
-    special = np.array([0.0, TOLERANCE, 2 * TOLERANCE, np.nan, np.inf, -np.inf, -1.0])
-    _agreed = True  # provisionally: the C path runs within the check
-    try:
-        for trial in range(16):
-            k, n = int(rng.integers(1, 6)), int(rng.integers(1, 5))
-            braking, by = trial % 2 == 1, trial % 3 != 0
-            start = {} if trial % 4 else {"max_slack": 0.5, "min_barrier": 0.1}
-            stats = ([dict(start) for _ in range(k)], [dict(start) for _ in range(k)])
-            counters = (WorldCounters(stats[0]), WorldCounters(stats[1]))
-            for t in (0.0, 0.01, 0.02, 0.03):
-                slack = np.where(
-                    rng.random(k * n) < 0.8,
-                    0.0,
-                    rng.choice(special[:4], k * n) * rng.uniform(0.5, 2.0, k * n),
-                )
-                least = rng.normal(0.0, 1.0, k * n)
-                least[rng.random(k * n) < 0.2] = rng.choice(special[3:], 1)
-                step = FilterStep(
-                    rng.random(k * n) < 0.1,
-                    slack,
-                    0,
-                    fallback=rng.random(k * n) < 0.05,
-                    by_vehicle=least if by else None,
-                )
-                if not _account_c(stats[0], t, braking, step, counters[0]):
-                    return False
-                account_worlds_numpy(stats[1], t, braking, step, n, counters[1])
-            if repr(stats[0]) != repr(stats[1]) or not all(
-                np.array_equal(a.view(np.uint64), b.view(np.uint64))
-                for a, b in (
-                    (counters[0].max_slack, counters[1].max_slack),
-                    (counters[0].min_barrier, counters[1].min_barrier),
-                )
-            ):
-                return False
-    finally:
-        _agreed = None
     return True

@@ -23,19 +23,19 @@ left against its braking command ``z_b``, to first order::
 condition by construction, and a vehicle's conditions always have a common point
 within its bounds. :mod:`sandbox.behaviour.safety.braking_check` then checks the QP's
 command beyond first order. The distance beyond which no condition can bind is
-:func:`braking_range`; the equations and what they guarantee are in
-``docs/concepts/safety.md``.
+:func:`~sandbox.behaviour.safety.state.braking_range`; the equations and what they
+guarantee are in ``docs/concepts/safety.md``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from sandbox.behaviour.safety.braking_check import Pending
 from sandbox.behaviour.safety.running import ray_floor, run_target, runs
+from sandbox.behaviour.safety.state import Brakings
 from sandbox.model.barriers import (
     MIN_DIST,
     braking_periods,
@@ -48,7 +48,7 @@ from sandbox.model.barriers import (
 )
 
 if TYPE_CHECKING:
-    from sandbox.behaviour.safety.cbf import CBFState
+    from sandbox.behaviour.safety.state import CBFState
     from sandbox.plugins.contexts import FilterContext
 
 
@@ -119,45 +119,6 @@ def pair_geometry(
     return me, other, coop, rel, dist, big_d
 
 
-def braking_range(
-    v1_max: np.ndarray,
-    lateral: np.ndarray,
-    accel: np.ndarray,
-    diameter: np.ndarray,
-    margin: float,
-    look_ahead: float,
-    dt: float,
-) -> float:
-    """Distance [m] beyond which no braking-barrier condition can bind.
-
-    A braking from ``v1_max`` runs at most ``S = v1_max (v1_max / a + dt) / 2 +
-    v1_max dt`` (the first period at the command's speed), a vehicle that does not
-    brake at most ``s (v1_max / a_min + 2 dt)`` meanwhile (``s = sqrt(v1_max^2 +
-    lateral^2)``, the look-ahead points' top speed), so ``H >= r - D - 2 X`` at a
-    distance ``r`` of the points, ``X`` the larger travel. A condition binds only if
-    a command within the bounds loses more than ``rho H`` against the braking
-    command: ``|g . dz| <= G = (2 dt + v1_max / a_min) 2 a dt + dt (1 + S / l) 2
-    lateral``, ``rho >= a_min / (a_min + a_max)``. Beyond ``D + l + 2 X + G /
-    rho`` none does.
-
-    >>> round(braking_range(np.array([2.0]), np.array([0.4]), np.array([5.0]),
-    ...                     np.array([0.5]), 0.05, 0.1, 0.01), 3)
-    2.732
-    """
-    v = float(np.max(v1_max))
-    q = float(np.max(lateral))
-    s = float(np.max(np.hypot(v1_max, lateral)))
-    a_min, a_max = float(np.min(accel)), float(np.max(accel))
-    if not (np.isfinite(s) and np.isfinite(a_max) and a_min > 0):
-        return np.inf
-    stop = v / a_min + dt  # [s] the braking's duration, the first period included
-    travel = max(0.5 * v * stop + v * dt, s * (stop + dt))
-    reach = (stop + dt) * 2.0 * a_max * dt
-    reach += dt * (1.0 + (0.5 * v * stop + v * dt) / look_ahead) * 2.0 * q
-    big_d = float(np.max(diameter)) + 2.0 * look_ahead + margin
-    return big_d + look_ahead + 2.0 * travel + reach * (a_min + a_max) / a_min
-
-
 def obstacle_normals(
     state: CBFState, ctx: FilterContext, p: np.ndarray, filtered: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -180,48 +141,6 @@ def obstacle_normals(
     norm = np.maximum(np.hypot(away[:, 0], away[:, 1]), MIN_DIST)
     away /= norm[:, None]
     return rows, signed, away
-
-
-@dataclass
-class Brakings:
-    """Every vehicle's braking from this state on, period by period.
-
-    The drive reaches a command one substep into the period (``lag = 1 /
-    substeps`` of it at the last command), so a period at the speeds ``s_(m-1)``
-    then ``s_m`` runs ``dt u_m``, ``u_m = (1 - lag) s_m + lag s_(m-1)`` (``s_(-1) =
-    v1^``); its first period also runs ``lag dt l v2^`` sideways and turns the
-    heading by ``lag dt v2^``, along which the rest runs (``heading``).
-
-    Attributes
-    ----------
-    first : ndarray, shape (n,) [m/s]
-        The braking command's speed, ``v1^`` moved ``max_accel dt`` toward 0.
-    speeds : ndarray, shape (n, S) [m/s]
-        ``s_m`` of the periods (0 once stopped); ``S - 1`` periods in all, at least
-        one at rest.
-    travel : ndarray, shape (n, S) [m]
-        Distance run by the start of each period.
-    slope : ndarray, shape (n, S) [s]
-        ``d travel / d v1`` of the first period's speed.
-    heading, side : ndarray, shape (n, 2)
-        The heading ``e`` now and ``e^perp``.
-    path, path_side : ndarray, shape (n, 2)
-        The heading of the braking after the first period, and its ``e^perp``.
-    moves : ndarray, shape (n,) int
-        The periods in which the braking moves.
-    lag : float [1]
-    """
-
-    first: np.ndarray
-    speeds: np.ndarray
-    travel: np.ndarray
-    slope: np.ndarray
-    heading: np.ndarray
-    side: np.ndarray
-    path: np.ndarray
-    path_side: np.ndarray
-    moves: np.ndarray
-    lag: float
 
 
 def brakings(ctx: FilterContext, state: CBFState, theta: np.ndarray) -> Brakings:

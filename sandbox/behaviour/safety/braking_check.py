@@ -40,8 +40,7 @@ from sandbox.model.barriers import (
 )
 
 if TYPE_CHECKING:
-    from sandbox.behaviour.safety.braking import Brakings
-    from sandbox.behaviour.safety.cbf import CBFState
+    from sandbox.behaviour.safety.state import Brakings, CBFState
     from sandbox.plugins.contexts import FilterContext
 
 #: Halvings of the bisection toward the braking command [1]: ``t`` within 2^-8.

@@ -117,7 +117,6 @@ from dataclasses import replace
 
 import numpy as np
 
-from sandbox.behaviour.estimation import BroadcastEstimate
 from sandbox.behaviour.safety.accounting import (
     FilterStep,
     WorldCounters,
@@ -126,7 +125,6 @@ from sandbox.behaviour.safety.accounting import (
 )
 from sandbox.behaviour.safety.braking import (
     braking_fallback,
-    braking_range,
     braking_rows,
     columns,
     look_ahead_points,
@@ -138,19 +136,13 @@ from sandbox.behaviour.safety.filter_kernel import covers, usable, velocity_step
 from sandbox.behaviour.safety.priority import PRIORITY, holding
 from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
 from sandbox.behaviour.safety.right_hand import pass_right
-from sandbox.geometry.neighbours import NeighbourList, WorldPairs
+from sandbox.behaviour.safety.state import CBFState
 from sandbox.model.barriers import (
-    ESTIMATE_GAIN,
     MIN_DIST,
-    sensing_margin,
 )
 from sandbox.model.dynamics import CLIP
 from sandbox.plugins.contexts import FilterContext
 from sandbox.plugins.registration import Param, register_filter
-
-#: The speed bound used where a vehicle has no ``v1_max`` [m/s] (the loop's bound of a
-#: diverged run).
-UNLIMITED_SPEED = 1e3
 
 PARAMS = {
     "barrier": Param(
@@ -253,109 +245,6 @@ PARAMS = {
         maximum=16,
     ),
 }
-
-
-def _per_vehicle(value: float | np.ndarray, n: int) -> np.ndarray:
-    return np.broadcast_to(np.asarray(value, dtype=float), (n,))
-
-
-def auto_range(
-    v1_max: np.ndarray,
-    v2_max: np.ndarray,
-    diameter: np.ndarray,
-    gamma: float,
-    margin: float,
-    look_ahead: float,
-) -> float:
-    """Distance [m] beyond which no barrier condition can bind.
-
-    Look-ahead points move at most ``s = sqrt(v1_max^2 + (l v2_max)^2)``, so a gap
-    closes at most at ``2 s``; the pair's condition ``2 r r' >= -gamma (r^2 - D^2)``
-    holds at any velocity for ``r >= 2 s / gamma + sqrt((2 s / gamma)^2 + D^2)``, and
-    each half then holds at the velocities of the last period. Plus ``l`` (the
-    conditions toward failed vehicles use their centres). Unlimited speeds give
-    ``inf``.
-
-    >>> round(auto_range(np.array([2.0]), np.array([4.0]), np.array([0.5]),
-    ...                  2.0, 0.05, 0.1), 3)
-    4.313
-    """
-    lateral = np.where(np.isfinite(v2_max), look_ahead * v2_max, v1_max)
-    s = float(np.max(np.hypot(v1_max, lateral)))
-    if not np.isfinite(s):
-        return np.inf
-    big_d = float(np.max(diameter)) + 2.0 * look_ahead + margin
-    q = 2.0 * s / gamma
-    return q + float(np.sqrt(q * q + big_d * big_d)) + look_ahead
-
-
-class CBFState:
-    """What the filter keeps between steps: parameters, limits, the neighbour index."""
-
-    def __init__(self, ctx: FilterContext) -> None:
-        p = ctx.params
-        n = len(ctx.pos)
-        self.gamma = float(p["gamma"])
-        self.margin = float(p["margin"])
-        self.look = float(p["look_ahead"])
-        self.speed_only = p["projection"] == "speed"
-        self.broadcast = p["neighbour_velocity"] == "broadcast"
-        self.reverse = bool(p["reverse"])
-        self.max_rows = int(p["max_constraints"])
-        # at most a right angle (1.5708 is pi / 2 as written)
-        self.pass_right = min(float(p.get("pass_right") or 0.0), np.pi / 2)
-        self.priority = p.get("priority") or "none"  # the rule's ordering (priority.py)
-        v1_max = _per_vehicle(ctx.v1_max, n)
-        v2_max = _per_vehicle(ctx.v2_max, n)
-        self.v1_max = np.where(np.isfinite(v1_max), v1_max, UNLIMITED_SPEED)
-        # The look-ahead point's sideways speed l v2 (v1_max where v2 is unlimited).
-        self.lateral = np.where(np.isfinite(v2_max), self.look * v2_max, self.v1_max)
-        self.accel = _per_vehicle(ctx.accel_max, n).copy()
-        self.braking = p.get("barrier", "velocity") == "braking"
-        #: The margin for what the vehicles sense of each other [m] (braking only).
-        self.sensed = 0.0
-        #: The estimate of the others' poses from the broadcast (braking only).
-        self.estimate: BroadcastEstimate | None = None
-        if self.braking and ctx.sensing is not None:
-            gain = p.get("estimate_gain")
-            gain = ESTIMATE_GAIN if gain is None else float(gain)
-            self.sensed = sensing_margin(
-                ctx.sensing.get("position_noise", 0.0),
-                ctx.sensing.get("heading_noise", 0.0),
-                gain,
-                self.look,
-                float(np.max(self.v1_max)),
-                float(np.min(self.accel)),
-                ctx.dt,
-            )
-            delay = int(round(ctx.sensing.get("delay", 0.0) / ctx.dt))
-            self.estimate = BroadcastEstimate(delay, gain, ctx.dt, ctx.substeps)
-        radius = p.get("range")
-        if radius is None:
-            radius = auto_range(
-                v1_max, v2_max, ctx.diameter, self.gamma, self.margin, self.look
-            )
-        if not np.isfinite(radius):
-            radius = auto_range(
-                self.v1_max, v2_max, ctx.diameter, self.gamma, self.margin, self.look
-            )
-        if self.braking and p.get("range") is None:
-            radius = braking_range(
-                self.v1_max,
-                self.lateral,
-                self.accel,
-                ctx.diameter,
-                self.margin + self.sensed,
-                self.look,
-                ctx.dt,
-            )
-        self.range = float(radius)
-        if ctx.worlds > 1:  # a batched call: pairs within each world only
-            self.neighbours = WorldPairs(ctx.worlds, n // ctx.worlds, self.range)
-        else:
-            self.neighbours = NeighbourList(self.range)
-        #: The C loop's arguments kept between steps (filter_kernel.Arguments).
-        self.c_args = None
 
 
 def _box(

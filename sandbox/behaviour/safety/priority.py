@@ -47,7 +47,7 @@ from sandbox.behaviour.safety.qp import TOLERANCE
 from sandbox.plugins.registration import Param
 
 if TYPE_CHECKING:
-    from sandbox.behaviour.safety.cbf import CBFState
+    from sandbox.behaviour.safety.state import CBFState
     from sandbox.plugins.contexts import FilterContext
 
 #: Slot distances closer than this are a tie (decided by the index) [m]: far above

@@ -7,10 +7,9 @@ quadratic over a convex polygon is ``z0`` itself, or the projection of ``z0`` on
 edge line, or a vertex, the intersection of two edge lines. :func:`project` computes
 all ``1 + m + m (m - 1) / 2`` candidates, keeps the feasible ones and returns the
 nearest: the exact optimum, with no iteration and no tolerance other than the
-feasibility test. Where the optional extension ``sandbox.behaviour.safety._qp``
-(``_qp.c``) is built, :func:`project` is one C loop over the problems, the numpy
-operations in their order (the same numbers; checked at the first use against
-:func:`project_numpy` on random problems, the numpy path used if any differs).
+feasibility test. Where the compiled path ``qp`` is on (:mod:`sandbox.accel`;
+``project`` of ``_filter.c``), :func:`project` is one C loop over the problems,
+within 1e-9 of :func:`project_numpy`, the reference (``tests/test_compiled_paths.py``).
 
 When the half-planes have no common point, :func:`min_violation` finds the smallest
 slack ``s`` for which the *soft* half-planes relaxed to ``a . z <= b + s`` meet the
@@ -28,6 +27,7 @@ from itertools import combinations
 
 import numpy as np
 
+from sandbox import accel
 from sandbox.model.kernels import c_float64
 
 #: Feasibility tolerance of a half-plane [m/s] (rows are unit vectors).
@@ -73,10 +73,11 @@ def project(
     >>> z.tolist(), ok.tolist()
     [[1.0, 1.0], [True]]
     """
-    if USE_KERNEL and kernel_agrees():
+    c = accel.module("qp")
+    if c is not None:
         z0c, ac, bc = c_float64(z0), c_float64(a), c_float64(b)
         z, feasible = np.empty(z0c.shape), np.empty(len(z0c), dtype=bool)
-        _qp.project(z0c, ac, bc, float(tol), z, feasible)
+        c.project(z0c, ac, bc, float(tol), z, feasible)
         return z, feasible
     return project_numpy(z0, a, b, tol)
 
@@ -84,7 +85,7 @@ def project(
 def project_numpy(
     z0: np.ndarray, a: np.ndarray, b: np.ndarray, tol: float = TOLERANCE
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`project` by numpy (the definition)."""
+    """:func:`project` by numpy (the reference)."""
     m = b.shape[1]
     viol = a[..., 0] * z0[:, None, 0] + a[..., 1] * z0[:, None, 1] - b  # (n, m)
     inside = np.all(viol <= tol, axis=1)
@@ -115,56 +116,6 @@ def project_numpy(
     z[rows] = np.where(found[:, None], cand[np.arange(len(rows)), best], z0r)
     feasible[rows] = found
     return z, feasible
-
-
-try:
-    from sandbox.behaviour.safety import _qp
-except ImportError:  # pragma: no cover - built without a C compiler
-    _qp = None
-
-#: Project in C where that extension is built and agrees with numpy (False: numpy).
-USE_KERNEL = True
-_agreed: bool | None = None
-
-
-def kernel_agrees() -> bool:
-    """Whether the C :func:`project` gives :func:`project_numpy`'s bits (checked once).
-
-    On a few thousand random problems of one to eight half-planes (z0 inside and
-    outside, empty polygons, parallel and repeated lines, padding rows).
-    """
-    global _agreed
-    if _agreed is None:
-        _agreed = _qp is not None and _check()
-    return _agreed
-
-
-def _check() -> bool:
-    global _agreed
-    rng = np.random.default_rng(20261206)
-    for m in range(1, 9):
-        k = 512
-        angle = rng.uniform(-np.pi, np.pi, (k, m))
-        if m > 1:  # repeated and opposite lines
-            angle[: k // 8, 1] = angle[: k // 8, 0]
-            angle[k // 8 : k // 4, 1] = angle[k // 8 : k // 4, 0] + np.pi
-        a = np.stack((np.cos(angle), np.sin(angle)), -1)
-        a[rng.random((k, m)) < 0.1] = 0.0  # padding rows
-        b = rng.normal(0.3, 1.0, (k, m))
-        z0 = rng.normal(0.0, 1.5, (k, 2))
-        for tol in (TOLERANCE, 10.0 * TOLERANCE):
-            _agreed = True  # provisionally: the C path runs within the check
-            try:
-                z, ok = project(z0, a, b, tol)
-            finally:
-                _agreed = None
-            zn, okn = project_numpy(z0, a, b, tol)
-            if not (
-                np.array_equal(ok, okn)
-                and np.array_equal(z.view(np.uint64), zn.view(np.uint64))
-            ):
-                return False
-    return True
 
 
 def min_violation(

@@ -1,12 +1,10 @@
 /* The exact projection of one problem of sandbox/behaviour/safety/qp.py (project).
  *
- * Shared by _qp.c (qp.project over many problems) and _filter.c (the velocity
- * barrier's whole step). For one problem it does what numpy's project_numpy does:
- * z0 itself if it keeps every half-plane (within the tolerance); else every
- * candidate (the projections of z0 on the edge lines, then the vertices of each pair
- * of lines in numpy's triu order), the feasible ones kept and the nearest returned
- * (the first on a tie, as argmin). The same IEEE-754 double operations in numpy's
- * order (compiled without fused multiply-adds); the C library is not called.
+ * Included by _filter.c: qp.project over many problems (project) and the velocity
+ * barrier's whole step. For one problem it does what qp.project_numpy does: z0
+ * itself if it keeps every half-plane (within the tolerance); else every candidate
+ * (the projections of z0 on the edge lines, then the vertices of each pair of lines
+ * i < j), the feasible ones kept and the nearest returned (the first on a tie).
  */
 
 #ifndef SANDBOX_QP_PROJECT_H
@@ -35,7 +33,7 @@ project_one(const double *a, const double *b, Py_ssize_t m, double x0, double y0
 outside:;
     double best = INFINITY, bx = x0, by = y0;
     int found = 0;
-    /* the candidates in numpy's order: m edges, then the vertices (i < j) */
+    /* the candidates: m edges, then the vertices (i < j) */
     Py_ssize_t count = m + m * (m - 1) / 2;
     Py_ssize_t i = 0, j = 0;
     for (Py_ssize_t c = 0; c < count; c++) {

@@ -19,7 +19,7 @@ from sandbox.model.barriers import MIN_SPEED
 from sandbox.model.dynamics import CLIP
 
 if TYPE_CHECKING:
-    from sandbox.behaviour.safety.cbf import CBFState
+    from sandbox.behaviour.safety.state import CBFState
 
 #: The right-hand rule (``pass_right``): a vehicle is stalled when its filtered
 #: look-ahead speed keeps less than STALL_START of its nominal speed, fully at

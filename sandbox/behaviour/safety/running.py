@@ -22,11 +22,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from sandbox.behaviour.safety.state import Brakings
 from sandbox.model.barriers import MIN_DIST, STRAIGHT
 
 if TYPE_CHECKING:
-    from sandbox.behaviour.safety.braking import Brakings
-    from sandbox.behaviour.safety.cbf import CBFState
+    from sandbox.behaviour.safety.state import CBFState
     from sandbox.plugins.contexts import FilterContext
 
 #: How long the run is sampled at full speed [s], period by period, before its
@@ -86,8 +86,6 @@ def runs(ctx: FilterContext, state: CBFState, theta: np.ndarray, like: Brakings)
     v1`` of that command (1 a period until the run is at full speed), and ``moves``
     the sample at which each run's sampling ends (:func:`run_ends`).
     """
-    from sandbox.behaviour.safety.braking import Brakings
-
     n, dt, lag = len(ctx.pos), ctx.dt, like.lag
     step = state.accel * dt
     last = np.zeros(n) if ctx.v1_prev is None else ctx.v1_prev

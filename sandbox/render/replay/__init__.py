@@ -50,11 +50,18 @@ def replay_html(
     """The HTML text of the replay page of ``run`` (see :func:`write_html`)."""
     from sandbox.render.replay.encode import replay_data
 
+    width = 0  # the beams a vehicle, counted in the page's budget
+    if show_beams and run.ranges is not None and run.beam_angles is not None:
+        width = int(run.beam_angles.shape[-1])
     data = replay_data(
-        run, metrics, title=title, max_vehicle_samples=max_vehicle_samples
+        run,
+        metrics,
+        title=title,
+        max_vehicle_samples=max_vehicle_samples,
+        beams=width,
     )
     transforms = []
-    if show_beams:
+    if width:
         from sandbox.render.replay.encode import beam_data
 
         beams = beam_data(run, data)

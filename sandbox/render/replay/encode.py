@@ -15,12 +15,13 @@ vehicles) is decimated in time: every ``stride``-th sample is kept (and the last
 and the page says so. The events marked on the page's timeline are read with the
 functions the figures and the GIF use
 (:func:`sandbox.behaviour.detection.detection_metrics`,
-:func:`sandbox.render.figure_marks._changed`; a collision's health from the metrics),
-the obstacles and the reference path as the GIF draws them (``_obstacles`` and
-``_reference_path`` of :mod:`sandbox.render.camera`), the first view as the GIF frames
-it (``_content_bounds``, :func:`~sandbox.render.camera.auto_follow` and
+:func:`sandbox.render.figure_marks.changed_slots`; a collision's health from the
+metrics), the obstacles and the reference path as the GIF draws them
+(``drawn_obstacles`` and ``reference_path`` of :mod:`sandbox.render.camera`), the first
+view as the GIF frames it (``content_bounds``,
+:func:`~sandbox.render.camera.auto_follow` and
 :meth:`~sandbox.render.camera.Camera.for_run`), and the colours with the GIF's palette
-(:func:`sandbox.render.palette._rgb`).
+(:func:`sandbox.render.palette.color_rgb`).
 
 With ``platoons:`` the mapping also has ``platoons`` (each platoon's ``name``,
 ``color``, ``since`` and ``until``: those of
@@ -47,6 +48,7 @@ from sandbox.run.record import MODE_NAMES, Run
 __all__ = [
     "FORMAT",
     "LARGE_FLEET",
+    "MAX_BEAM_READINGS",
     "MAX_VEHICLE_SAMPLES",
     "STEPS",
     "beam_data",
@@ -61,6 +63,10 @@ FORMAT = 1
 #: longer record is decimated in time. About 40 bytes of page per vehicle-sample at
 #: most, and 36 bytes of browser memory.
 MAX_VEHICLE_SAMPLES = 1_500_000
+#: Most range readings (recorded samples times vehicles times beams) a page with the
+#: beams (``--show-beams``) embeds; a longer record is decimated in time the same way.
+#: About 2 to 4 bytes of page per reading, and 4 bytes of browser memory.
+MAX_BEAM_READINGS = 2_000_000
 #: Fleets larger than this are drawn without trails, slot marks and names (as the GIF).
 LARGE_FLEET = 100
 #: Fleets up to this size get a closest-approach mark (pairwise distances per sample).
@@ -87,7 +93,9 @@ KINDS = ("failure", "detection", "leader_change", "reassignment", "collision")
 
 
 # ---------------------------------------------------------------------------- packing
-def pack(values: np.ndarray, step: float, order: int = 2) -> dict[str, Any]:
+def pack(
+    values: np.ndarray, step: float, order: int = 2, level: int = 9
+) -> dict[str, Any]:
     """Pack an array whose first axis is time into a compact JSON-ready mapping.
 
     Parameters
@@ -99,6 +107,9 @@ def pack(values: np.ndarray, step: float, order: int = 2) -> dict[str, Any]:
         magnitude still fits in an ``int32``.
     order : int
         How many times to difference along the first axis (0, 1 or 2).
+    level : int
+        zlib's compression level (9: the smallest; 6 for noisy data such as range
+        readings, where 9 searches for matches up to 30 times longer for about 1 %).
 
     Returns
     -------
@@ -124,7 +135,7 @@ def pack(values: np.ndarray, step: float, order: int = 2) -> dict[str, Any]:
         q = q.astype(np.int32).astype(np.int64)  # wrap to 32 bits
     raw = q.astype("<i4").tobytes()
     planes = np.frombuffer(raw, dtype=np.uint8).reshape(-1, 4).T.tobytes()
-    data = base64.b64encode(zlib.compress(planes, 9)).decode("ascii")
+    data = base64.b64encode(zlib.compress(planes, level)).decode("ascii")
     return {"shape": list(arr.shape), "step": step, "order": int(order), "data": data}
 
 
@@ -150,9 +161,9 @@ def unpack(packed: dict[str, Any]) -> np.ndarray:
 # ---------------------------------------------------------------------------- content
 def _hex(color: str, k: int) -> str:
     """``#rrggbb`` of a vehicle colour, as the GIF's palette resolves it."""
-    from sandbox.render.palette import _rgb
+    from sandbox.render.palette import color_rgb
 
-    return "#{:02x}{:02x}{:02x}".format(*_rgb(color, k))
+    return "#{:02x}{:02x}{:02x}".format(*color_rgb(color, k))
 
 
 def _rounded(x: Any, digits: int = 6) -> float | None:
@@ -170,7 +181,7 @@ def _info(run: Run, key: str) -> Any:
 
 def _obstacles(run: Run) -> list[dict[str, Any]]:
     """Obstacles as the GIF draws them, walls told apart by the scenario."""
-    from sandbox.render.camera import _obstacles as drawn
+    from sandbox.render.camera import drawn_obstacles as drawn
 
     raw = _info(run, "obstacles") or []
     names = [ob.get("name") if isinstance(ob, dict) else None for ob in raw]
@@ -269,14 +280,14 @@ def _events(run: Run, pos: np.ndarray, metrics: dict[str, Any]) -> list[dict[str
             )
     moves = _info(run, "reassignments") or []
     if moves:
-        from sandbox.render.figure_marks import _changed
+        from sandbox.render.figure_marks import changed_slots
 
         for event in moves:
             out.append(
                 {
                     "t": _rounded(event["t"]),
                     "kind": "reassignment",
-                    "changes": _changed(run, event),
+                    "changes": changed_slots(run, event),
                 }
             )
     for change in _info(run, "leader_changes") or []:
@@ -363,14 +374,22 @@ def _summary(run: Run, metrics: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def decimation(samples: int, vehicles: int, budget: int | None = None) -> int:
-    """The stride in time that keeps a record within the vehicle-sample budget.
+def decimation(
+    samples: int, vehicles: int, budget: int | None = None, beams: int = 0
+) -> int:
+    """The stride in time that keeps a record within the page's budgets.
 
-    >>> decimation(6001, 10), decimation(18001, 1000)
-    (1, 13)
+    Within ``budget`` vehicle-samples (default :data:`MAX_VEHICLE_SAMPLES`) and, with
+    ``beams`` beams a vehicle embedded, within :data:`MAX_BEAM_READINGS` readings.
+
+    >>> decimation(6001, 10), decimation(18001, 1000), decimation(6001, 16, beams=1024)
+    (1, 13, 50)
     """
     limit = MAX_VEHICLE_SAMPLES if budget is None else int(budget)
-    return max(1, -(-samples * vehicles // max(limit, 1)))
+    stride = -(-samples * vehicles // max(limit, 1))
+    if beams > 0:
+        stride = max(stride, -(-samples * vehicles * beams // MAX_BEAM_READINGS))
+    return max(1, stride)
 
 
 def replay_data(
@@ -379,6 +398,7 @@ def replay_data(
     *,
     title: str | None = None,
     max_vehicle_samples: int | None = None,
+    beams: int = 0,
 ) -> dict[str, Any]:
     """The mapping a replay page embeds (see the module docstring).
 
@@ -391,6 +411,9 @@ def replay_data(
         The name shown; default the scenario's name.
     max_vehicle_samples : int, optional
         Decimation budget; default :data:`MAX_VEHICLE_SAMPLES`.
+    beams : int
+        The beams a vehicle the page will embed (:func:`beam_data`), counted in the
+        decimation against :data:`MAX_BEAM_READINGS`; 0: none.
 
     Returns
     -------
@@ -410,15 +433,15 @@ def replay_data(
         metrics = compute_metrics(run)
     from sandbox.render.camera import (
         Camera,
-        _content_bounds,
-        _reference_path,
         auto_follow,
+        content_bounds,
+        reference_path,
     )
 
     t = np.asarray(run.t, dtype=float)
     T, n = len(t), run.n_vehicles
     pos = np.asarray(run.pose[:, :, :2], dtype=float)
-    stride = decimation(T, n, max_vehicle_samples)
+    stride = decimation(T, n, max_vehicle_samples, beams)
     keep = np.arange(0, T, stride)
     if keep[-1] != T - 1:
         keep = np.append(keep, T - 1)
@@ -440,14 +463,16 @@ def replay_data(
     }
     platoons = _platoons(run, keep, arrays)
     reach = float(np.max(run.diameter, initial=0.0)) / 2.0
-    lo, hi = _content_bounds(run, reach)
-    path = _reference_path(run)
+    lo, hi = content_bounds(run, reach)
+    path = reference_path(run)
     notes = []
     if stride > 1:
         notes.append(
             f"Decimated in time: every {stride}th of the {T:,} recorded samples is "
             f"shown ({len(keep):,} samples; a page holds at most "
-            f"{max_vehicle_samples or MAX_VEHICLE_SAMPLES:,} vehicle-samples)."
+            f"{max_vehicle_samples or MAX_VEHICLE_SAMPLES:,} vehicle-samples"
+            + (f" and {MAX_BEAM_READINGS:,} range readings" if beams > 0 else "")
+            + ")."
         )
     if n > LARGE_FLEET:
         notes.append(
@@ -552,14 +577,14 @@ def page_samples(run: Run, data: dict[str, Any]) -> np.ndarray:
 def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
     """The range sensors' scans for the page, on its samples; None without scans.
 
-    ``ranges`` packed like the other arrays (0.1 mm steps, differenced once; NaN for
-    a vehicle or beam without a sensor), ``angles`` each beam's angle about the
-    heading (n, B) [rad], ``reach`` each vehicle's ``max_range`` [m] (a reading
-    there hit nothing; None without a sensor).
+    ``ranges`` packed like the other arrays (0.1 mm steps, differenced once, zlib's
+    level 6: readings are noisy; NaN for a vehicle or beam without a sensor), ``angles``
+    each beam's angle about the heading (n, B) [rad], ``reach`` each vehicle's
+    ``max_range`` [m] (a reading there hit nothing; None without a sensor).
     """
     if run.ranges is None or run.beam_angles is None:
         return None
-    ranges = np.asarray(run.ranges, dtype=float)[page_samples(run, data)]
+    ranges = np.asarray(run.ranges)[page_samples(run, data)].astype(float)  # kept only
     specs = None
     if run.scenario is not None and hasattr(run.scenario, "range_specs"):
         specs = run.scenario.range_specs()
@@ -569,7 +594,7 @@ def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
     else:
         reach = [None if s is None else _rounded(s.max_range) for s in specs]
     return {
-        "ranges": pack(ranges, STEPS["pose"], order=1),
+        "ranges": pack(ranges, STEPS["pose"], order=1, level=6),
         "angles": [[_rounded(a) for a in row] for row in run.beam_angles.tolist()],
         "reach": reach,
         "width": int(run.beam_angles.shape[1]),

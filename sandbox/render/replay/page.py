@@ -3,20 +3,28 @@
 A page is one of the templates of ``sandbox/render/replay/assets/`` (package data, read
 with :mod:`importlib.resources`) with its style sheet, its script and its data inlined:
 no request of any kind leaves the file (its content security policy forbids them too).
-Every page carries :data:`GENERATOR` in its first line; :func:`check_output` lets a page
-replace only a file that carries it (an earlier replay), never another file.
+The template's placeholders are filled in one pass, so a name or a description that
+looks like one stays text; the data's JSON cannot end its ``<script>`` element
+(:func:`json_for_script`); and the policy runs the page's own script only, named by its
+hash (:func:`script_hash`), never an inline event handler. Every page carries
+:data:`GENERATOR` in its first line; :func:`check_output` lets a page replace only a
+file that carries it (an earlier replay), never another file.
 """
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import json
 import os
+import re
 from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from sandbox.errors import SandboxError
+from sandbox.run.output_guard import OutputRefused, check_target
 
 __all__ = ["GENERATOR", "ReplayError", "build_page", "check_output", "write_page"]
 
@@ -37,10 +45,46 @@ def asset(name: str) -> str:
     )
 
 
-def _json_for_script(data: Any) -> str:
-    """JSON that can sit inside a ``<script>`` element (no ``</``)."""
+#: How JSON text is made safe inside a ``<script>`` element: every character that could
+#: end the element, open a comment or end a JavaScript line becomes its ``\uXXXX``
+#: form (legal JSON, the same value once parsed).
+SCRIPT_ESCAPES = {
+    "<": "\\u003c",
+    ">": "\\u003e",
+    "&": "\\u0026",
+    "\u2028": "\\u2028",
+    "\u2029": "\\u2029",
+}
+_SCRIPT_UNSAFE = re.compile("[<>&\u2028\u2029]")
+#: The template's own placeholders, each replaced once, in one pass.
+PLACEHOLDERS = ("GENERATOR", "CSP_SCRIPT", "TITLE", "STYLE", "SCRIPT", "DATA")
+_PLACEHOLDER = re.compile(r"\{\{(" + "|".join(PLACEHOLDERS) + r")\}\}")
+
+
+def json_for_script(data: Any) -> str:
+    r"""JSON text that can sit inside a ``<script>`` element as it is.
+
+    ``<``, ``>``, ``&``, U+2028 and U+2029 are written in their ``\uXXXX`` forms, so
+    no string of the data can close the element (``</script>``), open an HTML comment
+    (``<!--``) or break a line of script; the text is still JSON, and parses to
+    ``data``.
+
+    >>> json_for_script({"name": "</script><!--"})
+    '{"name":"\\u003c/script\\u003e\\u003c!--"}'
+    """
     text = json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return text.replace("</", "<\\/").replace("<!--", "<\\!--")
+    return _SCRIPT_UNSAFE.sub(lambda m: SCRIPT_ESCAPES[m.group(0)], text)
+
+
+def script_hash(script: str) -> str:
+    """The content security policy's source of one inline script, by its hash.
+
+    With it (and no ``'unsafe-inline'``) the browser runs that script and nothing else:
+    no other inline script and no inline event handler (``onerror=...``) a text of the
+    data might smuggle in.
+    """
+    digest = hashlib.sha256(script.encode("utf-8")).digest()
+    return f"'sha256-{base64.b64encode(digest).decode('ascii')}'"
 
 
 def _escape(text: str) -> str:
@@ -83,19 +127,24 @@ def build_page(
         script = transform(script)
     script = script.replace("</script", "<\\/script")
     parts = {
-        "{{TITLE}}": _escape(title),
-        "{{STYLE}}": asset("replay.css"),
-        "{{DATA}}": _json_for_script(data),
-        "{{SCRIPT}}": script,
-        "{{GENERATOR}}": GENERATOR,
+        "GENERATOR": GENERATOR,
+        "CSP_SCRIPT": script_hash(script),
+        "TITLE": _escape(title),
+        "STYLE": asset("replay.css"),
+        "SCRIPT": script,
+        "DATA": json_for_script(data),
     }
-    for key in ("{{GENERATOR}}", "{{TITLE}}", "{{STYLE}}", "{{SCRIPT}}", "{{DATA}}"):
-        page = page.replace(key, parts[key])  # the data last: it is never searched
-    return page
+    # One pass over the template: a value is never searched for placeholders.
+    return _PLACEHOLDER.sub(lambda m: parts[m.group(1)], page)
 
 
 def is_page(path: Path) -> bool:
-    """Whether ``path`` is a page written here (it carries :data:`GENERATOR`)."""
+    """Whether ``path`` is a page written here (it carries :data:`GENERATOR`).
+
+    A link is not, whatever it points to.
+    """
+    if Path(path).is_symlink():
+        return False
     try:
         with open(path, "rb") as fh:
             head = fh.read(_HEAD_BYTES)
@@ -108,20 +157,22 @@ def check_output(path: Path) -> None:
     """Raise :class:`ReplayError` unless ``path`` may be written.
 
     It may be missing, or a regular file that is an earlier page; not a directory, a
-    link or any other file, which are never overwritten.
+    link or any other file, which are never overwritten (the rule of every output,
+    :func:`sandbox.run.output_guard.check_target`).
     """
     path = Path(path)
     if path.suffix.lower() not in (".html", ".htm"):
         raise ReplayError(f"{path}: the output must be an .html file")
-    if not path.exists() and not path.is_symlink():
-        return
-    if path.is_symlink() or not path.is_file():
-        raise ReplayError(f"{path}: exists and is not a file; nothing was written")
-    if not is_page(path):
-        raise ReplayError(
-            f"{path}: exists and is not a replay page written by sandbox, so it is not "
-            "overwritten; choose another output"
+    try:
+        check_target(
+            path,
+            "view",
+            recognise=is_page,
+            what="a replay page written by sandbox",
+            hint="choose another output",
         )
+    except OutputRefused as exc:
+        raise ReplayError(str(exc)) from None
 
 
 def write_page(path: Path, text: str) -> Path:

@@ -180,6 +180,7 @@
   function firstView() {
     // the GIF's automatic camera: follow the leader of a run spread along a line
     const c = DATA.camera || {};
+    follow = -1;
     fit();
     if (c.follow && nameIndex.has(c.follow) && c.width > 0) {
       follow = nameIndex.get(c.follow);
@@ -862,8 +863,9 @@
         case "ArrowLeft": if (e.shiftKey) { pause(); seek(now - 1); } else stepSample(-1); break;
         case "+": case "=": setSpeed(SPEEDS.find((x) => x > speed + 1e-9) || 10); break;
         case "-": case "_": setSpeed(SPEEDS.slice().reverse().find((x) => x < speed - 1e-9) || 0.1); break;
-        case "Home": pause(); seek(t0); break;
-        case "End": pause(); seek(t1); break;
+        // the start or the end, seen as the page opened (not where a jump zoomed in)
+        case "Home": pause(); firstView(); seek(t0); break;
+        case "End": pause(); firstView(); seek(t1); break;
         case "n": nextEvent(1); break;
         case "p": nextEvent(-1); break;
         case "f": follow = -1; fit(); break;

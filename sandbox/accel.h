@@ -1,14 +1,15 @@
-/* numpy's rules for the C kernels, and numpy's arrays through the buffer interface.
+/* What the compiled paths share: numpy's arrays read and made, a few plain helpers.
  *
- * Included by the optional extensions whose loops must give numpy's numbers to the
- * bit (see setup.py): numpy's maximum, clip and remainder on ties, NaN and signs; a
+ * Included by every extension of sandbox/accel.py's registry but _cstep: a
  * contiguous float64 array (or one value for every row), a contiguous intp index
- * array and a contiguous bool array, read from any object with the buffer interface
- * (an ndarray through numpy's C API where the build has its headers).
+ * array and a contiguous array of one-byte elements, read from any object with the
+ * buffer interface (an ndarray through numpy's C API where the build has its
+ * headers), and new arrays made through numpy's C API; the larger and the smaller
+ * of two numbers, a clamp, and an angle wrapped around the circle.
  */
 
-#ifndef SANDBOX_NUMPY_RULES_H
-#define SANDBOX_NUMPY_RULES_H
+#ifndef SANDBOX_ACCEL_H
+#define SANDBOX_ACCEL_H
 
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -81,49 +82,34 @@ new_array(int nd, Py_ssize_t d0, Py_ssize_t d1, int boolean)
 #endif
 }
 
-/* numpy.remainder(a, b) of floats: fmod, moved to b's sign, +-0 with b's sign. */
+/* The larger of a and b (b where they are equal or one is NaN). */
 static inline double
-np_remainder(double a, double b)
+larger(double a, double b)
 {
-    double mod = fmod(a, b);
-    if (!b) {
-        return mod;
-    }
-    if (mod) {
-        if ((b < 0) != (mod < 0)) {
-            mod += b;
-        }
-    }
-    else {
-        mod = copysign(0.0, b);
-    }
-    return mod;
+    return a > b ? a : b;
 }
 
-/* numpy.maximum(a, b): a where a > b or a is NaN, else b (b on a tie). */
+/* The smaller of a and b (b where they are equal or one is NaN). */
 static inline double
-np_maximum(double a, double b)
+smaller(double a, double b)
 {
-    return (a > b || a != a) ? a : b;
+    return a < b ? a : b;
 }
 
-/* numpy's clip with array bounds: max then min, the bound on a tie, NaN kept. */
+/* x raised to lo, then lowered to hi (x itself where it is NaN). */
 static inline double
-clip_rows(double x, double lo, double hi)
+clamp(double x, double lo, double hi)
 {
-    double y = (x != x) ? x : (x > lo ? x : lo);
-    return (y != y) ? y : (y < hi ? y : hi);
+    double y = x < lo ? lo : x;
+    return y > hi ? hi : y;
 }
 
-/* numpy's clip with scalar bounds: x itself on a tie, NaN kept. */
+/* The angle a [rad] moved by whole turns into [-pi, pi]: (a + pi) mod 2 pi - pi. */
 static inline double
-clip_scalars(double x, double lo, double hi)
+wrapped(double a)
 {
-    if (x != x) {
-        return x;
-    }
-    double y = (x < lo) ? lo : x;
-    return (y > hi) ? hi : y;
+    double w = fmod(a + M_PI, 2.0 * M_PI);
+    return (w < 0.0 ? w + 2.0 * M_PI : w) - M_PI;
 }
 
 /* A float64 buffer and its length. */
@@ -184,39 +170,6 @@ get_all_rows(PyObject *const *objs, Rows *rows, int count, int first_writable)
         }
     }
     return 0;
-}
-
-/* A module's ``elementwise(op, a, b, out)`` for its checks: ``out[i] = f(op, a[i],
- * b[i])`` over three float64 arrays of one length. */
-static inline PyObject *
-elementwise_over(PyObject *const *args, Py_ssize_t nargs,
-                 double (*f)(long op, double a, double b))
-{
-    if (nargs != 4) {
-        PyErr_SetString(PyExc_TypeError, "elementwise takes 4 arguments");
-        return NULL;
-    }
-    long op = PyLong_AsLong(args[0]);
-    if (op == -1 && PyErr_Occurred()) {
-        return NULL;
-    }
-    Rows r[3];
-    if (get_all_rows(args + 1, r, 3, 2) < 0) {
-        return NULL;
-    }
-    Py_ssize_t n = r[2].len;
-    if (r[0].len != n || r[1].len != n) {
-        release(r, 3);
-        PyErr_SetString(PyExc_ValueError, "elementwise: shapes differ");
-        return NULL;
-    }
-    const double *a = r[0].data, *b = r[1].data;
-    double *out = r[2].data;
-    for (Py_ssize_t i = 0; i < n; i++) {
-        out[i] = f(op, a[i], b[i]);
-    }
-    release(r, 3);
-    Py_RETURN_NONE;
 }
 
 /* The module of ``def`` with its constant ALLOCATES: whether its calls make their
