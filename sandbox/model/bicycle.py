@@ -30,6 +30,8 @@ Pure functions of arrays of shape ``(n,)`` (vehicles); no state, no I/O.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from sandbox.model.dynamics import CLIP, wrap_angle
@@ -438,3 +440,43 @@ class CarLimits:
     def rows(self, index: np.ndarray) -> CarLimits:
         """The limits of the rows ``index`` (copies)."""
         return CarLimits(*(getattr(self, name)[index] for name in self.FIELDS))
+
+
+@dataclass(frozen=True)
+class CarSteering:
+    """The cars among a safety filter's rows (``FilterContext.steering``).
+
+    Every array has a row per vehicle of the filter's rows, NaN (``inf`` for the
+    rate) on a unicycle's.
+
+    Attributes
+    ----------
+    wheelbase : ndarray, shape (n,) [m]
+        ``L``; NaN marks a unicycle.
+    max_steer : ndarray, shape (n,) [rad]
+    max_steer_rate : ndarray, shape (n,) [rad/s]
+        ``inf`` where not declared.
+    held : ndarray, shape (n,) [rad]
+        The steering angles of the last period, from which this period's move
+        (:func:`limit_steer_angle`).
+    """
+
+    wheelbase: np.ndarray
+    max_steer: np.ndarray
+    max_steer_rate: np.ndarray
+    held: np.ndarray
+
+    def reach(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """The least and the largest steering angle [rad] of the period, (n,) each.
+
+        ``held`` moved by at most ``max_steer_rate dt``, within ``max_steer``: the
+        angles :func:`limit_steer_angle` can give (NaN on a unicycle's row).
+
+        >>> CarSteering(np.ones(1), np.full(1, 0.5), np.full(1, 1.0),
+        ...             np.full(1, 0.45)).reach(0.1)
+        (array([0.35]), array([0.5]))
+        """
+        step = self.max_steer_rate * dt
+        lo = np.maximum(-self.max_steer, self.held - step)
+        hi = np.minimum(self.max_steer, self.held + step)
+        return lo, hi
