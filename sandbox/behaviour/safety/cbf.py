@@ -521,7 +521,9 @@ def filter_commands(
             zg, sg = solve(z0[group], mat, off, soft)
         else:  # a car's better cone (cars.py); unicycles as they are
             zg, sg, (mat, off, soft) = cone.solve(group, z0[group], (mat, off, soft))
-        if state.pass_right > 0 and not state.speed_only:
+        # the right-hand rule turns where a vehicle stands: not a car's (cars.py)
+        car = cone is not None and bool(cone.car[group[0]])
+        if state.pass_right > 0 and not state.speed_only and not car:
             held = None if hold is None else (hold[group], np.zeros(off.shape, bool))
             if held is not None:
                 held[1][slot[veh[mine]], 4 + rank[mine]] = wall[mine]
