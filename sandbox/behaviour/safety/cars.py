@@ -22,6 +22,12 @@ is first made the command the steering stage would execute of it
 for a car reports nothing; the cars are solved in groups of their own, so a
 unicycle's problem, and its numbers, are those it has without cars.
 
+A car takes no right-hand rule (:mod:`~sandbox.behaviour.safety.right_hand`): the
+rule turns a stalled vehicle's nominal velocity to its right, which a car, unable to
+turn where it stands, can follow only by driving forward at full lock; in the exact
+ring of ``scenarios/safety/circle_swap_20.yaml`` that walked every car into its
+neighbours.
+
 A command in either cone is executed as it is (up to rounding): the steering stage
 after the filter finds the angle it asks for within the car's reach. Where the box
 and a cone have no common point (the box keeps the car's speed on the other side of

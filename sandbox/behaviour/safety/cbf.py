@@ -71,6 +71,14 @@ failures (which replace the commands of the vehicles they hit). All of the above
 without a ``priority`` is also one C loop over the vehicles of every world
 (:mod:`sandbox.behaviour.safety.filter_kernel`), with numpy's numbers.
 
+**Cars** (``model: bicycle``, ``FilterContext.steering``): a car's QP also keeps its
+command within what its steering can reach this period, the two hard rows of its
+forward or its reverse cone, the better solution kept
+(:mod:`sandbox.behaviour.safety.cars`); a car takes no right-hand rule (it cannot
+turn where it stands), and no cone with ``projection: speed``. The C loop does not
+know the cones: a step with cars is made by it for the unicycles and by numpy for the
+cars.
+
 **The braking barrier** (``barrier: braking``; ``velocity``, all of the above, stays
 the default). The velocity barrier asks ``h' >= -gamma h`` of a velocity the drive
 can change only by ``max_accel dt`` a period, so near a barrier its conditions may
