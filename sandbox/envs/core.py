@@ -30,7 +30,10 @@ Action of an agent, two numbers in ``[-1, 1]``:
 
 - ``action="commands"``: ``(v1, v2) = (a0 v1_max, a1 v2_max)`` [m/s, rad/s], the
   vehicle's own limits (or ``max_command``), given to
-  :meth:`~sandbox.loop.simulation.Simulation.step` as ``commands``;
+  :meth:`~sandbox.loop.simulation.Simulation.step` as ``commands``; for a car
+  (``model: bicycle``) the speed and the steering angle, ``(v1, delta) = (a0 v1_max,
+  a1 max_steer)`` [m/s, rad], given as the turn rate ``v1 tan(delta) / L`` (at rest
+  the wheels stay where they are: :func:`~sandbox.model.bicycle.steer_commands`);
 - ``action="shift"``: a displacement ``max_shift (a0, a1)`` [m] of the target the
   built-in law and recovery computed, given as ``shifts`` (the law's feed-forward is
   kept, so the zero action drives exactly as the scenario's own controller).
@@ -287,6 +290,14 @@ class Task:
         self.max_shift = _positive(
             max_shift if max_shift is not None else 2.0 * sc.diameter, "max_shift"
         )
+        #: Each agent's wheelbase [m] where it is a car, else NaN, shape (m,).
+        self.wheelbase = np.array(
+            [
+                v.wheelbase if v.model == "bicycle" else np.nan
+                for v in (sc.vehicles[i] for i in self.rows)
+            ],
+            dtype=float,
+        )
         self.scale = self._command_scale(sc, max_command)
         self.render_size = int(render_size)
         observe = (observe,) if isinstance(observe, str) else tuple(observe)
@@ -339,6 +350,14 @@ class Task:
         scale = []
         for a in self.agents:
             v = sc.vehicles[self.names.index(a)]
+            if v.model == "bicycle":  # a car: its speed and steering angle
+                if v.v1_max is None:
+                    raise ValueError(
+                        f"action='commands': car {a!r} has no v1_max to scale actions "
+                        "by; set it in the scenario or pass max_command"
+                    )
+                scale.append((v.v1_max, v.max_steer))
+                continue
             if v.v1_max is None or v.v2_max is None:
                 raise ValueError(
                     f"action='commands': vehicle {a!r} has no v1_max or v2_max to "
@@ -374,7 +393,7 @@ class Task:
         )
         rows = np.full((len(self.names), 2), np.nan)
         if self.action == "commands":
-            rows[self.rows] = a * self.scale
+            rows[self.rows] = driven_commands(a, self.scale, self.wheelbase)
             kwargs = {"commands": rows}
         else:
             rows[self.rows] = a * self.max_shift
@@ -535,6 +554,38 @@ class Task:
             info=dict(sim.info),
             scenario=sim.scenario,
         )
+
+
+def driven_commands(
+    actions: np.ndarray, scale: np.ndarray, wheelbase: np.ndarray
+) -> np.ndarray:
+    """The ``(v1, v2)`` [m/s, rad/s] of the agents' actions with ``action="commands"``.
+
+    Parameters
+    ----------
+    actions : ndarray, shape (..., m, 2)
+        In ``[-1, 1]``.
+    scale : ndarray, shape (m, 2)
+        A full action: ``(v1_max, v2_max)``, or a car's ``(v1_max, max_steer)``.
+    wheelbase : ndarray, shape (m,) [m]
+        A car's wheelbase, NaN for a unicycle.
+
+    Returns
+    -------
+    ndarray, shape (..., m, 2)
+        A car's second number, a steering angle, made the turn rate ``v1 tan(delta)
+        / L`` [rad/s] the loop executes.
+
+    >>> driven_commands(np.array([[1.0, 1.0]]), np.array([[2.0, 0.5]]),
+    ...                 np.array([1.0])).round(4).tolist()
+    [[2.0, 1.0926]]
+    """
+    rows = actions * scale
+    car = np.flatnonzero(np.isfinite(wheelbase))
+    if len(car):
+        v1, delta = rows[..., car, 0], rows[..., car, 1]
+        rows[..., car, 1] = v1 * np.tan(delta) / wheelbase[car]
+    return rows
 
 
 def reference_point(sim: Simulation) -> np.ndarray:

@@ -35,6 +35,7 @@ from sandbox.envs.core import (
     Task,
     Weights,
     default_agents,
+    driven_commands,
     features_of,
 )
 from sandbox.loop.simulation import Simulation
@@ -148,8 +149,11 @@ class VectorTask:
         task, n, Kc = self.task, self.n, len(worlds)
         rows = np.full((Kc, n, 2), np.nan)
         local = self.where[mine, 1]
-        scale = task.scale if task.action == "commands" else task.max_shift
-        rows[local[:, None], task.rows[None, :]] = a[mine] * scale
+        if task.action == "commands":  # a car's: speed and steering angle
+            part = driven_commands(a[mine], task.scale, task.wheelbase)
+        else:
+            part = a[mine] * task.max_shift
+        rows[local[:, None], task.rows[None, :]] = part
         kwargs = {"commands" if task.action == "commands" else "shifts": rows}
         terms = np.zeros((Kc, self.m, 3))
         fleet, physics = sim.fleet, sim.physics.worlds

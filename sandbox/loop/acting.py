@@ -5,7 +5,10 @@ vehicle towards its planned target (or the caller's override), filters the comma
 for safety (:mod:`sandbox.loop.safety`), then applies the open-loop schedules
 (:mod:`sandbox.loop.schedules`), the caller's command overrides (within the vehicle's
 limits) and the failures (:class:`~sandbox.model.failures.Failures`), in that order,
-and returns what the period applies (:class:`Acted`).
+and returns what the period applies (:class:`Acted`). Where the fleet has cars
+(:mod:`sandbox.loop.steering`) their rows take the car's controller and every
+command they execute is steered within their limits; the unicycles' rows are as
+they are without.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from sandbox.loop.plan import Plan
 from sandbox.loop.safety import Safety
 from sandbox.loop.schedules import CommandSchedules
 from sandbox.loop.state import Fleet, limits, uniform
+from sandbox.loop.steering import CarDrive
 from sandbox.model.dynamics import CLIP
 from sandbox.model.failures import Failures
 from sandbox.model.flatness import Gains
@@ -46,6 +50,9 @@ class Acted(NamedTuple):
         The controllers' extension states for ``t_k+1``.
     target : ndarray, shape (N, 2) [m], or None
         The targets tracked where the caller overrode them (None: the plan's).
+    steer : ndarray, shape (N,) [rad]
+        The cars' steering angles over the period (the fleet's own ``steer``, as
+        it was, where the loop has no car).
     """
 
     v1: np.ndarray
@@ -54,6 +61,7 @@ class Acted(NamedTuple):
     mode: np.ndarray
     chi: np.ndarray
     target: np.ndarray | None
+    steer: np.ndarray
 
 
 class Acting:
@@ -63,7 +71,7 @@ class Acting:
     ----------
     layout : Layout
     fleet : Fleet
-        The fleet (its gains and limits).
+        The fleet (its gains and limits, its cars).
     safety : Safety
     detecting : Detecting
     failures : Failures
@@ -92,6 +100,8 @@ class Acting:
         self._scheduled = len(self.schedules) > 0
         self._fails = len(failures) > 0  # else no vehicle ever fails
         self._commanded_rows = np.flatnonzero(fleet.commanded)
+        #: The car rows' controller and steering (None: every row is a unicycle).
+        self.cars = CarDrive.build(fleet, layout.h)
 
     def commands(
         self,
@@ -146,6 +156,9 @@ class Acting:
         chi_next, v1, v2 = self.controller.step(
             fleet.pos, fleet.chi, fleet.theta, target, v_ref, a_ref
         )
+        cars = self.cars
+        if cars is not None:  # the cars' rows by their own anti-windup (steering.py)
+            cars.control(fleet, target, v_ref, a_ref, chi_next, v1, v2)
         safety = self._safety
         if safety.filter is not None:  # after the controller, before the failures
             v1, v2 = safety.commands(
@@ -168,6 +181,9 @@ class Acting:
             v2 = np.where(mask, CLIP(rows[:, 1], -self.v2_max, self.v2_max), v2)
             passive = passive | mask
             external = mask if external is None else external | mask
+        steer = fleet.steer
+        if cars is not None:  # what a car executes: its steering's turn rate
+            v2, steer = cars.steer(v1, v2, fleet.steer)
         detecting = self._detecting
         if detecting.on:  # what the controllers ask for, broadcast
             detecting.intend(v1, v2, worlds())
@@ -178,6 +194,8 @@ class Acting:
         )
         for w, exc in errors:  # a failure plug-in failed: its world ends now
             failed(w, exc)
+        if cars is not None and self._fails:  # a failure's commands steered too
+            v2, steer = cars.steer(v1, v2, fleet.steer, steer, failing)
         if detecting.on:
             # A failed controller does not know: it keeps its own state until the
             # failure ends (then it resumes from the applied velocity).
@@ -199,7 +217,7 @@ class Acting:
         if self._fails:  # else no vehicle has failed
             mode[failing] = MODE_FAILED
         overridden = target if external is not None else None
-        return Acted(v1, v2, failing, mode, chi_next, overridden)
+        return Acted(v1, v2, failing, mode, chi_next, overridden, steer)
 
     def _command_limits(self, v1: np.ndarray, last: np.ndarray) -> np.ndarray:
         """User speeds within ``v1_max`` and, from the last speed, ``max_accel``."""

@@ -28,6 +28,7 @@ from sandbox.loop.recording import LoopRecord
 from sandbox.loop.run_info import run_description
 from sandbox.loop.safety import Safety
 from sandbox.loop.state import Fleet, limits
+from sandbox.loop.steering import SteeringRecord
 from sandbox.loop.stepping import LoopPhysics
 from sandbox.loop.tally import LoopTally
 from sandbox.model.failures import Failures
@@ -56,6 +57,8 @@ class LoopParts:
     acting : Acting
     liveness : Liveness
     record : LoopRecord
+    steering : SteeringRecord or None
+        The cars' steering angles of the record's samples (None: no car).
     tally : LoopTally
     shift_motion : BatchDifference
         The backward differences of the recovery shift (eqs. (18)-(19)), a history
@@ -74,6 +77,7 @@ class LoopParts:
     acting: Acting
     liveness: Liveness
     record: LoopRecord
+    steering: SteeringRecord | None
     tally: LoopTally
     shift_motion: BatchDifference
 
@@ -171,6 +175,7 @@ def build(scenarios: list[Scenario], worlds: list[Physics | None]) -> LoopParts:
         )
     )
     avoidance.kernel_strategy = avoidance.strategy  # what the C call replaces
+    capacity = layout.steps // layout.record_every + 1
     return LoopParts(
         layout=layout,
         fleet=fleet,
@@ -183,7 +188,8 @@ def build(scenarios: list[Scenario], worlds: list[Physics | None]) -> LoopParts:
         failures=failures,
         acting=acting,
         liveness=Liveness(info),
-        record=LoopRecord(layout.steps // layout.record_every + 1, K, n),
+        record=LoopRecord(capacity, K, n),
+        steering=SteeringRecord.build(fleet, capacity, K, n),
         tally=LoopTally(K, n, h),
         shift_motion=BatchDifference(h, K),
     )

@@ -5,7 +5,9 @@ a period, once for the rows of every world (a filter registered with
 ``batched=True``: ``FilterContext.worlds`` is K, each world's counters its own) or
 world by world (each world's memory and counters its own). With ``platoons:`` each
 platoon's safety section is called on its rows
-(:mod:`sandbox.loop.platoon_sections`, or each world's platoons apart).
+(:mod:`sandbox.loop.platoon_sections`, or each world's platoons apart). Where the
+rows hold cars (``model: bicycle``) the filter sees their steering
+(``FilterContext.steering``, :class:`~sandbox.model.bicycle.CarSteering`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from sandbox.loop.layout import Layout
 from sandbox.loop.liveness import Failed
 from sandbox.loop.perception import Perception
 from sandbox.loop.state import Fleet
+from sandbox.model.bicycle import CarSteering
 from sandbox.model.obstacle_field import ObstacleField
 from sandbox.plugins.registration import FilterContext, get, runnable
 
@@ -76,6 +79,10 @@ class Safety:
             for w, sc in enumerate(layout.scenarios)
         ]
         self._started = False
+        #: Which worlds hold a car (their filter sees the cars' steering).
+        self._cars = [
+            any(v.model == "bicycle" for v in sc.vehicles) for sc in layout.scenarios
+        ]
 
     def use_platoons(self, sections: Any, world_filters: list) -> None:
         """With ``platoons:``: their sections (one call for all) or each world's."""
@@ -155,6 +162,7 @@ class Safety:
                 stats=self.world_stats[w],
                 slot=slot[rows],
                 substeps=layout.substeps,
+                steering=steering(fleet, rows) if self._cars[w] else None,
                 **self._perception.context(w),
             )
             try:
@@ -198,6 +206,7 @@ class Safety:
             world_stats=self.world_stats,
             slot=slot,
             substeps=layout.substeps,
+            steering=steering(fleet, slice(None)) if any(self._cars) else None,
             **self._perception.context(),
         )
         out = self.filter(ctx)  # a PluginRunError ends every world (the loop's guard)
@@ -213,3 +222,13 @@ def rows_of(value: object, n: int) -> np.ndarray:
     if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (n,):
         return value.copy()
     return np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()
+
+
+def steering(fleet: Fleet, rows: slice) -> CarSteering:
+    """The cars' steering of the fleet's ``rows`` as a filter sees it (views)."""
+    return CarSteering(
+        fleet.wheelbase[rows],
+        fleet.max_steer[rows],
+        fleet.max_steer_rate[rows],
+        fleet.steer[rows],
+    )

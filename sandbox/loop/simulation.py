@@ -188,6 +188,7 @@ class Simulation:
         self.physics: LoopPhysics = parts.physics
         #: The record of every world's samples.
         self.recorder: LoopRecord = parts.record
+        self._steering = parts.steering
         self._formation = parts.formation
         self._perception = parts.perception
         self._avoidance = parts.avoidance
@@ -358,6 +359,7 @@ class Simulation:
             live.worlds,
         )
         fleet.v1, fleet.v2, fleet.failed = acted.v1, acted.v2, acted.failed
+        fleet.steer = acted.steer
         if self._fails:  # else never set: an episode now is healthy
             self.physics.failed[:] = acted.failed  # an episode now is not healthy
         fleet.mode = acted.mode
@@ -374,6 +376,9 @@ class Simulation:
         if self.k % layout.record_every:
             return
         target = self._recorded_target
+        steering, index = self._steering, self.recorder.count
+        if steering is not None:  # the cars' angles of the same sample
+            steering.append(index, fleet.steer)
         self.recorder.append(
             self.k * layout.h,
             fleet.pos,
@@ -497,6 +502,8 @@ class Simulation:
             return
         live.status[w] = status
         if last:
+            if self._steering is not None:
+                self._steering.append(self.recorder.count, fleet.steer, w)
             nan = np.full((layout.N, 2), np.nan)
             arrays = self.recorder.append_last(
                 w,
@@ -556,6 +563,8 @@ class Simulation:
         """World ``w``'s run (:func:`~sandbox.loop.ending.make_run`)."""
         layout, live, safety = self._layout, self._liveness, self._safety
         ranges = self._perception.ranges
+        if self._steering is not None:  # a world with cars: their angles
+            arrays = {**arrays, **self._steering.arrays(w, len(arrays["t"]))}
         return make_run(
             layout,
             w,

@@ -43,6 +43,14 @@ class Fleet:
         With arrays of shape (n,).
     commanded : ndarray, shape (n,), bool
         Vehicles driven open-loop by a command schedule.
+    bicycle : ndarray, shape (n,), bool
+        Cars (``model: bicycle``, :mod:`sandbox.model.bicycle`); the others are
+        unicycles.
+    wheelbase, max_steer, max_steer_rate : ndarray, shape (n,) [m], [rad], [rad/s]
+        A car's; NaN for a unicycle, ``inf`` where a steering rate is not limited.
+    steer : ndarray, shape (n,) [rad]
+        A car's steering angle delta during the current control period (0 for a
+        unicycle).
     """
 
     pos: np.ndarray
@@ -60,6 +68,11 @@ class Fleet:
     accel_max: np.ndarray
     gains: Gains
     commanded: np.ndarray
+    bicycle: np.ndarray
+    wheelbase: np.ndarray
+    max_steer: np.ndarray
+    max_steer_rate: np.ndarray
+    steer: np.ndarray
 
     @property
     def n(self) -> int:
@@ -74,6 +87,16 @@ class Fleet:
 
         def limit(values: list[float | None]) -> np.ndarray:
             return np.array([np.inf if v is None else v for v in values], dtype=float)
+
+        def car(values: list[float | None], unset: float) -> np.ndarray:
+            bicycle = [v.model == "bicycle" for v in vs]
+            return np.array(
+                [
+                    x if b and x is not None else unset
+                    for x, b in zip(values, bicycle, strict=True)
+                ],
+                dtype=float,
+            )
 
         gains = Gains(
             **{
@@ -97,6 +120,11 @@ class Fleet:
             accel_max=limit([v.max_accel for v in vs]),
             gains=gains,
             commanded=np.array([v.drive.type == "commands" for v in vs], dtype=bool),
+            bicycle=np.array([v.model == "bicycle" for v in vs], dtype=bool),
+            wheelbase=car([v.wheelbase for v in vs], np.nan),
+            max_steer=car([v.max_steer for v in vs], np.nan),
+            max_steer_rate=car([v.max_steer_rate for v in vs], np.inf),
+            steer=np.zeros(n),
         )
 
     @classmethod

@@ -285,6 +285,12 @@ class FilterContext:
     substeps : int
         The physics' substeps a period: a drive reaches a new command one substep
         into the period (the first substep runs at the last period's command).
+    steering : CarSteering or None
+        The cars among the rows (``model: bicycle``): their wheelbases (NaN on a
+        unicycle's row), steering limits and last steering angles
+        (:class:`~sandbox.model.bicycle.CarSteering`); None: no car. A car executes
+        the turn rate ``v1 tan(delta) / L`` of a steering angle within its limits,
+        whatever ``v2`` the filter returns.
     """
 
     t: float
@@ -315,6 +321,7 @@ class FilterContext:
     world_stats: list[dict[str, Any]] | None = None
     slot: np.ndarray | None = None
     substeps: int = 1
+    steering: Any = None
 
 
 @dataclass

@@ -46,6 +46,7 @@ from matplotlib.colors import is_color_like
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 
+from sandbox.render.cars import car_lines, car_wheelbases
 from sandbox.render.figure_marks import (
     TITLE_PAD,
     detection_marks,
@@ -382,6 +383,17 @@ def trajectories_figure(run: Run) -> Figure:
     )
     if heads:
         ax.add_collection(LineCollection(heads, colors="k", linewidths=1.8, zorder=4))
+    wheelbase = car_wheelbases(run)
+    if wheelbase is not None:  # cars: chassis and wheels, the front one steered
+        for k in snaps:
+            chassis, wheels = car_lines(
+                np.asarray(pose[k], dtype=float),
+                np.asarray(run.steer[k], dtype=float),
+                wheelbase,
+                np.asarray(run.diameter, dtype=float),
+            )
+            ax.add_collection(LineCollection(chassis, colors="k", lw=0.8, zorder=4))
+            ax.add_collection(LineCollection(wheels, colors="k", lw=2.4, zorder=4))
     # Failures (onset position) and collisions (midpoint of the vehicles involved).
     t = np.asarray(run.t, dtype=float)
     fails = [
@@ -644,26 +656,33 @@ def commands_figure(run: Run) -> Figure:
     Returns
     -------
     Figure
-        Top: ``v1 [m/s]``; bottom: ``v2 [rad/s]``; shared ``t [s]`` axis.
+        Top: ``v1 [m/s]``; then ``v2 [rad/s]``; for a run with cars, at the bottom
+        their steering angles ``delta [rad]``; shared ``t [s]`` axis.
     """
-    fig = Figure(figsize=(9.0, 6.0), layout="constrained")
-    top, bottom = fig.subplots(2, 1, sharex=True)
+    cars = run.steer is not None  # a third panel: the cars' steering angles
+    fig = Figure(figsize=(9.0, 8.0 if cars else 6.0), layout="constrained")
+    axes = list(fig.subplots(3 if cars else 2, 1, sharex=True))
+    top, bottom = axes[0], axes[-1]
     colors = _colors(run)
     idx = _thin(run)
     t = np.asarray(run.t, dtype=float)
     cmd = np.asarray(run.cmd[idx], dtype=float)
     _series(top, t[idx], cmd[:, :, 0], run, colors, lw=1.0)
-    _series(bottom, t[idx], cmd[:, :, 1], run, colors, lw=1.0)
+    _series(axes[1], t[idx], cmd[:, :, 1], run, colors, lw=1.0)
+    if cars:
+        steer = np.asarray(run.steer[idx], dtype=float)
+        _series(bottom, t[idx], steer, run, colors, lw=1.0)
+        bottom.set_ylabel("steering delta [rad]")
     for i, start, end, _ in _failure_spans(run):
-        for ax in (top, bottom):
+        for ax in axes:
             ax.axvline(start, color=colors[i], ls="--", lw=1.0)
             if end is not None:
                 ax.axvline(end, color=colors[i], ls=":", lw=1.0)
     top.set_ylabel("v1 [m/s]")
-    bottom.set_ylabel("v2 [rad/s]")
+    axes[1].set_ylabel("v2 [rad/s]")
     bottom.set_xlabel("t [s]")
     bottom.set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0)
-    for ax in (top, bottom):
+    for ax in axes:
         ax.grid(True, lw=0.4, alpha=0.5)
     top.set_title(_title(run, "Commands"))
     _side_legend(fig, top, run)

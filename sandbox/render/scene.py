@@ -24,6 +24,7 @@ from sandbox.render.camera import (
     frame_height,
     reference_path,
 )
+from sandbox.render.cars import car_bodies, car_lines, car_wheelbases
 from sandbox.render.overlay import (
     TextStamps,
     draw_bottom_band,
@@ -123,6 +124,11 @@ class Scene:
             self.ranges = np.asarray(run.ranges, dtype=float)
             self.beam_angles = np.asarray(run.beam_angles, dtype=float)
             self.reach = _beam_reach(run, self.ranges)
+        # Cars (model: bicycle): chassis and wheels, the front one steered.
+        self.wheelbase = car_wheelbases(run)
+        if self.wheelbase is not None:
+            self.steer = np.asarray(run.steer, dtype=float)
+            self.diameter = np.asarray(run.diameter, dtype=float)
         # Static geometry.
         self.obstacles = drawn_obstacles(run)
         path = reference_path(run)
@@ -264,6 +270,8 @@ class Scene:
         else:
             self._draw_slots(draw, cam.world_to_pixel(self.slot[k]))
             self._draw_bodies(draw, centers, radius, self.theta[k], ringed, halo, ring)
+            if self.wheelbase is not None:
+                self._draw_cars(draw, cam, k, radius)
         self._draw_failures(draw, centers[failed], radius[failed])
         self._draw_flashes(draw, cam, self.t[k])
         self._draw_hud(draw, img, self.t[k])
@@ -311,6 +319,23 @@ class Scene:
             tip = (u + r * math.cos(theta[i]), v - r * math.sin(theta[i]))
             width = max(2, int(round(0.2 * r)))
             draw.line([u, v, *tip], fill=BLACK, width=width)
+
+    def _draw_cars(
+        self, draw: ImageDraw.ImageDraw, cam: Camera, k: int, radius: np.ndarray
+    ) -> None:
+        """The cars' chassis and wheels (:func:`~sandbox.render.cars.car_lines`)."""
+        pose = np.column_stack((self.pos[k], self.theta[k]))
+        steer = self.steer[k]
+        cars = np.flatnonzero(np.isfinite(steer))
+        bodies = car_bodies(pose, steer, self.wheelbase, self.diameter)
+        for i, corners in zip(cars, cam.world_to_pixel(bodies), strict=True):
+            draw.polygon(_flat(corners), outline=int(self.body[i]), width=1)
+        chassis, wheels = car_lines(pose, steer, self.wheelbase, self.diameter)
+        r = float(np.median(radius))
+        thin, thick = max(1, round(0.12 * r)), max(2, round(0.3 * r))
+        for width, lines in ((thin, chassis), (thick, wheels)):
+            for a in cam.world_to_pixel(lines):
+                draw.line(_flat(a), fill=BLACK, width=width)
 
     def _draw_trails(self, draw: ImageDraw.ImageDraw, cam: Camera, k: int) -> None:
         k0 = int(self.trail_start[k])

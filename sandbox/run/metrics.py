@@ -314,6 +314,8 @@ def compute_metrics(run: Any, settle_tol: float | None = None) -> dict[str, Any]
         }
         if has_slot and not failed_end:
             healthy_settled.append(settle is not None)
+    for name, block in steering_metrics(run).items():  # cars only
+        vehicles[name]["steering"] = block
     vv = [e for e in run.events if e.kind == "vehicle_vehicle"]
     vo = [e for e in run.events if e.kind == "vehicle_obstacle"]
     healthy = healthy_events(run)
@@ -371,6 +373,45 @@ def compute_metrics(run: Any, settle_tol: float | None = None) -> dict[str, Any]
     for contribute in metric_contributions().values():  # e.g. the detector's blocks
         out.update(contribute(run))
     out["warnings"] = run_warnings(out)
+    return out
+
+
+def steering_metrics(run: Any) -> dict[str, dict[str, Any]]:
+    """Each car's steering (``model: bicycle``): how long it was at its limit.
+
+    ``saturated_time`` [s] is the time the steering angle was at ``max_steer``
+    (each sample held until the next), ``saturated_fraction`` that time over the
+    run's, ``max_abs`` [rad] the largest angle and ``max_steer`` [rad] the limit.
+    Empty for a run without cars, or loaded without its scenario.
+
+    Parameters
+    ----------
+    run : Run
+
+    Returns
+    -------
+    dict
+        Vehicle name to its block.
+    """
+    vehicles = getattr(run.scenario, "vehicles", None)
+    if run.steer is None or vehicles is None or len(vehicles) != run.n_vehicles:
+        return {}
+    t = np.asarray(run.t, dtype=float)
+    held = np.diff(t)  # each sample's period, the last one none
+    total = float(t[-1] - t[0]) if len(t) else 0.0
+    out = {}
+    for i, v in enumerate(vehicles):
+        if v.model != "bicycle" or v.max_steer is None:
+            continue
+        angle = np.abs(np.asarray(run.steer[:, i], dtype=float))
+        at_limit = angle >= v.max_steer * (1.0 - 1e-9)
+        time = float(np.sum(held[at_limit[:-1]])) if len(t) > 1 else 0.0
+        out[run.names[i]] = {
+            "saturated_time": round(time, 6),
+            "saturated_fraction": round(time / total, 6) if total > 0 else 0.0,
+            "max_abs": _finite(np.nanmax(angle)) if len(t) else None,
+            "max_steer": v.max_steer,
+        }
     return out
 
 

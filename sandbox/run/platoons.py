@@ -140,6 +140,7 @@ def platoon_view(run: Any, name: str) -> Any:
         target=run.target[:, rows],
         mode=run.mode[:, rows],
         failed=run.failed[:, rows],
+        steer=None if run.steer is None else run.steer[:, rows],
         reference=reference,
         names=[run.names[i] for i in rows],
         colors=[run.colors[i] for i in rows],

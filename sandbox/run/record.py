@@ -138,6 +138,9 @@ class Run:
         vehicle or beam without one); None: the run had no range sensor.
     beam_angles : ndarray, shape (n, B) [rad], or None
         Each beam's angle about the vehicle's heading.
+    steer : ndarray, shape (T, n) [rad], or None
+        Each car's steering angle delta (``model: bicycle``) during the period from
+        each sample, NaN on a unicycle's row; None: the run had no car.
     """
 
     t: np.ndarray
@@ -159,6 +162,7 @@ class Run:
     scenario: Any = None
     ranges: np.ndarray | None = None
     beam_angles: np.ndarray | None = None
+    steer: np.ndarray | None = None
 
     @property
     def n_vehicles(self) -> int:
@@ -328,6 +332,8 @@ class Run:
         scans = {}
         if self.ranges is not None and self.beam_angles is not None:
             scans = {"ranges": self.ranges, "beam_angles": self.beam_angles}
+        if self.steer is not None:  # the steering angles only of a run with cars
+            scans["steer"] = self.steer
         with open(path, "wb") as fh:
             np.savez_compressed(
                 fh,

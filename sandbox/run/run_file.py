@@ -98,6 +98,9 @@ def read_checked(path: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         if names & set(OPTIONAL):  # both or neither
             expected |= set(OPTIONAL)
             members.update(OPTIONAL)
+        if "steer" in names:  # a run with cars
+            expected.add("steer")
+            members["steer"] = ("f", ("T", "n"))
         missing = sorted(expected - names)
         extra = sorted(set(infos) - {f"{k}.npy" for k in expected})
         if missing or extra:

@@ -34,6 +34,7 @@ from sandbox.plugins.registration import (
     Param,
 )
 from sandbox.scenario import bundled, randomize
+from sandbox.scenario.cars import check_car, turning_warnings
 from sandbox.scenario.checks import check_consistency
 from sandbox.scenario.expectations import read_expectations
 from sandbox.scenario.inert import clip_detection, conditional_keys, spans_beyond_run
@@ -68,8 +69,10 @@ from sandbox.scenario.sections import (
 )
 from sandbox.scenario.sensors import read_sensors
 from sandbox.scenario.specs import (
+    FormationSpec,
     MetricsSpec,
     ReconfigureSpec,
+    ReferenceSpec,
     Scenario,
     SensingSpec,
     SensorsSpec,
@@ -301,7 +304,7 @@ def parse_scenario(
                     f"{len(listed)} listed + {platoon.count} generated",
                     f"at most {MAX_VEHICLES} in all",
                 )
-            else:
+            elif check_car(rd, params, "vehicle"):
                 made = expand_platoon(
                     platoon, [v for _, v in listed], params, seed, reference, formation
                 )
@@ -407,6 +410,7 @@ def parse_scenario(
     )
     if tunnel is not None:
         rd.warn("substeps", tunnel)
+    _turning(rd, listed + generated, reference, formation, duration)
     with from_loader():
         scenario = Scenario(
             name=name,
@@ -441,6 +445,25 @@ def parse_scenario(
     for line in scenario.warnings:
         warnings.warn(line, SandboxWarning, stacklevel=_caller_level())
     return scenario
+
+
+def _turning(
+    rd: Reader,
+    vehicles: list[tuple[str, VehicleSpec]],
+    reference: ReferenceSpec | None,
+    formation: FormationSpec | None,
+    duration: float,
+) -> None:
+    """Warn of each car asked to turn tighter than it can on the reference."""
+    frame, needs_leader = "reference", False
+    if formation is not None:
+        options = plugins.get("law", formation.law).options
+        frame, needs_leader = options["frame"], options["needs_leader"]
+    specs = [v for _, v in vehicles]
+    tracks = [formation is None or (needs_leader and v.leader) for v in specs]
+    rotate = formation is not None and formation.rotate
+    for i, line in turning_warnings(specs, reference, frame, rotate, duration, tracks):
+        rd.warn(vehicles[i][0], line)
 
 
 def _quietly_parsed(doc: dict[str, Any]) -> Scenario:

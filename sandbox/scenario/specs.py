@@ -126,6 +126,13 @@ class VehicleSpec:
     #: Its own ``sensors:`` (the fleet's, ``Scenario.sensors``, merged in); None:
     #: the fleet's.
     sensors: SensorsSpec | None = None
+    #: ``unicycle`` (eq. (1)) or ``bicycle`` (a car, :mod:`sandbox.model.bicycle`).
+    model: str = "unicycle"
+    #: A car's wheelbase L [m], steering limit [rad] and steering-rate limit
+    #: [rad/s] (None: not set; the rate unlimited).
+    wheelbase: float | None = None
+    max_steer: float | None = None
+    max_steer_rate: float | None = None
 
 
 @dataclass(frozen=True)
@@ -540,11 +547,14 @@ class Scenario:
             for key in ("mass", "v1_max", "v2_max", "max_accel", "motor_accel"):
                 if getattr(made, key) is not None:
                     doc["vehicle"][key] = getattr(made, key)
+            doc["vehicle"].update(_car_keys(made))
             doc["vehicle"]["gains"] = plain(made.gains)
             doc["platoon"] = plain(self.platoon, skip_none=True)
         doc["vehicles"] = []
         for v in listed:
             item = plain(v, skip_none=True)
+            if v.model == "unicycle":  # the default, left out
+                del item["model"]
             item["gains"] = plain(v.gains)
             if v.drive.type == "reference":
                 del item["drive"]
@@ -654,3 +664,12 @@ def plain(obj: Any, skip_none: bool = False) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
     return obj
+
+
+def _car_keys(v: VehicleSpec) -> dict[str, Any]:
+    """A vehicle's car keys for a document: none for a unicycle without them."""
+    out: dict[str, Any] = {} if v.model == "unicycle" else {"model": v.model}
+    for key in ("wheelbase", "max_steer", "max_steer_rate"):
+        if getattr(v, key) is not None:
+            out[key] = getattr(v, key)
+    return out

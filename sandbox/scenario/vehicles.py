@@ -20,6 +20,7 @@ from sandbox.model.flatness import (
 from sandbox.plugins.registration import (
     Param,
 )
+from sandbox.scenario.cars import CAR_PARAMS, check_car, check_steer_limit
 from sandbox.scenario.reader import (
     MAX_VEHICLES,
     MIN_DIAMETER,
@@ -92,6 +93,7 @@ VEHICLE_PARAMS: dict[str, Param] = {
         "m/s^2 in contact",
         minimum=MIN_ACCEL,
     ),
+    **CAR_PARAMS,
 }
 
 GAINS: dict[str, Param] = {
@@ -232,6 +234,7 @@ def read_vehicle_params(
     for key, p in VEHICLE_PARAMS.items():
         if p.type != "custom":
             out[key], _ = read_param(rd, m, key, path, p, base[key])
+    check_steer_limit(rd, out, path)
     gains_doc, gains_path = rd.get(m, "gains", path, None)
     gains = dict(base["gains"])
     if gains_doc is not None:
@@ -367,7 +370,7 @@ def read_vehicles(
                 continue
         if pose is None or offset is None or None in pose or drive is None:
             continue
-        if None in (p["diameter"], p["mass"]):
+        if None in (p["diameter"], p["mass"]) or not check_car(rd, p, sub):
             continue
         if any(v is None for v in p["gains"].values()):
             continue
@@ -401,6 +404,10 @@ def _make_vehicle(
         max_accel=p["max_accel"],
         motor_accel=p["motor_accel"],
         drive=drive,
+        model=p["model"],
+        wheelbase=p["wheelbase"],
+        max_steer=p["max_steer"],
+        max_steer_rate=p["max_steer_rate"],
     )
 
 

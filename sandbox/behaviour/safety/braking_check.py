@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from sandbox.behaviour.safety.cars import solved_groups
 from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
 from sandbox.behaviour.safety.running import ray_floor, run_speeds
 from sandbox.model.barriers import (
@@ -40,6 +41,7 @@ from sandbox.model.barriers import (
 )
 
 if TYPE_CHECKING:
+    from sandbox.behaviour.safety.cars import CarCone
     from sandbox.behaviour.safety.state import Brakings, CBFState
     from sandbox.plugins.contexts import FilterContext
 
@@ -349,6 +351,7 @@ def _escape(
     moved: np.ndarray,
     solved: Solved,
     box: tuple[np.ndarray, ...],
+    cone: CarCone | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Commands near ``z`` that pay, to first order, for what ``z`` loses beyond it.
 
@@ -379,8 +382,7 @@ def _escape(
         short = np.zeros(total)
         short[ids] = np.maximum(-margin, 0.0)
         shift += OVERPAY * short[cond] / norm
-        for m in np.unique(counts[moved]):
-            group = np.flatnonzero(moved & (counts == m))
+        for m, group in solved_groups(np.flatnonzero(moved), counts, cone, False):
             slot = np.full(len(z), -1, dtype=np.intp)
             slot[group] = np.arange(len(group))
             rows = np.flatnonzero(slot[veh] >= 0)
@@ -391,9 +393,12 @@ def _escape(
                 solved.a[mine[rows]],
                 b,
                 solved.rank[mine[rows]],
-                int(m),
+                m,
             )
-            zg, slack = solve(z[group], mat, off, soft)
+            if cone is None:
+                zg, slack = solve(z[group], mat, off, soft)
+            else:  # a car's better cone (cars.py)
+                zg, slack, _ = cone.solve(group, z[group], (mat, off, soft))
             out[group] = zg
             ok[group] &= slack <= TOLERANCE
     return out, ok
@@ -407,6 +412,7 @@ def check_commands(
     z_b: np.ndarray,
     solved: Solved | None = None,
     box: tuple[np.ndarray, ...] | None = None,
+    cone: CarCone | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The commands moved toward braking where the drive's model says they must be.
 
@@ -423,6 +429,9 @@ def check_commands(
         The conditions the QP kept.
     box : tuple of ndarray, each shape (n,), optional
         The bounds ``lo1, hi1, lo2, hi2`` of ``z`` [m/s].
+    cone : CarCone, optional
+        The cars' reachable sets, kept by the command toward which the QP's
+        conditions are tightened (:mod:`sandbox.behaviour.safety.cars`).
 
     Returns
     -------
@@ -438,7 +447,7 @@ def check_commands(
     out = _bisect(state, ctx, few, z, z_b, moved)
     if solved is None or box is None:
         return out, moved
-    target, found = _escape(state, ctx, pending, z, moved, solved, box)
+    target, found = _escape(state, ctx, pending, z, moved, solved, box, cone)
     if found.any():
         other = _bisect(state, ctx, _subset(pending, found), target, z_b, found)
         nearer = np.hypot(*(other - z).T) < np.hypot(*(out - z).T)

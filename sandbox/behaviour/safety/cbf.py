@@ -71,6 +71,14 @@ failures (which replace the commands of the vehicles they hit). All of the above
 without a ``priority`` is also one C loop over the vehicles of every world
 (:mod:`sandbox.behaviour.safety.filter_kernel`), with numpy's numbers.
 
+**Cars** (``model: bicycle``, ``FilterContext.steering``): a car's QP also keeps its
+command within what its steering can reach this period, the two hard rows of its
+forward or its reverse cone, the better solution kept
+(:mod:`sandbox.behaviour.safety.cars`); a car takes no right-hand rule (it cannot
+turn where it stands), and no cone with ``projection: speed``. The C loop does not
+know the cones: a step with cars is made by it for the unicycles and by numpy for the
+cars.
+
 **The braking barrier** (``barrier: braking``; ``velocity``, all of the above, stays
 the default). The velocity barrier asks ``h' >= -gamma h`` of a velocity the drive
 can change only by ``max_accel dt`` a period, so near a barrier its conditions may
@@ -132,6 +140,7 @@ from sandbox.behaviour.safety.braking import (
     pair_geometry,
 )
 from sandbox.behaviour.safety.braking_check import Solved, check_commands, passes
+from sandbox.behaviour.safety.cars import CarCone, solved_groups, with_cars
 from sandbox.behaviour.safety.constrained import record_episodes
 from sandbox.behaviour.safety.filter_kernel import covers, usable, velocity_step
 from sandbox.behaviour.safety.priority import PRIORITY, holding
@@ -391,6 +400,7 @@ def filter_commands(
     ctx: FilterContext,
     prune: bool = True,
     braked: np.ndarray | None = None,
+    only: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, FilterStep]:
     """The filtered ``(v1, v2)`` of one step, and what the filter did.
 
@@ -412,6 +422,10 @@ def filter_commands(
         Under the braking barrier, vehicles that may not take the run toward
         vehicles that do not brake (the second try of the step: ``ctx`` then
         holds the estimate already).
+    only : ndarray, shape (n,), bool, optional
+        Solve these vehicles' problems only (the others keep ``ctx``'s commands):
+        the cars, after the compiled step (:func:`~sandbox.behaviour.safety.cars.
+        with_cars`).
 
     Returns
     -------
@@ -419,8 +433,12 @@ def filter_commands(
     v2 : ndarray, shape (n,) [rad/s]
     step : FilterStep
     """
-    if prune and braked is None and covers(state) and usable():
-        return velocity_step(state, ctx)  # the same step in one C call
+    if prune and braked is None and only is None and covers(state) and usable():
+        fast = velocity_step(state, ctx)  # the same step in one C call
+        car = None if ctx.steering is None else np.isfinite(ctx.steering.wheelbase)
+        if car is None or not car.any():
+            return fast
+        return with_cars(car, fast, filter_commands(state, ctx, prune, only=car))
     n, look = len(ctx.pos), state.look
     if braked is None and state.estimate is not None and ctx.seen is not None:
         seen = state.estimate.update(ctx.seen, ctx.v1_prev, ctx.v2_prev)
@@ -435,11 +453,15 @@ def filter_commands(
     z0 = columns(v1, look * v2)
     slack = np.zeros(n)
     active = np.zeros(n, dtype=bool)
-    who = filtered.nonzero()[0]
+    who = (filtered if only is None else filtered & only).nonzero()[0]
     if len(who) == 0:
         return v1, v2, FilterStep(active, slack, 0, np.inf, np.zeros(n, dtype=bool))
     lo1, hi1, lo2, hi2 = (np.zeros(n) for _ in range(4))
     lo1[who], hi1[who], lo2[who], hi2[who] = _box(state, ctx, z0[:, 1], who)
+    # The cars' reachable set, two hard rows each (cars.py); None without a car.
+    cone = CarCone.of(ctx, look, state.speed_only, (lo1, hi1, lo2, hi2), who)
+    if cone is not None:  # a car's nominal: the command its steering executes
+        z0 = columns(v1, look * cone.nominal(v1, v2))
     if ctx.v1_prev is None:
         z_hat = np.zeros((n, 2))
     else:
@@ -491,12 +513,11 @@ def filter_commands(
 
     z = z0.copy()
     bare = who[counts[who] == 0]  # the bounds only: a clip
+    if cone is not None:  # a car's: its cone too
+        bare = bare[~cone.car[bare]]
     z[bare, 0] = CLIP(z0[bare, 0], lo1[bare], hi1[bare])
     z[bare, 1] = CLIP(z0[bare, 1], lo2[bare], hi2[bare])
-    for m in np.bincount(counts[who]).nonzero()[0]:  # the counts, sorted
-        if m == 0:
-            continue
-        group = who[counts[who] == m]
+    for m, group in solved_groups(who, counts, cone):  # the counts, sorted
         k = len(group)
         slot = np.full(n, -1, dtype=np.intp)
         slot[group] = np.arange(k)
@@ -505,9 +526,14 @@ def filter_commands(
         mat, off, soft = bounded_problems(
             box, slot[veh[mine]], a[mine], b[mine], rank[mine], m
         )
-        zg, sg = solve(z0[group], mat, off, soft)
-        if state.pass_right > 0 and not state.speed_only:
-            held = None if hold is None else (hold[group], np.zeros((k, 4 + m), bool))
+        if cone is None:
+            zg, sg = solve(z0[group], mat, off, soft)
+        else:  # a car's better cone (cars.py); unicycles as they are
+            zg, sg, (mat, off, soft) = cone.solve(group, z0[group], (mat, off, soft))
+        # the right-hand rule turns where a vehicle stands: not a car's (cars.py)
+        car = cone is not None and bool(cone.car[group[0]])
+        if state.pass_right > 0 and not state.speed_only and not car:
+            held = None if hold is None else (hold[group], np.zeros(off.shape, bool))
             if held is not None:
                 held[1][slot[veh[mine]], 4 + rank[mine]] = wall[mine]
             zg, sg = pass_right(state, z0[group], zg, sg, mat, off, soft, held)
@@ -525,7 +551,7 @@ def filter_commands(
             z_b[running, 1] = 0.0
         solved = Solved(veh, a, b, rank, pending["cond"][src], pending["norm"][src])
         box = (lo1, hi1, lo2, hi2)
-        z, _ = check_commands(state, ctx, pending["check"], z, z_b, solved, box)
+        z, _ = check_commands(state, ctx, pending["check"], z, z_b, solved, box, cone)
         if running is not None:
             bad = running & ~passes(state, ctx, pending["check"], z)
             if bad.any():

@@ -70,6 +70,12 @@ def replay_html(
             transforms.append(with_beams)
     if "platoons" in data:  # several platoons: their references
         transforms.append(with_platoons)
+    from sandbox.render.replay.encode import car_data
+
+    cars = car_data(run, data)
+    if cars is not None:  # cars: their chassis and steered wheels
+        data["cars"] = cars
+        transforms.append(with_cars)
 
     def transform(script: str) -> str:
         for step in transforms:
@@ -122,6 +128,15 @@ def with_platoons(script: str) -> str:
     the one reference of a run of one platoon, and name them in the legend.
     """
     return with_pieces(script, "replay_platoons.js")
+
+
+def with_cars(script: str) -> str:
+    """``replay.js`` with the pieces of ``replay_cars.js`` (``model: bicycle``).
+
+    They draw each car's chassis and wheels, the front one turned by its steering
+    angle at the sample.
+    """
+    return with_pieces(script, "replay_cars.js")
 
 
 def write_html(

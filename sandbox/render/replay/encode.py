@@ -566,6 +566,20 @@ def _platoons(
     ]
 
 
+def page_samples(run: Run, data: dict[str, Any]) -> np.ndarray:
+    """The record's samples a page shows: every ``data["stride"]``-th, and the last.
+
+    >>> from types import SimpleNamespace
+    >>> page_samples(SimpleNamespace(t=np.arange(5)), {"stride": 2}).tolist()
+    [0, 2, 4]
+    """
+    T = len(run.t)
+    keep = np.arange(0, T, int(data["stride"]))
+    if keep[-1] != T - 1:
+        keep = np.append(keep, T - 1)
+    return keep
+
+
 def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
     """The range sensors' scans for the page, on its samples; None without scans.
 
@@ -576,11 +590,7 @@ def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
     """
     if run.ranges is None or run.beam_angles is None:
         return None
-    T = len(run.t)
-    keep = np.arange(0, T, int(data["stride"]))
-    if keep[-1] != T - 1:
-        keep = np.append(keep, T - 1)
-    ranges = np.asarray(run.ranges)[keep].astype(float)  # the samples kept only
+    ranges = np.asarray(run.ranges)[page_samples(run, data)].astype(float)  # kept only
     specs = None
     if run.scenario is not None and hasattr(run.scenario, "range_specs"):
         specs = run.scenario.range_specs()
@@ -594,4 +604,25 @@ def beam_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
         "angles": [[_rounded(a) for a in row] for row in run.beam_angles.tolist()],
         "reach": reach,
         "width": int(run.beam_angles.shape[1]),
+    }
+
+
+def car_data(run: Run, data: dict[str, Any]) -> dict[str, Any] | None:
+    """The cars' steering for the page, on its samples; None for a run without cars.
+
+    ``steer`` packed like the other arrays (shape (T, n) [rad], NaN on a unicycle's
+    row), ``wheelbase`` each vehicle's [m] (None for a unicycle) and ``wheel`` the
+    drawn wheels' length as a fraction of the diameter
+    (:mod:`sandbox.render.cars`).
+    """
+    from sandbox.render.cars import WHEEL_FRACTION, car_wheelbases
+
+    wheelbase = car_wheelbases(run)
+    if wheelbase is None:
+        return None
+    steer = np.asarray(run.steer, dtype=float)[page_samples(run, data)]
+    return {
+        "steer": pack(steer, STEPS["pose"], order=1),
+        "wheelbase": [_rounded(w) for w in wheelbase],
+        "wheel": WHEEL_FRACTION,
     }
