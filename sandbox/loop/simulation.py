@@ -330,18 +330,25 @@ class Simulation:
         target, shift, active = self._avoidance.targets(
             t, fleet, slot, may_avoid, known, self.believed, live.worlds(), failed
         )
+        slot_vel = slot_acc = None  # the law's alone: v_ref, a_ref
         if self._estimate_shift == "estimate":
             K, n, N = layout.K, layout.n, layout.N
             d_shift, dd_shift = self._shift_motion.update(shift.reshape(K, n, 2))
+            slot_vel, slot_acc = v_ref, a_ref
             v_ref = v_ref + d_shift.reshape(N, 2)
             a_ref = a_ref + dd_shift.reshape(N, 2)
         self._failing = failing
-        self.plan = Plan(slot, target, v_ref, a_ref, point, active, failing)
+        self.plan = Plan(
+            slot, target, v_ref, a_ref, point, active, failing, slot_vel, slot_acc
+        )
 
-    def _act(self, commands: Rows, targets: Rows, shifts: Rows) -> np.ndarray:
+    def _act(
+        self, commands: Rows, targets: Rows, shifts: Rows
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Commands for the period from ``t_k`` (:class:`~sandbox.loop.acting.Acting`).
 
-        Sets ``fleet.v1, v2, failed, mode``; returns ``chi`` for ``t_k+1``.
+        Sets ``fleet.v1, v2, failed, mode``; returns ``chi`` and the directions of
+        travel for ``t_k+1``.
         """
         fleet, live = self.fleet, self._liveness
         acted = self._acting.commands(
@@ -363,7 +370,7 @@ class Simulation:
         fleet.mode = acted.mode
         if acted.target is not None:
             self._recorded_target = acted.target
-        return acted.chi
+        return acted.chi, acted.travel
 
     def _record(self, plan: Plan) -> None:
         """The loop metrics, and the sample of ``t_k`` every ``record_every`` steps."""
@@ -392,10 +399,14 @@ class Simulation:
         if ranges is not None:
             ranges.record()
 
-    def _advance(self, chi_next: np.ndarray) -> None:
-        """Write the commands to the physics and step it to ``t_k+1``."""
+    def _advance(self, following: tuple[np.ndarray, np.ndarray]) -> None:
+        """Write the commands to the physics and step it to ``t_k+1``.
+
+        ``following``: the controllers' ``chi`` and directions of travel of
+        ``t_k+1``.
+        """
         fleet, h = self.fleet, self._layout.h
-        fleet.chi = chi_next
+        fleet.chi, fleet.travel = following
         tally = self._tally
         commanded = tally.commanded if tally.commanded_at == self.k else None
         self.physics.advance(
@@ -422,7 +433,7 @@ class Simulation:
         self._recorded_target = None
         start = time.perf_counter()
         try:
-            chi_next = self._act(commands, targets, shifts)
+            following = self._act(commands, targets, shifts)
         except PluginRunError as exc:  # a batched plug-in: every world ends
             for w in live.worlds():
                 self._plugin_failed(w, exc)
@@ -439,7 +450,7 @@ class Simulation:
                 live.info[w]["interrupted"] = {"t": self.k * self._layout.h}
                 self._end_world(w, STATUS_INTERRUPTED, last=False)
             return
-        self._advance(chi_next)
+        self._advance(following)
         if self._sense():
             start = time.perf_counter()
             self._guarded(self._plan)
@@ -779,10 +790,15 @@ class Simulation:
         if live.undefined[world]:  # ended with its plan undefined
             nan = np.full((layout.n, 2), np.nan)
             slot, target, failing = nan, nan.copy(), fleet.failed[rows].copy()
+            slot_vel, slot_acc = nan.copy(), nan.copy()
         else:
             slot = np.array(plan.slot[rows], dtype=float)
             target = np.array(plan.target[rows], dtype=float)
             failing = plan.failing[rows].copy()
+            none = np.isnan(slot)  # no slot: no motion of it either
+            slot_vel, slot_acc = (
+                np.where(none, np.nan, a[rows]) for a in plan.slot_motion()
+            )
         ranges = self._perception.ranges
         platoons = self._formation.platoons
         scenario = layout.scenarios[world]
@@ -793,6 +809,8 @@ class Simulation:
             vel=fleet.vel[rows].copy(),
             chi=fleet.chi[rows].copy(),
             slot=slot,
+            slot_vel=slot_vel,
+            slot_acc=slot_acc,
             target=target,
             mode=fleet.mode[rows].copy() if ended else plan.mode(layout.N)[rows],
             failed=failing,
