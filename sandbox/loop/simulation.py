@@ -56,7 +56,7 @@ from sandbox.loop import plan as planning
 from sandbox.loop.building import LoopParts, build
 from sandbox.loop.collector import collector_off, frozen_heap
 from sandbox.loop.divergence import RowsView, diverged
-from sandbox.loop.ending import make_run
+from sandbox.loop.ending import make_run, stage_error
 from sandbox.loop.observation import Observation, Overrides, override_rows
 from sandbox.loop.plan import Plan
 from sandbox.loop.platoons import Platoons
@@ -288,6 +288,7 @@ class Simulation:
                 self.known_failed,
                 live.worlds(),
                 live.info,
+                lambda w, exc: self._world_failed(w, "platoons", exc),
             ):
                 self._shift_motion.reset(w)
         slot, v_ref, a_ref, point = formation.targets(
@@ -428,7 +429,12 @@ class Simulation:
         should_stop: Callable[[], bool] | None = None,
         shifts: Rows = None,
     ) -> None:
-        """One control period: act, record, advance, sense and plan the next."""
+        """One control period: act, record, advance, sense and plan the next.
+
+        A stage that fails (not a plug-in: a defect, or the record's spill on a full
+        disk) ends every live world there with status ``error``, its samples up to
+        then kept (:meth:`_stage_failed`).
+        """
         live = self._liveness
         self._recorded_target = None
         start = time.perf_counter()
@@ -439,8 +445,13 @@ class Simulation:
                 self._plugin_failed(w, exc)
             live.closed = True
             return
+        except Exception as exc:  # a defect: the run ends, its outputs kept
+            self._stage_failed("act", exc)
+            return
         self._control_time += time.perf_counter() - start
-        self._record(self.plan)
+        if not self._stage("record", self._record, self.plan):
+            return
+        self._spill_failed()
         if not live.count:
             live.closed = True
             return
@@ -450,8 +461,14 @@ class Simulation:
                 live.info[w]["interrupted"] = {"t": self.k * self._layout.h}
                 self._end_world(w, STATUS_INTERRUPTED, last=False)
             return
-        self._advance(following)
-        if self._sense():
+        if not self._stage("physics", self._advance, following):
+            return
+        try:
+            sensed = self._sense()
+        except Exception as exc:
+            self._stage_failed("sense", exc, last=False)
+            return
+        if sensed:
             start = time.perf_counter()
             self._guarded(self._plan)
             self._control_time += time.perf_counter() - start
@@ -459,12 +476,57 @@ class Simulation:
             live.closed = True
 
     def _guarded(self, stage: Callable[[], None]) -> None:
-        """Run a stage over all worlds; a plug-in that fails there ends every world."""
+        """Run the plan over all worlds; a failure there ends every world.
+
+        A plug-in that fails ends them as :meth:`_plugin_failed` says, anything else
+        as :meth:`_stage_failed` does.
+        """
         try:
             stage()
         except PluginRunError as exc:
             for w in self._liveness.worlds():
                 self._plugin_failed(w, exc)
+        except Exception as exc:  # a defect: the run ends, its outputs kept
+            self._stage_failed("plan", exc)
+
+    def _stage(self, name: str, stage: Callable[[Any], None], arg: Any) -> bool:
+        """``stage(arg)``; False when it failed (every world ended, status error)."""
+        try:
+            stage(arg)
+        except Exception as exc:  # a defect: the run ends, its outputs kept
+            self._stage_failed(name, exc, last=False)
+            return False
+        return True
+
+    def _stage_failed(self, stage: str, exc: Exception, last: bool = True) -> None:
+        """Every live world ends now with status ``error``: ``stage`` raised ``exc``.
+
+        ``last``: record the sample of now first, with the plan undefined (a stage
+        before the record's); else the run ends at the last sample recorded.
+        """
+        live = self._liveness
+        for w in live.worlds():
+            self._world_failed(w, stage, exc, last)
+        live.closed = True
+
+    def _world_failed(
+        self, w: int, stage: str, exc: Exception | str, last: bool = True
+    ) -> None:
+        """World ``w`` ends now with status ``error``: a stage of the loop failed.
+
+        ``info["error"]`` names the stage and says what failed
+        (:func:`~sandbox.loop.ending.stage_error`).
+        """
+        t = self.k * self._layout.h
+        self._liveness.info[w]["error"] = stage_error(t, stage, exc)
+        self._end_world(w, STATUS_ERROR, last)
+
+    def _spill_failed(self) -> None:
+        """End the live worlds whose record's spill failed (a full disk)."""
+        for w in self._liveness.worlds():
+            why = self.recorder.failure(w)
+            if why is not None:
+                self._world_failed(w, "record", why, last=False)
 
     def _loop(
         self,
@@ -556,16 +618,27 @@ class Simulation:
         except PluginRunError as exc:
             for w in live.worlds():
                 self._plugin_failed(w, exc)
+        except Exception as exc:  # a defect: the run ends, its outputs kept
+            self._stage_failed("act", exc)
         else:
-            self._record(self.plan)
+            if self._stage("record", self._record, self.plan):
+                self._spill_failed()
         for w in live.worlds():
             status = live.status[w]
             live.end(w, self._make_run(w, self.recorder.arrays(w), status), False)
         live.closed = True
 
     def _make_run(self, w: int, arrays: dict, status: str) -> Run:
-        """World ``w``'s run (:func:`~sandbox.loop.ending.make_run`)."""
+        """World ``w``'s run (:func:`~sandbox.loop.ending.make_run`).
+
+        A record whose spill failed as it was closed ends the run with status
+        ``error`` too (its samples written before are the run's).
+        """
         layout, live, safety = self._layout, self._liveness, self._safety
+        why = self.recorder.failure(w)
+        if why is not None and status != STATUS_ERROR:
+            status = live.status[w] = STATUS_ERROR
+            live.info[w]["error"] = stage_error(self.k * layout.h, "record", why)
         ranges = self._perception.ranges
         return make_run(
             layout,
