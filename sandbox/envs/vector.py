@@ -35,7 +35,6 @@ from sandbox.envs.core import (
     Task,
     Weights,
     default_agents,
-    features_of,
 )
 from sandbox.loop.simulation import Simulation
 from sandbox.scenario import Scenario
@@ -186,26 +185,35 @@ class VectorTask:
 
     # ------------------------------------------------------------------ reading
     def features(self) -> np.ndarray:
-        """Observations of every agent of every world, ``(K, m, size)`` float32."""
+        """Observations of every agent of every world, ``(K, m, size)`` float32.
+
+        Built by :meth:`Task.of_worlds <sandbox.envs.core.Task.of_worlds>`, the
+        single environment's builder, from each cohort's arrays (and, with
+        ``platoons:`` or range readings, from its worlds' observations).
+        """
         task = self.task
         out = np.zeros((self.K, self.m, task.size), dtype=np.float32)
-        low, high = task.bounds()
         for c, (sim, worlds) in enumerate(self.cohorts):
             mine = worlds[self.where[worlds, 0] == c]
             if not len(mine):
                 continue
             Kc, n, fl = len(worlds), self.n, sim.fleet
             local = self.where[mine, 1]
-            out[mine] = features_of(
+            platoon = ranges = None
+            if task.platooned or task.reach is not None:
+                seen = [sim.observe(int(j)) for j in local]
+                if task.platooned:
+                    platoon = np.array([o.platoon for o in seen], dtype=object)
+                if task.reach is not None:
+                    ranges = np.stack([o.ranges for o in seen])
+            out[mine] = task.of_worlds(
                 fl.pos.reshape(Kc, n, 2)[local],
                 fl.theta.reshape(Kc, n)[local],
                 fl.vel.reshape(Kc, n, 2)[local],
                 sim.plan.slot.reshape(Kc, n, 2)[local],
                 sim.plan.failing.reshape(Kc, n)[local],
-                task.rows,
-                task.k,
-                low,
-                high,
+                platoon,
+                ranges,
             )
         return out
 
