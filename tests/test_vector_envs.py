@@ -213,3 +213,34 @@ def test_the_vector_env_observes_the_range_readings_as_the_single_env():
     doc["sensors"] = {"range": {"beams": 8, "max_range": 5.0}}
     lockstep(doc, "b1", steps=40, observe=("neighbours", "ranges"))
     lockstep(doc, "b1", steps=5, observe=("ranges",))
+
+
+def test_reset_ended_starts_the_next_episodes_the_next_step_would_start():
+    # Two copies of one vector env run to the end of their episodes (1 s): one resets
+    # by the next step (Gymnasium's next-step autoreset), the other by reset_ended()
+    # at once (SB3's same-step reset); they then go on alike.
+    K = 3
+    step_env, now_env = (
+        VehicleVectorEnv(DOC, num_envs=K, agent="red", repeat=3) for _ in range(2)
+    )
+    step_env.reset(seed=4)
+    obs, _ = now_env.reset(seed=4)
+    same, reset = now_env.reset_ended()  # nothing ended yet: nothing reset
+    assert not reset.any() and np.array_equal(same, obs)
+    rng = np.random.default_rng(2)
+    done = np.zeros(K, dtype=bool)
+    while not done.any():
+        a = rng.uniform(-1, 1, size=(K, 2)).astype(np.float32)
+        step_env.step(a)
+        _, _, terminated, truncated, _ = now_env.step(a)
+        done = terminated | truncated
+    assert done.all()  # every world at the duration
+    want, reward, *_ = step_env.step(np.zeros((K, 2), dtype=np.float32))
+    got, reset = now_env.reset_ended()
+    assert reset.all() and not reward.any()
+    np.testing.assert_array_equal(got, want)
+    for _ in range(5):
+        a = rng.uniform(-1, 1, size=(K, 2)).astype(np.float32)
+        one, two = step_env.step(a), now_env.step(a)
+        for x, y in zip(one[:4], two[:4], strict=True):
+            np.testing.assert_array_equal(x, y)

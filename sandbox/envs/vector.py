@@ -135,10 +135,20 @@ class VectorTask:
             mine = worlds[(self.where[worlds, 0] == c) & ~restarted[worlds]]
             if len(mine):
                 rewards[mine] = self._advance(sim, worlds, mine, a)
-        if restarted.any():
-            self.where[restarted, 0] = -1
-            self._start(np.flatnonzero(restarted))
+        self.reset_ended(restarted)
         return rewards, restarted
+
+    def reset_ended(self, worlds: np.ndarray | None = None) -> np.ndarray:
+        """Start the next episodes of the worlds whose episode has ended, now.
+
+        ``worlds`` (a mask, ``(K,)``) limits it to those; returns the mask of the
+        worlds reset (in one new cohort). The next :meth:`step` steps them.
+        """
+        ended = self.ended.copy() if worlds is None else worlds & self.ended
+        if ended.any():
+            self.where[ended, 0] = -1
+            self._start(np.flatnonzero(ended))
+        return ended
 
     def _advance(
         self, sim: Simulation, worlds: np.ndarray, mine: np.ndarray, a: np.ndarray
@@ -341,6 +351,26 @@ class VehicleVectorEnv(gym.vector.VectorEnv):
             truncated & ~restarted,
             info,
         )
+
+    def reset_ended(self) -> tuple[np.ndarray, np.ndarray]:
+        """Start the next episode of every world whose episode ended, at once.
+
+        Gymnasium's next-step autoreset resets such a world in the next :meth:`step`
+        (its action ignored, reward 0). Called after the step that ended them, this
+        resets them now instead, as a same-step autoreset does (the adapter
+        :class:`~sandbox.envs.sb3.SB3VecEnv` uses it): the next step then steps
+        them. Their new episodes are those the next step would have started.
+
+        Returns
+        -------
+        obs : ndarray, shape (num_envs, features), float32
+            Every world's observation now: the reset worlds' first of their new
+            episode.
+        reset : ndarray, shape (num_envs,), bool
+            The worlds reset.
+        """
+        reset = self.vector.reset_ended()
+        return self.vector.features()[:, 0], reset
 
 
 class FormationVectorEnv:
