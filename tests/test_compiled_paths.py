@@ -734,9 +734,9 @@ def test_a_run_takes_every_compiled_path_that_is_on(monkeypatch):
         for function in functions:
             real = getattr(module, function)
 
-            def counted(*args, _key=f"{name}.{function}", _real=real):
+            def counted(*args, _key=f"{name}.{function}", _real=real, **kwargs):
                 calls[_key] = calls.get(_key, 0) + 1
-                return _real(*args)
+                return _real(*args, **kwargs)
 
             monkeypatch.setattr(module, function, counted)
     scenarios = [

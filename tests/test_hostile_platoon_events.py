@@ -140,3 +140,23 @@ def test_a_stage_that_fails_in_one_world_ends_that_world_alone(
     assert runs[0].t[-1] == pytest.approx(3.8) and runs[1].t[-1] == pytest.approx(16)
     assert runs[0].info["error"]["message"].startswith("RuntimeError: a defect")
     assert "platoon_events" in compute_metrics(runs[1])
+
+
+def test_a_stage_that_fails_at_the_first_period_of_a_batch_ends_every_world(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The controller fails at t = 0 in a batch of two: both worlds end there with
+    # status error (the loop's tally of the first world ended alone was sized to it
+    # and the second world's end raised an IndexError).
+    from sandbox.model import kernels
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise RuntimeError("a defect")
+
+    monkeypatch.setattr(kernels.Controller, "step", broken)
+    sc = load_scenario("paper/fig15_continuous_beta1", overrides=["duration=1"])
+    runs = Simulation.batch([sc, sc.with_overrides("seed=1")])
+    assert [r.status for r in runs] == ["error", "error"]
+    for run in runs:
+        assert run.info["error"]["stage"] == "act" and len(run.t) == 1
+        assert run.info["error"]["message"].startswith("RuntimeError: a defect")
