@@ -381,15 +381,24 @@ def test_the_observation_gives_the_slots_velocity_and_acceleration() -> None:
 
 
 def test_an_estimating_law_gives_its_backward_differences() -> None:
-    # own_estimate, eqs. (18)-(19): x_ref' is the backward difference of the slot over
-    # h, x_ref'' that of x_ref' (a controller need not difference them itself).
+    # own_estimate, eqs. (18)-(19): a follower's x_ref' is the backward difference of
+    # its slot over h, x_ref'' that of x_ref' (a controller need not difference them
+    # itself); the leader's are the reference's own derivatives (a 5 m circle at
+    # 1 m/s from (5, 0): x_ref' = (-sin(t/5), cos(t/5))).
     sc = load_scenario("paper/own_estimate_circle", overrides=["duration=1"])
     sim = Simulation(sc)
     seen = [sim.step() for _ in range(20)]
-    h = sc.dt
+    h, lead = sc.dt, seen[0].index("leader")
+    follow = [i for i in range(seen[0].n) if i != lead]
     for a, b, c in zip(seen[5:], seen[6:], seen[7:], strict=False):
-        np.testing.assert_allclose(b.slot_vel, (b.slot - a.slot) / h, atol=1e-9)
-        np.testing.assert_allclose(c.slot_acc, (c.slot_vel - b.slot_vel) / h, atol=1e-6)
+        np.testing.assert_allclose(
+            b.slot_vel[follow], (b.slot - a.slot)[follow] / h, atol=1e-9
+        )
+        np.testing.assert_allclose(
+            c.slot_acc[follow], (c.slot_vel - b.slot_vel)[follow] / h, atol=1e-6
+        )
+        exact = [-np.sin(b.t / 5.0), np.cos(b.t / 5.0)]
+        np.testing.assert_allclose(b.slot_vel[lead], exact, atol=1e-9)
     assert np.abs(seen[-1].slot_vel).max() > 0.5  # the slots move
 
 
