@@ -168,14 +168,19 @@ def test_a_controller_step_agrees_with_the_numpy_functions(n, limits):
         pos = rng.normal(0.0, 2.0, (n, 2))
         chi = rng.normal(0.0, 1.0, (n, 2))
         chi[rng.random(n) < 0.1] = 0.0  # at rest: eq. (5)'s heading held
+        slow = rng.random(n) < 0.2  # near rest: chi comes back from zero
+        chi[slow] *= 0.005
         theta = rng.uniform(-4.0, 4.0, n)
         target = pos + rng.normal(0.0, 1.0, (n, 2))
         target[rng.random(n) < 0.2, 0] = np.nan  # aims at the position's coordinate
         v_ref, a_ref = rng.normal(0.0, 1.0, (n, 2)), rng.normal(0.0, 1.0, (n, 2))
-        got = controller.step(pos, chi, theta, target, v_ref, a_ref)
-        want = controller.step_numpy(pos, chi, theta, target, v_ref, a_ref)
-        for a, b in zip(got, want, strict=True):
+        travel = rng.integers(-1, 2, n).astype(np.int8)  # backward, none, forward
+        args = (pos, chi, theta, target, v_ref, a_ref, travel)
+        got = controller.step(*args)
+        want = controller.step_numpy(*args)
+        for a, b in zip(got[:3], want[:3], strict=True):
             close(a, b, TIGHT)
+        np.testing.assert_array_equal(got[3], want[3])  # the directions of travel
 
 
 @needs("controller")
@@ -729,9 +734,9 @@ def test_a_run_takes_every_compiled_path_that_is_on(monkeypatch):
         for function in functions:
             real = getattr(module, function)
 
-            def counted(*args, _key=f"{name}.{function}", _real=real):
+            def counted(*args, _key=f"{name}.{function}", _real=real, **kwargs):
                 calls[_key] = calls.get(_key, 0) + 1
-                return _real(*args)
+                return _real(*args, **kwargs)
 
             monkeypatch.setattr(module, function, counted)
     scenarios = [

@@ -191,3 +191,34 @@ def test_the_cli_reference_has_every_command() -> None:
     for command in sub.choices:
         assert f"### `sandbox {command}`" in text, command
         assert f"usage: sandbox {command}" in text, command
+
+
+def test_the_controller_tutorial_lists_every_observation_field() -> None:
+    # The table of docs/tutorials/controller.md against the dataclass: every public
+    # field (the loop's own ``near`` is not one) and the ``obstacles`` property.
+    import dataclasses
+
+    from sandbox import Observation
+
+    text = (DOCS / "tutorials" / "controller.md").read_text(encoding="utf-8")
+    table = text[text.index("| `Observation` field |") :].split("\n\n")[0]
+    rows = {
+        line.split("|")[1].strip().strip("`")
+        for line in table.splitlines()[2:]
+        if line.startswith("| `")
+    }
+    fields = {f.name for f in dataclasses.fields(Observation) if f.repr}
+    assert rows == fields | {"obstacles"}
+
+
+def test_step_describes_each_of_its_overrides() -> None:
+    # The API reference shows Simulation.step's docstring: each keyword is described
+    # under Parameters.
+    import inspect
+
+    from sandbox import Simulation
+
+    doc = inspect.getdoc(Simulation.step)
+    params = doc[doc.index("Parameters") : doc.index("Returns")]
+    for name in ("commands", "targets", "shifts", "observe"):
+        assert f"\n{name} : " in params, name

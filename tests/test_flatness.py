@@ -6,13 +6,16 @@ import numpy as np
 import pytest
 
 from sandbox.model.flatness import (
-    CHI_HOLD,
-    CHI_REG,
+    CHI_REST,
+    TRAVEL_BACKWARD,
+    TRAVEL_FORWARD,
+    TRAVEL_NONE,
     Gains,
     advance_extension,
     discrete_spectral_radius,
     extension_rate,
     flat_inputs,
+    travel_direction,
 )
 
 INF = np.array([np.inf])
@@ -118,20 +121,65 @@ def test_eq5_at_chi_zero_holds_heading_without_nan() -> None:
     assert (v1[0], v2[0]) == (0.0, 0.0)
 
 
-def test_eq5_below_chi_hold_the_vehicle_stands_still() -> None:
-    # |chi| = CHI_HOLD / 2: the angle of chi means nothing; neither turn nor drive.
-    chi = v(0.6 * CHI_HOLD / 2, 0.8 * CHI_HOLD / 2)
-    v1, v2 = flat_inputs(np.array([2.5]), chi, v(0, 1), 2.0)
-    assert (v1[0], v2[0]) == (0.0, 0.0)
+def test_eq5_at_rest_holds_the_heading_and_moves_along_it() -> None:
+    # |chi| = 0.005 < CHI_REST: the angle of chi means nothing. The heading is held
+    # (v2 = 0, whatever chi') and v1 is chi's component along it: heading 0, chi
+    # (0.003, 0.004): v1 = 0.003; heading pi: v1 = -0.003.
+    assert 0.005 < CHI_REST
+    chi = v(0.003, 0.004)
+    v1, v2 = flat_inputs(np.array([0.0]), chi, v(0, 1), 2.0)
+    assert v1[0] == pytest.approx(0.003) and v2[0] == 0.0
+    v1, v2 = flat_inputs(np.array([math.pi]), chi, v(50, -80), 2.0)
+    assert v1[0] == pytest.approx(-0.003) and v2[0] == 0.0
 
 
-def test_eq5_feedforward_is_bounded_below_chi_reg() -> None:
-    # chi = (0.005, 0), chi' = (0, 1): exact feedforward 0.005 / 0.005^2 = 200 rad/s;
-    # the divisor is floored at CHI_REG^2 = 1e-4, giving 0.005 / 1e-4 = 50 rad/s.
-    assert CHI_HOLD < 0.005 < CHI_REG == 0.01
-    v1, v2 = flat_inputs(np.array([0.0]), v(0.005, 0), v(0, 1), 2.0)
-    assert v1[0] == pytest.approx(0.005)
-    assert v2[0] == pytest.approx(50.0)
+def test_eq5_backward_is_eq5_for_minus_chi() -> None:
+    # Travelling backward with chi = (-1, 0.1) and heading 0: v1 = -|chi|; the heading
+    # error is measured to the angle of -chi = (1, -0.1), atan2(-0.1, 1) = -0.0997,
+    # so v2 = ff - 2 (0 + 0.0997); chi' = (0, 1): ff = (-0.1 * 0 + -1 * 1) / 1.01.
+    chi, rate = v(-1.0, 0.1), v(0.0, 1.0)
+    back = np.array([TRAVEL_BACKWARD], dtype=np.int8)
+    v1, v2 = flat_inputs(np.array([0.0]), chi, rate, 2.0, travel=back)
+    assert v1[0] == pytest.approx(-math.hypot(1.0, 0.1))
+    assert v2[0] == pytest.approx(-1.0 / 1.01 - 2.0 * math.atan2(0.1, 1.0))
+    # the same state travelling forward turns round (heading error 3.04 rad)
+    fwd = np.array([TRAVEL_FORWARD], dtype=np.int8)
+    v1, v2 = flat_inputs(np.array([0.0]), chi, rate, 2.0, travel=fwd)
+    assert v1[0] == pytest.approx(math.hypot(1.0, 0.1))
+    assert v2[0] == pytest.approx(-1.0 / 1.01 - 2.0 * (0.0 - math.atan2(0.1, -1.0)))
+
+
+@pytest.mark.parametrize(
+    ("chi", "chi_next", "travel", "want"),
+    [
+        # forward, chi reverses through zero within a period: backward
+        ((0.05, 0.0), (-0.02, 0.001), TRAVEL_FORWARD, TRAVEL_BACKWARD),
+        # forward, chi slows along the heading: still forward
+        ((0.05, 0.0), (0.02, 0.0), TRAVEL_FORWARD, TRAVEL_FORWARD),
+        # forward, chi turns past a quarter turn without vanishing: still forward
+        ((0.0, 1.0), (-0.1, 1.0), TRAVEL_FORWARD, TRAVEL_FORWARD),
+        # at rest, chi comes back behind: backward (no turn round)
+        ((0.001, 0.0), (-0.5, 0.2), TRAVEL_FORWARD, TRAVEL_BACKWARD),
+        # ... and ahead: forward
+        ((0.001, 0.0), (0.5, 0.2), TRAVEL_BACKWARD, TRAVEL_FORWARD),
+        # never travelled: sets off forward whatever the side of chi
+        ((0.0, 0.0), (-0.5, 0.0), TRAVEL_NONE, TRAVEL_FORWARD),
+        # backward, chi points ahead: forward again
+        ((-0.5, 0.0), (-0.5, 0.6), TRAVEL_BACKWARD, TRAVEL_BACKWARD),
+        ((0.0, 0.5), (0.1, 0.5), TRAVEL_BACKWARD, TRAVEL_FORWARD),
+        # chi_next at rest: unchanged
+        ((0.05, 0.0), (-0.005, 0.0), TRAVEL_FORWARD, TRAVEL_FORWARD),
+        ((0.0, 0.0), (0.0, 0.0), TRAVEL_NONE, TRAVEL_NONE),
+    ],
+)
+def test_the_direction_of_travel_is_chosen_when_chi_comes_back(
+    chi: tuple, chi_next: tuple, travel: int, want: int
+) -> None:
+    # heading 0 (along +x1) throughout
+    got = travel_direction(
+        v(*chi), v(*chi_next), np.zeros(1), np.array([travel], dtype=np.int8)
+    )
+    assert got.dtype == np.int8 and got.tolist() == [want]
 
 
 # ---------------------------------------------------------------------------- limits

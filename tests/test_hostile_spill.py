@@ -2,9 +2,12 @@
 
 v0.3: a record spilling to a full TMPDIR ended in a traceback from a finalizer (the
 recorder's ``_discard`` closing files whose buffers could not be written), an error
-naming no path, and the spill directory left on the full file system. Now the run
-ends with one line naming the directory and what the record needs, every spill file
-is closed and the directory removed, and a recorder dropped half-way raises nothing.
+naming no path, and the spill directory left on the full file system. Then the run
+ended with one line naming the directory and what the record needs, but with exit 1
+and no run directory. Now the run ends there with status ``error``, its samples
+written before kept and its run directory written; the line names the directory,
+every spill file is closed and the directory removed, and a recorder dropped
+half-way raises nothing.
 The disk fills up here through the kernel's own ``/dev/full`` (every write fails with
 ``ENOSPC``) or a file that fails past a size, not a small real file system.
 """
@@ -13,6 +16,7 @@ from __future__ import annotations
 
 import errno
 import gc
+import json
 import os
 import tempfile
 from pathlib import Path
@@ -100,22 +104,32 @@ def sample(rec: Recorder, k: int, n: int) -> None:
     )
 
 
-def test_a_full_disk_mid_run_names_the_directory_and_removes_it(
+def test_a_full_disk_mid_run_keeps_what_was_written_and_removes_the_directory(
     tmp_path: Path, small_disk: list[FillsUp]
 ) -> None:
     n = 8
     rec = Recorder(100_000, n, spill_bytes=0, directory=tmp_path)
     assert rec.on_disk
     spill = next(tmp_path.glob("sandbox-record-*"))
-    with pytest.raises(SpillError) as caught:
-        for k in range(100_000):
-            sample(rec, k, n)
-    message = str(caught.value)
+    for k in range(100_000):
+        sample(rec, k, n)
+        if rec.failure is not None:
+            break
+    message = rec.failure
+    assert message is not None and k < 1_000  # 20 kB of room per file
     assert message.startswith(f"{spill}: the run's record cannot be spilled there")
     assert "No space left on device" in message and "TMPDIR" in message
     assert "\n" not in message
     assert not spill.exists()  # removed, on the full file system too
     assert small_disk and all(f.closed for f in small_disk)
+    # the samples written before the disk filled up are kept, whole, in order
+    arrays = rec.arrays()
+    kept = len(arrays["t"])
+    assert 0 < kept <= k and f"the {kept} samples written before" in message
+    np.testing.assert_allclose(arrays["t"], np.arange(kept) * 0.01)
+    assert all(len(a) == kept for a in arrays.values())
+    sample(rec, k + 1, n)  # takes no more
+    assert len(rec.arrays()["t"]) == kept
 
 
 def test_a_recorder_dropped_half_way_raises_nothing(
@@ -157,7 +171,7 @@ def test_a_full_disk_at_the_start_names_the_directory(
     assert full_files and all(f.closed for f in full_files)
 
 
-def test_sandbox_run_on_a_full_tmpdir_says_so_in_one_line(
+def test_sandbox_run_on_a_full_tmpdir_keeps_its_outputs_up_to_then(
     tmp_path: Path,
     small_disk: list[FillsUp],
     monkeypatch: pytest.MonkeyPatch,
@@ -170,12 +184,24 @@ def test_sandbox_run_on_a_full_tmpdir_says_so_in_one_line(
     seen: list[object] = []
     monkeypatch.setattr("sys.unraisablehook", seen.append)
     scenario = write_yaml(tmp_path, {**HEADON, "duration": 20})
-    assert main(["run", str(scenario), "--out", str(tmp_path / "out")]) == 1
+    out = tmp_path / "out"
+    assert main(["run", str(scenario), "--out", str(out)]) == 1
     gc.collect()
     err = capsys.readouterr().err
     lines = [ln for ln in err.splitlines() if ln]
-    assert len(lines) == 1 and lines[0].startswith(f"error: {tmp}/sandbox-record-")
-    assert "No space left on device" in lines[0] and "Traceback" not in err
+    assert len(lines) == 1 and "Traceback" not in err
+    assert lines[0].startswith("error: at t = ")
+    assert f"the run's record stage failed: {tmp}/sandbox-record-" in lines[0]
+    assert "No space left on device" in lines[0] and f"are in {out}" in lines[0]
     assert seen == []
     assert list(tmp.iterdir()) == []  # no spill directory left
     assert all(f.closed for f in small_disk)
+    # the run directory holds the run up to the failure, status error
+    from sandbox import load_run
+
+    run = load_run(out)
+    assert run.status == "error" and run.info["error"]["stage"] == "record"
+    assert 0 < run.t[-1] < 20.0
+    metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+    assert metrics["status"] == "error"
+    assert metrics["error"]["message"].startswith(f"{tmp}/sandbox-record-")

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from helpers import PAPER, run_scenario, window
 
-from sandbox import Run, load_scenario
+from sandbox import Run, Simulation, load_scenario
 from sandbox.model.flatness import Gains
 
 #: The section 2-3 scenarios (the folder also holds section 4's figures).
@@ -159,7 +159,10 @@ def test_stabilization_parks_at_the_point() -> None:
     assert fe["final"] < 1e-3
     assert metrics["vehicles"]["blue"]["settling_time"] < 3.0
     last = window(run, 5.0)
-    assert np.all(run.cmd[last] == 0.0)  # parked: no speed, no turning
+    # parked: no turning, and a speed that is chi's vanishing component along the
+    # heading (below a nanometre a second)
+    assert np.all(run.cmd[last, :, 1] == 0.0)
+    assert np.abs(run.cmd[last, :, 0]).max() < 1e-9
     assert np.ptp(run.pose[last, 0, :2], axis=0).max() < 1e-9
 
 
@@ -393,3 +396,20 @@ def test_leader_ref_follows_a_drifting_leader_poorly() -> None:
         assert e[-1, i] < 0.7 * e[drifting, i].max()
     # no collision: the followers stay off the leader, just not where they should
     assert metrics["collisions"]["total"] == 0
+
+
+def test_a_rotating_formation_parks_at_the_end_of_its_path() -> None:
+    # paper/waypoints_end: the reference holds still at (20, 0) from 23.32 s on. At
+    # rest the leader holds its heading (it spun from 0.73 to -7.49 rad in 1.5 s, the
+    # angle of a vanishing chi) and the followers park at their slots (they orbited
+    # the leader at 7-12 m/s, 1.5-2.5 m off at 40 s).
+    sc = load_scenario("paper/waypoints_end", overrides=["duration=30"])
+    run = Simulation(sc).run()
+    end = int(round(23.32 / sc.dt))
+    after = slice(end, end + 150)  # the 1.5 s after the end
+    heading = run.pose[after, 0, 2]
+    assert np.ptp(heading) < 0.1
+    assert np.abs(run.cmd[after, 0, 1]).max() < 1.0  # [rad/s]
+    assert np.abs(run.cmd[end:, 1:, 0]).max() < 1.5  # [m/s]: no orbit
+    error = np.hypot(*(run.slot[-1, 1:] - run.pose[-1, 1:, :2]).T)
+    assert error.max() < 0.01

@@ -362,3 +362,57 @@ def test_run_reports_progress_about_a_hundred_times_and_stops_when_asked() -> No
     stopped = Simulation(sc).run(should_stop=lambda: next(polls) >= 50)
     assert stopped.status == "interrupted" and len(stopped.t) == 51
     np.testing.assert_array_equal(stopped.pose, run.pose[:51])
+
+
+# ------------------------------------------------------------------ the slot's motion
+def test_the_observation_gives_the_slots_velocity_and_acceleration() -> None:
+    # virtual_fixed: every slot is the reference (a 5 m circle at 1 m/s) plus a fixed
+    # offset, so its velocity is the circle's, of norm 1 m/s, and its acceleration the
+    # centripetal 1^2 / 5 = 0.2 m/s^2 towards the centre.
+    sim = Simulation(load_scenario("paper/virtual_fixed", overrides=["duration=1"]))
+    for _ in range(50):
+        obs = sim.step()
+    np.testing.assert_allclose(np.hypot(*obs.slot_vel.T), 1.0, rtol=1e-9)
+    np.testing.assert_allclose(np.hypot(*obs.slot_acc.T), 0.2, rtol=1e-9)
+    centre = obs.slot - obs.slot[obs.index("leader")]  # the offsets
+    inward = -(obs.slot - centre)  # the reference point to the centre (0, 0)
+    cos = np.sum(inward * obs.slot_acc, axis=1) / (np.hypot(*inward.T) * 0.2)
+    np.testing.assert_allclose(cos, 1.0, rtol=1e-9)
+
+
+def test_an_estimating_law_gives_its_backward_differences() -> None:
+    # own_estimate, eqs. (18)-(19): a follower's x_ref' is the backward difference of
+    # its slot over h, x_ref'' that of x_ref' (a controller need not difference them
+    # itself); the leader's are the reference's own derivatives (a 5 m circle at
+    # 1 m/s from (5, 0): x_ref' = (-sin(t/5), cos(t/5))).
+    sc = load_scenario("paper/own_estimate_circle", overrides=["duration=1"])
+    sim = Simulation(sc)
+    seen = [sim.step() for _ in range(20)]
+    h, lead = sc.dt, seen[0].index("leader")
+    follow = [i for i in range(seen[0].n) if i != lead]
+    for a, b, c in zip(seen[5:], seen[6:], seen[7:], strict=False):
+        np.testing.assert_allclose(
+            b.slot_vel[follow], (b.slot - a.slot)[follow] / h, atol=1e-9
+        )
+        np.testing.assert_allclose(
+            c.slot_acc[follow], (c.slot_vel - b.slot_vel)[follow] / h, atol=1e-6
+        )
+        exact = [-np.sin(b.t / 5.0), np.cos(b.t / 5.0)]
+        np.testing.assert_allclose(b.slot_vel[lead], exact, atol=1e-9)
+    assert np.abs(seen[-1].slot_vel).max() > 0.5  # the slots move
+
+
+def test_the_slots_motion_is_each_worlds_own_in_a_batch() -> None:
+    a = load_scenario("paper/rotating_circle", overrides=["duration=1"])
+    doc = a.to_dict()
+    doc["vehicles"][0]["pose"] = [4.8, 0.1, 1.4]  # the leader's start: its estimates
+    b = load_scenario(doc)
+    batch = Simulation.stacked([a, b])
+    alone = [Simulation(a), Simulation(b)]
+    for _ in range(30):
+        both = batch.step()
+        one = [sim.step() for sim in alone]
+    for got, want in zip(both, one, strict=True):
+        np.testing.assert_array_equal(got.slot_vel, want.slot_vel)
+        np.testing.assert_array_equal(got.slot_acc, want.slot_acc)
+    assert not np.array_equal(both[0].slot_acc, both[1].slot_acc)

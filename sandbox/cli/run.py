@@ -115,8 +115,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_FAILED
     if run.status == STATUS_ERROR:
         e = metrics.get("error", {})
+        who = e.get("plugin") or f"run's {e.get('stage')} stage"
         print(
-            f"error: at t = {e.get('t', 0):.3f} s the {e.get('plugin')} failed: "
+            f"error: at t = {e.get('t', 0):.3f} s the {who} failed: "
             f"{e.get('message')}; outputs up to then are in {out_dir} (status 'error')",
             file=sys.stderr,
         )

@@ -14,14 +14,16 @@ in the world frame:
 - then for each of the ``k`` nearest other vehicles, nearest first: relative position
   ``pos_j - pos_i`` [m] (2), relative velocity ``vel_j - vel_i`` [m/s] (2), failed flag
   (1), present flag (1; zeros pad the list when there are fewer than ``k`` others);
-- with ``observe=("neighbours", "ranges")``, then the agent's range-sensor readings
+- with ``platoons:`` only, then ``k`` entries: for each of those neighbours, 1 if it
+  belongs to the agent's platoon (0 otherwise, or absent). The agent's platoon's name
+  is ``info["platoon"]``.
+- with ``observe=("neighbours", "ranges")``, last, the agent's range-sensor readings
   ``Observation.ranges[i]`` [m] (``B`` entries, beams from ``-fov/2`` (right) to
   ``+fov/2`` (left) about the heading; ``max_range`` where nothing is hit), in
   ``[0, max_range]``; every agent needs a ``sensors.range``. ``observe=("ranges",)``
   leaves the neighbours out (``7 + B`` entries).
-- with ``platoons:`` only, ``k`` more entries at the end: for each of those neighbours,
-  1 if it belongs to the agent's platoon (0 otherwise, or absent). The agent's
-  platoon's name is ``info["platoon"]``.
+
+The single and the vector environments build them alike (:meth:`Task.of_worlds`).
 
 Positions are clipped to ``[-max_distance, max_distance]`` and velocities to
 ``[-max_speed, max_speed]``, the bounds of the observation space.
@@ -452,54 +454,73 @@ class Task:
 
     # ------------------------------------------------------------------ features
     def features(self) -> np.ndarray:
-        """Observations of every agent, shape (m, size), float32.
+        """Observations of every agent, shape (m, size), float32 (:meth:`of_worlds`)."""
+        obs = self.obs
+        return self.of_worlds(
+            obs.pose[None, :, :2],
+            obs.pose[None, :, 2],
+            obs.vel[None],
+            obs.slot[None],
+            obs.failed[None],
+            None if obs.platoon is None else np.array([obs.platoon], dtype=object),
+            None if obs.ranges is None else obs.ranges[None],
+        )[0]
 
-        ``size`` is ``7 + 6 k``, plus ``k`` same-platoon flags with ``platoons:``,
-        plus ``B`` range readings with ``observe`` ranges.
+    def of_worlds(
+        self,
+        pos: np.ndarray,
+        theta: np.ndarray,
+        vel: np.ndarray,
+        slot: np.ndarray,
+        failed: np.ndarray,
+        platoon: np.ndarray | None = None,
+        ranges: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Observations of every agent of W worlds, shape (W, m, size), float32.
+
+        The one builder of the single and the vector environments. ``size`` is
+        ``7 + 6 k``, plus ``k`` same-platoon flags with ``platoons:``, plus ``B``
+        range readings with ``observe`` ranges (see the module docstring).
+
+        Parameters
+        ----------
+        pos, vel, slot : ndarray, shape (W, n, 2) [m, m/s, m]
+        theta : ndarray, shape (W, n) [rad]
+        failed : ndarray, shape (W, n), bool
+        platoon : ndarray of str, shape (W, n), optional
+            Each vehicle's platoon (:attr:`Observation.platoon`); needed with
+            ``platoons:``.
+        ranges : ndarray, shape (W, n, B') [m], optional
+            The range readings (:attr:`Observation.ranges`); needed with ``observe``
+            ranges.
         """
-        obs, m, i = self.obs, len(self.agents), self.rows
         low, high = self.bounds()
         base = OWN_FEATURES + NEIGHBOUR_FEATURES * self.k
         parts = [
             features_of(
-                obs.pose[None, :, :2],
-                obs.pose[None, :, 2],
-                obs.vel[None],
-                obs.slot[None],
-                obs.failed[None],
-                i,
+                pos,
+                theta,
+                vel,
+                slot,
+                failed,
+                self.rows,
                 self.k,
                 low[:base],
                 high[:base],
-            )[0]
+            )
         ]
         if self.platooned:  # 1: the neighbour is in the agent's platoon
-            parts.append(self._same_platoon(obs).astype(np.float32))
+            parts.append(same_platoon(pos, platoon, self.rows, self.k))
         if self.reach is not None:
-            width = len(self.reach)  # a beam a vehicle lacks reads its bound
-            got = obs.ranges[i][:, :width]
-            block = np.broadcast_to(self.reach, (m, width)).copy()
-            block[:, : got.shape[1]] = np.where(
-                np.isfinite(got), got, block[:, : got.shape[1]]
+            W, m, width = len(pos), len(self.rows), len(self.reach)
+            got = ranges[:, self.rows, :width]  # a beam a vehicle lacks reads its bound
+            block = np.broadcast_to(self.reach, (W, m, width)).copy()
+            block[..., : got.shape[2]] = np.where(
+                np.isfinite(got), got, block[..., : got.shape[2]]
             )
             lo, hi = low[-width:], high[-width:]
             parts.append(np.clip(block, lo, hi).astype(np.float32))
-        return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
-
-    def _same_platoon(self, obs: Observation) -> np.ndarray:
-        """For each agent's ``k`` nearest others: 1 when in its platoon, (m, k)."""
-        m, i, n, k = len(self.agents), self.rows, obs.n, self.k
-        out = np.zeros((m, k))
-        if k and n > 1:
-            pos = obs.pose[:, :2]
-            rel = pos[None, :, :] - pos[i, None, :]
-            dist = np.hypot(rel[..., 0], rel[..., 1])
-            dist[np.arange(m), i] = np.inf
-            take = min(k, n - 1)
-            near = np.argsort(dist, axis=1, kind="stable")[:, :take]
-            of = np.array(obs.platoon, dtype=object)
-            out[:, :take] = of[near] == of[i][:, None]
-        return out
+        return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds of an observation, shape (size,) each (features)."""
@@ -642,6 +663,29 @@ def features_of(
         )
     out = np.where(np.isfinite(out), out, 0.0)
     return np.clip(out, low, high).astype(np.float32)
+
+
+def same_platoon(
+    pos: np.ndarray, platoon: np.ndarray, agents: np.ndarray, k: int
+) -> np.ndarray:
+    """For each agent's ``k`` nearest others: 1 when in its platoon, (W, m, k) float32.
+
+    ``pos`` is (W, n, 2) [m], ``platoon`` (W, n) the platoons' names and ``agents``
+    the agents' rows (m,); the neighbours are those of :func:`features_of` (0 pads
+    the list when there are fewer than ``k`` others).
+    """
+    W, n = platoon.shape
+    m, i = len(agents), agents
+    out = np.zeros((W, m, k), dtype=np.float32)
+    if k and n > 1:
+        rel = pos[:, None, :, :] - pos[:, i, None, :]  # (W, m, n, 2)
+        dist = np.hypot(rel[..., 0], rel[..., 1])
+        dist[:, np.arange(m), i] = np.inf
+        take = min(k, n - 1)
+        near = np.argsort(dist, axis=2, kind="stable")[..., :take]  # (W, m, take)
+        w_ = np.arange(W)[:, None, None]
+        out[..., :take] = platoon[w_, near] == platoon[:, i][..., None]
+    return out
 
 
 def _positive(value: Any, what: str) -> float:

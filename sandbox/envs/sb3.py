@@ -5,13 +5,12 @@ environments reset *in the same step* as their episodes end: the observation ret
 with ``done`` is the first of the next episode, and the last one of the ended episode
 is in ``info["terminal_observation"]``. :class:`~sandbox.envs.VehicleVectorEnv`
 resets in the *next* step (Gymnasium 1.x). :class:`SB3VecEnv` adapts the one to the
-other: when every world's episode ends in a step (they all last the scenario's
-duration), it makes the reset step at once and returns its observations, so SB3 sees
-exactly what its own ``DummyVecEnv`` over as many :class:`~sandbox.envs.VehicleEnv`
-would give, one loop stepping every world. A world that ends alone (a diverged
-state) is reset by the next step, whose action for it is ignored: SB3 then sees its
-ended episode's last observation with ``done`` and, in the next step, a reward of 0
-and the new episode's first observation.
+other: the worlds whose episodes end in a step (all of them at the scenario's
+duration, or one alone with a diverged state) start their next episodes at once
+(:meth:`VehicleVectorEnv.reset_ended <sandbox.envs.VehicleVectorEnv.reset_ended>`)
+and their first observations are returned, so SB3 sees exactly what its own
+``DummyVecEnv`` over as many :class:`~sandbox.envs.VehicleEnv` would give, one loop
+stepping every world.
 
 Seeds follow SB3's convention, which is the vector environment's: ``seed(s)`` makes
 the next :meth:`SB3VecEnv.reset` start world ``k`` with ``s + k``.
@@ -141,8 +140,8 @@ class SB3VecEnv(VecEnv):
         ]
         for k in np.flatnonzero(done):
             infos[k]["terminal_observation"] = obs[k].copy()
-        if done.all():  # every episode ended now: the reset step at once
-            obs, *_ = self.env.step(np.zeros((self.num_envs, 2), dtype=np.float32))
+        if done.any():  # the ended episodes' next ones start at once (SB3's reset)
+            obs, _ = self.env.reset_ended()
         return obs, reward.astype(np.float32), done, infos
 
     def close(self) -> None:

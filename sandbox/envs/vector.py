@@ -36,7 +36,6 @@ from sandbox.envs.core import (
     Weights,
     default_agents,
     driven_commands,
-    features_of,
 )
 from sandbox.loop.simulation import Simulation
 from sandbox.scenario import Scenario
@@ -137,10 +136,20 @@ class VectorTask:
             mine = worlds[(self.where[worlds, 0] == c) & ~restarted[worlds]]
             if len(mine):
                 rewards[mine] = self._advance(sim, worlds, mine, a)
-        if restarted.any():
-            self.where[restarted, 0] = -1
-            self._start(np.flatnonzero(restarted))
+        self.reset_ended(restarted)
         return rewards, restarted
+
+    def reset_ended(self, worlds: np.ndarray | None = None) -> np.ndarray:
+        """Start the next episodes of the worlds whose episode has ended, now.
+
+        ``worlds`` (a mask, ``(K,)``) limits it to those; returns the mask of the
+        worlds reset (in one new cohort). The next :meth:`step` steps them.
+        """
+        ended = self.ended.copy() if worlds is None else worlds & self.ended
+        if ended.any():
+            self.where[ended, 0] = -1
+            self._start(np.flatnonzero(ended))
+        return ended
 
     def _advance(
         self, sim: Simulation, worlds: np.ndarray, mine: np.ndarray, a: np.ndarray
@@ -190,26 +199,35 @@ class VectorTask:
 
     # ------------------------------------------------------------------ reading
     def features(self) -> np.ndarray:
-        """Observations of every agent of every world, ``(K, m, size)`` float32."""
+        """Observations of every agent of every world, ``(K, m, size)`` float32.
+
+        Built by :meth:`Task.of_worlds <sandbox.envs.core.Task.of_worlds>`, the
+        single environment's builder, from each cohort's arrays (and, with
+        ``platoons:`` or range readings, from its worlds' observations).
+        """
         task = self.task
         out = np.zeros((self.K, self.m, task.size), dtype=np.float32)
-        low, high = task.bounds()
         for c, (sim, worlds) in enumerate(self.cohorts):
             mine = worlds[self.where[worlds, 0] == c]
             if not len(mine):
                 continue
             Kc, n, fl = len(worlds), self.n, sim.fleet
             local = self.where[mine, 1]
-            out[mine] = features_of(
+            platoon = ranges = None
+            if task.platooned or task.reach is not None:
+                seen = [sim.observe(int(j)) for j in local]
+                if task.platooned:
+                    platoon = np.array([o.platoon for o in seen], dtype=object)
+                if task.reach is not None:
+                    ranges = np.stack([o.ranges for o in seen])
+            out[mine] = task.of_worlds(
                 fl.pos.reshape(Kc, n, 2)[local],
                 fl.theta.reshape(Kc, n)[local],
                 fl.vel.reshape(Kc, n, 2)[local],
                 sim.plan.slot.reshape(Kc, n, 2)[local],
                 sim.plan.failing.reshape(Kc, n)[local],
-                task.rows,
-                task.k,
-                low,
-                high,
+                platoon,
+                ranges,
             )
         return out
 
@@ -337,6 +355,26 @@ class VehicleVectorEnv(gym.vector.VectorEnv):
             truncated & ~restarted,
             info,
         )
+
+    def reset_ended(self) -> tuple[np.ndarray, np.ndarray]:
+        """Start the next episode of every world whose episode ended, at once.
+
+        Gymnasium's next-step autoreset resets such a world in the next :meth:`step`
+        (its action ignored, reward 0). Called after the step that ended them, this
+        resets them now instead, as a same-step autoreset does (the adapter
+        :class:`~sandbox.envs.sb3.SB3VecEnv` uses it): the next step then steps
+        them. Their new episodes are those the next step would have started.
+
+        Returns
+        -------
+        obs : ndarray, shape (num_envs, features), float32
+            Every world's observation now: the reset worlds' first of their new
+            episode.
+        reset : ndarray, shape (num_envs,), bool
+            The worlds reset.
+        """
+        reset = self.vector.reset_ended()
+        return self.vector.features()[:, 0], reset
 
 
 class FormationVectorEnv:

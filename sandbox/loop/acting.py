@@ -27,7 +27,12 @@ from sandbox.loop.state import Fleet, limits, uniform
 from sandbox.loop.steering import CarDrive
 from sandbox.model.dynamics import CLIP
 from sandbox.model.failures import Failures
-from sandbox.model.flatness import Gains
+from sandbox.model.flatness import (
+    CHI_REST,
+    TRAVEL_BACKWARD,
+    TRAVEL_FORWARD,
+    Gains,
+)
 from sandbox.model.kernels import Controller
 from sandbox.run.record import MODE_EXTERNAL, MODE_FAILED
 
@@ -48,6 +53,9 @@ class Acted(NamedTuple):
         ``run.MODE_*`` codes of the period.
     chi : ndarray, shape (N, 2) [m/s]
         The controllers' extension states for ``t_k+1``.
+    travel : ndarray, shape (N,), int8
+        Their directions of travel for ``t_k+1``
+        (:func:`~sandbox.model.flatness.travel_direction`).
     target : ndarray, shape (N, 2) [m], or None
         The targets tracked where the caller overrode them (None: the plan's).
     steer : ndarray, shape (N,) [rad]
@@ -60,6 +68,7 @@ class Acted(NamedTuple):
     failed: np.ndarray
     mode: np.ndarray
     chi: np.ndarray
+    travel: np.ndarray
     target: np.ndarray | None
     steer: np.ndarray
 
@@ -153,8 +162,8 @@ class Acting:
             target = np.where(mask[:, None], rows, target)
             v_ref = np.where(mask[:, None], 0.0, v_ref)
             a_ref = np.where(mask[:, None], 0.0, a_ref)
-        chi_next, v1, v2 = self.controller.step(
-            fleet.pos, fleet.chi, fleet.theta, target, v_ref, a_ref
+        chi_next, v1, v2, travel = self.controller.step(
+            fleet.pos, fleet.chi, fleet.theta, target, v_ref, a_ref, fleet.travel
         )
         cars = self.cars
         if cars is not None:  # the cars' rows by their own anti-windup (steering.py)
@@ -211,13 +220,19 @@ class Acting:
             theta, speed = fleet.theta[rows], v1[rows]
             chi_next[rows, 0] = speed * np.cos(theta)
             chi_next[rows, 1] = speed * np.sin(theta)
+            # ... and so does the direction of travel (where it moves).
+            travel[rows] = np.where(
+                np.abs(speed) < CHI_REST,
+                travel[rows],
+                np.where(speed < 0.0, TRAVEL_BACKWARD, TRAVEL_FORWARD),
+            )
         mode = plan.active.astype(np.int8)  # MODE_FORMATION 0, MODE_AVOID 1
         if external is not None:
             mode[external] = MODE_EXTERNAL
         if self._fails:  # else no vehicle has failed
             mode[failing] = MODE_FAILED
         overridden = target if external is not None else None
-        return Acted(v1, v2, failing, mode, chi_next, overridden, steer)
+        return Acted(v1, v2, failing, mode, chi_next, travel, overridden, steer)
 
     def _command_limits(self, v1: np.ndarray, last: np.ndarray) -> np.ndarray:
         """User speeds within ``v1_max`` and, from the last speed, ``max_accel``."""

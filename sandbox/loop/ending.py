@@ -5,10 +5,16 @@ recorded with the plan undefined) or with the others (at the duration, when stop
 or when the caller asks for the results early: the last sample with the
 controller's own commands). Either way :func:`make_run` completes the world's
 description (``Run.info``) and makes its run from its recorded arrays.
+
+A stage of the loop that fails (a defect, or the record's spill on a full disk) ends
+the worlds with status ``error`` as a plug-in does, their samples up to then kept:
+:func:`stage_error` is the ``info["error"]`` that says which stage and what failed.
 """
 
 from __future__ import annotations
 
+import traceback
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -95,3 +101,44 @@ def make_run(
         **arrays,
         **ranges,
     )
+
+
+#: The package's folder: a failure's place is told relative to it.
+_PACKAGE = Path(__file__).resolve().parents[1]
+
+
+def stage_error(t: float, stage: str, what: BaseException | str) -> dict[str, Any]:
+    """The ``info["error"]`` of a run that ended because a stage of the loop failed.
+
+    Parameters
+    ----------
+    t : float [s]
+        When it failed.
+    stage : str
+        The stage: ``plan``, ``platoons``, ``act``, ``record``, ``physics`` or
+        ``sense``.
+    what : exception or str
+        What failed: an exception (told as its type, its message and the innermost
+        place in the package that raised it), or a one-line message.
+
+    Returns
+    -------
+    dict
+        ``{"t": t, "stage": stage, "message": ...}``.
+
+    >>> stage_error(1.5, "record", "disk full")
+    {'t': 1.5, 'stage': 'record', 'message': 'disk full'}
+    """
+    if isinstance(what, BaseException):
+        message = f"{type(what).__name__}: {what}".rstrip(": ")
+        place = None
+        for frame in traceback.extract_tb(what.__traceback__):
+            path = Path(frame.filename).resolve()
+            if path.is_relative_to(_PACKAGE):
+                place = f"{path.relative_to(_PACKAGE.parent).as_posix()}, line "
+                place += str(frame.lineno)
+        if place is not None:
+            message += f" ({place})"
+    else:
+        message = what
+    return {"t": round(t, 9), "stage": stage, "message": " ".join(message.split())}

@@ -489,27 +489,33 @@ class Formation:
         known: np.ndarray,
         live: Sequence[int],
         info: list[dict],
+        broke: Callable[[int, Exception], None],
     ) -> list[int]:
         """Each live world's platoons: the merges, splits and reconfigurations of ``t``.
 
         Their records are written into the worlds' descriptions ``info``; who may
         avoid is taken from each world's platoons. Returns the worlds whose recovery
-        shift's estimate restarts now.
+        shift's estimate restarts now. A world whose platoons fail here (a defect) is
+        passed to ``broke(w, exc)``, which ends it; the others go on.
         """
         layout = self._layout
         restart = []
         for w in live:
             rows = layout.rows(w)
             platoons = self.platoons[w]
-            change = platoons.prepare(
-                t,
-                fleet.pos[rows],
-                fleet.theta[rows],
-                fleet.vel[rows],
-                None if seen is None else seen[rows],
-                None if believed is None else believed[rows],
-                known[rows],
-            )
+            try:
+                change = platoons.prepare(
+                    t,
+                    fleet.pos[rows],
+                    fleet.theta[rows],
+                    fleet.vel[rows],
+                    None if seen is None else seen[rows],
+                    None if believed is None else believed[rows],
+                    known[rows],
+                )
+            except Exception as exc:  # a defect: this world ends, its outputs kept
+                broke(w, exc)
+                continue
             if change.records is not None:
                 info[w].update(change.records)
             if change.reset_shift:

@@ -45,6 +45,14 @@ class Observation:
     slot : ndarray, shape (n, 2) [m]
         Each vehicle's place by its formation law (the leader's: the reference point);
         NaN where undefined (an open-loop vehicle).
+    slot_vel : ndarray, shape (n, 2) [m/s]
+        The velocity the law gives with the slot, ``x_ref'`` of eq. (6): the
+        reference's derivative, or the backward-difference estimate of eq. (8) (the
+        leader's) or (18) (the slot's own); the built-in controller's feed-forward.
+        NaN where the slot is.
+    slot_acc : ndarray, shape (n, 2) [m/s^2]
+        The acceleration the law gives with the slot, ``x_ref''`` of eq. (6) (eqs.
+        (9), (19) where estimated).
     target : ndarray, shape (n, 2) [m]
         The point the built-in controller will track this period: the slot shifted by
         the recovery strategy (before any override given to :meth:`step`).
@@ -74,6 +82,8 @@ class Observation:
     vel: np.ndarray
     chi: np.ndarray
     slot: np.ndarray
+    slot_vel: np.ndarray
+    slot_acc: np.ndarray
     target: np.ndarray
     mode: np.ndarray
     failed: np.ndarray

@@ -122,13 +122,17 @@ class Plan:
     slot, target : ndarray, shape (N, 2) [m]
         Formation slots, and the slots shifted by recovery; NaN where undefined.
     v_ref, a_ref : ndarray, shape (N, 2) [m/s], [m/s^2]
-        The law's ``x_ref'``, ``x_ref''`` (plus the shift's, when estimated).
+        The feed-forward of ``target``: the law's ``x_ref'``, ``x_ref''`` (plus the
+        shift's, when estimated).
     point : ndarray, shape (2,) or (K, 2) [m]
         The reference point (NaN without a reference).
     active : ndarray, shape (N,), bool
         Vehicles whose target recovery shifts.
     failing : ndarray, shape (N,), bool
         Vehicles with an active failure.
+    slot_vel, slot_acc : ndarray, shape (N, 2) [m/s], [m/s^2], or None
+        The law's ``x_ref'``, ``x_ref''`` alone, the slot's motion (None: ``v_ref``
+        and ``a_ref``, no shift's added).
     """
 
     slot: np.ndarray
@@ -138,6 +142,14 @@ class Plan:
     point: np.ndarray
     active: np.ndarray
     failing: np.ndarray
+    slot_vel: np.ndarray | None = None
+    slot_acc: np.ndarray | None = None
+
+    def slot_motion(self) -> tuple[np.ndarray, np.ndarray]:
+        """The slot's velocity and acceleration, (N, 2) each [m/s], [m/s^2]."""
+        if self.slot_vel is None:
+            return self.v_ref, self.a_ref
+        return self.slot_vel, self.slot_acc
 
     @classmethod
     def undefined(cls, n: int, failed: np.ndarray) -> Plan:

@@ -8,11 +8,16 @@ A or B) and assigns the followers of both to the slots by minimum total squared
 distance between their positions and the slots' positions now
 (:func:`scipy.optimize.linear_sum_assignment`, the assignment of
 :mod:`sandbox.behaviour.reconfigure`); A's leader keeps the lead and its slot. A
-split makes the listed vehicles a platoon of their own, led by the first listed,
-with the law of the platoon they leave, their offsets taken relative to the new
-leader's and the new reference; the others keep their slots. The laws of the
-platoons that change restart (their estimators start from the new configuration).
-See :mod:`sandbox.scenario.events` for the grammar and the checks.
+split makes the listed vehicles a platoon of their own, led by the first listed
+that holds a slot, with the law of the platoon they leave, their offsets taken
+relative to the new leader's and the new reference; the others keep their slots.
+The laws of the platoons that change restart (their estimators start from the new
+configuration). See :mod:`sandbox.scenario.events` for the grammar and the checks.
+
+A vehicle without a slot (a NaN offset: a failed vehicle a reconfiguration took the
+slot from, or a leader that handed the lead over, :mod:`sandbox.behaviour.
+reconfigure`) keeps none through a merge or split: it is in the platoon (an obstacle
+to its recovery) but no slot is made for it, and none is given to it.
 """
 
 from __future__ import annotations
@@ -76,10 +81,12 @@ def merge(
 
     pos, theta, vel = state
     both = np.concatenate((into.offset, source.offset))
-    spacing = _spacing(both)
-    shift = (
-        float(np.min(into.offset[:, 0])) - spacing - float(np.max(source.offset[:, 0]))
-    )
+    held = np.isfinite(both).all(axis=1)  # the vehicles that hold a slot
+    spacing = _spacing(both[held])
+    mine, theirs = held[: len(into.offset)], held[len(into.offset) :]
+    last = float(np.min(into.offset[mine, 0])) if mine.any() else 0.0
+    first = float(np.max(source.offset[theirs, 0])) if theirs.any() else 0.0
+    shift = last - spacing - first
     slots = np.concatenate((into.offset, source.offset + [shift, 0.0]))
     rows = np.concatenate((into.rows, source.rows))
     lead = into.leader
@@ -92,13 +99,18 @@ def merge(
         if probe.law is not None
         else np.broadcast_to(ctx.reference[0], (len(rows), 2)) + slots
     )
-    movable = np.array([k for k in range(len(rows)) if k != lead], dtype=np.intp)
-    free = movable  # every slot but the leader's
+    # The slots but the leader's, and the vehicles that hold them.
+    movable = np.array(
+        [k for k in range(len(rows)) if k != lead and held[k]], dtype=np.intp
+    )
+    free = movable
     offset = slots.copy()
     if len(movable):
         rel = pos[rows[movable]][:, None, :] - where[free][None, :, :]
-        r, c = linear_sum_assignment(rel[..., 0] ** 2 + rel[..., 1] ** 2)
-        offset[movable[r]] = slots[free[c]]
+        cost = rel[..., 0] ** 2 + rel[..., 1] ** 2  # [m^2]
+        if np.isfinite(cost).all():  # else each keeps its slot
+            r, c = linear_sum_assignment(cost)
+            offset[movable[r]] = slots[free[c]]
     merged = make(
         into.name, rows, offset, into.law_name, into.params, into.reference, lead
     )
@@ -106,7 +118,7 @@ def merge(
         "t": round(t, 9),
         "merge": {"into": into.name, "from": source.name},
         "offsets": {
-            int(i): [round(float(x), 9) for x in o]
+            int(i): ([round(float(x), 9) for x in o] if np.isfinite(o).all() else None)
             for i, o in zip(rows, offset, strict=True)
         },
     }
@@ -131,7 +143,10 @@ def split(
         group.reference,
         new_lead,
     )
-    offset = group.offset[local] - group.offset[local[0]]
+    # Led by the first listed that holds a slot (the first listed if none does).
+    held = [k for k, j in enumerate(local) if np.isfinite(group.offset[j]).all()]
+    first = held[0] if held else 0
+    offset = group.offset[local] - group.offset[local[first]]
     made = make(
         event.new,
         group.rows[local],
@@ -139,7 +154,7 @@ def split(
         group.law_name,
         group.params,
         event.reference.build(),
-        0,
+        first,
     )
     record = {
         "t": round(t, 9),

@@ -6,7 +6,8 @@ has its last sample written alone and its arrays copied out at once, so the samp
 of the others may then overwrite its column. A world whose record is larger than
 :data:`~sandbox.run.recorder.SPILL_BYTES` keeps a
 :class:`~sandbox.run.recorder.Recorder` of its own, streamed to disk, and is appended
-to world by world.
+to world by world; where its spill fails (a full disk), the samples written before
+are kept and :meth:`LoopRecord.failure` says why (the loop ends that world there).
 """
 
 from __future__ import annotations
@@ -185,6 +186,15 @@ class LoopRecord:
             failed[rows],
             point,
         )
+
+    def failure(self, w: int) -> str | None:
+        """Why world ``w``'s record stopped taking samples (None: it did not).
+
+        A record spilled to disk whose spill failed
+        (:attr:`~sandbox.run.recorder.Recorder.failure`); a record in memory never
+        fails.
+        """
+        return self._worlds[w].failure if self.on_disk else None
 
     def arrays(self, w: int, count: int | None = None) -> dict[str, np.ndarray]:
         """World ``w``'s first ``count`` samples (default all so far), its own copy.

@@ -56,7 +56,7 @@ from sandbox.loop import plan as planning
 from sandbox.loop.building import LoopParts, build
 from sandbox.loop.collector import collector_off, frozen_heap
 from sandbox.loop.divergence import RowsView, diverged
-from sandbox.loop.ending import make_run
+from sandbox.loop.ending import make_run, stage_error
 from sandbox.loop.observation import Observation, Overrides, override_rows
 from sandbox.loop.plan import Plan
 from sandbox.loop.platoons import Platoons
@@ -289,6 +289,7 @@ class Simulation:
                 self.known_failed,
                 live.worlds(),
                 live.info,
+                lambda w, exc: self._world_failed(w, "platoons", exc),
             ):
                 self._shift_motion.reset(w)
         slot, v_ref, a_ref, point = formation.targets(
@@ -331,18 +332,25 @@ class Simulation:
         target, shift, active = self._avoidance.targets(
             t, fleet, slot, may_avoid, known, self.believed, live.worlds(), failed
         )
+        slot_vel = slot_acc = None  # the law's alone: v_ref, a_ref
         if self._estimate_shift == "estimate":
             K, n, N = layout.K, layout.n, layout.N
             d_shift, dd_shift = self._shift_motion.update(shift.reshape(K, n, 2))
+            slot_vel, slot_acc = v_ref, a_ref
             v_ref = v_ref + d_shift.reshape(N, 2)
             a_ref = a_ref + dd_shift.reshape(N, 2)
         self._failing = failing
-        self.plan = Plan(slot, target, v_ref, a_ref, point, active, failing)
+        self.plan = Plan(
+            slot, target, v_ref, a_ref, point, active, failing, slot_vel, slot_acc
+        )
 
-    def _act(self, commands: Rows, targets: Rows, shifts: Rows) -> np.ndarray:
+    def _act(
+        self, commands: Rows, targets: Rows, shifts: Rows
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Commands for the period from ``t_k`` (:class:`~sandbox.loop.acting.Acting`).
 
-        Sets ``fleet.v1, v2, failed, mode``; returns ``chi`` for ``t_k+1``.
+        Sets ``fleet.v1, v2, failed, mode``; returns ``chi`` and the directions of
+        travel for ``t_k+1``.
         """
         fleet, live = self.fleet, self._liveness
         acted = self._acting.commands(
@@ -365,7 +373,7 @@ class Simulation:
         fleet.mode = acted.mode
         if acted.target is not None:
             self._recorded_target = acted.target
-        return acted.chi
+        return acted.chi, acted.travel
 
     def _record(self, plan: Plan) -> None:
         """The loop metrics, and the sample of ``t_k`` every ``record_every`` steps."""
@@ -397,10 +405,14 @@ class Simulation:
         if ranges is not None:
             ranges.record()
 
-    def _advance(self, chi_next: np.ndarray) -> None:
-        """Write the commands to the physics and step it to ``t_k+1``."""
+    def _advance(self, following: tuple[np.ndarray, np.ndarray]) -> None:
+        """Write the commands to the physics and step it to ``t_k+1``.
+
+        ``following``: the controllers' ``chi`` and directions of travel of
+        ``t_k+1``.
+        """
         fleet, h = self.fleet, self._layout.h
-        fleet.chi = chi_next
+        fleet.chi, fleet.travel = following
         tally = self._tally
         commanded = tally.commanded if tally.commanded_at == self.k else None
         self.physics.advance(
@@ -422,19 +434,29 @@ class Simulation:
         should_stop: Callable[[], bool] | None = None,
         shifts: Rows = None,
     ) -> None:
-        """One control period: act, record, advance, sense and plan the next."""
+        """One control period: act, record, advance, sense and plan the next.
+
+        A stage that fails (not a plug-in: a defect, or the record's spill on a full
+        disk) ends every live world there with status ``error``, its samples up to
+        then kept (:meth:`_stage_failed`).
+        """
         live = self._liveness
         self._recorded_target = None
         start = time.perf_counter()
         try:
-            chi_next = self._act(commands, targets, shifts)
+            following = self._act(commands, targets, shifts)
         except PluginRunError as exc:  # a batched plug-in: every world ends
             for w in live.worlds():
                 self._plugin_failed(w, exc)
             live.closed = True
             return
+        except Exception as exc:  # a defect: the run ends, its outputs kept
+            self._stage_failed("act", exc)
+            return
         self._control_time += time.perf_counter() - start
-        self._record(self.plan)
+        if not self._stage("record", self._record, self.plan):
+            return
+        self._spill_failed()
         if not live.count:
             live.closed = True
             return
@@ -444,8 +466,14 @@ class Simulation:
                 live.info[w]["interrupted"] = {"t": self.k * self._layout.h}
                 self._end_world(w, STATUS_INTERRUPTED, last=False)
             return
-        self._advance(chi_next)
-        if self._sense():
+        if not self._stage("physics", self._advance, following):
+            return
+        try:
+            sensed = self._sense()
+        except Exception as exc:
+            self._stage_failed("sense", exc, last=False)
+            return
+        if sensed:
             start = time.perf_counter()
             self._guarded(self._plan)
             self._control_time += time.perf_counter() - start
@@ -453,12 +481,57 @@ class Simulation:
             live.closed = True
 
     def _guarded(self, stage: Callable[[], None]) -> None:
-        """Run a stage over all worlds; a plug-in that fails there ends every world."""
+        """Run the plan over all worlds; a failure there ends every world.
+
+        A plug-in that fails ends them as :meth:`_plugin_failed` says, anything else
+        as :meth:`_stage_failed` does.
+        """
         try:
             stage()
         except PluginRunError as exc:
             for w in self._liveness.worlds():
                 self._plugin_failed(w, exc)
+        except Exception as exc:  # a defect: the run ends, its outputs kept
+            self._stage_failed("plan", exc)
+
+    def _stage(self, name: str, stage: Callable[[Any], None], arg: Any) -> bool:
+        """``stage(arg)``; False when it failed (every world ended, status error)."""
+        try:
+            stage(arg)
+        except Exception as exc:  # a defect: the run ends, its outputs kept
+            self._stage_failed(name, exc, last=False)
+            return False
+        return True
+
+    def _stage_failed(self, stage: str, exc: Exception, last: bool = True) -> None:
+        """Every live world ends now with status ``error``: ``stage`` raised ``exc``.
+
+        ``last``: record the sample of now first, with the plan undefined (a stage
+        before the record's); else the run ends at the last sample recorded.
+        """
+        live = self._liveness
+        for w in live.worlds():
+            self._world_failed(w, stage, exc, last)
+        live.closed = True
+
+    def _world_failed(
+        self, w: int, stage: str, exc: Exception | str, last: bool = True
+    ) -> None:
+        """World ``w`` ends now with status ``error``: a stage of the loop failed.
+
+        ``info["error"]`` names the stage and says what failed
+        (:func:`~sandbox.loop.ending.stage_error`).
+        """
+        t = self.k * self._layout.h
+        self._liveness.info[w]["error"] = stage_error(t, stage, exc)
+        self._end_world(w, STATUS_ERROR, last)
+
+    def _spill_failed(self) -> None:
+        """End the live worlds whose record's spill failed (a full disk)."""
+        for w in self._liveness.worlds():
+            why = self.recorder.failure(w)
+            if why is not None:
+                self._world_failed(w, "record", why, last=False)
 
     def _loop(
         self,
@@ -552,16 +625,27 @@ class Simulation:
         except PluginRunError as exc:
             for w in live.worlds():
                 self._plugin_failed(w, exc)
+        except Exception as exc:  # a defect: the run ends, its outputs kept
+            self._stage_failed("act", exc)
         else:
-            self._record(self.plan)
+            if self._stage("record", self._record, self.plan):
+                self._spill_failed()
         for w in live.worlds():
             status = live.status[w]
             live.end(w, self._make_run(w, self.recorder.arrays(w), status), False)
         live.closed = True
 
     def _make_run(self, w: int, arrays: dict, status: str) -> Run:
-        """World ``w``'s run (:func:`~sandbox.loop.ending.make_run`)."""
+        """World ``w``'s run (:func:`~sandbox.loop.ending.make_run`).
+
+        A record whose spill failed as it was closed ends the run with status
+        ``error`` too (its samples written before are the run's).
+        """
         layout, live, safety = self._layout, self._liveness, self._safety
+        why = self.recorder.failure(w)
+        if why is not None and status != STATUS_ERROR:
+            status = live.status[w] = STATUS_ERROR
+            live.info[w]["error"] = stage_error(self.k * layout.h, "record", why)
         ranges = self._perception.ranges
         if self._steering is not None:  # a world with cars: their angles
             arrays = {**arrays, **self._steering.arrays(w, len(arrays["t"]))}
@@ -788,10 +872,15 @@ class Simulation:
         if live.undefined[world]:  # ended with its plan undefined
             nan = np.full((layout.n, 2), np.nan)
             slot, target, failing = nan, nan.copy(), fleet.failed[rows].copy()
+            slot_vel, slot_acc = nan.copy(), nan.copy()
         else:
             slot = np.array(plan.slot[rows], dtype=float)
             target = np.array(plan.target[rows], dtype=float)
             failing = plan.failing[rows].copy()
+            none = np.isnan(slot)  # no slot: no motion of it either
+            slot_vel, slot_acc = (
+                np.where(none, np.nan, a[rows]) for a in plan.slot_motion()
+            )
         ranges = self._perception.ranges
         platoons = self._formation.platoons
         scenario = layout.scenarios[world]
@@ -802,6 +891,8 @@ class Simulation:
             vel=fleet.vel[rows].copy(),
             chi=fleet.chi[rows].copy(),
             slot=slot,
+            slot_vel=slot_vel,
+            slot_acc=slot_acc,
             target=target,
             mode=fleet.mode[rows].copy() if ended else plan.mode(layout.N)[rows],
             failed=failing,

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sandbox.model.flatness import Gains
+from sandbox.model.flatness import TRAVEL_NONE, Gains
 from sandbox.scenario import Scenario
 
 
@@ -30,6 +30,10 @@ class Fleet:
         Measured velocities.
     chi : ndarray, shape (n, 2) [m/s]
         Extension states of eqs. (4)/(6).
+    travel : ndarray, shape (n,), int8
+        The controllers' directions of travel along the heading
+        (:func:`~sandbox.model.flatness.travel_direction`; ``TRAVEL_NONE`` before
+        they set off).
     v1, v2 : ndarray, shape (n,) [m/s], [rad/s]
         Commands applied during the current control period.
     mode : ndarray, shape (n,), int8
@@ -57,6 +61,7 @@ class Fleet:
     theta: np.ndarray
     vel: np.ndarray
     chi: np.ndarray
+    travel: np.ndarray
     v1: np.ndarray
     v2: np.ndarray
     mode: np.ndarray
@@ -109,6 +114,7 @@ class Fleet:
             theta=np.array([v.pose[2] for v in vs], dtype=float),
             vel=np.zeros((n, 2)),
             chi=np.zeros((n, 2)),
+            travel=np.full(n, TRAVEL_NONE, dtype=np.int8),
             v1=np.zeros(n),
             v2=np.zeros(n),
             mode=np.zeros(n, dtype=np.int8),

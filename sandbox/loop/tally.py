@@ -307,9 +307,12 @@ class LoopTally:
                 )
         heading = b.theta[vs] + 0.5 * v2 * self.h
         commanded = np.stack((v1 * np.cos(heading), v1 * np.sin(heading)), -1)
-        if self._commanded is None:
+        if self._commanded is None and worlds is None:
             self._commanded, self._was_free = commanded, free
         else:
+            if self._commanded is None:  # some worlds first (they ended at once)
+                self._commanded = np.zeros((K * n, 2))
+                self._was_free = np.zeros(K * n, dtype=bool)  # the others: unchecked
             self._commanded[vs] = commanded
             self._was_free[vs] = free
         if worlds is None:

@@ -18,8 +18,10 @@
 #include "motor_model.h"
 
 /* The controller's constants (sandbox/model/flatness.py). */
-#define CHI_HOLD 1e-3
-#define CHI_REG 0.01
+#define CHI_REST 0.01
+#define TRAVEL_NONE 0
+#define TRAVEL_FORWARD 1
+#define TRAVEL_BACKWARD (-1)
 
 /* sandbox.model.dynamics.wrap_angle: wrapped into [-pi, pi), pi folded to -pi. */
 static inline double
@@ -64,28 +66,64 @@ extension_row(const double *p, const double *c, const double *g, const double *v
     *norm_out = norm;
 }
 
-/* limit_turn (where ``turning_limit``; ``angle_nxt`` the angle of ``nxt``), the
- * applied rate, flat_inputs (``angle_chi`` the angle of ``chi``) and the clip of v2,
- * one row: writes chi_next (2), v1 and v2. */
-static inline void
-flat_row(double th, const double *c, const double *x, double norm, double angle_nxt,
-         double angle_chi, double k, double turn, double vmax, double dt, long flags,
-         double *chi_next, double *v1_out, double *v2_out)
+/* travel_direction, one row: the direction of travel for chi ``x`` of the next
+ * period, from chi ``c`` now and the direction ``travel`` now (heading's cosine and
+ * sine ``cth``, ``sth``). */
+static inline int
+travel_row(const double *c, const double *x, double cth, double sth, int travel)
 {
-    int turning_limit = (int)(flags & 1);
+    double n1 = x[0], n2 = x[1];
+    if (!(n1 * n1 + n2 * n2 >= CHI_REST * CHI_REST)) {
+        return travel; /* chi_next at rest: unchanged */
+    }
+    double c1 = c[0], c2 = c[1];
+    int vanished = (c1 * c1 + c2 * c2 < CHI_REST * CHI_REST) || (c1 * n1 + c2 * n2 < 0.0);
+    double ahead = n1 * cth + n2 * sth;
+    int out = travel;
+    if (vanished) {
+        out = travel == TRAVEL_NONE ? TRAVEL_FORWARD
+                                    : (ahead < 0.0 ? TRAVEL_BACKWARD : TRAVEL_FORWARD);
+    }
+    if (out == TRAVEL_BACKWARD && ahead > 0.0) {
+        out = TRAVEL_FORWARD;
+    }
+    return out == TRAVEL_NONE ? TRAVEL_FORWARD : out;
+}
+
+/* limit_turn (where ``turning_limit``) about the direction of travel ``travel_next``,
+ * the applied rate, flat_inputs with the direction ``travel`` now (``angle_chi`` the
+ * angle of ``chi``) and the clip of v2, one row: writes chi_next (2), v1 and v2, and
+ * returns the direction of travel of the next period. */
+static inline int
+flat_row(double th, double cth, double sth, const double *c, const double *x,
+         double norm, double angle_chi, double k, double turn, double vmax, double dt,
+         int turning_limit, int travel, int travel_next, double *chi_next,
+         double *v1_out, double *v2_out)
+{
     double out0 = x[0], out1 = x[1];
     double aim = NAN;
     if (turning_limit) { /* limit_turn */
-        double off = wrap_angle(angle_nxt - th);
+        int back = travel_next == TRAVEL_BACKWARD;
+        double angle = atan2(x[1], x[0]);
+        if (back) {
+            angle = angle + M_PI;
+        }
+        double off = wrap_angle(angle - th);
         double lim = turn * dt;
-        int outside = (fabs(off) > lim) && (norm >= CHI_HOLD);
+        int outside = (fabs(off) > lim) && (norm >= CHI_REST);
         if (outside) {
             double edge = clamp(off, -lim, lim);
             double along = larger(norm * cos(off - edge), 0.0);
+            if (back) {
+                along = -along;
+            }
             double direction = th + edge;
             out0 = along * cos(direction);
             out1 = along * sin(direction);
-            aim = angle_nxt;
+            aim = angle;
+        }
+        if (hypot(out0, out1) < CHI_REST) { /* held at rest: it has not set off */
+            travel_next = travel;
         }
     }
     chi_next[0] = out0;
@@ -95,86 +133,167 @@ flat_row(double th, const double *c, const double *x, double norm, double angle_
     double c1 = c[0], c2 = c[1];
     double norm2 = c1 * c1 + c2 * c2;
     double v1 = sqrt(norm2);
-    int defined = norm2 >= CHI_HOLD * CHI_HOLD;
-    double safe = larger(norm2, CHI_REG * CHI_REG);
+    int moving = norm2 >= CHI_REST * CHI_REST;
+    double safe = larger(norm2, CHI_REST * CHI_REST);
     double feedforward = (-c2 * cd0 + c1 * cd1) / safe;
-    double heading_error = wrap_angle(th - angle_chi);
-    double v2 = defined ? feedforward - k * heading_error : 0.0;
+    double angle = angle_chi;
+    if (travel == TRAVEL_BACKWARD) { /* eq. (5) for -chi */
+        v1 = -v1;
+        angle = angle + M_PI;
+    }
+    double v2 = feedforward - k * wrap_angle(th - angle);
+    if (!moving) { /* at rest: the heading held, the motion along it */
+        v1 = c1 * cth + c2 * sth;
+        v2 = 0.0;
+        feedforward = 0.0;
+    }
     if (aim == aim) { /* turning: toward the aim the turn limit held chi from */
         double toward = -k * wrap_angle(th - aim);
-        v2 = (defined ? feedforward : 0.0) + toward;
+        v2 = feedforward + toward;
     }
-    v2 = clamp(v2, -vmax, vmax);
-    *v1_out = defined ? v1 : 0.0;
-    *v2_out = v2;
+    *v1_out = v1;
+    *v2_out = clamp(v2, -vmax, vmax);
+    return travel_next;
+}
+
+/* The keyword arguments of controller_step, in the order of ``args`` below. */
+enum {
+    A_POS, A_CHI, A_THETA, A_TARGET, A_V_REF, A_A_REF, A_K1, A_K2, A_K3, A_K4,
+    A_ACCEL_MAX, A_V1_MAX, A_KP, A_TURN_MAX, A_V2_MAX, A_CHI_NEXT, A_V1, A_V2,
+    A_TRAVEL, A_TRAVEL_NEXT, A_DT, A_TURNING, A_COUNT
+};
+/* float64 arrays: A_POS .. A_V2 (the last three written). */
+#define A_ROWS (A_V2 + 1)
+static const char *const controller_names[A_COUNT] = {
+    "pos", "chi", "theta", "target", "v_ref", "a_ref", "k1", "k2", "k3", "k4",
+    "accel_max", "v1_max", "kp", "turn_max", "v2_max", "chi_next", "v1", "v2",
+    "travel", "travel_next", "dt", "turning",
+};
+/* The names as interned strings (made at import): a caller's keywords are the same
+ * objects, matched by identity before any comparison of text. */
+static PyObject *controller_keys[A_COUNT];
+
+/* ``args`` in the order of controller_names from a call by keywords only; -1 with
+ * TypeError on a positional argument, an unknown, repeated or missing keyword. */
+static int
+keywords(PyObject *const *args, Py_ssize_t nargs, PyObject *kwnames,
+         PyObject **out)
+{
+    Py_ssize_t given = kwnames == NULL ? 0 : PyTuple_GET_SIZE(kwnames);
+    if (nargs != 0 || given != A_COUNT) {
+        PyErr_Format(PyExc_TypeError,
+                     "controller_step takes its %d arguments by keyword only", A_COUNT);
+        return -1;
+    }
+    for (int k = 0; k < A_COUNT; k++) {
+        out[k] = NULL;
+    }
+    for (Py_ssize_t j = 0; j < given; j++) {
+        PyObject *key = PyTuple_GET_ITEM(kwnames, j);
+        int at = -1;
+        for (int k = 0; k < A_COUNT && at < 0; k++) {
+            if (key == controller_keys[k]) {
+                at = k;
+            }
+        }
+        for (int k = 0; k < A_COUNT && at < 0; k++) {
+            if (PyUnicode_Compare(key, controller_keys[k]) == 0) {
+                at = k;
+            }
+        }
+        if (PyErr_Occurred()) {
+            return -1;
+        }
+        if (at < 0 || out[at] != NULL) {
+            PyErr_Format(PyExc_TypeError, "controller_step: %s keyword %R",
+                         at < 0 ? "unknown" : "repeated", key);
+            return -1;
+        }
+        out[at] = args[nargs + j];
+    }
+    return 0;
 }
 
 PyDoc_STRVAR(controller_step_doc,
-"controller_step(pos, chi, theta, target, v_ref, a_ref, k1, k2, k3, k4, accel_max,\n"
-"                v1_max, kp, turn_max, v2_max, dt, flags, chi_next, v1, v2) -> None\n"
+"controller_step(*, pos, chi, theta, target, v_ref, a_ref, k1, k2, k3, k4,\n"
+"                accel_max, v1_max, kp, turn_max, v2_max, chi_next, v1, v2, travel,\n"
+"                travel_next, dt, turning) -> None\n"
 "\n"
-"The flatness controller of a period for n vehicles: ``pos, chi, target, v_ref,\n"
-"a_ref`` (n, 2) (a NaN target coordinate aims at the position's), ``theta`` (n,),\n"
-"the gains, limits and ``kp`` (n,) or (1,), ``dt`` [s], ``flags & 1`` where the\n"
-"turn rate is limited (anti-windup). Writes ``chi_next`` (n, 2), ``v1`` and ``v2``\n"
-"(n,): eq. (6)'s Euler step with its clamps, the turn limit, eq. (5) and the clip\n"
-"of v2 to ``v2_max``.");
+"The flatness controller of a period for n vehicles, by keywords only: ``pos, chi,\n"
+"target, v_ref, a_ref`` (n, 2) float64 (a NaN target coordinate aims at the\n"
+"position's), ``theta`` (n,), the gains, limits and ``kp`` (n,) or (1,), ``travel``\n"
+"(n,) int8 (the direction of travel now), ``dt`` [s], ``turning`` true where the\n"
+"turn rate is limited (anti-windup). Writes ``chi_next`` (n, 2), ``v1``, ``v2`` (n,)\n"
+"and ``travel_next`` (n,) int8: eq. (6)'s Euler step with its clamps, the direction\n"
+"of travel, the turn limit, eq. (5) and the clip of v2 to ``v2_max``.");
 
 static PyObject *
-controller_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+controller_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
+                PyObject *kwnames)
 {
-    if (nargs != 20) {
-        PyErr_SetString(PyExc_TypeError, "controller_step takes 20 arguments");
+    PyObject *a[A_COUNT];
+    if (keywords(args, nargs, kwnames, a) < 0) {
         return NULL;
     }
-    double dt = PyFloat_AsDouble(args[15]);
-    long flags = PyLong_AsLong(args[16]);
-    if ((dt == -1.0 || flags == -1) && PyErr_Occurred()) {
+    double dt = PyFloat_AsDouble(a[A_DT]);
+    int turning_limit = PyObject_IsTrue(a[A_TURNING]);
+    if ((dt == -1.0 && PyErr_Occurred()) || turning_limit < 0) {
         return NULL;
     }
-    Rows r[18];
-    int got = 0;
-    for (int k = 0; k < 20; k++) {
-        if (k == 15 || k == 16) {
-            continue;
-        }
-        int idx = k < 15 ? k : k - 2;
-        if (get_rows(args[k], &r[idx], k >= 17) < 0) {
-            release(r, got);
-            return NULL;
-        }
-        got++;
+    Rows r[A_ROWS];
+    if (get_all_rows(a, r, A_ROWS, A_CHI_NEXT) < 0) {
+        return NULL;
     }
-    Rows *pos = &r[0], *chi = &r[1], *theta = &r[2], *target = &r[3];
-    Rows *v_ref = &r[4], *a_ref = &r[5], *k1 = &r[6], *k2 = &r[7], *k3 = &r[8];
-    Rows *k4 = &r[9], *accel = &r[10], *v1_max = &r[11], *kp = &r[12];
-    Rows *turn = &r[13], *v2_max = &r[14], *chi_next = &r[15], *v1_out = &r[16];
-    Rows *v2_out = &r[17];
+    Py_buffer tv, tn;
+    if (get_bytes(a[A_TRAVEL], &tv, 0) < 0) {
+        release(r, A_ROWS);
+        return NULL;
+    }
+    if (get_bytes(a[A_TRAVEL_NEXT], &tn, 1) < 0) {
+        PyBuffer_Release(&tv);
+        release(r, A_ROWS);
+        return NULL;
+    }
+    Rows *pos = &r[A_POS], *chi = &r[A_CHI], *theta = &r[A_THETA];
+    Rows *target = &r[A_TARGET], *v_ref = &r[A_V_REF], *a_ref = &r[A_A_REF];
+    Rows *k1 = &r[A_K1], *k2 = &r[A_K2], *k3 = &r[A_K3], *k4 = &r[A_K4];
+    Rows *accel = &r[A_ACCEL_MAX], *v1_max = &r[A_V1_MAX], *kp = &r[A_KP];
+    Rows *turn = &r[A_TURN_MAX], *v2_max = &r[A_V2_MAX];
+    Rows *chi_next = &r[A_CHI_NEXT], *v1_out = &r[A_V1], *v2_out = &r[A_V2];
     Py_ssize_t n = theta->len;
     if (pos->len != 2 * n || chi->len != 2 * n || target->len != 2 * n ||
         v_ref->len != 2 * n || a_ref->len != 2 * n || chi_next->len != 2 * n ||
-        v1_out->len != n || v2_out->len != n) {
-        release(r, got);
+        v1_out->len != n || v2_out->len != n || tv.len != n || tn.len != n) {
+        PyBuffer_Release(&tn);
+        PyBuffer_Release(&tv);
+        release(r, A_ROWS);
         PyErr_SetString(PyExc_ValueError, "controller_step: shapes differ");
         return NULL;
     }
-    int turning_limit = (int)(flags & 1);
+    const signed char *travel = (const signed char *)tv.buf;
+    signed char *travel_next = (signed char *)tn.buf;
     for (Py_ssize_t i = 0; i < n; i++) {
         const double *c = chi->data + 2 * i;
+        double th = theta->data[i];
+        double cth = cos(th), sth = sin(th);
         double nxt[2], norm;
         extension_row(pos->data + 2 * i, c, target->data + 2 * i, v_ref->data + 2 * i,
                       a_ref->data + 2 * i, k1->data[i * k1->step],
                       k2->data[i * k2->step], k3->data[i * k3->step],
                       k4->data[i * k4->step], accel->data[i * accel->step],
                       v1_max->data[i * v1_max->step], dt, nxt, &norm);
+        int now = travel[i];
+        int next = travel_row(c, nxt, cth, sth, now);
         double angle_chi = atan2(c[1], c[0]);
-        double angle_nxt = turning_limit ? atan2(nxt[1], nxt[0]) : 0.0;
-        flat_row(theta->data[i], c, nxt, norm, angle_nxt, angle_chi,
-                 kp->data[i * kp->step], turn->data[i * turn->step],
-                 v2_max->data[i * v2_max->step], dt, flags, chi_next->data + 2 * i,
-                 v1_out->data + i, v2_out->data + i);
+        travel_next[i] = (signed char)flat_row(
+            th, cth, sth, c, nxt, norm, angle_chi, kp->data[i * kp->step],
+            turn->data[i * turn->step], v2_max->data[i * v2_max->step], dt,
+            turning_limit, now, next, chi_next->data + 2 * i, v1_out->data + i,
+            v2_out->data + i);
     }
-    release(r, got);
+    PyBuffer_Release(&tn);
+    PyBuffer_Release(&tv);
+    release(r, A_ROWS);
     Py_RETURN_NONE;
 }
 
@@ -231,8 +350,8 @@ motor_model(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 }
 
 static PyMethodDef methods[] = {
-    {"controller_step", (PyCFunction)(void (*)(void))controller_step, METH_FASTCALL,
-     controller_step_doc},
+    {"controller_step", (PyCFunction)(void (*)(void))controller_step,
+     METH_FASTCALL | METH_KEYWORDS, controller_step_doc},
     {"motor_model", (PyCFunction)(void (*)(void))motor_model, METH_FASTCALL,
      motor_model_doc},
     {NULL, NULL, 0, NULL},
@@ -247,5 +366,13 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC
 PyInit__kernels(void)
 {
+    for (int k = 0; k < A_COUNT; k++) {
+        if (controller_keys[k] == NULL) {
+            controller_keys[k] = PyUnicode_InternFromString(controller_names[k]);
+            if (controller_keys[k] == NULL) {
+                return NULL;
+            }
+        }
+    }
     return PyModule_Create(&module);
 }

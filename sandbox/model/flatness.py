@@ -17,17 +17,20 @@ import numpy as np
 
 from sandbox.model.dynamics import CLIP, wrap_angle
 
-# : Below this speed ``|chi|`` [m/s] the direction of chi is undefined (a vehicle at
-# rest):
-#: the vehicle holds its heading (v2 = 0) instead of dividing by zero in eq. (5), and
-#: stands still (v1 = 0): driving at ``|chi|`` along a heading unrelated to chi pushes
-#: a parked vehicle off its point (eq. (4) then ends in a millimetre orbit spinning at
-#: about 5 rad/s, or a 0.5 m orbit when ``v2_max`` is 3 rad/s).
-CHI_HOLD = 1e-3
-#: The feedforward of eq. (5) divides by ``max(|chi|^2, CHI_REG^2)`` [m/s]: exact above
-#: this speed, bounded near rest (where numerical noise in chi would otherwise be turned
-#: into turn rates of thousands of rad/s).
-CHI_REG = 0.01
+#: Below this speed ``|chi|`` [m/s] the ideal velocity has vanished: the vehicle is at
+#: rest, where the direction of chi (the desired heading ``arctan2(chi1, chi2)`` of eq.
+#: (5)) is undefined. The vehicle then holds its heading (``v2 = 0``) and moves only
+#: along it (``v1`` the component of chi along the heading, of either sign), as the
+#: rotated offsets hold the last tangent of eq. (15) when the reference stops
+#: (:data:`sandbox.model.laws.REST_SPEED`). Turning towards chi there would make a
+#: turn rate of ``kp`` times an angle of noise: a vehicle parked at its point spun at
+#: 5-7 rad/s, and a leader spinning at the end of its path swung a rotating formation
+#: round it at 14-20 m/s.
+CHI_REST = 0.01
+
+#: The direction of travel along the heading (:func:`travel_direction`): not yet
+#: travelled, forward (eq. (5)), backward (eq. (5) for ``-chi``).
+TRAVEL_NONE, TRAVEL_FORWARD, TRAVEL_BACKWARD = 0, 1, -1
 
 
 @dataclass(frozen=True)
@@ -95,14 +98,19 @@ def flat_inputs(
     chi_dot: np.ndarray,
     kp: float | np.ndarray,
     aim: np.ndarray | None = None,
+    travel: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Control inputs ``(v1, v2)`` from the extension states, eq. (5).
 
-    ``v1 = |chi|``; ``v2`` is the turn rate of chi (flatness feedforward, eq. (3)) minus
-    ``kp`` times the heading error ``x3 - angle(chi)``, wrapped to ``[-pi, pi)``. Where
-    ``|chi| < CHI_HOLD`` the angle of chi is undefined and the vehicle holds its heading
-    and stands still (``v1 = v2 = 0``); below ``CHI_REG`` the feedforward's divisor is
-    floored at ``CHI_REG^2``. No NaN is ever produced for finite inputs.
+    ``v1 = |chi|``; ``v2`` is the turn rate of chi (flatness feedforward, eq. (3))
+    minus ``kp`` times the heading error ``x3 - angle(chi)``, wrapped to ``[-pi,
+    pi)``. A vehicle travelling backward (``travel`` :data:`TRAVEL_BACKWARD`, see
+    :func:`travel_direction`) drives eq. (5) for ``-chi``: ``v1 = -|chi|`` and the
+    heading error measured to the angle of ``-chi`` (the turn rate of chi is that of
+    ``-chi``). Where ``|chi| < CHI_REST`` the ideal velocity has vanished and its
+    angle is undefined: the vehicle holds its heading (``v2 = 0``) and moves only
+    along it, ``v1`` the component of chi along the heading. No NaN is ever produced
+    for finite inputs.
 
     Parameters
     ----------
@@ -110,8 +118,11 @@ def flat_inputs(
     chi, chi_dot : ndarray, shape (n, 2) [m/s], [m/s^2]
     kp : float or ndarray, shape (n,) [1/s]
     aim : ndarray, shape (n,) [rad], optional
-        Where not NaN, the direction the turn-rate anti-windup held chi back from
-        (:func:`limit_turn`): the heading error is measured to it instead of to chi.
+        Where not NaN, the heading the turn-rate anti-windup held chi back from
+        (:func:`limit_turn`): the heading error is measured to it instead, at rest
+        included.
+    travel : ndarray, shape (n,), int8, optional
+        The direction of travel (:func:`travel_direction`); default forward.
 
     Returns
     -------
@@ -121,23 +132,85 @@ def flat_inputs(
     c1, c2 = chi[..., 0], chi[..., 1]
     norm2 = c1 * c1 + c2 * c2
     v1 = np.sqrt(norm2)  # eq. (5)
-    defined = norm2 >= CHI_HOLD * CHI_HOLD
-    every = np.count_nonzero(defined) == defined.size  # where(defined, x, 0) is x
-    safe = np.maximum(norm2, CHI_REG * CHI_REG)
+    moving = norm2 >= CHI_REST * CHI_REST
+    every = np.count_nonzero(moving) == moving.size  # where(moving, x, y) is x
+    safe = np.maximum(norm2, CHI_REST * CHI_REST)
     feedforward = (-c2 * chi_dot[..., 0] + c1 * chi_dot[..., 1]) / safe  # eq. (5)
     # "arctan2(chi1, chi2)" in the report is the angle of the vector (chi1, chi2).
-    heading_error = wrap_angle(theta - np.arctan2(c2, c1))
-    v2 = feedforward - kp * heading_error  # eq. (5)
-    if not every:
-        v2 = np.where(defined, v2, 0.0)
+    angle = np.arctan2(c2, c1)
+    if travel is not None and np.count_nonzero(travel == TRAVEL_BACKWARD):
+        backward = travel == TRAVEL_BACKWARD  # eq. (5) for -chi
+        v1 = np.where(backward, -v1, v1)
+        angle = np.where(backward, angle + np.pi, angle)
+    v2 = feedforward - kp * wrap_angle(theta - angle)  # eq. (5)
+    if not every:  # at rest: the heading held, the motion along it
+        v1 = np.where(moving, v1, c1 * np.cos(theta) + c2 * np.sin(theta))
+        v2 = np.where(moving, v2, 0.0)
     if aim is not None:
         turning = ~np.isnan(aim)
         if np.count_nonzero(turning):  # chi held back by the turn limit: turn to aim
             toward = -kp * wrap_angle(theta - np.where(turning, aim, 0.0))
             if not every:
-                feedforward = np.where(defined, feedforward, 0.0)
+                feedforward = np.where(moving, feedforward, 0.0)
             v2 = np.where(turning, feedforward + toward, v2)
-    return (v1 if every else np.where(defined, v1, 0.0)), v2
+    return v1, v2
+
+
+def travel_direction(
+    chi: np.ndarray, chi_next: np.ndarray, theta: np.ndarray, travel: np.ndarray
+) -> np.ndarray:
+    """The direction of travel along the heading for the next period.
+
+    Eq. (5) drives forward (``v1 = |chi| >= 0``): a vehicle whose chi points behind
+    it turns round first. That is right when it sets off, but not when the ideal
+    velocity vanishes: at the end of a reference that stops, or at a stabilization
+    point, the vehicle overshoots by a few centimetres (for the report's gains,
+    3.7 % of the speed it had, in metres per m/s) and chi comes back pointing behind
+    it. Turning round for that made the vehicle spin and orbit its point. So the
+    direction of travel is chosen again whenever chi comes back from having
+    vanished (it was at rest, ``|chi| < CHI_REST``, or it reversed within one
+    period, ``chi . chi_next < 0``): the vehicle keeps its heading line and travels
+    forward or backward, whichever is along chi (it turns by less than a quarter
+    turn). A vehicle that has not travelled yet sets off forward (the report's
+    start); a vehicle travelling backward goes forward again once chi points ahead
+    of it.
+
+    Parameters
+    ----------
+    chi, chi_next : ndarray, shape (n, 2) [m/s]
+        The extension states now and asked for the next period (before the
+        turn-rate limit, :func:`limit_turn`).
+    theta : ndarray, shape (n,) [rad]
+    travel : ndarray, shape (n,), int8
+        The direction now: :data:`TRAVEL_NONE` (not travelled yet),
+        :data:`TRAVEL_FORWARD` or :data:`TRAVEL_BACKWARD`.
+
+    Returns
+    -------
+    travel_next : ndarray, shape (n,), int8
+        Unchanged where ``chi_next`` is at rest.
+
+    >>> east = np.array([0.0])
+    >>> travel_direction(np.array([[0.05, 0.0]]), np.array([[-0.02, 0.0]]), east,
+    ...                  np.array([TRAVEL_FORWARD], dtype=np.int8)).tolist()
+    [-1]
+    >>> travel_direction(np.array([[0.0, 0.0]]), np.array([[-0.02, 0.0]]), east,
+    ...                  np.array([TRAVEL_NONE], dtype=np.int8)).tolist()
+    [1]
+    """
+    n1, n2 = chi_next[..., 0], chi_next[..., 1]
+    moves = n1 * n1 + n2 * n2 >= CHI_REST * CHI_REST
+    if not np.count_nonzero(moves):
+        return travel
+    c1, c2 = chi[..., 0], chi[..., 1]
+    vanished = (c1 * c1 + c2 * c2 < CHI_REST * CHI_REST) | (c1 * n1 + c2 * n2 < 0.0)
+    ahead = n1 * np.cos(theta) + n2 * np.sin(theta)
+    line = np.where(ahead < 0.0, TRAVEL_BACKWARD, TRAVEL_FORWARD)
+    chosen = np.where(travel == TRAVEL_NONE, TRAVEL_FORWARD, line)
+    out = np.where(vanished, chosen, travel)
+    out = np.where((out == TRAVEL_BACKWARD) & (ahead > 0.0), TRAVEL_FORWARD, out)
+    out = np.where(out == TRAVEL_NONE, TRAVEL_FORWARD, out)
+    return np.where(moves, out, travel).astype(np.int8)
 
 
 def advance_extension(
@@ -146,18 +219,15 @@ def advance_extension(
     dt: float,
     v1_max: np.ndarray,
     accel_max: np.ndarray,
-    theta: np.ndarray | None = None,
-    turn_max: np.ndarray | float | None = None,
-) -> tuple[np.ndarray, ...]:
+) -> tuple[np.ndarray, np.ndarray]:
     """Integrate the extension states one control period, with saturation.
 
     Explicit Euler ``chi + dt * chi_dot``, then the limits act on chi itself (state
     clamping, the anti-windup of this product): the change of chi is at most
-    ``accel_max * dt`` in norm and ``|chi| <= v1_max``. Because ``v1 = |chi|``, the
-    commanded speed then never exceeds its limits and chi never winds up beyond what the
-    vehicle is asked to do. With a turn-rate limit (``theta`` and ``turn_max`` given),
-    chi is also kept within the directions the vehicle can drive along by the next
-    period (:func:`limit_turn`).
+    ``accel_max * dt`` in norm and ``|chi| <= v1_max``. Because ``|v1| <= |chi|``, the
+    commanded speed then never exceeds its limits and chi never winds up beyond what
+    the vehicle is asked to do. The turn-rate limit of the anti-windup is
+    :func:`limit_turn`, applied after.
 
     Parameters
     ----------
@@ -165,19 +235,12 @@ def advance_extension(
     dt : float [s]
     v1_max, accel_max : ndarray, shape (n,) [m/s], [m/s^2]
         ``inf`` where unlimited.
-    theta : ndarray, shape (n,) [rad], optional
-        Headings, for the turn-rate limit.
-    turn_max : float or ndarray, shape (n,) [rad/s], optional
-        ``v2_max`` (``inf`` where unlimited); None: no turn-rate limit.
 
     Returns
     -------
     chi_next : ndarray, shape (n, 2) [m/s]
     chi_dot_applied : ndarray, shape (n, 2) [m/s^2]
         ``(chi_next - chi) / dt``: the rate actually applied (use it for eq. (5)).
-    aim : ndarray, shape (n,) [rad]
-        Only with ``turn_max``: see :func:`limit_turn` (pass it to
-        :func:`flat_inputs`).
     """
     step = chi_dot * dt
     # A vector within its bound is scaled by 1.0, which leaves it as it is: the
@@ -192,30 +255,28 @@ def advance_extension(
     if np.count_nonzero(norm > v1_max):
         scale = np.where(norm > v1_max, v1_max / np.maximum(norm, 1e-300), 1.0)
         nxt = nxt * scale[..., None]
-        norm = None  # changed: limit_turn measures it again
-    if turn_max is None:
-        return nxt, (nxt - chi) / dt
-    nxt, aim = limit_turn(nxt, theta, turn_max * dt, norm)
-    return nxt, (nxt - chi) / dt, aim
+    return nxt, (nxt - chi) / dt
 
 
 def limit_turn(
     chi: np.ndarray,
     theta: np.ndarray,
     limit: np.ndarray | float,
-    norm: np.ndarray | None = None,
+    travel: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Turn-rate anti-windup: keep chi where the vehicle can drive in one period.
 
     A unicycle heading ``theta`` can move, by the next period, only along directions
-    within ``limit = v2_max * dt`` of its heading. A chi outside that cone is replaced
-    by its projection on the nearer edge of the cone (its component along that
-    direction, or zero when it points away): chi then stays what the vehicle can do,
-    as with the speed and acceleration clamps, instead of rotating faster than the
-    vehicle can turn while the heading falls behind for ever. The direction the
-    controller asked for is returned as ``aim``: the heading loop of eq. (5) turns
-    the vehicle towards it (see :func:`flat_inputs`), at rest included, so a vehicle
-    facing away from its target turns (at up to ``v2_max``) before it drives.
+    within ``limit = v2_max * dt`` of its direction of travel (its heading, or the
+    opposite where it travels backward, :func:`travel_direction`). A chi outside that
+    cone is replaced by its projection on the nearer edge of the cone (its component
+    along that direction, or zero when it points away): chi then stays what the
+    vehicle can do, as with the speed and acceleration clamps, instead of rotating
+    faster than the vehicle can turn while the heading falls behind for ever. The
+    heading the controller asked for is returned as ``aim``: the heading loop of eq.
+    (5) turns the vehicle towards it (see :func:`flat_inputs`), at rest included, so
+    a vehicle facing away from its target turns (at up to ``v2_max``) before it
+    drives. A chi at rest (``|chi| < CHI_REST``) is not limited.
 
     Parameters
     ----------
@@ -223,31 +284,36 @@ def limit_turn(
         The extension states after the speed and acceleration clamps.
     theta : ndarray, shape (n,) [rad]
     limit : float or ndarray, shape (n,) [rad]
-    norm : ndarray, shape (n,) [m/s], optional
-        ``|chi|`` if known (the same numbers as measuring it here).
+    travel : ndarray, shape (n,), int8, optional
+        The direction of travel; default forward.
 
     Returns
     -------
     chi : ndarray, shape (n, 2) [m/s]
     aim : ndarray, shape (n,) [rad]
-        Angle of the requested chi where it was outside the cone, NaN elsewhere.
+        The heading along the requested chi (its angle, or the opposite one where
+        the vehicle travels backward) where it was outside the cone, NaN elsewhere.
 
     >>> chi, aim = limit_turn(np.array([[0.0, 1.0]]), np.array([0.0]), 0.1)
     >>> chi.round(3).tolist(), aim.round(4).tolist()
     ([[0.0, 0.0]], [1.5708])
     """
     c1, c2 = chi[..., 0], chi[..., 1]
-    if norm is None:
-        norm = np.hypot(c1, c2)
+    norm = np.hypot(c1, c2)
     angle = np.arctan2(c2, c1)
+    if travel is not None and np.count_nonzero(travel == TRAVEL_BACKWARD):
+        angle = np.where(travel == TRAVEL_BACKWARD, angle + np.pi, angle)
+        sign = np.where(travel == TRAVEL_BACKWARD, -1.0, 1.0)
+    else:
+        sign = 1.0
     off = wrap_angle(angle - theta)
-    outside = (np.abs(off) > limit) & (norm >= CHI_HOLD)
+    outside = (np.abs(off) > limit) & (norm >= CHI_REST)
     if not np.count_nonzero(outside):
         nowhere = np.empty(norm.shape)
         nowhere.fill(np.nan)
         return chi, nowhere
     edge = CLIP(off, -limit, limit)
-    along = np.maximum(norm * np.cos(off - edge), 0.0)
+    along = sign * np.maximum(norm * np.cos(off - edge), 0.0)
     direction = theta + edge
     turned = np.empty(chi.shape)
     turned[..., 0] = along * np.cos(direction)

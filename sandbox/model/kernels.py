@@ -24,10 +24,13 @@ import numpy as np
 from sandbox import accel
 from sandbox.model.dynamics import CLIP
 from sandbox.model.flatness import (
+    CHI_REST,
     Gains,
     advance_extension,
     extension_rate,
     flat_inputs,
+    limit_turn,
+    travel_direction,
 )
 
 
@@ -78,7 +81,7 @@ class Controller:
         self._accel, self._v1 = _rows(accel_max), _rows(v1_max)
         self._v2 = _rows(v2_max)
         self._turn = _rows(np.inf if turn_max is None else turn_max)
-        self._flags = 0 if turn_max is None else 1  # the turn-rate limit
+        self._turning = turn_max is not None  # the turn-rate limit
         self._c = accel.module("controller")
 
     def step(
@@ -89,8 +92,9 @@ class Controller:
         target: np.ndarray,
         v_ref: np.ndarray,
         a_ref: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``chi`` of the next period and the commands ``(v1, v2)`` of this one.
+        travel: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``chi`` and the direction of travel of the next period, ``(v1, v2)`` now.
 
         Parameters
         ----------
@@ -99,6 +103,9 @@ class Controller:
         target, v_ref, a_ref : ndarray (n, 2) [m], [m/s], [m/s^2]
             The slot to track (a NaN coordinate aims at the position's) and its
             feed-forward velocity and acceleration.
+        travel : ndarray (n,), int8
+            The direction of travel now
+            (:func:`~sandbox.model.flatness.travel_direction`).
 
         Returns
         -------
@@ -106,54 +113,67 @@ class Controller:
         v1 : ndarray (n,) [m/s]
         v2 : ndarray (n,) [rad/s]
             Within ``v2_max``.
+        travel_next : ndarray (n,), int8
         """
         if self._c is not None:
-            return self._step_c(pos, chi, theta, target, v_ref, a_ref)
-        return self.step_numpy(pos, chi, theta, target, v_ref, a_ref)
+            return self._step_c(pos, chi, theta, target, v_ref, a_ref, travel)
+        return self.step_numpy(pos, chi, theta, target, v_ref, a_ref, travel)
 
-    def step_numpy(self, pos, chi, theta, target, v_ref, a_ref):
+    def step_numpy(
+        self,
+        pos: np.ndarray,
+        chi: np.ndarray,
+        theta: np.ndarray,
+        target: np.ndarray,
+        v_ref: np.ndarray,
+        a_ref: np.ndarray,
+        travel: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`step` by the numpy functions (the reference)."""
         if np.count_nonzero(np.isnan(target)):
             aim = np.where(np.isnan(target), pos, target)
         else:
             aim = target
         chi_dot = extension_rate(pos, chi, aim, v_ref, a_ref, self.gains)
+        chi_next, chi_dot = advance_extension(
+            chi, chi_dot, self.dt, self.v1_max, self.accel_max
+        )
+        travel_next = travel_direction(chi, chi_next, theta, travel)
         turn = None
-        if self.turn_max is None:
-            chi_next, chi_dot = advance_extension(
-                chi, chi_dot, self.dt, self.v1_max, self.accel_max
+        if self.turn_max is not None:  # the turn-rate limit of the anti-windup
+            chi_next, turn = limit_turn(
+                chi_next, theta, self.turn_max * self.dt, travel_next
             )
-        else:  # the turn-rate limit of the anti-windup
-            chi_next, chi_dot, turn = advance_extension(
-                chi,
-                chi_dot,
-                self.dt,
-                self.v1_max,
-                self.accel_max,
-                theta,
-                self.turn_max,
-            )
-        v1, v2 = flat_inputs(theta, chi, chi_dot, self.gains.kp, turn)
-        return chi_next, v1, CLIP(v2, -self.v2_max, self.v2_max)
+            chi_dot = (chi_next - chi) / self.dt
+            # Where the limit holds the vehicle at rest (it turns first), the
+            # direction stays what it was: it has not set off.
+            rest = np.hypot(chi_next[:, 0], chi_next[:, 1]) < CHI_REST
+            travel_next = np.where(rest, travel, travel_next).astype(np.int8)
+        v1, v2 = flat_inputs(theta, chi, chi_dot, self.gains.kp, turn, travel)
+        return chi_next, v1, CLIP(v2, -self.v2_max, self.v2_max), travel_next
 
-    def _step_c(self, pos, chi, theta, target, v_ref, a_ref):
+    def _step_c(self, pos, chi, theta, target, v_ref, a_ref, travel):
         try:
-            return self._step_arrays(pos, chi, theta, target, v_ref, a_ref)
-        except (BufferError, TypeError, ValueError):  # not C float64 arrays: made so
-            arrays = (pos, chi, theta, target, v_ref, a_ref)
-            return self._step_arrays(*map(c_float64, arrays))
+            return self._step_arrays(pos, chi, theta, target, v_ref, a_ref, travel)
+        except (BufferError, TypeError, ValueError):  # not C arrays: made so
+            arrays = map(c_float64, (pos, chi, theta, target, v_ref, a_ref))
+            travel = np.ascontiguousarray(travel, dtype=np.int8)
+            return self._step_arrays(*arrays, travel)
 
-    def _step_arrays(self, pos, chi, theta, target, v_ref, a_ref):
+    def _step_arrays(self, pos, chi, theta, target, v_ref, a_ref, travel):
         """The C call on C-contiguous float64 arrays (else an error, no write)."""
         n = len(theta)
         k1, k2, k3, k4 = self._k
         chi_next, v1, v2 = np.empty((n, 2)), np.empty(n), np.empty(n)
+        travel_next = np.empty(n, dtype=np.int8)
         self._c.controller_step(
-            pos, chi, theta, target, v_ref, a_ref, k1, k2, k3, k4, self._accel,
-            self._v1, self._kp, self._turn, self._v2, self.dt, self._flags,
-            chi_next, v1, v2,
+            pos=pos, chi=chi, theta=theta, target=target, v_ref=v_ref, a_ref=a_ref,
+            k1=k1, k2=k2, k3=k3, k4=k4, accel_max=self._accel, v1_max=self._v1,
+            kp=self._kp, turn_max=self._turn, v2_max=self._v2, chi_next=chi_next,
+            v1=v1, v2=v2, travel=travel, travel_next=travel_next, dt=self.dt,
+            turning=self._turning,
         )  # fmt: skip
-        return chi_next, v1, v2
+        return chi_next, v1, v2, travel_next
 
 
 def motor_model(

@@ -6,11 +6,14 @@ when read back), removed when the run's arrays are no longer used, or by the nex
 after a crash (:func:`remove_dead_records`). Its :meth:`Recorder.arrays` become a
 :class:`~sandbox.run.record.Run`.
 
-A spill that cannot be written (the temporary directory's file system is full, or
+A spill that cannot start (the temporary directory's file system is full, or
 read-only) raises :class:`SpillError`, one line naming the directory and what the
-record needs there; every spill file is closed and the directory removed first, and a
-recorder dropped half-way (its run failed) closes and removes its files without an
-error of its own.
+record needs there. One that fails during the run (the disk fills up) keeps the
+samples written before (memory maps of its files) and says so in
+:attr:`Recorder.failure`, the same one line: the loop then ends the run there with
+status ``error``, its outputs written. Either way every spill file is closed and the
+directory removed, and a recorder dropped half-way (its run failed) closes and
+removes its files without an error of its own.
 """
 
 from __future__ import annotations
@@ -84,6 +87,10 @@ class Recorder:
         T, n = n_samples, n_vehicles
         self.capacity = T
         self.count = 0
+        #: The one line of a spill that failed during the run (None: none): the
+        #: samples written before it are kept, the recorder takes no more.
+        self.failure: str | None = None
+        self._kept: dict[str, np.ndarray] | None = None
         shapes = {k: (f(n), np.dtype(dtype)) for k, (f, dtype) in _FIELDS.items()}
         sample_bytes = sum(
             int(np.prod(shape)) * dtype.itemsize for shape, dtype in shapes.values()
@@ -197,18 +204,54 @@ class Recorder:
                 fh.write(data.tobytes())
                 fh.flush()  # a full disk says so now, not at close
         except OSError as exc:
-            self._fail(exc)
+            self._keep(exc)
+            return
         self._flushed = self.count
+
+    def _keep(self, exc: OSError) -> None:
+        """The spill failed: keep the samples written, remove the files; say why.
+
+        The samples flushed before (all arrays written up to the same sample) are
+        mapped read-only and the files closed and removed (the mappings keep their
+        data); those still in the buffer are lost. :attr:`failure` says it in one
+        line, and the recorder takes no more samples.
+        """
+        directory = self._dir
+        self._cleanup.detach()
+        k = self._flushed
+        kept = {}
+        for name, (shape, dtype) in self._shapes.items():
+            if k == 0:
+                kept[name] = np.zeros((0, *shape), dtype)
+                continue
+            kept[name] = np.memmap(
+                directory / f"{name}.npy",
+                dtype=dtype,
+                mode="r",
+                offset=self._offsets[name],
+                shape=(k, *shape),
+            )
+        _discard(self._files, directory)
+        self._buffers = {}
+        self._kept = kept
+        self.count = self.capacity = k
+        self.failure = (
+            f"{self._why(directory, exc)} (the {k} samples written before are kept)"
+        )
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The filled part of every array (read-only memory maps if on disk).
 
         For a disk-backed record this closes the recorder: call it once, at the end.
+        Where the spill failed (:attr:`failure`), the samples written before.
         """
         k = self.count
         if not self.on_disk:
             return {name: buf[:k] for name, buf in self._buffers.items()}
-        self._flush()
+        if self._kept is None:
+            self._flush()
+        if self._kept is not None:  # the spill failed: what it kept
+            return self._kept
         try:
             for name, fh in self._files.items():
                 shape, dtype = self._shapes[name]
@@ -220,7 +263,8 @@ class Recorder:
                 for name in self._shapes
             }
         except OSError as exc:
-            self._fail(exc)
+            self._keep(exc)
+            return self._kept
         self._files.clear()
         self._buffers = {}
         self._cleanup.detach()

@@ -535,7 +535,7 @@ INFO: dict[str, Check] = {
             {"t": number()},
             {
                 "platoons": by_name(items(vehicle()), vehicles=False),
-                "offsets": by_name(point()),
+                "offsets": by_name(point(optional=True)),  # None: no slot
             },
         )
     ),

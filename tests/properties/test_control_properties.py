@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from sandbox.model.dynamics import wrap_angle
 from sandbox.model.flatness import (
-    CHI_HOLD,
+    CHI_REST,
     Gains,
     advance_extension,
     extension_rate,
@@ -22,12 +22,12 @@ from sandbox.model.laws import BackwardDifference, rotate_offsets
 #: Physically meaningful magnitudes (no overflow of squares: warnings are errors).
 BIG = 1e6
 finite = st.floats(-BIG, BIG, allow_nan=False, allow_infinity=False)
-#: Speeds that include exact zero and values just around the hold threshold.
+#: Speeds that include exact zero and values just around the rest threshold.
 tiny = st.one_of(
     st.just(0.0),
-    st.floats(-10 * CHI_HOLD, 10 * CHI_HOLD, allow_nan=False),
+    st.floats(-10 * CHI_REST, 10 * CHI_REST, allow_nan=False),
     st.sampled_from(
-        [CHI_HOLD, -CHI_HOLD, np.nextafter(CHI_HOLD, 0.0), 1e-300, -1e-300]
+        [CHI_REST, -CHI_REST, np.nextafter(CHI_REST, 0.0), 1e-300, -1e-300]
     ),
 )
 speed = st.one_of(tiny, finite)
@@ -87,11 +87,13 @@ def test_eq5_finite_for_finite_inputs(
 ) -> None:
     v1, v2 = flat_inputs(np.array([theta]), chi, chi_dot, kp)
     assert np.isfinite(v1).all() and np.isfinite(v2).all()
-    norm = float(np.hypot(*chi[0]))
-    if norm >= CHI_HOLD:
-        assert v1[0] == pytest.approx(norm, rel=1e-14)
-    else:  # no direction: stand still, hold the heading
-        assert v1[0] == 0.0 and v2[0] == 0.0
+    c1, c2 = chi[0]
+    if c1 * c1 + c2 * c2 >= CHI_REST * CHI_REST:
+        assert v1[0] == pytest.approx(math.hypot(c1, c2), rel=1e-14)
+    else:  # no direction: hold the heading, move along it
+        along = c1 * math.cos(theta) + c2 * math.sin(theta)
+        assert v1[0] == pytest.approx(along, rel=1e-12, abs=1e-300)
+        assert v2[0] == 0.0
 
 
 @settings(deadline=None)
