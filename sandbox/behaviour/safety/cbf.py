@@ -132,6 +132,7 @@ from sandbox.behaviour.safety.braking import (
     pair_geometry,
 )
 from sandbox.behaviour.safety.braking_check import Solved, check_commands, passes
+from sandbox.behaviour.safety.constrained import record_episodes
 from sandbox.behaviour.safety.filter_kernel import covers, usable, velocity_step
 from sandbox.behaviour.safety.priority import PRIORITY, holding
 from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
@@ -572,7 +573,10 @@ def _check(values: dict, section: dict) -> list[tuple]:
 
 @register_filter("cbf", params=PARAMS, check=_check, batched=True)
 def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
-    """Control-barrier-function filter through the look-ahead point (sandbox/safety)."""
+    """Control-barrier-function filter through the look-ahead point.
+
+    Its pieces are the modules of ``sandbox/behaviour/safety/``.
+    """
     state = ctx.memory.get("cbf")
     if state is None:
         state = ctx.memory["cbf"] = CBFState(ctx)
@@ -580,10 +584,12 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     ctx.memory["last"] = step
     if ctx.worlds == 1:
         account(ctx.stats, ctx.t, state.braking, step, slice(None), step.min_barrier)
+        record_episodes(ctx.memory, [ctx.stats], ctx.t, step.active, len(ctx.pos))
         return v1, v2
     counters = ctx.memory.get("counters")
     if counters is None:
         counters = ctx.memory["counters"] = WorldCounters(ctx.world_stats)
     n = len(ctx.pos) // ctx.worlds  # each world's own counters
     account_worlds(ctx.world_stats, ctx.t, state.braking, step, n, counters)
+    record_episodes(ctx.memory, ctx.world_stats, ctx.t, step.active, n)
     return v1, v2
