@@ -526,7 +526,7 @@ def synthetic_platoon(compiled: bool, n: int = 36, periods: int = 64) -> tuple:
             )
         else:
             with accel.switched_off("controller"):
-                st.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
+                st.history.append(ctx.t, ctx.seen, ctx.fresh)
                 out = residual_pass(st, ctx)
         events.append([list(rows) for rows in out])
     return st, trace, events

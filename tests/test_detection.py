@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from helpers import SCENARIOS, run_scenario
 
-from sandbox import Simulation, load_scenario, simulate
+from sandbox import Simulation, compute_metrics, load_scenario, simulate
 from sandbox.behaviour.detection import llr
 from sandbox.behaviour.tracks import stop_fits
 from sandbox.errors import ScenarioError
@@ -102,9 +102,10 @@ def test_a_runaway_is_told_from_a_stuck_steering_by_its_speed():
     # its controller asks for); read on through the isolation time its speed departs
     # too, and the detection's kind becomes uncontrolled.
     sim = Simulation(load_scenario(FAILURES / "detect_uncontrolled_into_leader.yaml"))
-    while not sim.detection.events:
+    (events,) = sim.detection.events  # one world
+    while not events:
         sim.step()
-    assert sim.detection.events[0]["kind"] == "stuck_steering"
+    assert events[0]["kind"] == "stuck_steering"
     assert result("detect_uncontrolled_into_leader")[1]["detections"][0]["kind"] == (
         "uncontrolled"
     )
@@ -228,3 +229,35 @@ def test_reconfiguration_reacts_to_the_detection(name, vehicle):
     assert m["converged"] and o["converged"]
     for change in m.get("leader_changes", []):
         assert change["t"] == pytest.approx(failure["detected_at"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("barrier", ["velocity", "braking"])
+def test_a_safety_filter_does_not_delay_a_detection(barrier):
+    # The filter's rate bound starts from the commands red sent, not from what its
+    # failed drive did: red's broadcast commands do not follow its own braking, and a
+    # filtered run finds the stop as soon as an unfiltered one (within one period).
+    sets = [
+        "detection.method=glr",
+        "detection.lambda=null",
+        "sensing.position_noise=0.02",
+        "sensing.heading_noise=0.01",
+        "sensing.delay=0.05",
+        "duration=6",
+    ]
+    seeds = range(6)
+    delays = {}
+    for filt in ("none", "cbf"):
+        scs = [
+            load_scenario(
+                FAILURES / "detect_follower_stop.yaml",
+                overrides=[*sets, f"safety.filter={filt}", f"seed={s}"]
+                + ([f"safety.barrier={barrier}"] if filt == "cbf" else []),
+            )
+            for s in seeds
+        ]
+        runs = Simulation.batch(scs)
+        failures = [compute_metrics(r)["detection"]["failures"][0] for r in runs]
+        assert all(f["detected_kind"] == "stop" for f in failures), failures
+        delays[filt] = np.array([f["delay"] for f in failures])
+    assert np.all(delays["cbf"] <= delays["none"] + 0.01 + 1e-9), delays

@@ -110,12 +110,13 @@ static const struct {
     [CONTACT] = {BOOL, 0, 0}, [COMMANDS] = {F64, 0, 2}, [MOTOR_ACCEL] = {F64, 0, 1},
     [TURN_ACCEL] = {F64, 0, 1}, [BRAKE] = {F64, 0, 1}, [READ] = {I64, 1, 1},
     [CLEARED] = {I64, 1, 1}, [ALARMS] = {I64, 1, 1}, [TRACE_ROWS] = {I64, 1, 1},
-    [TRACE_INC] = {F64, 1, 1}, [RING_VALUES] = {F64, 1, 2}, [RING_FRESH] = {BOOL, 1, 1},
+    [TRACE_INC] = {F64, 1, 1}, [RING_VALUES] = {F64, 1, 3}, [RING_FRESH] = {BOOL, 1, 1},
 };
 
 /* The scalars, after the arrays. */
 enum {
-    SLOT, T, H, SUBSTEPS, WINDOW, SP, SH, HEADING_NOISE, MU, LAMBDA, ISOLATION, N_ARGS
+    SLOT, T, H, SUBSTEPS, WINDOW, SP, SH, HEADING_NOISE, MU, LAMBDA, ISOLATION, SETTLE,
+    N_ARGS
 };
 /* The arguments: the state, the arrays after its fields, the scalars. */
 #define N_PASSED (1 + N_ARRAYS - N_FIELDS + N_ARGS)
@@ -134,10 +135,10 @@ PyDoc_STRVAR(residual_period_doc,
 "residual_period(state, seen, fresh, contact, commands, motor_accel, turn_accel,\n"
 "                brake, read, cleared, alarms, trace_rows, trace_inc, ring_values,\n"
 "                ring_fresh, slot, t, h, substeps, window, sp, sh, heading_noise,\n"
-"                mu, lam, isolation) -> (reads, clears, alarms, used)\n"
+"                mu, lam, isolation, settle) -> (reads, clears, alarms, used)\n"
 "\n"
-"Stores the observed positions and fresh flags in row ``slot`` of the track\n"
-"history's rings ``ring_values`` (L, n, 2) and ``ring_fresh`` (L, n) (None: no\n"
+"Stores the observed poses and fresh flags in row ``slot`` of the track\n"
+"history's rings ``ring_values`` (L, n, 3) and ``ring_fresh`` (L, n) (None: no\n"
 "history), then does"
 "one period of the residual detector for n rows: the arrays of the DetectorState\n"
 "``state`` (float64, the ages, gates and counts int64, ``pending`` and\n"
@@ -148,7 +149,8 @@ PyDoc_STRVAR(residual_period_doc,
 "``alarms`` (int64, n), and where ``trace_rows`` is not None the rows of every\n"
 "window used and their log-likelihood ratios to it and ``trace_inc`` (n); returns\n"
 "how many of each. ``window`` [periods], ``sp``, ``sh`` the residuals' standard\n"
-"deviations, ``mu`` the shift, ``lam`` the threshold, ``isolation`` [s].");
+"deviations, ``mu`` the shift, ``lam`` the threshold, ``isolation`` [s] and\n"
+"``settle`` [s], how long the track must show a braked vehicle at rest.");
 
 static PyObject *
 residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -205,17 +207,17 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             shapes = b[k].len == columns * n;
         }
     }
-    /* the rings: L rows of n positions and flags, the slot one of them */
+    /* the rings: L rows of n poses and flags, the slot one of them */
     Py_ssize_t slot = (Py_ssize_t)s[SLOT];
     double *ring = NULL;
     char *ring_fresh = NULL;
     if (shapes && (present[RING_VALUES] || present[RING_FRESH])) {
         Py_ssize_t rows = n ? b[RING_FRESH].len / n : 0;
         shapes = present[RING_VALUES] && present[RING_FRESH] && n > 0 &&
-                 b[RING_FRESH].len == rows * n && b[RING_VALUES].len == 2 * rows * n &&
+                 b[RING_FRESH].len == rows * n && b[RING_VALUES].len == 3 * rows * n &&
                  (double)slot == s[SLOT] && slot >= 0 && slot < rows;
         if (shapes) {
-            ring = (double *)b[RING_VALUES].data + 2 * n * slot;
+            ring = (double *)b[RING_VALUES].data + 3 * n * slot;
             ring_fresh = (char *)b[RING_FRESH].data + n * slot;
         }
     }
@@ -245,10 +247,10 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     double *trace_inc = present[TRACE_INC] ? b[TRACE_INC].data : NULL;
 
     double t = s[T], h = s[H], sp = s[SP], sh = s[SH], sigma_h = s[HEADING_NOISE];
-    double mu = s[MU], lam = s[LAMBDA], isolation = s[ISOLATION];
+    double mu = s[MU], lam = s[LAMBDA], isolation = s[ISOLATION], settle = s[SETTLE];
     double half_mu2 = 0.5 * mu * mu;
     double dts = h / (double)substeps;
-    /* Python's max(isolation, braking + window dt) past the alarm */
+    /* Python's max(isolation, braking + window dt + settle) past the alarm */
     double window_s = (double)window * h;
     Py_ssize_t n_read = 0, n_cleared = 0, n_alarms = 0, n_used = 0;
 
@@ -257,8 +259,9 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         const double *o = seen + 3 * i;
         int is_fresh = fresh == NULL || fresh[i];
         if (ring != NULL) { /* the history's row of this period */
-            ring[2 * i] = o[0];
-            ring[2 * i + 1] = o[1];
+            ring[3 * i] = o[0];
+            ring[3 * i + 1] = o[1];
+            ring[3 * i + 2] = o[2];
             ring_fresh[i] = (char)is_fresh;
         }
         motor_period(p, vel + 2 * i, rate + i, travel + i, cmd[2 * i],
@@ -347,7 +350,7 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         else if (g[i] >= lam) { /* an alarm: latched, its kind read until then */
             detected[i] = 1;
             double braking = hypot(vel[2 * i], vel[2 * i + 1]) / brake[i];
-            double after = braking + window_s;
+            double after = braking + window_s + settle;
             isolating[i] = t + (after > isolation ? after : isolation);
             g[i] = 0.0;
             clear[i] = 0.0;

@@ -80,15 +80,16 @@ Latching
 
 from __future__ import annotations
 
-import copy
 from collections import deque
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from sandbox.behaviour import residual_kernel
 from sandbox.behaviour.isolation import read_kinds
 from sandbox.behaviour.residual_state import (
+    RECENT_SPEED_WINDOW,
     DetectorState,
     advance_model,
     shape_history,
@@ -96,12 +97,18 @@ from sandbox.behaviour.residual_state import (
     wrap_difference,
 )
 from sandbox.behaviour.tracks import stop_fits as stop_fits  # its documented path
+from sandbox.errors import PluginRunError
 from sandbox.plugins.registration import (
     DetectorContext,
     Param,
+    get,
     register_detector,
     register_metrics,
+    runnable,
 )
+
+if TYPE_CHECKING:
+    from sandbox.scenario import Scenario
 
 #: The kinds a detection names (failure kinds of :mod:`sandbox.model.failures`).
 KINDS = ("stop", "spin", "stuck_steering", "uncontrolled", "crash")
@@ -224,7 +231,7 @@ def residual(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
             ctx.memory.get("trace"),
         )  # fmt: skip
     else:
-        st.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
+        st.history.append(ctx.t, ctx.seen, ctx.fresh)
         events = residual_pass(st, ctx)
     read_kinds(st, ctx, events)
     return st.detected.copy(), list(st.kinds)
@@ -325,11 +332,12 @@ def residual_pass(st: DetectorState, ctx: DetectorContext) -> tuple:
     alarms = i_new[st.g[i_new] >= lam]
     st.detected[alarms] = True
     # Read on at least until a failed drive could have braked to rest from the
-    # commanded speed, and one window more.
+    # commanded speed and its track has shown it at rest, and one window more.
     brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
     for i in alarms:
         braking = float(np.hypot(*st.vel[i])) / float(brakes[i])
-        st.isolating[i] = ctx.t + max(float(p["isolation"]), braking + window * ctx.dt)
+        after = braking + window * ctx.dt + RECENT_SPEED_WINDOW
+        st.isolating[i] = ctx.t + max(float(p["isolation"]), after)
     st.g[alarms] = 0.0
     st.clear[alarms] = 0.0
     st.pending[rows] = True  # the next window starts at the next observation
@@ -338,169 +346,188 @@ def residual_pass(st: DetectorState, ctx: DetectorContext) -> tuple:
     return rows[k_read], cleared, alarms
 
 
-class Detection:
-    """The loop's detector: builds its context each period and keeps the events.
+class BatchDetection:
+    """The detector of a loop's K worlds: its context each period, and the events.
 
-    Made by :meth:`make` (None for the oracle, which the loop applies itself, so that
-    the default is today's behaviour to the bit). :meth:`update` is called from
-    ``Simulation._plan`` at every ``t_k`` and returns what the platoon believes has
-    failed; :attr:`events` lists the detections, as ``{"vehicle", "t", "kind",
-    "cleared"}`` (``cleared``: the time the detection was withdrawn, or None).
+    Made by :meth:`make` from the worlds' scenarios (None for the oracle, which the
+    loop applies itself, so that the default is today's behaviour to the bit); the
+    rows are the K worlds' ``n`` vehicles, world after world, for any K (a single
+    run is K = 1). :meth:`update` is called at every ``t_k`` and returns what each
+    world's platoon believes has failed: one call of a detector registered with
+    ``batched=True`` on every row (its decisions row by row), any other world by
+    world on the world's rows, with the world's own ``memory``. Every world's
+    detections are its own (:meth:`summary`), so that each is byte for byte its run
+    alone.
+
+    Parameters
+    ----------
+    scenarios : sequence of Scenario
+        The K worlds' scenarios, of one structure (the method, its values and the
+        declared noise are the first's; the drives' limits each world's own).
+    names : sequence of sequence of str
+        Each world's vehicle names.
     """
 
-    def __init__(self, scenario, names: list[str]) -> None:
-        from collections import deque
-
-        from sandbox.plugins.registration import get, runnable
-
-        spec = scenario.detection
+    def __init__(
+        self, scenarios: Sequence[Scenario], names: Sequence[Sequence[str]]
+    ) -> None:
+        first = scenarios[0]
+        spec = first.detection
+        registered = get("detector", spec.method)
         self.method = spec.method
-        self.func = runnable(get("detector", spec.method))
+        self.func = runnable(registered)
         self.params = dict(spec.params)
-        self.memory: dict = {}
-        self.names = list(names)
-        n = len(names)
-        sensing = scenario.sensing
+        #: Whether the detector is called once on the rows of every world.
+        self.batched = bool(registered.options.get("batched"))
+        self.K, self.n = len(scenarios), len(names[0])
+        self.names = [list(world) for world in names]
+        #: What the detector keeps between periods: one dict for the rows of every
+        #: world (``batched``), else each world's (``memory`` is the first's).
+        self.memories: list[dict] = (
+            [{}] if self.batched else [{} for _ in range(self.K)]
+        )
+        self.memory = self.memories[0]
+        sensing = first.sensing
         self.position_noise = float(sensing.position_noise)
         self.heading_noise = float(sensing.heading_noise)
-        delay = int(round(sensing.delay / scenario.dt))
-        self.substeps = int(scenario.substeps)
+        self.substeps = int(first.substeps)
+        vehicles = [v for sc in scenarios for v in sc.vehicles]
         accel = np.array(
-            [
-                np.inf if v.motor_accel is None else v.motor_accel
-                for v in scenario.vehicles
-            ]
+            [np.inf if v.motor_accel is None else v.motor_accel for v in vehicles]
         )
-        radius = np.array([v.diameter / 2.0 for v in scenario.vehicles])
+        radius = np.array([v.diameter / 2.0 for v in vehicles])
         self.motor_accel = accel
         # The hardest the drive brakes: its declared acceleration limit, within the
         # motor's (a failure's speed moves by at most max_accel h per period).
         declared = np.array(
-            [np.inf if v.max_accel is None else v.max_accel for v in scenario.vehicles]
+            [np.inf if v.max_accel is None else v.max_accel for v in vehicles]
         )
         self.brake_accel = np.minimum(accel, declared)
         self.turn_accel = ANGULAR_MOTOR_FACTOR * accel / radius
-        #: The commands the controllers asked for in the last period (n, 2).
+        #: The commands every vehicle sent in the last period (K n, 2).
         self.intended: np.ndarray | None = None
+        delay = int(round(first.sensing.delay / first.dt))
         self._sent: deque[np.ndarray] = deque(maxlen=delay + 1)
-        self._known = np.zeros(n, dtype=bool)
+        self._known = np.zeros(self.K * self.n, dtype=bool)
         self._open: dict[int, dict] = {}
-        self.events: list[dict] = []
+        #: Each world's detections, ``{"vehicle", "t", "kind", "cleared"}``.
+        self.events: list[list[dict]] = [[] for _ in range(self.K)]
         # The built-in residual, whose periods may take its pass in C.
         self._builtin = self.func is residual
         self._kernel: residual_kernel.ResidualPass | None = None
-        # Where detections are written: each world's names and events (one world).
-        self._world_size = n
-        self._world_names = [self.names]
-        self._world_events = [self.events]
 
     @classmethod
-    def make(cls, scenario, names: list[str]) -> Detection | None:
-        """The detection of a scenario, or None for ``method: oracle``."""
-        if scenario.detection.method == "oracle":
+    def make(
+        cls, scenarios: Sequence[Scenario], names: Sequence[Sequence[str]]
+    ) -> BatchDetection | None:
+        """The detection of K worlds, or None for ``method: oracle``."""
+        if scenarios[0].detection.method == "oracle":
             return None
-        return cls(scenario, names)
+        return cls(scenarios, names)
 
-    @classmethod
-    def stack(cls, detections: list[Detection]) -> Detection:
-        """One detector for the rows of K worlds (a batched detector's one call).
-
-        The worlds share the method, its values and the declared noise (their
-        structure); the drives' accelerations are stacked, and each detection is
-        written to its world's own :class:`Detection` (its ``events`` and
-        :meth:`summary`).
-        """
-        first = detections[0]
-        out = copy.copy(first)
-        for name in ("motor_accel", "brake_accel", "turn_accel"):
-            setattr(out, name, np.concatenate([getattr(d, name) for d in detections]))
-        out.memory = {}
-        out.intended = None
-        out._sent = deque(maxlen=first._sent.maxlen)
-        out._known = np.zeros(len(out.motor_accel), dtype=bool)
-        out._open = {}
-        out._kernel = None
-        out._world_size = len(first.names)
-        out._world_names = [d.names for d in detections]
-        out._world_events = [d.events for d in detections]
-        return out
-
-    def update(self, sim, t: float, failing: np.ndarray) -> np.ndarray:
-        """What the platoon believes has failed at ``t`` (n,) bool; records events."""
-        fleet = sim.fleet
-        if sim.seen is not None:
-            seen = sim.seen
-            fresh = getattr(sim.broadcast, "fresh", None)
-        else:
-            seen = np.column_stack((fleet.pos, fleet.theta))
-            fresh = None
-        contact = getattr(sim.world, "in_contact", None)
-        return self.update_rows(
-            t,
-            sim.h,
-            fleet,
-            seen,
-            fresh,
-            None if contact is None else contact(),
-            failing,
-        )
-
-    def update_rows(
+    def update(
         self,
         t: float,
         dt: float,
-        fleet,
+        fleet: Any,
         seen: np.ndarray,
         fresh: np.ndarray | None,
         contact: np.ndarray | None,
         failing: np.ndarray,
+        live: Sequence[int],
+        failed: Callable[[int, PluginRunError], None],
     ) -> np.ndarray:
-        """:meth:`update` from the rows themselves (of one world or K stacked)."""
+        """What each world's platoon believes has failed at ``t`` [s], (K n,) bool.
+
+        Parameters
+        ----------
+        t, dt : float [s]
+        fleet : Fleet
+            The rows' true states (``pos``, ``theta``, ``vel``).
+        seen : ndarray, shape (K n, 3) [m, m, rad]
+            The broadcast copies (or the true poses without sensing).
+        fresh, contact : ndarray, shape (K n,), bool, or None
+            The copies that arrived (None: all) and the rows in contact (None:
+            none).
+        failing : ndarray, shape (K n,), bool
+            The rows with an active failure (the truth, for the oracle).
+        live : sequence of int
+            The live worlds (a detector called world by world skips the others).
+        failed : callable
+            ``failed(w, exc)`` ends world ``w`` whose detector raised (world by
+            world; a batched detector's error ends every world, in the loop).
+        """
         if self.intended is not None:
             self._sent.append(self.intended)
             self.intended = None
         commands = self._sent[0] if len(self._sent) == self._sent.maxlen else None
-        st = self.memory.get("state") if self._builtin else None
-        if (
-            st is not None
-            and commands is not None
-            and st.history is not None
-            and residual_kernel.usable()
-        ):
-            return self._residual_pass(
-                st, t, dt, fleet, seen, fresh, contact, failing, commands
+        if self.batched:
+            st = self.memory.get("state") if self._builtin else None
+            if (
+                st is not None
+                and commands is not None
+                and st.history is not None
+                and residual_kernel.usable()
+            ):
+                return self._residual_pass(
+                    st, t, dt, fleet, seen, fresh, contact, failing, commands
+                )
+            rows = slice(None)
+            ctx = self._context(
+                t, dt, fleet, seen, fresh, contact, failing, commands, rows, 0
             )
-        ctx = self._context(t, dt, fleet, seen, fresh, contact, failing, commands)
-        out = self.func(ctx)
+            known, kinds = self._answer(self.func(ctx), len(seen))
+            return self._note(t, known, kinds)
+        n = self.n
+        known = np.zeros(self.K * n, dtype=bool)
+        kinds: list = [None] * (self.K * n)
+        for w in live:
+            rows = slice(w * n, (w + 1) * n)
+            ctx = self._context(
+                t, dt, fleet, seen, fresh, contact, failing, commands, rows, w
+            )
+            try:
+                out = self.func(ctx)
+            except PluginRunError as exc:
+                failed(w, exc)
+                continue
+            known[rows], kinds[rows] = self._answer(out, n)
+        return self._note(t, known, kinds)
+
+    @staticmethod
+    def _answer(out: Any, n: int) -> tuple[np.ndarray, list]:
+        """A detector's answer as ``(known, kinds)``: (n,) bool, n kinds or None."""
         kinds = None
         if isinstance(out, tuple):
             out, kinds = out
-        return self._note(t, np.asarray(out, dtype=bool).copy(), kinds)
+        known = np.asarray(out, dtype=bool).copy()
+        return known, [None] * n if kinds is None else list(kinds)
 
     def _context(
-        self, t, dt, fleet, seen, fresh, contact, failing, commands
+        self, t, dt, fleet, seen, fresh, contact, failing, commands, rows, w
     ) -> DetectorContext:
-        """What the detector sees at ``t`` (see :meth:`update_rows`)."""
-        n = len(fleet.theta)
+        """What the detector sees at ``t`` on ``rows`` (all, or world ``w``'s)."""
+        seen = seen[rows]
+        n = len(seen)
         return DetectorContext(
             t=t,
             dt=dt,
-            pos=fleet.pos,
-            theta=fleet.theta,
-            vel=fleet.vel,
+            pos=fleet.pos[rows],
+            theta=fleet.theta[rows],
+            vel=fleet.vel[rows],
             seen=seen,
-            fresh=np.ones(n, dtype=bool) if fresh is None else fresh,
-            commands=commands,
-            in_contact=np.zeros(n, dtype=bool) if contact is None else contact,
-            failing=failing,
+            fresh=np.ones(n, dtype=bool) if fresh is None else fresh[rows],
+            commands=None if commands is None else commands[rows],
+            in_contact=np.zeros(n, dtype=bool) if contact is None else contact[rows],
+            failing=failing[rows],
             position_noise=self.position_noise,
             heading_noise=self.heading_noise,
             substeps=self.substeps,
-            motor_accel=self.motor_accel,
-            turn_accel=self.turn_accel,
+            motor_accel=self.motor_accel[rows],
+            turn_accel=self.turn_accel[rows],
             params=self.params,
-            memory=self.memory,
-            brake_accel=self.brake_accel,
+            memory=self.memories[w],
+            brake_accel=self.brake_accel[rows],
         )
 
     def _residual_pass(
@@ -514,7 +541,7 @@ class Detection:
         kernel = self._kernel
         if kernel is None or kernel.dt != dt:
             kernel = self._kernel = residual_kernel.ResidualPass(
-                len(fleet.theta), dt, self.substeps, self.params,
+                len(seen), dt, self.substeps, self.params,
                 self.position_noise, self.heading_noise, self.motor_accel,
                 self.turn_accel, self.brake_accel,
             )  # fmt: skip
@@ -524,23 +551,24 @@ class Detection:
         if events is residual_kernel.QUIET:  # no kind read: nothing detected or not
             self._known = known = self._known.copy()
             return known
-        ctx = self._context(t, dt, fleet, seen, fresh, contact, failing, commands)
+        ctx = self._context(
+            t, dt, fleet, seen, fresh, contact, failing, commands, slice(None), 0
+        )
         read_kinds(st, ctx, events)
         return self._note(t, st.detected.copy(), st.kinds)
 
-    def _note(self, t: float, known: np.ndarray, kinds: list | None) -> np.ndarray:
+    def _note(self, t: float, known: np.ndarray, kinds: list) -> np.ndarray:
         """Record the detections made, re-read and withdrawn at ``t``; ``known``."""
         for i in np.flatnonzero(known & ~self._known):
-            kind = kinds[i] if kinds is not None and kinds[i] else "unknown"
-            w, j = divmod(int(i), self._world_size)
-            event = {"vehicle": self._world_names[w][j], "t": round(t, 9), "kind": kind}
+            kind = kinds[i] or "unknown"
+            w, j = divmod(int(i), self.n)
+            event = {"vehicle": self.names[w][j], "t": round(t, 9), "kind": kind}
             event["cleared"] = None
-            self._world_events[w].append(event)
+            self.events[w].append(event)
             self._open[int(i)] = event
-        if kinds is not None:  # a kind still being read is updated in its event
-            for i, event in self._open.items():
-                if known[i] and kinds[i]:
-                    event["kind"] = kinds[i]
+        for i, event in self._open.items():  # a kind still read is updated
+            if known[i] and kinds[i]:
+                event["kind"] = kinds[i]
         for i in np.flatnonzero(~known & self._known):
             event = self._open.pop(int(i), None)
             if event is not None:
@@ -548,12 +576,12 @@ class Detection:
         self._known = known
         return known
 
-    def summary(self) -> dict:
-        """What ``Run.info["detection"]`` keeps: the method, its values, the events."""
+    def summary(self, w: int) -> dict:
+        """World ``w``'s ``Run.info["detection"]``: method, values and events."""
         return {
             "method": self.method,
             "params": dict(self.params),
-            "events": [dict(e) for e in self.events],
+            "events": [dict(e) for e in self.events[w]],
         }
 
 

@@ -77,27 +77,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from sandbox.behaviour.detection import RESIDUAL_PARAMS
-from sandbox.behaviour.isolation import (
-    CRASH_CONTACT_WINDOW,
-    RECENT_SPEED_WINDOW,
-    STILL_SPEED,
-    recent_speed,
-    stopped_by_impact,
-)
+from sandbox.behaviour.isolation import recent_motion, rest_kind
 from sandbox.behaviour.residual_state import (
+    RECENT_SPEED_WINDOW,
     DetectorState,
     advance_model,
     shape_history,
     start_state,
     wrap_difference,
 )
-from sandbox.behaviour.tracks import TrackHistory
 from sandbox.plugins.registration import DetectorContext, Param, register_detector
 
 #: How long after a contact the window stays empty [s].
 CONTACT_GATE = 0.1
 #: Standard errors beyond which a rate of the fit counts, for isolation.
 SPEED_Z = 3.0
+#: How long the kind is read after a braked vehicle's track shows it at rest [s].
+ISOLATION_MARGIN = 0.1
 #: MAD to standard deviation of a normal distribution.
 MAD_SCALE = 1.4826
 #: Fewest innovations before the noise estimate replaces the declared noise.
@@ -298,8 +294,7 @@ class GlrState:
     isolating: np.ndarray  # until when the kind is read (n,) [s]
     clearing: np.ndarray  # the window restarted after isolation (n,) bool
     kinds: list  # (n,)
-    headings: TrackHistory  # the last SHAPE_HISTORY s of seen headings
-    count: int = 0  # observations seen
+    count: np.ndarray  # observations received (n,)
 
 
 def _init(ctx: DetectorContext) -> GlrState:
@@ -337,7 +332,7 @@ def _init(ctx: DetectorContext) -> GlrState:
         isolating=np.full(n, -np.inf),
         clearing=np.zeros(n, dtype=bool),
         kinds=[""] * n,
-        headings=shape_history(ctx, ()),
+        count=np.zeros(n, dtype=int),
     )
 
 
@@ -352,17 +347,17 @@ def mad_sigmas(d: np.ndarray) -> np.ndarray:
     return MAD_SCALE * np.median(np.abs(d - med[:, None]), axis=1) / math.sqrt(2.0)
 
 
-def _update_noise(st: GlrState, ctx: DetectorContext) -> None:
-    """Re-estimate the noise of every vehicle with enough fault-free innovations.
+def _update_noise(st: GlrState, ctx: DetectorContext, due: np.ndarray) -> None:
+    """Re-estimate the noise of the vehicles ``due`` with enough fault-free innovations.
 
     The vehicles with the same number of stored innovations are estimated together
     (each row's medians as :func:`mad_sigma` takes them one vehicle at a time).
     """
-    if ctx.params["noise_window"] <= 0.0:
+    if ctx.params["noise_window"] <= 0.0 or not due.size:
         return
-    ready = st.innov_n >= MIN_NOISE_SAMPLES
-    for count in np.unique(st.innov_n[ready]):
-        rows = np.flatnonzero(st.innov_n == count)
+    due = due[st.innov_n[due] >= MIN_NOISE_SAMPLES]
+    for count in np.unique(st.innov_n[due]):
+        rows = due[st.innov_n[due] == count]
         d = st.innov[rows, :count]
         sp = mad_sigmas(d[:, :, :2].reshape(len(rows), -1))
         sh = mad_sigmas(d[:, :, 2])
@@ -379,22 +374,17 @@ def _kind(st: GlrState, i: int, t: float, ctx: DetectorContext, fit: tuple) -> s
     z_c = (-s * mu[0] + c * mu[1]) / se[1]
     z_h = mu[2] / se[2]
     brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
-    brake = float(brakes[i])
-    recent = recent_speed(model, i)
+    # At rest against its commands (the speed fitted to the last
+    # RECENT_SPEED_WINDOW s of positions within STILL_Z standard errors of 0, the
+    # commanded one beyond), turning or not (the turn rate fitted to the headings
+    # beyond TURN_Z), with the noise as estimated.
+    motion = recent_motion(model, i, float(st.sigma[i, 0]), float(st.sigma[i, 2]))
     commanded = float(np.hypot(*model.vel[i]))
-    slow = recent is not None and recent < max(STILL_SPEED, 0.5 * commanded)
-    if slow:
-        # Turning: the observed heading over the last RECENT_SPEED_WINDOW s moves
-        # beyond 4 standard deviations of a difference of two noisy headings.
-        times, h = st.headings.track(i, t - RECENT_SPEED_WINDOW - 1e-9)
-        turn = 0.0
-        if len(times):
-            turn = abs(float(wrap_difference(np.array(h[-1] - h[0]))))
-        if turn > 4.0 * math.sqrt(2.0) * st.sigma[i, 2]:
+    if motion is not None and motion.halted(commanded):
+        if motion.turning:
             return "spin"
-        if t - model.last_contact[i] <= CRASH_CONTACT_WINDOW:
-            return "crash"
-        return "crash" if stopped_by_impact(model, i, brake) else "stop"
+        return rest_kind(model, i, t, float(brakes[i]), float(st.sigma[i, 0]))
+    model.rest[i] = ""
     if abs(z_a) > SPEED_Z:
         return "uncontrolled"
     if abs(z_h) > SPEED_Z and abs(z_h) >= abs(z_c):
@@ -411,8 +401,7 @@ def glr(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         return st.detected.copy(), list(st.kinds)
     p = ctx.params
     model = st.model
-    model.history.append(ctx.t, ctx.seen[:, :2], ctx.fresh)
-    st.headings.append(ctx.t, ctx.seen[:, 2], ctx.fresh)
+    model.history.append(ctx.t, ctx.seen, ctx.fresh)
     advance_model(model, ctx)
     contact = ctx.in_contact
     model.last_contact = np.where(contact, ctx.t, model.last_contact)
@@ -420,6 +409,9 @@ def glr(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
     rows = np.flatnonzero(ctx.fresh)
     if rows.size == 0:
         return st.detected.copy(), list(st.kinds)
+    # Each vehicle's noise is estimated anew every NOISE_EVERY of its observations.
+    st.count[rows] += 1
+    due = rows[st.count[rows] % NOISE_EVERY == 0]
     seen = ctx.seen[rows]
     pred = model.pose[rows]
     turned = wrap_difference(seen[:, 2] - pred[:, 2])
@@ -444,6 +436,7 @@ def glr(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         first = st.times[keep][:, 0]
         st.started[keep] = np.where(st.valid[keep, 0], first, st.started[keep])
     if keep.size == 0:
+        _update_noise(st, ctx, due)
         return st.detected.copy(), list(st.kinds)
     g, tau, mu, se = glr_statistic(
         st.times[keep], st.values[keep], st.valid[keep], st.sigma[keep]
@@ -459,9 +452,7 @@ def glr(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         st.innov[quiet, slot] = d[np.searchsorted(rows, quiet)]
         st.innov_at[quiet] = (slot + 1) % k
         st.innov_n[quiet] = np.minimum(st.innov_n[quiet] + 1, k)
-    st.count += 1
-    if st.count % NOISE_EVERY == 0:
-        _update_noise(st, ctx)
+    _update_noise(st, ctx, due)
     window = float(p["window"])
     # Only a vehicle with an alarm, or raising one, has anything to do.
     for k in np.flatnonzero(st.detected[keep] | (g >= st.lam)):
@@ -469,10 +460,12 @@ def glr(ctx: DetectorContext) -> tuple[np.ndarray, list[str]]:
         if not st.detected[i]:
             if g[k] >= st.lam:
                 st.detected[i] = True
+                model.rest[i] = ""  # how it came to rest is read anew
                 st.kinds[i] = _kind(st, i, ctx.t, ctx, (mu[k], se[k]))
                 brakes = ctx.motor_accel if ctx.brake_accel is None else ctx.brake_accel
                 braking = float(np.hypot(*model.vel[i])) / float(brakes[i])
-                st.isolating[i] = ctx.t + max(float(p["isolation"]), braking + 0.1)
+                after = braking + ISOLATION_MARGIN + RECENT_SPEED_WINDOW
+                st.isolating[i] = ctx.t + max(float(p["isolation"]), after)
                 st.clearing[i] = False
             continue
         if ctx.t <= st.isolating[i] + 1e-9:

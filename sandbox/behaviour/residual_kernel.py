@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from sandbox import accel
+from sandbox.behaviour.residual_state import RECENT_SPEED_WINDOW
 from sandbox.model.kernels import c_float64
 
 #: What :meth:`ResidualPass.run` returns for a period without anything to read.
@@ -90,6 +91,7 @@ class ResidualPass:
             float(p["shift"]),
             float(p["lambda"]),
             float(p["isolation"]),
+            RECENT_SPEED_WINDOW,
         )
         self._limits = (
             c_float64(motor_accel),

@@ -24,6 +24,9 @@ if TYPE_CHECKING:
 
 #: How much of the observed track the crash-or-stop fit reads [s].
 SHAPE_HISTORY = 1.0
+#: Over how long the speed and the turn rate observed lately are fitted [s]; a
+#: braked vehicle's kind is read until its track has been at rest this long.
+RECENT_SPEED_WINDOW = 0.2
 
 
 @dataclass
@@ -53,7 +56,8 @@ class DetectorState:
     detected: np.ndarray  # latched (n,) bool
     isolating: np.ndarray  # until when the kind is still read (n,) [s]
     kinds: list  # the kind of each latched detection (n,)
-    history: TrackHistory | None = None  # the last SHAPE_HISTORY s of seen xy
+    rest: list  # stop or crash, read when the vehicle came to rest; "" (n,)
+    history: TrackHistory | None = None  # the last SHAPE_HISTORY s of seen poses
 
 
 def start_state(ctx: DetectorContext) -> DetectorState:
@@ -84,13 +88,14 @@ def start_state(ctx: DetectorContext) -> DetectorState:
         detected=np.zeros(n, dtype=bool),
         isolating=np.full(n, -np.inf),
         kinds=[""] * n,
+        rest=[""] * n,
     )
 
 
-def shape_history(ctx: DetectorContext, shape: tuple[int, ...] = (2,)) -> TrackHistory:
-    """The last :data:`SHAPE_HISTORY` s of every vehicle's observations."""
+def shape_history(ctx: DetectorContext) -> TrackHistory:
+    """The last :data:`SHAPE_HISTORY` s of every vehicle's observed poses (3,)."""
     length = int(round(SHAPE_HISTORY / ctx.dt)) + 1
-    return TrackHistory(length, len(ctx.pos), shape)
+    return TrackHistory(length, len(ctx.pos), (3,))
 
 
 def wrap_difference(a: np.ndarray) -> np.ndarray:

@@ -111,6 +111,10 @@ class Acting:
         self._commanded_rows = np.flatnonzero(fleet.commanded)
         #: The car rows' controller and steering (None: every row is a unicycle).
         self.cars = CarDrive.build(fleet, layout.h)
+        # The commands sent last period, and the rows whose drive did otherwise
+        # (a failure that lasts), None when no row did (see _believed_last).
+        self._sent: tuple[np.ndarray, np.ndarray] | None = None
+        self._hidden: np.ndarray | None = None
 
     def commands(
         self,
@@ -171,8 +175,9 @@ class Acting:
         safety = self._safety
         if safety.filter is not None:  # after the controller, before the failures
             v1, v2 = safety.commands(
-                t, v1, v2, fleet, plan.slot, known, seen, worlds(), failed
-            )
+                t, v1, v2, fleet, plan.slot, known, seen, worlds(), failed,
+                self._believed_last(fleet, known),
+            )  # fmt: skip
         # Vehicles not driven by the controller this period.
         passive = fleet.commanded
         schedules = self.schedules
@@ -194,8 +199,9 @@ class Acting:
         if cars is not None:  # what a car executes: its steering's turn rate
             v2, steer = cars.steer(v1, v2, fleet.steer)
         detecting = self._detecting
-        if detecting.on:  # what the controllers ask for, broadcast
-            detecting.intend(v1, v2, worlds())
+        sent = v1, v2  # what each vehicle sends to its drive (and broadcasts)
+        if detecting.on:
+            detecting.intend(v1, v2)
         # The drive executes a failure within its acceleration limit (a crash aside).
         fs = self._failures
         v1, v2, failing, frozen, errors = fs.apply(
@@ -208,7 +214,9 @@ class Acting:
         if detecting.on:
             # A failed controller does not know: it keeps its own state until the
             # failure ends (then it resumes from the applied velocity).
-            frozen = frozen & ~fs.active_vehicles(t + h, live)
+            lasting = fs.active_vehicles(t + h, live)
+            frozen = frozen & ~lasting
+            self._note_sent(sent, failing & lasting)
         # chi follows the applied velocity of passive vehicles, so that the law resumes
         # without a jump when the failure or the override ends.
         if self._fails:  # else no vehicle is frozen
@@ -233,6 +241,36 @@ class Acting:
             mode[failing] = MODE_FAILED
         overridden = target if external is not None else None
         return Acted(v1, v2, failing, mode, chi_next, travel, overridden, steer)
+
+    def _believed_last(
+        self, fleet: Fleet, known: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The last period's commands as the platoon knows them (None: the fleet's).
+
+        A drive that failed without its vehicle being believed failed is believed to
+        have executed what its vehicle sent: the safety filter's rate bound, braking
+        command and estimate then start from the sent commands, not from what the
+        failed drive did (which would carry the failure into the sent commands and
+        hide it from the detector). A vehicle believed failed is seen as its drive
+        moves; a healthy drive applies what it was sent, so the two agree.
+        """
+        if self._hidden is None:
+            return None
+        hide = self._hidden & ~known
+        if not hide.any():
+            return None
+        v1_sent, v2_sent = self._sent
+        return np.where(hide, v1_sent, fleet.v1), np.where(hide, v2_sent, fleet.v2)
+
+    def _note_sent(
+        self, sent: tuple[np.ndarray, np.ndarray], hidden: np.ndarray
+    ) -> None:
+        """Keep the commands sent where a failure that lasts differs from them."""
+        if hidden.any():
+            self._sent = (sent[0].copy(), sent[1].copy())
+            self._hidden = hidden
+        else:
+            self._hidden = None
 
     def _command_limits(self, v1: np.ndarray, last: np.ndarray) -> np.ndarray:
         """User speeds within ``v1_max`` and, from the last speed, ``max_accel``."""

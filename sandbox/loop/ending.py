@@ -31,7 +31,7 @@ def make_run(
     arrays: dict[str, np.ndarray],
     *,
     failed_at: dict[str, float],
-    detection: Any,
+    detection: dict[str, Any] | None,
     loop_metrics: dict[str, Any],
     wall_time: float,
     control_time: float,
@@ -56,8 +56,9 @@ def make_run(
         Its recorded samples (``t``, ``pose``, ...).
     failed_at : dict
         When each failed vehicle failed [s].
-    detection : Detection or None
-        Its detector (None: the oracle).
+    detection : dict or None
+        Its detector's summary (None: the oracle;
+        :meth:`~sandbox.behaviour.detection.BatchDetection.summary`).
     loop_metrics : dict
         The loop metrics of the world (:meth:`~sandbox.loop.tally.LoopTally.result`).
     wall_time, control_time : float [s]
@@ -77,7 +78,7 @@ def make_run(
     sc = layout.scenarios[w]
     info["failed_at"] = failed_at
     if detection is not None:
-        info["detection"] = detection.summary()
+        info["detection"] = detection
     info["loop_metrics"] = loop_metrics
     info["wall_time"] = wall_time
     info["control_time"] = control_time

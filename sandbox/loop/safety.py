@@ -105,6 +105,7 @@ class Safety:
         seen: np.ndarray | None,
         live: Sequence[int],
         failed: Failed,
+        last: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """The filtered commands of the period from ``t`` [s], (N,) each.
 
@@ -125,11 +126,15 @@ class Safety:
             The live worlds.
         failed : callable
             ``failed(w, exc)`` ends world ``w`` (its plug-in failed).
+        last : tuple of ndarray, shape (N,) each, or None
+            The last period's commands ``(v1, v2)`` as the platoon knows them (the
+            filter's ``v1_prev``, ``v2_prev``; None: the fleet's).
         """
         started = self._started
         self._started = True
+        prev = (fleet.v1, fleet.v2) if last is None else last
         if self.batched:
-            return self._batched(t, v1, v2, fleet, slot, known, seen, started)
+            return self._batched(t, v1, v2, fleet, slot, known, seen, started, prev)
         layout = self._layout
         n = layout.n
         v1_out, v2_out = v1.copy(), v2.copy()
@@ -148,8 +153,8 @@ class Safety:
                 v2=v2[rows],
                 diameter=fleet.diameter[rows],
                 params=dict(sc.safety.params),
-                v1_prev=fleet.v1[rows] if started else None,
-                v2_prev=fleet.v2[rows] if started else None,
+                v1_prev=prev[0][rows] if started else None,
+                v2_prev=prev[1][rows] if started else None,
                 v1_max=v1_max,
                 v2_max=v2_max,
                 accel_max=accel_max,
@@ -175,7 +180,7 @@ class Safety:
         return v1_out, v2_out
 
     def _batched(
-        self, t, v1, v2, fleet, slot, known, seen, started
+        self, t, v1, v2, fleet, slot, known, seen, started, prev
     ) -> tuple[np.ndarray, np.ndarray]:
         """One call of a batched filter on the rows of all worlds."""
         layout = self._layout
@@ -190,8 +195,8 @@ class Safety:
             v2=v2,
             diameter=fleet.diameter,
             params=dict(layout.scenarios[0].safety.params),
-            v1_prev=fleet.v1 if started else None,
-            v2_prev=fleet.v2 if started else None,
+            v1_prev=prev[0] if started else None,
+            v2_prev=prev[1] if started else None,
             v1_max=v1_max,
             v2_max=v2_max,
             accel_max=accel_max,

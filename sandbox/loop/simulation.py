@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.behaviour.detection import Detection
+from sandbox.behaviour.detection import BatchDetection
 from sandbox.behaviour.ranges import observation_fields
 from sandbox.behaviour.reconfigure import Reconfiguration
 from sandbox.behaviour.sensing import StackedBroadcast
@@ -649,6 +649,7 @@ class Simulation:
         ranges = self._perception.ranges
         if self._steering is not None:  # a world with cars: their angles
             arrays = {**arrays, **self._steering.arrays(w, len(arrays["t"]))}
+        detection = self._detecting.detection
         return make_run(
             layout,
             w,
@@ -656,7 +657,7 @@ class Simulation:
             status,
             arrays,
             failed_at=live.failed_at[w],
-            detection=self._detecting.worlds[w],
+            detection=None if detection is None else detection.summary(w),
             loop_metrics=self._tally.result(w),
             wall_time=(time.perf_counter() - self._wall) / layout.K,
             control_time=self._control_time / layout.K,
@@ -752,15 +753,14 @@ class Simulation:
         return self._liveness.failed_at[0]
 
     @property
-    def detection(self) -> Detection | None:
-        """The detector that runs, None for the oracle.
+    def detection(self) -> BatchDetection | None:
+        """The detector of every world, None for the oracle.
 
-        A detector registered with ``batched=True`` is one for the rows of every
-        world (its events the first world's); any other is each world's own (the
-        first world's is given).
+        Its ``memory`` is what a detector registered with ``batched=True`` keeps
+        for the rows of every world (any other detector's: the first world's;
+        ``memories`` holds each world's); ``events[w]`` are world ``w``'s detections.
         """
-        detecting = self._detecting
-        return detecting.worlds[0] if detecting.batch is None else detecting.batch
+        return self._detecting.detection
 
     @property
     def reconfiguration(self) -> Reconfiguration | None:
