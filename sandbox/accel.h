@@ -16,6 +16,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <stdint.h>
 #include <string.h>
 
 /* With numpy's headers (setup.py defines SANDBOX_NUMPY_API where numpy is there at
@@ -272,8 +273,6 @@ get_indices(PyObject *obj, Indices *out)
  * the argument, before anything is written.
  */
 
-#include <stdint.h>
-
 /* What an argument is. */
 enum {
     FLOATS,  /* a C-contiguous float64 array (one element: one value for every row) */
@@ -386,10 +385,11 @@ take_array(const char *function, const Param *p, Arg *arg, PyObject *obj)
     case FLOATS:
     case VALUES: ok = size == 8 && strcmp(f, "d") == 0; break;
     case BYTES: ok = size == 1; break;
-    default:
-        ok = size == 8 && (strcmp(f, "l") == 0 || strcmp(f, "q") == 0 ||
-                           (p->kind == INTPS && strcmp(f, "n") == 0));
+    case INTPS:
+        ok = size == (Py_ssize_t)sizeof(Py_ssize_t) &&
+             (strcmp(f, "l") == 0 || strcmp(f, "q") == 0 || strcmp(f, "n") == 0);
         break;
+    default: ok = size == 8 && (strcmp(f, "l") == 0 || strcmp(f, "q") == 0); break;
     }
     if (!ok) {
         PyBuffer_Release(&arg->view);

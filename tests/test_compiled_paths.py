@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ctypes
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -587,6 +588,61 @@ def test_the_motor_limits_agree_with_numpy():
     assert np.array_equal(got[0], want[0])
     close(got[1], want[1], TIGHT)
     close(got[2], want[2], TIGHT)
+
+
+def motor_arguments(n: int) -> dict:
+    """The named arguments of ``_motors.motor_limits`` for ``n`` vehicles."""
+    rng = np.random.default_rng(n)
+    arrays = {name: rng.uniform(0.5, 5.0, n) for name in (
+        "mass", "moment", "least_force", "least_torque", "force", "torque",
+    )}  # fmt: skip
+    return {
+        "command": rng.normal(0.0, 1.0, (n, 3)),
+        "measured": rng.normal(0.0, 1.0, (n, 3)),
+        "free": rng.random(n) < 0.8,
+        "substep": 0.0025,
+        "headroom": 1.5,
+        **arrays,
+        "tracking": np.ones(n, dtype=bool),
+        "force_out": np.full(n, -1.0),
+        "torque_out": np.full(n, -1.0),
+        "change": np.zeros(n, dtype=bool),
+    }
+
+
+@needs("motors")
+def test_an_entry_point_takes_its_arguments_by_name_in_any_order():
+    c = accel.module("motors")
+    named = motor_arguments(5)
+    in_order = c.motor_limits(**named)
+    written = named["force_out"].copy(), named["change"].copy()
+    again = motor_arguments(5)
+    assert c.motor_limits(**dict(reversed(list(again.items())))) == in_order
+    assert np.array_equal(again["force_out"], written[0])
+    assert np.array_equal(again["change"], written[1])
+
+
+@needs("motors")
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"change": None}, "motor_limits: missing argument 'change'"),
+        ({"chnage": 1}, "motor_limits: no argument 'chnage'"),
+        ({"mass": np.ones(5, dtype=np.float32)}, "motor_limits: mass: expected a"),
+        ({"substep": "0.01"}, "motor_limits: substep: expected a number"),
+        ({"free": np.ones(10, dtype=bool)}, "motor_limits: shapes differ"),
+    ],
+)
+def test_a_bad_named_argument_is_refused_before_anything_is_written(change, message):
+    c = accel.module("motors")
+    named = {**motor_arguments(5), **change}
+    named = {key: value for key, value in named.items() if value is not None}
+    error = ValueError if "shapes" in message else TypeError
+    with pytest.raises(error, match=re.escape(message)):
+        c.motor_limits(**named)
+    assert np.all(named["force_out"] == -1.0)
+    with pytest.raises(TypeError, match="takes keyword arguments only"):
+        c.motor_limits(named["command"])
 
 
 @needs("period")

@@ -138,12 +138,9 @@ prepare(PyObject *self, PyObject *const *args, Py_ssize_t nargs, PyObject *kwnam
     b->arrays = a.arrays.n;
     b->size = a.size.n;
     b->num_at = a.num_at.n;
-    result = PyCapsule_New(b, BATCH, NULL);
+    result = PyCapsule_New(b, BATCH, free_batch);
     if (result == NULL) {
         PyMem_Free(b);
-    }
-    else if (PyCapsule_SetDestructor(result, free_batch) < 0) {
-        Py_CLEAR(result);
     }
 done:
     release_named(&prepare_signature, (Arg *)&a);
