@@ -148,8 +148,8 @@ def test_the_overlap_check_without_scipy_finds_what_the_kd_tree_finds(
     rng = np.random.default_rng(3)
     pos = rng.uniform(0, 6, size=(120, 2))
     rad = rng.uniform(0.1, 0.6, size=120)
-    brute = set(scenario._overlapping_pairs(pos, rad, 10_000))
+    brute = set(scenario.overlapping_pairs(pos, rad, 10_000))
     monkeypatch.setattr(scenario, "BRUTE_FORCE_PAIRS", 0)
-    tree = set(scenario._overlapping_pairs(pos, rad, 10_000))
+    tree = set(scenario.overlapping_pairs(pos, rad, 10_000))
     assert len(brute) > 20  # the discs do overlap
     assert {(a, b) for a, b, _ in brute} == {(a, b) for a, b, _ in tree}

@@ -15,7 +15,7 @@ import pytest
 from helpers import SCENARIOS, run_scenario
 
 from sandbox import load_scenario
-from sandbox.errors import ScenarioError
+from sandbox.errors import SandboxWarning, ScenarioError
 from sandbox.run.deadlock import find_deadlocks, stuck_samples
 
 SWAP = SCENARIOS / "safety" / "head_on_swap.yaml"
@@ -153,9 +153,10 @@ def test_head_on_stall_is_a_deadlock_and_the_tangential_term_has_none() -> None:
 
 
 def test_deadlock_keys_are_metrics_parameters() -> None:
-    _, m = run_scenario(
-        SWAP, "recovery.tangential=0", "metrics.deadlock_time=10", duration=6
-    )
+    with pytest.warns(SandboxWarning, match="no deadlock can be found"):
+        _, m = run_scenario(
+            SWAP, "recovery.tangential=0", "metrics.deadlock_time=10", duration=6
+        )
     assert m["deadlocks"] == []
     _, m = run_scenario(
         SWAP, "recovery.tangential=0", "metrics.deadlock_distance=3", duration=6

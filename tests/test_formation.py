@@ -93,7 +93,8 @@ CIRCLE_REF = (np.array([5.0, 0.0]), np.array([0.0, 1.0]), np.array([-0.2, 0.0]))
 
 
 def test_registry_has_the_five_laws() -> None:
-    assert set(LAWS) == {"fixed", "rotating", "virtual", "leader_ref", "own_estimate"}
+    report = {"fixed", "rotating", "virtual", "leader_ref", "own_estimate"}
+    assert set(LAWS) == report | {"potential", "flocking"}  # and references [2], [3]
     assert not LAWS["virtual"].needs_leader
     assert all(
         LAWS[k].needs_leader

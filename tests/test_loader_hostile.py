@@ -24,9 +24,9 @@ from sandbox.errors import SandboxWarning, ScenarioError
 from sandbox.scenario import (
     MAX_FILE_BYTES,
     MAX_NAME,
-    _overlapping_pairs,
     load_scenario,
     name_problem,
+    overlapping_pairs,
     parse_scenario,
 )
 
@@ -76,9 +76,9 @@ def test_overlapping_pairs_are_those_a_brute_force_finds(seed: int) -> None:
         for a, b in itertools.combinations(range(n), 2)
         if np.hypot(*(pos[a] - pos[b])) < rad[a] + rad[b] - 1e-9
     }
-    found = {(a, b) for a, b, _ in _overlapping_pairs(pos, rad, 10**6)}
+    found = {(a, b) for a, b, _ in overlapping_pairs(pos, rad, 10**6)}
     assert found == truth
-    few = list(_overlapping_pairs(pos, rad, 3))
+    few = list(overlapping_pairs(pos, rad, 3))
     assert len(few) == min(3, len(truth))
     assert {(a, b) for a, b, _ in few} <= truth
 
@@ -111,7 +111,7 @@ def test_validate_of_dev_zero_is_one_line_and_exit_2(
 def test_the_c_parser_is_used_and_gives_the_same_lines_and_duplicates(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    assert issubclass(sc._YAMLLoader, yaml.CSafeLoader)
+    assert issubclass(sc.YAMLLoader, yaml.CSafeLoader)
     root = Path(__file__).parent.parent / "scenarios"
     files = [
         *sorted(root.rglob("*.yaml"))[:6],
@@ -123,14 +123,14 @@ def test_the_c_parser_is_used_and_gives_the_same_lines_and_duplicates(
         for path in files:
             node = loader(path.read_text()).get_single_node()
             lines: dict[str, int] = {}
-            sc._line_map(node, "", lines)
-            out.append((lines, [str(p) for p in sc._duplicate_keys(node)]))
+            sc.line_map(node, "", lines)
+            out.append((lines, [str(p) for p in sc.duplicate_keys(node)]))
         return out
 
     class Pure(yaml.SafeLoader):
-        yaml_implicit_resolvers = sc._YAMLLoader.yaml_implicit_resolvers
+        yaml_implicit_resolvers = sc.YAMLLoader.yaml_implicit_resolvers
 
-    fast, slow = read(sc._YAMLLoader), read(Pure)
+    fast, slow = read(sc.YAMLLoader), read(Pure)
     assert fast == slow
     assert any(dups for _, dups in fast)
 

@@ -278,7 +278,7 @@ def test_every_kind_is_declared_with_a_builtin() -> None:
             p for p in plugins.registry(kind).values() if "built-in" in p.origin
         ]
         assert builtins, kind
-    assert plugins.names("filter") == ("none", "cbf")
+    assert plugins.names("filter") == ("none", "cbf", "orca")
     assert plugins.names("detector") == ("none", "oracle", "residual", "glr")
     assert len(plugins.names("law")) >= 5 and len(plugins.names("failure")) >= 5
     assert len(plugins.names("reference")) >= 5 and len(plugins.names("obstacle")) >= 4

@@ -19,7 +19,7 @@ from helpers import SCENARIOS, write_yaml
 
 from sandbox import Simulation, load_scenario
 from sandbox.behaviour.ranges import beam_layout
-from sandbox.errors import ScenarioError
+from sandbox.errors import SandboxWarning, ScenarioError
 from sandbox.loop.plan import structure_key
 from sandbox.model.obstacle_field import ObstacleField
 from sandbox.physics.ranges import HIT_OBSTACLE, HIT_VEHICLE, RangeCaster
@@ -174,7 +174,7 @@ def test_a_scan_is_held_until_the_next_at_the_rate() -> None:
     [
         ({"beams": 0}, "sensors.range.beams: out of range (got 0"),
         ({"beams": 1025}, "expected a whole number from 1 to 1024"),
-        ({"fov": 0}, "sensors.range.fov: must be greater than 0 (got 0"),
+        ({"fov": 0}, "sensors.range.fov: must be at least 0.001 (got 0"),
         ({"fov": 7}, "sensors.range.fov: must be at most 6.28319 (got 7"),
         ({"max_range": 0}, "sensors.range.max_range: must be greater than 0"),
         ({"max_range": -1}, "sensors.range.max_range:"),
@@ -271,7 +271,8 @@ def box_run(obstacles: str, strategy: str = "continuous") -> Any:
 
 @pytest.mark.slow
 def test_sensed_recovery_avoids_a_box() -> None:
-    hit = box_run("sensed", strategy="none")
+    with pytest.warns(SandboxWarning, match="does nothing here"):
+        hit = box_run("sensed", strategy="none")  # beta, r: the continuous strategy's
     assert any(e.kind == "vehicle_obstacle" for e in hit.events)  # the counter works
     run = box_run("sensed")
     assert not run.events

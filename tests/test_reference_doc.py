@@ -52,10 +52,10 @@ ROWS = TEXT.splitlines()
 
 def key_lines() -> dict[str, int]:
     """The 1-based line of every key path of the document (as the loader maps them)."""
-    from sandbox.scenario.yamlfile import _line_map
+    from sandbox.scenario.yamlfile import line_map
 
     lines: dict[str, int] = {}
-    _line_map(yaml.compose(TEXT), "", lines)
+    line_map(yaml.compose(TEXT), "", lines)
     return lines
 
 

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from sandbox.cli import main
-from sandbox.scenario import _YAMLLoader, load_scenario, parse_scenario
+from sandbox.scenario import YAMLLoader, load_scenario, parse_scenario
 from sandbox.scenario.schema import (
     LENGTH_PATTERN,
     NAME_PATTERN,
@@ -37,7 +37,7 @@ VALIDATOR = jsonschema.Draft202012Validator(build_schema())
 
 
 def read(path: Path) -> Any:
-    return yaml.load(path.read_text(encoding="utf-8"), Loader=_YAMLLoader)
+    return yaml.load(path.read_text(encoding="utf-8"), Loader=YAMLLoader)
 
 
 def errors(doc: Any) -> list[str]:

@@ -25,7 +25,7 @@ from sandbox.cli import main
 from sandbox.errors import ScenarioError
 from sandbox.loop.simulation import Simulation
 from sandbox.scenario import load_scenario, parse_scenario
-from sandbox.scenario.specs import _from_loader
+from sandbox.scenario.specs import from_loader
 
 BAD = Path(__file__).parent / "bad_scenarios"
 CORPUS = sorted(BAD.glob("*.yaml"))
@@ -360,7 +360,7 @@ def test_the_bound_of_the_check_is_what_the_simulation_shows() -> None:
     """Report gains: the check refuses dt >= 0.1 s; the loop converges below, not above.
 
     Point stabilization from 1 m, run with validation bypassed (the loader's private
-    ``_from_loader``: a plain ``dataclasses.replace`` is validated):
+    ``from_loader``: a plain ``dataclasses.replace`` is validated):
     dt = 0.09 s converges; dt = 0.15 s, which the linear bound |z| < 1 (dt < 0.2 s)
     would allow, diverges (the unicycle cannot follow a chi that reverses every period).
     """
@@ -377,7 +377,7 @@ def test_the_bound_of_the_check_is_what_the_simulation_shows() -> None:
             parse_scenario(dict(doc, dt=dt))
         except ScenarioError as exc:
             problems = exc.lines
-        with _from_loader():
+        with from_loader():
             unchecked = dataclasses.replace(base, dt=dt)
         run = Simulation(unchecked).run()
         error = np.hypot(run.pose[-1, 0, 0] - 1.0, run.pose[-1, 0, 1])

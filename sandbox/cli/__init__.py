@@ -49,6 +49,7 @@ from sandbox.cli.common import (
     command_signals,
     forget_caught_interrupt,
     load_cli_plugins,
+    trust_advice,
 )
 from sandbox.errors import PluginError, SandboxError, SandboxWarning, ScenarioError
 
@@ -141,7 +142,10 @@ def _one_line_warnings() -> Iterator[None]:
 def _dispatch(argv: list[str] | None) -> int:
     """Parse the command line and run the command; errors become messages."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:  # with the usage of the command given, not the top level's
+        command = getattr(args, "command_parser", None) or parser
+        command.error(f"unrecognized arguments: {' '.join(unknown)}")
     if args.command is None:  # plain `sandbox`: say what it can do
         parser.print_help()
         return EXIT_OK
@@ -153,7 +157,7 @@ def _dispatch(argv: list[str] | None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     except ScenarioError as exc:
-        for line in exc.lines:
+        for line in trust_advice(exc, args).lines:
             print(line, file=sys.stderr)
         return EXIT_INVALID
     except PluginError as exc:

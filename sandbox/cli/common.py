@@ -140,36 +140,13 @@ def progress(total: int, desc: str, unit: str = "step") -> Progress:
     return Progress(total, desc, unit)
 
 
-class StopFlag:
-    """SIGINT/SIGTERM handler that asks the running simulation to stop cleanly."""
-
-    def __init__(self) -> None:
-        self.raised = False
-        self._old: dict[int, object] = {}
-
-    def __call__(self) -> bool:
-        """Whether a stop was asked for."""
-        return self.raised
-
-    def _handle(self, signum: int, frame: FrameType | None) -> None:
-        self.raised = True
-
-    def __enter__(self) -> StopFlag:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            self._old[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
-
-
 class command_signals:  # noqa: N801 - used as a context manager, like a function
     """SIGINT and SIGTERM raise ``KeyboardInterrupt`` while a command runs.
 
     The same at every phase (loading, writing a GIF, ...): whatever is being written
     is removed or left whole by its ``except``/``finally``, and ``main`` exits with
-    status 130. A run's simulation and output writing use :class:`StopFlag` instead.
+    status 130. A run's simulation and output writing use
+    :class:`sandbox._startup.StopOnSignal` instead (a first signal asks them to stop).
     The earlier handlers are restored on exit.
 
     An interrupt that lands where Python cannot raise it (a ``__del__`` method, a
@@ -521,6 +498,21 @@ def add_plugin_option(p: argparse.ArgumentParser, trust: bool = False) -> None:
         )
 
 
+def trust_advice(exc: Exception, args: argparse.Namespace) -> Exception:
+    """A refusal of plug-in code, advising what this command takes to run it.
+
+    Commands that run scenarios take ``--trust-plugins``; the others (``validate``,
+    ``view``, ``gallery``, ...) never run the code a file lists, but load a plug-in
+    named with ``--plugin``. Any other error is returned as it is (and nothing is
+    imported for it).
+    """
+    advised = getattr(exc, "advised", None)  # an UntrustedScenario's
+    if advised is None:
+        return exc
+    runs = getattr(args, "trust_plugins", None) is not None
+    return advised("option" if runs else "plugin")
+
+
 def load_cli_plugins(args: argparse.Namespace) -> None:
     """Import the ``--plugin`` plug-ins and the installed entry points.
 
@@ -562,10 +554,13 @@ def add_command(
     epilog = "examples:\n" + "\n".join(f"  {line}" for line in examples)
     text = description or f"{summary[:1].upper()}{summary[1:]}."
     width = min(shutil.get_terminal_size().columns - 2, 78)
-    return sub.add_parser(
+    parser = sub.add_parser(
         name,
         help=summary,
         description=textwrap.fill(text, width),
         epilog=epilog,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    # an unknown option is reported with this command's usage (sandbox.cli.main)
+    parser.set_defaults(command_parser=parser)
+    return parser

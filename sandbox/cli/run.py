@@ -6,11 +6,11 @@ import argparse
 import sys
 from pathlib import Path
 
+from sandbox._startup import StopOnSignal
 from sandbox.cli.common import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
     EXIT_OK,
-    StopFlag,
     add_command,
     add_gif_options,
     add_plugin_option,
@@ -24,6 +24,12 @@ from sandbox.cli.common import (
 )
 from sandbox.cli.info import not_built_warnings
 from sandbox.errors import Problem, ScenarioError
+
+#: What the first SIGINT/SIGTERM of a run says.
+STOP_NOTICE = (
+    "stopping: the run ends at this step and its outputs are written (a second "
+    "Ctrl-C stops at once, without them)"
+)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -61,10 +67,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_mp4(args)
     if args.gif:
         check_gif_frames(scenario.duration, args)
-    # SIGINT/SIGTERM only raise the flag until the outputs are written: the run stops
-    # at the next step and its outputs so far are still written whole (atomically).
-    with StopFlag() as stop:
-        sim = Simulation(scenario)
+    # Building the run: a signal ends the command (nothing is written yet). Then a
+    # first SIGINT/SIGTERM only raises the flag until the outputs are written: the
+    # run stops at the next step and its outputs so far are written whole
+    # (atomically); a second stops the command at once (sandbox/_startup.py).
+    sim = Simulation(scenario)
+    with StopOnSignal(STOP_NOTICE) as stop:
         with progress(sim.steps, "simulating") as bar:
             run = sim.run(progress=bar, should_stop=stop)
         metrics = compute_metrics(run)

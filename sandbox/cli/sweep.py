@@ -20,6 +20,7 @@ from sandbox.cli.common import (
     add_command,
     add_plugin_option,
     positive,
+    progress,
     scenario_file,
 )
 from sandbox.errors import SandboxError
@@ -59,7 +60,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, file: str) -> int:
     from sandbox.study import engine
     from sandbox.study.spec import SweepError, build_spec
-    from sandbox.study.sweep import Progress, describe_dry_run, run_sweep
+    from sandbox.study.sweep import describe_dry_run, run_sweep
 
     if args.out is None:
         print("error: sandbox sweep FILE: --out DIR is required", file=sys.stderr)
@@ -90,7 +91,14 @@ def _run(args: argparse.Namespace, file: str) -> int:
         for line in lines:
             print(line)
         return EXIT_OK
-    jobs = args.jobs
+    if (args.scheduler or args.scheduler_file) and args.jobs is not None:
+        print(
+            f"error: --jobs {args.jobs} with a Dask scheduler: the cluster's workers "
+            "run the runs there (give --jobs for local processes, or the scheduler)",
+            file=sys.stderr,
+        )
+        return EXIT_INVALID
+    jobs = 1 if args.jobs is None else args.jobs
     if jobs < 1:
         print(f"error: --jobs {jobs}: expected at least 1", file=sys.stderr)
         return EXIT_INVALID
@@ -101,19 +109,19 @@ def _run(args: argparse.Namespace, file: str) -> int:
             file=sys.stderr,
         )
         jobs = cores
-    progress = Progress() if sys.stderr.isatty() else None
-    try:
-        report = run_sweep(
-            spec,
-            out,
-            jobs=jobs,
-            scheduler=args.scheduler,
-            scheduler_file=args.scheduler_file,
-            retry_failed=args.retry_failed,
-            progress=progress,
-            max_runs=args.max_runs,
-            keep_runs=args.keep_runs,
-        )
+    try:  # the progress bar of every command (tqdm, on a terminal only)
+        with progress(0, "sweep", unit="run") as bar:
+            report = run_sweep(
+                spec,
+                out,
+                jobs=jobs,
+                scheduler=args.scheduler,
+                scheduler_file=args.scheduler_file,
+                retry_failed=args.retry_failed,
+                progress=bar,
+                max_runs=args.max_runs,
+                keep_runs=args.keep_runs,
+            )
     except SweepError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
@@ -285,8 +293,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--jobs",
         type=int,
-        default=1,
-        help="local processes (default 1: in-process; at most the cores)",
+        default=None,
+        help="local processes (default 1: in-process; at most the cores; not with "
+        "--scheduler)",
     )
     p.add_argument(
         "--scheduler", metavar="ADDR", help="Dask scheduler, tcp://host:port"

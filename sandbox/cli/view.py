@@ -18,6 +18,7 @@ from sandbox.cli.common import (
     add_command,
     add_plugin_option,
     nonempty,
+    trust_advice,
 )
 
 #: The page's name in the run directory.
@@ -37,7 +38,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         run = load_run_dir(run_dir)
         written = write_run_html(run, out)
     except SandboxError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {trust_advice(exc, args)}", file=sys.stderr)
         return EXIT_INVALID
     print_written(written)
     return EXIT_OK

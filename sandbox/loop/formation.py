@@ -79,12 +79,14 @@ class Formation:
             first.reconfigure.assign != "none" or first.on_leader_failure != "keep"
         )
         batched = plugin is not None and bool(plugin.options.get("batched", False))
-        #: Whether each world's own law is evaluated on its rows (module docstring).
-        self.per_world = plugin is not None and (
-            not batched or (reforming and not built_in)
-        )
         #: A built-in law class: it reads its leader and the reference only.
         self.inputs = built_in and inspect.isclass(plugin.obj)
+        #: Whether each world's own law is evaluated on its rows (module docstring):
+        #: worlds that re-form apart share one law only where it is a built-in law
+        #: class, whose state the loop knows (:mod:`sandbox.loop.reforming`).
+        self.per_world = plugin is not None and (
+            not batched or (reforming and not self.inputs)
+        )
         offset = fleet.offset
         # Each world's own law, on its rows alone: evaluated world by world, or what
         # its reconfiguration acts on.

@@ -292,10 +292,10 @@ class RangeCaster:
         last = count[s] - 1
         pair, beam = [], []
         for turn in (0.0, -2.0 * math.pi):
-            lo = np.ceil((edge + turn) / step[s] - 1e-9)
-            hi = np.floor((edge + turn + 2.0 * half) / step[s] + 1e-9)
-            lo = np.where(inside, 0, np.maximum(lo, 0)).astype(np.intp)
-            hi = np.minimum(hi, last).astype(np.intp)
+            lo = np.ceil(_beams_to(edge + turn, step[s]) - 1e-9)
+            hi = np.floor(_beams_to(edge + turn + 2.0 * half, step[s]) + 1e-9)
+            lo = np.where(inside, 0, np.clip(lo, 0, last + 1)).astype(np.intp)
+            hi = np.clip(hi, -1, last).astype(np.intp)
             hi = np.where(inside, last if turn == 0.0 else -1, hi)
             length = np.maximum(hi - lo + 1, 0)
             p = np.repeat(np.arange(len(s)), length)
@@ -362,6 +362,22 @@ class RangeCaster:
             if hit is not None and hit.shape is not None:
                 out[k] = hit.alpha
         return out  # pragma: no cover
+
+
+def _beams_to(angle: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """How many beam spacings ``step`` [rad] the angles [rad] are, without overflow.
+
+    One beam (``step`` 0) is at 0: an angle above it is ``+inf`` spacings away, one
+    below ``-inf``; a spacing so narrow that the count overflows gives an infinite
+    count too (the caller clips the counts to the beams there are).
+
+    >>> _beams_to(np.array([1.0, -1.0, 0.0, 1.0]), np.array([0.5, 0.0, 0.0, 0.0]))
+    array([  2., -inf,   0.,  inf])
+    """
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        count = angle / step
+    beyond = np.where(angle > 0.0, np.inf, np.where(angle < 0.0, -np.inf, 0.0))
+    return np.where(step > 0.0, count, beyond)
 
 
 def _address(shape: pymunk.Shape) -> int:

@@ -6,7 +6,7 @@ module that registers into it. Registration order within a kind is the order her
 """
 
 #: The modules whose decorators register the built-in laws, detectors, failures,
-#: obstacles, strategies, references and filters.
+#: obstacles, strategies, references and filters, and contributions to the metrics.
 BUILTIN_MODULES: tuple[str, ...] = (
     "sandbox.model.laws",
     "sandbox.behaviour.detection",
@@ -16,4 +16,8 @@ BUILTIN_MODULES: tuple[str, ...] = (
     "sandbox.behaviour.recovery",
     "sandbox.model.references",
     "sandbox.behaviour.safety",
+    "sandbox.model.potential",
+    "sandbox.model.flocking",
+    "sandbox.behaviour.safety.orca",
+    "sandbox.run.goals",
 )

@@ -28,6 +28,7 @@ from sandbox.render.overlay import (
     frame_bands,
 )
 from sandbox.render.palette import build_palette
+from sandbox.run.constrained import constrained_mask, filter_name
 from sandbox.run.record import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, Run
 
 __all__ = [
@@ -473,6 +474,9 @@ def _legend_items(run: Run, body: np.ndarray, large: bool) -> list[LegendItem]:
         items.append(LegendItem("avoid", "avoiding"))
     if (mode == MODE_EXTERNAL).any():
         items.append(LegendItem("external", "external command"))
+    constrained = constrained_mask(run)
+    if constrained is not None and constrained.any():
+        items.append(LegendItem("filter", f"{filter_name(run)} acting"))
     if np.asarray(run.failed, dtype=bool).any() or (mode == MODE_FAILED).any():
         items.append(LegendItem("failed", "failed"))
     if len(run.events):

@@ -91,7 +91,8 @@ class LegendItem:
     ----------
     kind : str
         The mark drawn: ``"vehicle"`` (a disc of the vehicle's colour), ``"slot"``,
-        ``"reference"``, ``"avoid"``, ``"external"``, ``"failed"`` or ``"collision"``.
+        ``"reference"``, ``"avoid"``, ``"external"``, ``"filter"`` (constrained by
+        the safety filter), ``"failed"`` or ``"collision"``.
     label : str
     color : int
         Palette index of a vehicle's colour (for ``"vehicle"``), else unused.
@@ -239,8 +240,9 @@ def _draw_mark(
     elif item.kind == "reference":
         draw.line([x, yc, x + 0.4 * w, yc], fill=marks["path"], width=1)
         draw.line([x + 0.6 * w, yc, x + w, yc], fill=marks["path"], width=1)
-    elif item.kind in ("avoid", "external"):
-        color = marks["orange" if item.kind == "avoid" else "blue"]
+    elif item.kind in ("avoid", "external", "filter"):
+        fills = {"avoid": marks["orange"], "external": marks["blue"]}
+        color = fills.get(item.kind, black)
         draw.ellipse([cx - r, yc - r, cx + r, yc + r], fill=color)
         draw.ellipse(box, fill=white, outline=black, width=1)
     elif item.kind == "failed":

@@ -45,6 +45,7 @@ from sandbox.render.palette import (
     stamp_discs,
 )
 from sandbox.render.platoons import platoon_paths, platoon_references
+from sandbox.run.constrained import constrained_mask
 from sandbox.run.record import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, Run
 
 #: How long a collision flash stays visible [s] (simulated; at least 1.5 frames).
@@ -105,6 +106,8 @@ class Scene:
         rec = run.info.get("recovery") if isinstance(run.info, dict) else None
         rec = rec if isinstance(rec, dict) else {}
         self.strategy = recovery_label(run, str(rec.get("strategy", "-")))
+        # The vehicles a safety filter constrained (a black ring), None: never.
+        self.constrained = constrained_mask(run)
         self.zone_radii = [
             float(v) for v in (rec.get("R"), rec.get("r")) if v is not None and v > 0
         ]
@@ -220,6 +223,11 @@ class Scene:
         avoid = (self.mode[k] == MODE_AVOID) & ~failed
         external = (self.mode[k] == MODE_EXTERNAL) & ~failed
         ring = np.where(external, BLUE, ORANGE)
+        ringed = avoid | external
+        if self.constrained is not None:
+            filtered = self.constrained[k] & ~failed & ~external
+            ring = np.where(filtered, BLACK, ring)
+            ringed = ringed | filtered
         draw = ImageDraw.Draw(img)
         draw.fontmode = "1"
         if self.trails:
@@ -248,7 +256,7 @@ class Scene:
                 heading=self.theta[k],
                 heading_width=np.maximum(2.0, 0.2 * radius),
                 detail=radius >= _MIN_DETAIL_PX,
-                halo=avoid | external,
+                halo=ringed,
                 halo_width=halo,
                 halo_color=ring,
             )
@@ -257,9 +265,7 @@ class Scene:
             draw.fontmode = "1"
         else:
             self._draw_slots(draw, cam.world_to_pixel(self.slot[k]))
-            self._draw_bodies(
-                draw, centers, radius, self.theta[k], avoid | external, halo, ring
-            )
+            self._draw_bodies(draw, centers, radius, self.theta[k], ringed, halo, ring)
         self._draw_failures(draw, centers[failed], radius[failed])
         self._draw_flashes(draw, cam, self.t[k])
         self._draw_hud(draw, img, self.t[k])
@@ -289,7 +295,7 @@ class Scene:
         """Bodies (fill, black edge, heading line) and rings of avoiders.
 
         The ring is orange, or the palette index ``ring[i]`` (blue for vehicles in
-        external mode).
+        external mode, black for those a safety filter constrained).
         """
         ok = np.isfinite(centers).all(axis=1) & np.isfinite(theta)
         for i in np.flatnonzero(ok):

@@ -16,6 +16,8 @@ those declarations. The package:
 - :mod:`.yamlfile`: bounded YAML reading, line numbers, duplicate keys;
 - :mod:`.sections`, :mod:`.vehicles`: the declared sections and their readers;
 - :mod:`.checks`: checks across sections;
+- :mod:`.needs`: what a run will need (memory, disk), and the bounds that follow;
+- :mod:`.inert`: keys that would do nothing, warned of;
 - :mod:`.parse`: :func:`load_scenario`, :func:`parse_scenario`, ``--set``.
 
 The format is documented key by key in ``scenarios/reference.yaml``. Lengths may be
@@ -24,17 +26,16 @@ written in metres (``0.75``) or as multiples of the default vehicle diameter (``
 """
 
 from sandbox.model.obstacles import ObstacleSpec
-from sandbox.scenario.checks import _overlapping_pairs
+from sandbox.scenario.checks import overlapping_pairs
 from sandbox.scenario.parse import load_scenario, parse_scenario
 from sandbox.scenario.platoons import PLATOONS, PLATOONS_KEYS
 from sandbox.scenario.reader import (
-    _BAD_NAME,
-    _LENGTH,
+    BAD_NAME,
+    LENGTH,
     MAX_FILE_BYTES,
     MAX_LENGTH,
     MAX_NAME,
     MAX_NUMBER,
-    MAX_RECORD_BYTES,
     MAX_RECORD_EVERY,
     MAX_SEED,
     MAX_STEPS,
@@ -42,6 +43,7 @@ from sandbox.scenario.reader import (
     MAX_VEHICLES,
     MIN_DIAMETER,
     MIN_MASS,
+    MIN_POSITIVE,
     NAME_RULE,
     name_problem,
 )
@@ -95,7 +97,7 @@ from sandbox.scenario.vehicles import (
     VEHICLE_PARAMS,
     platoon_offsets,
 )
-from sandbox.scenario.yamlfile import _duplicate_keys, _line_map, _YAMLLoader
+from sandbox.scenario.yamlfile import YAMLLoader, duplicate_keys, line_map
 
 __all__ = [
     "DRIVE",
@@ -107,7 +109,6 @@ __all__ = [
     "MAX_LENGTH",
     "MAX_NAME",
     "MAX_NUMBER",
-    "MAX_RECORD_BYTES",
     "MAX_RECORD_EVERY",
     "MAX_SEED",
     "MAX_STEPS",
@@ -116,6 +117,7 @@ __all__ = [
     "METRICS",
     "MIN_DIAMETER",
     "MIN_MASS",
+    "MIN_POSITIVE",
     "NAME_RULE",
     "OBSTACLE",
     "PALETTE",
@@ -156,12 +158,12 @@ __all__ = [
     "ReferenceSpec",
     "Scenario",
     "VehicleSpec",
-    "_BAD_NAME",
-    "_LENGTH",
-    "_YAMLLoader",
-    "_duplicate_keys",
-    "_line_map",
-    "_overlapping_pairs",
+    "BAD_NAME",
+    "LENGTH",
+    "YAMLLoader",
+    "duplicate_keys",
+    "line_map",
+    "overlapping_pairs",
     "load_scenario",
     "name_problem",
     "parse_scenario",

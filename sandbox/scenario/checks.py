@@ -20,12 +20,10 @@ from sandbox.model.flatness import (
 )
 from sandbox.model.obstacles import ObstacleSpec
 from sandbox.scenario.reader import (
-    _BYTES_PER_SAMPLE,
-    MAX_RECORD_BYTES,
     MAX_STEPS,
-    _describe,
-    _hint,
-    _Reader,
+    Reader,
+    describe,
+    hint,
 )
 from sandbox.scenario.specs import (
     FailureSpec,
@@ -37,12 +35,11 @@ from sandbox.scenario.specs import (
 )
 
 
-def _check_consistency(
-    rd: _Reader,
+def check_consistency(
+    rd: Reader,
     doc: dict[Any, Any],
     duration: float | None,
     dt: float | None,
-    record_every: int | None,
     vehicles: list[tuple[str, VehicleSpec]],
     reference: ReferenceSpec | None,
     formation: FormationSpec | None,
@@ -70,7 +67,7 @@ def _check_consistency(
         rd.fail(
             "vehicles",
             "required key is missing (no vehicles)",
-            _describe(doc.get("vehicles")),
+            describe(doc.get("vehicles")),
             "a 'vehicles' list with at least one vehicle, or a 'platoon'",
         )
     if duration is not None and dt is not None:
@@ -88,18 +85,6 @@ def _check_consistency(
                 f"duration / dt = {duration / dt:.3g} steps",
                 f"at most {MAX_STEPS:g} steps: a longer dt or a shorter duration",
             )
-        elif record_every is not None:
-            samples = duration / dt // record_every + 1
-            size = samples * max(len(declared), 1) * _BYTES_PER_SAMPLE
-            if size > MAX_RECORD_BYTES:
-                rd.fail(
-                    "duration",
-                    "the run would not fit in memory",
-                    f"{samples:.3g} recorded samples of {len(declared)} vehicles, "
-                    f"about {size / 1e9:.3g} GB",
-                    f"at most {MAX_RECORD_BYTES / 1e9:g} GB: a shorter duration, a "
-                    "longer dt or a larger record_every",
-                )
     if dt is not None:
         _check_gains(rd, doc, dt, vehicles)
 
@@ -166,7 +151,7 @@ def _check_consistency(
         if vehicle is not None and vehicle not in names:
             rd.fail(
                 f"{where}.vehicle",
-                f"no such vehicle{_hint(vehicle, tuple(names))}",
+                f"no such vehicle{hint(vehicle, tuple(names))}",
                 repr(vehicle),
                 f"one of: {', '.join(list(names)[:10])}"
                 + (", ..." if len(names) > 10 else ""),
@@ -211,7 +196,7 @@ def _gains_path(doc: dict[Any, Any], where: str) -> str:
 
 
 def _check_gains(
-    rd: _Reader, doc: dict[Any, Any], dt: float, vehicles: list[tuple[str, VehicleSpec]]
+    rd: Reader, doc: dict[Any, Any], dt: float, vehicles: list[tuple[str, VehicleSpec]]
 ) -> None:
     """Check that the discrete update of eq. (6) is stable with the gains and period.
 
@@ -323,7 +308,7 @@ def _with_neighbours(
         yield from (int(a) for a in block[np.asarray(counts) > (1 if same else 0)])
 
 
-def _overlapping_pairs(
+def overlapping_pairs(
     pos: np.ndarray, rad: np.ndarray, limit: int
 ) -> Iterator[tuple[int, int, float]]:
     """Yield up to ``limit`` pairs ``(a, b, distance)`` of discs that overlap.
@@ -383,7 +368,7 @@ def _overlapping_pairs(
 
 
 def _check_geometry(
-    rd: _Reader,
+    rd: Reader,
     vehicles: list[tuple[str, VehicleSpec]],
     law: str | None,
     recovery: RecoverySpec | None = None,
@@ -398,7 +383,7 @@ def _check_geometry(
         return
     pos = np.array([v.pose[:2] for _, v in vehicles])
     rad = np.array([v.diameter / 2 for _, v in vehicles])
-    for shown, (a, b, dist) in enumerate(_overlapping_pairs(pos, rad, 6)):
+    for shown, (a, b, dist) in enumerate(overlapping_pairs(pos, rad, 6)):
         if shown == 5:
             rd.fail(
                 f"{vehicles[b][0]}.pose",
@@ -430,7 +415,7 @@ def _check_geometry(
         off[leads] = 0.0
     idx = np.flatnonzero(~leads)
     close = set()
-    for a, b, gap in _overlapping_pairs(off[idx], rad[idx], 3):
+    for a, b, gap in overlapping_pairs(off[idx], rad[idx], 3):
         a, b = int(idx[a]), int(idx[b])
         close.add((a, b))
         where = vehicles[b][0]
@@ -445,7 +430,7 @@ def _check_geometry(
     # The leader's slot is its own offset (the origin of the formation frame).
     half = np.full(len(vehicles), recovery.R / 2.0)
     shown = 0
-    for a, b, gap in _overlapping_pairs(off, half, 6):
+    for a, b, gap in overlapping_pairs(off, half, 6):
         if (a, b) in close:
             continue
         shown += 1
@@ -487,7 +472,7 @@ def _distance_to_obstacle(o: ObstacleSpec, p: np.ndarray) -> np.ndarray:
 
 
 def _check_obstacle_starts(
-    rd: _Reader,
+    rd: Reader,
     vehicles: list[tuple[str, VehicleSpec]],
     obstacles: list[tuple[str, ObstacleSpec]],
 ) -> None:

@@ -33,9 +33,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from sandbox.plugins.registration import Param
-from sandbox.scenario.reader import _describe, _hint, _Reader
-from sandbox.scenario.sections import _reference
-from sandbox.scenario.specs import ReferenceSpec, _plain
+from sandbox.scenario.reader import NAME_RULE, Reader, describe, hint, name_problem
+from sandbox.scenario.sections import read_reference
+from sandbox.scenario.specs import ReferenceSpec, plain
 
 _WHEN = {
     "type": "object",
@@ -120,7 +120,7 @@ class EventSpec:
         if self.kind == "merge":
             doc["merge"] = {"into": self.into, "from": self.source}
         else:
-            ref = {"type": self.reference.type, **_plain(self.reference.params, True)}
+            ref = {"type": self.reference.type, **plain(self.reference.params, True)}
             doc["split"] = {
                 "platoon": self.platoon,
                 "vehicles": list(self.vehicles),
@@ -131,7 +131,7 @@ class EventSpec:
 
 
 def read_events(
-    rd: _Reader,
+    rd: Reader,
     doc: Any,
     platoons: list[Any],
     duration: float,
@@ -180,7 +180,7 @@ def _keys(m: dict[Any, Any]) -> str:
 
 
 def _name(
-    rd: _Reader, m: dict[Any, Any], key: str, path: str, alive: dict
+    rd: Reader, m: dict[Any, Any], key: str, path: str, alive: dict
 ) -> str | None:
     value = m.get(key)
     if isinstance(value, str) and value in alive:
@@ -188,15 +188,15 @@ def _name(
     rd.fail(
         f"{path}.{key}",
         "no such platoon"
-        + (_hint(value, tuple(alive)) if isinstance(value, str) else ""),
-        _describe(value),
+        + (hint(value, tuple(alive)) if isinstance(value, str) else ""),
+        describe(value),
         f"one of: {', '.join(alive)} (at this point of the events)",
     )
     return None
 
 
 def _when(
-    rd: _Reader, doc: Any, path: str, alive: dict
+    rd: Reader, doc: Any, path: str, alive: dict
 ) -> tuple[str, float, str] | None:
     if doc is None:
         return None
@@ -220,7 +220,7 @@ def _when(
 
 
 def _merge(
-    rd: _Reader, doc: Any, path: str, alive: dict, leaders: dict
+    rd: Reader, doc: Any, path: str, alive: dict, leaders: dict
 ) -> EventSpec | None:
     m = rd.mapping(doc, path)
     if m is None:
@@ -243,7 +243,7 @@ def _merge(
 
 
 def _split(
-    rd: _Reader, doc: Any, path: str, alive: dict, leaders: dict
+    rd: Reader, doc: Any, path: str, alive: dict, leaders: dict
 ) -> EventSpec | None:
     m = rd.mapping(doc, path)
     if m is None:
@@ -255,8 +255,16 @@ def _split(
         rd.fail(
             f"{path}.new",
             "not a new platoon name",
-            _describe(new),
+            describe(new),
             "a name no platoon has",
+        )
+        new = None
+    elif (why := name_problem(new)) is not None:  # the rule of every platoon's name
+        rd.fail(
+            f"{path}.new",
+            "unusable name",
+            f"{describe(new)}, which {why}",
+            NAME_RULE,
         )
         new = None
     vehicles = m.get("vehicles")
@@ -268,7 +276,7 @@ def _split(
         rd.fail(
             f"{path}.vehicles",
             "not a list of vehicle names",
-            _describe(vehicles),
+            describe(vehicles),
             "names of the platoon's vehicles",
         )
         return None
@@ -281,7 +289,7 @@ def _split(
             "the new platoon's reference",
         )
     else:
-        reference = _reference(rd, m["reference"], f"{path}.reference")
+        reference = read_reference(rd, m["reference"], f"{path}.reference")
     if name is None or new is None or reference is None:
         return None
     mine = alive[name]
@@ -306,7 +314,7 @@ def _split(
         rd.fail(
             f"{path}.vehicles",
             "a vehicle listed twice",
-            _describe(vehicles),
+            describe(vehicles),
             "each once",
         )
         return None

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from sandbox.scenario.reader import _Reader
+    from sandbox.scenario.reader import Reader
 
 #: Keys of the ``expect:`` section.
 EXPECT_KEYS = (
@@ -370,7 +370,7 @@ class Expectations:
 
 # ------------------------------------------------------------------------------ reading
 def read_expectations(
-    rd: _Reader,
+    rd: Reader,
     doc: Any,
     path: str,
     names: Sequence[str] | None,
@@ -380,7 +380,7 @@ def read_expectations(
 
     Parameters
     ----------
-    rd : sandbox.scenario.reader._Reader
+    rd : sandbox.scenario.reader.Reader
         The loader's field reader (collects problems with their YAML lines).
     doc : Any
         The section as loaded from YAML; None or an empty mapping: no expectations.
@@ -398,7 +398,7 @@ def read_expectations(
     Expectations or None
         None when there is no section or it has problems.
     """
-    from sandbox.scenario.reader import _describe
+    from sandbox.scenario.reader import describe
 
     m = rd.mapping(doc, path)
     if not m:
@@ -449,7 +449,7 @@ def read_expectations(
                 if b is not None:
                     settling_times.append((name, b))
             if not sm:
-                rd.fail(sub, "empty", _describe(sm), _settle_kind())
+                rd.fail(sub, "empty", describe(sm), _settle_kind())
     formation_error = []
     if m.get("formation_error") is not None:
         sub = f"{path}.formation_error"
@@ -481,15 +481,15 @@ def read_expectations(
 
 
 def _read_platoons(
-    rd: _Reader, doc: Any, path: str, platoons: Sequence[str] | None
+    rd: Reader, doc: Any, path: str, platoons: Sequence[str] | None
 ) -> tuple[tuple[str, str, Any], ...]:
     """The ``expect: platoons:`` entries, ``(platoon, key, value)``."""
-    from sandbox.scenario.reader import _describe, _hint
+    from sandbox.scenario.reader import describe, hint
 
     if doc is None:
         return ()
     if not platoons:
-        rd.fail(path, "only with platoons:", _describe(doc), "a platoons: section")
+        rd.fail(path, "only with platoons:", describe(doc), "a platoons: section")
         return ()
     out: list[tuple[str, str, Any]] = []
     for name, value in (rd.mapping(doc, path) or {}).items():
@@ -497,8 +497,8 @@ def _read_platoons(
         if name not in platoons:
             rd.fail(
                 sub,
-                f"no such platoon{_hint(name, tuple(platoons))}",
-                _describe(name),
+                f"no such platoon{hint(name, tuple(platoons))}",
+                describe(name),
                 f"one of: {', '.join(platoons)}",
             )
             continue
@@ -538,10 +538,10 @@ def _names_text(names: Sequence[str]) -> str:
 
 
 def _vehicle(
-    rd: _Reader, name: Any, names: Sequence[str] | None, path: str, bounds: bool
+    rd: Reader, name: Any, names: Sequence[str] | None, path: str, bounds: bool
 ) -> bool:
     """Whether ``name`` is a vehicle of the scenario; records a problem if not."""
-    from sandbox.scenario.reader import _describe, _hint
+    from sandbox.scenario.reader import describe, hint
 
     if isinstance(name, str) and (names is None or name in names):
         return True
@@ -552,19 +552,17 @@ def _vehicle(
             f"at_least, at_most, or a vehicle name: {_names_text(list(names or ()))}"
         )
     what = "unknown key" if bounds else "no such vehicle"
-    rd.fail(
-        f"{path}.{name}", f"{what}{_hint(name, allowed)}", _describe(name), expected
-    )
+    rd.fail(f"{path}.{name}", f"{what}{hint(name, allowed)}", describe(name), expected)
     return False
 
 
-def _bound(rd: _Reader, value: Any, path: str, kind: str) -> Bound | None:
+def _bound(rd: Reader, value: Any, path: str, kind: str) -> Bound | None:
     """Read a bound: ``{at_least: x, at_most: y}``, or a bare whole number for counts.
 
     ``kind`` is ``count`` (whole numbers >= 0), ``length`` (metres or ``"3d"``, >= 0) or
     ``time`` (seconds, >= 0).
     """
-    from sandbox.scenario.reader import _describe
+    from sandbox.scenario.reader import describe
 
     expected = {
         "count": "a whole number >= 0, or {at_least: N} and/or {at_most: N}",
@@ -575,7 +573,7 @@ def _bound(rd: _Reader, value: Any, path: str, kind: str) -> Bound | None:
         n = _count(rd, value, path)
         return None if n is None else Bound(n, n)
     if not isinstance(value, dict):
-        rd.fail(path, "not a bound", _describe(value), expected)
+        rd.fail(path, "not a bound", describe(value), expected)
         return None
     rd.keys(value, BOUND_KEYS, path)
     ends: dict[str, float | None] = {}
@@ -593,7 +591,7 @@ def _bound(rd: _Reader, value: Any, path: str, kind: str) -> Bound | None:
             return None
     if not ends:
         if not any(k not in BOUND_KEYS for k in value):
-            rd.fail(path, "no bound given", _describe(value), expected)
+            rd.fail(path, "no bound given", describe(value), expected)
         return None
     lo, hi = ends.get("at_least"), ends.get("at_most")
     if lo is not None and hi is not None and lo > hi:
@@ -616,13 +614,13 @@ def _bound_text(lo: float | None, hi: float | None) -> str:
     return ", ".join(p for p in parts if p)
 
 
-def _count(rd: _Reader, value: Any, path: str) -> int | None:
-    from sandbox.scenario.reader import _describe
+def _count(rd: Reader, value: Any, path: str) -> int | None:
+    from sandbox.scenario.reader import describe
 
     if isinstance(value, float) and value.is_integer() and abs(value) < 2**53:
         value = int(value)
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        rd.fail(path, "not a count", _describe(value), "a whole number >= 0")
+        rd.fail(path, "not a count", describe(value), "a whole number >= 0")
         return None
     if value > MAX_COUNT:
         shown = (

@@ -14,37 +14,24 @@ import yaml
 
 from sandbox import plugins
 from sandbox.errors import Problem
-from sandbox.plugins.registration import (
-    KINDS,
-)
-from sandbox.scenario.events import EVENT_KEYS
+from sandbox.plugins.registration import KINDS, Param
+from sandbox.scenario.events import EVENT
 from sandbox.scenario.expectations import allowed_keys as expect_keys
-from sandbox.scenario.platoons import PLATOONS_KEYS
-from sandbox.scenario.reader import (
-    _describe,
-    _hint,
-    _Reader,
-)
+from sandbox.scenario.platoons import PLATOONS
+from sandbox.scenario.reader import Reader, describe, hint
 from sandbox.scenario.sections import (
-    METRICS_KEYS,
+    METRICS,
     PLUGIN_SECTIONS,
-    RECONFIGURE_KEYS,
-    SENSING_KEYS,
-    TOP_KEYS,
+    RECONFIGURE,
+    SENSING,
+    TOP,
 )
-from sandbox.scenario.vehicles import (
-    DRIVE_KEYS,
-    GAIN_KEYS,
-    PLATOON_KEYS,
-    VEHICLE_KEYS,
-    VEHICLE_PARAM_KEYS,
-)
-from sandbox.scenario.yamlfile import (
-    _YAMLLoader,
-)
+from sandbox.scenario.sensors import RANGE, SENSORS
+from sandbox.scenario.vehicles import DRIVE, GAINS, PLATOON, VEHICLE, VEHICLE_PARAMS
+from sandbox.scenario.yamlfile import YAMLLoader
 
 
-def _mark_overrides(
+def mark_overrides(
     problems: list[Problem], overridden: list[tuple[str, str]]
 ) -> list[Problem]:
     """Point problems in fields set on the command line at their ``--set``.
@@ -62,7 +49,7 @@ def _mark_overrides(
     return out
 
 
-def _apply_override(rd: _Reader, doc: dict[Any, Any], item: str) -> str | None:
+def apply_override(rd: Reader, doc: dict[Any, Any], item: str) -> str | None:
     """Apply one ``path=value`` assignment, e.g. ``recovery.beta=2``.
 
     Returns the field path it set, or None (a problem is recorded) if it names no field.
@@ -76,7 +63,7 @@ def _apply_override(rd: _Reader, doc: dict[Any, Any], item: str) -> str | None:
         )
         return None
     try:
-        value = yaml.load(raw, Loader=_YAMLLoader)
+        value = yaml.load(raw, Loader=YAMLLoader)
     except (yaml.YAMLError, RecursionError, ValueError):
         value = raw
     tokens = re.findall(r"[^.\[\]]+|\[\d+\]", path)
@@ -115,15 +102,15 @@ def _apply_override(rd: _Reader, doc: dict[Any, Any], item: str) -> str | None:
             rd.fail(
                 where,
                 "names no field",
-                f"{tok!r} under {_describe(target)}",
+                f"{tok!r} under {describe(target)}",
                 "a key under a mapping",
             )
             return None
-        allowed = _allowed_keys(tokens[:k], target)
+        allowed = allowed_keys(tokens[:k], target)
         if tok not in allowed:
             rd.fail(
                 where,
-                f"names no field{_hint(tok, allowed)}",
+                f"names no field{hint(tok, allowed)}",
                 repr(tok),
                 f"one of: {', '.join(allowed)}",
             )
@@ -145,35 +132,92 @@ def _apply_override(rd: _Reader, doc: dict[Any, Any], item: str) -> str | None:
     return path
 
 
-def _allowed_keys(parents: list[str], node: dict[Any, Any]) -> tuple[str, ...]:
-    """Keys allowed at a position in the document (for ``--set``)."""
+#: The declared tables of the sections ``--set`` may reach, by the name a ``Param``'s
+#: schema refers to them with (``{"$ref": "#/$defs/NAME"}``, as in the JSON Schema).
+DECLARED: dict[str, dict[str, Param]] = {
+    "vehicleParams": VEHICLE_PARAMS,
+    "gains": GAINS,
+    "vehicle": {**VEHICLE, **VEHICLE_PARAMS},
+    "drive": DRIVE,
+    "platoon": PLATOON,
+    "platoonEntry": PLATOONS,
+    "event": EVENT,
+    "metrics": METRICS,
+    "sensing": SENSING,
+    "reconfigure": RECONFIGURE,
+    "sensors": SENSORS,
+    "range": RANGE,
+}
+#: The sections that select a plug-in, by the name their schema has, and its kind.
+PLUGIN_DEFS = {
+    KINDS[kind].section if kind not in ("failure", "obstacle") else kind: kind
+    for kind in PLUGIN_SECTIONS
+}
+
+
+def allowed_keys(parents: list[str], node: dict[Any, Any]) -> tuple[str, ...]:
+    """Keys allowed at a position in the document (for ``--set``).
+
+    ``parents`` are the tokens of the path above the position (``["sensors",
+    "range"]``, ``["vehicles", "[1]", "gains"]``). The keys come from the
+    declarations, following each key's schema to the table of its section, so that a
+    section the file does not have yet (``--set sensors.range.rate=5``) is made by
+    the assignment; ``node`` is the mapping found there (a plug-in section's
+    selector, keys of a free-form section).
+    """
     names = [t for t in parents if not t.startswith("[")]
-    if not names:
-        return TOP_KEYS
-    if names[0] == "expect":
+    if names and names[0] == "expect":
         return expect_keys(names[1:], node)
-    head = names[-1]
-    if head == "gains":
-        return GAIN_KEYS
-    table: dict[str, tuple[str, ...]] = {
-        "vehicle": VEHICLE_PARAM_KEYS,
-        "vehicles": VEHICLE_KEYS,
-        "platoon": PLATOON_KEYS,
-        "metrics": METRICS_KEYS,
-        "sensing": SENSING_KEYS,
-        "reconfigure": RECONFIGURE_KEYS,
-        "drive": DRIVE_KEYS,
-        "platoons": PLATOONS_KEYS,  # an entry of platoons: (scenario/platoons.py)
-        "events": EVENT_KEYS,
-    }
-    if head in table:
-        return table[head]
-    for kind, own in PLUGIN_SECTIONS.items():
-        if KINDS[kind].section != head:
+    schema: Any = {"$ref": "#/$defs/top"}
+    for tok in parents:
+        if tok.startswith("["):
+            items = schema.get("items") if isinstance(schema, dict) else None
+            if not isinstance(items, dict):
+                return tuple(str(key) for key in node)
+            schema = items
             continue
-        name = node.get(KINDS[kind].selector, own[KINDS[kind].selector].default)
+        table = _table(schema, {})  # a section above: its own keys and every plug-in's
+        if table is None or tok not in table:
+            return tuple(str(key) for key in node)
+        schema = table[tok]
+    table = _table(schema, node)
+    return tuple(str(key) for key in node) if table is None else tuple(table)
+
+
+def _table(schema: Any, node: dict[Any, Any]) -> dict[str, Any] | None:
+    """The keys of a section's schema, each with its own schema (None: not known).
+
+    A declared table gives its ``Param``s' schemas; a section that selects a plug-in
+    gives its own keys and the selected plug-in's (every plug-in's for a lenient
+    kind, or when none is selected yet); an inline object its properties.
+    """
+    if not isinstance(schema, dict):
+        return None
+    ref = schema.get("$ref", "")
+    name = ref.rpartition("/")[2] if isinstance(ref, str) else ""
+    if name == "top":
+        return {k: _schema_of(p) for k, p in TOP.items()}
+    if name in DECLARED:
+        return {k: _schema_of(p) for k, p in DECLARED[name].items()}
+    if name in PLUGIN_DEFS:
+        kind = PLUGIN_DEFS[name]
+        own = PLUGIN_SECTIONS[kind]
+        info = KINDS[kind]
+        selected = node.get(info.selector, own[info.selector].default)
         registered = plugins.registry(kind)
-        if isinstance(name, str) and name in registered and not KINDS[kind].lenient:
-            return (*own, *registered[name].params)
-        return (*own, *plugins.all_params(kind))
-    return tuple(str(k) for k in node)
+        if isinstance(selected, str) and selected in registered and not info.lenient:
+            params = registered[selected].params
+        else:
+            params = plugins.all_params(kind)
+        keys = {k: _schema_of(p) for k, p in own.items()}
+        keys.update({k: {} for k in params if k not in keys})
+        return keys
+    properties = schema.get("properties")
+    if isinstance(properties, dict):
+        return dict(properties)
+    return None
+
+
+def _schema_of(p: Param) -> dict[str, Any]:
+    """A declared key's schema as far as ``--set`` follows it (its sections)."""
+    return dict(p.schema or {}) if p.type == "custom" else {}

@@ -28,17 +28,18 @@ import numpy as np
 
 from sandbox.errors import Problem, ScenarioError
 from sandbox.plugins.registration import Param
-from sandbox.scenario.checks import _overlapping_pairs
+from sandbox.scenario.checks import overlapping_pairs
 from sandbox.scenario.events import read_events
 from sandbox.scenario.expectations import read_expectations
-from sandbox.scenario.reader import _describe, _Reader
-from sandbox.scenario.sections import _failures, _list_of, _section
+from sandbox.scenario.reader import Reader, describe
+from sandbox.scenario.sections import list_param, read_failures, section_param
 from sandbox.scenario.specs import (
+    ENTRY_SECTIONS,
     PALETTE,
     PlatoonGroup,
     ReconfigureSpec,
     Scenario,
-    _from_loader,
+    from_loader,
 )
 
 if TYPE_CHECKING:
@@ -55,32 +56,33 @@ PLATOONS: dict[str, Param] = {
     "color": Param(
         "string",
         None,
-        doc="Colour of the platoon's vehicles that name none (default: blue, red, "
-        "green, ... by platoon)",
+        doc="Colour of the platoon's vehicles that name none, a CSS colour name or "
+        "#rrggbb (default: blue, red, green, ... by platoon)",
     ),
     "vehicle": Param(
-        **_section("vehicleParams"),
+        **section_param("vehicleParams"),
         doc="Defaults for the platoon's vehicles, merged over the top-level vehicle",
     ),
-    "vehicles": Param(**_list_of("vehicle"), doc="The platoon's listed vehicles"),
+    "vehicles": Param(**list_param("vehicle"), doc="The platoon's listed vehicles"),
     "platoon": Param(
-        **_section("platoon"),
+        **section_param("platoon"),
         doc="The platoon's generated followers (default prefix: <name>-v)",
     ),
     "reference": Param(
-        **_section("reference"), doc="The platoon's reference (default: top-level)"
+        **section_param("reference"), doc="The platoon's reference (default: top-level)"
     ),
     "formation": Param(
-        **_section("formation"), doc="The platoon's law (default: top-level)"
+        **section_param("formation"), doc="The platoon's law (default: top-level)"
     ),
     "recovery": Param(
-        **_section("recovery"), doc="The platoon's recovery (default: top-level)"
+        **section_param("recovery"), doc="The platoon's recovery (default: top-level)"
     ),
     "safety": Param(
-        **_section("safety"), doc="The platoon's safety filter (default: top-level)"
+        **section_param("safety"),
+        doc="The platoon's safety filter (default: top-level)",
     ),
     "reconfigure": Param(
-        **_section("reconfigure"),
+        **section_param("reconfigure"),
         doc="The platoon's slot reassignment (default: top-level)",
     ),
     "on_leader_failure": Param(
@@ -92,13 +94,13 @@ PLATOONS: dict[str, Param] = {
 }
 PLATOONS_KEYS = tuple(PLATOONS)
 #: The sections an entry replaces whole (``vehicle`` is merged key by key).
-_OWN = tuple(k for k in PLATOONS_KEYS if k not in ("name", "color", "vehicle"))
+_OWN = ENTRY_SECTIONS
 #: The top-level keys read once for the whole world, never in an entry's document.
 _WORLD = ("platoons", "events", "expect", "failures", "randomize", "plugins")
 
 
 def parse_platoons(
-    rd: _Reader,
+    rd: Reader,
     doc: dict[str, Any],
     source: str | None,
     parse: Callable[..., Scenario],
@@ -107,7 +109,7 @@ def parse_platoons(
 
     Parameters
     ----------
-    rd : _Reader
+    rd : Reader
         The loader's reader of the whole document (its lines, its problems so far).
     doc : dict
         The document, ``--set`` overrides and ``randomize:`` draws applied.
@@ -134,7 +136,7 @@ def parse_platoons(
         rd.fail(
             "platoons",
             "no platoons" if isinstance(entries, list) else "not a list of platoons",
-            _describe(entries),
+            describe(entries),
             "a list of at least one platoon",
         )
         raise ScenarioError(_sorted(rd.problems), source)
@@ -146,7 +148,8 @@ def parse_platoons(
     groups: list[tuple[str, str, Scenario]] = []
     seen_names: dict[str, int] = {}
     owner: dict[str, str] = {}
-    messages: list[str] = []
+    messages: dict[str, None] = {}
+    world_lines, entry_lines = _entry_lines(rd.lines)
     for i, _, m in rd.items(entries, "platoons", "platoons"):
         where = f"platoons[{i}]"
         rd.keys(m, PLATOONS_KEYS, where)
@@ -163,13 +166,19 @@ def parse_platoons(
                 "a name of its own",
             )
         seen_names[name] = i
-        color = rd.string(m, "color", where, PLATOON_COLORS[i % len(PLATOON_COLORS)])
+        color = rd.color(m, "color", where, PLATOON_COLORS[i % len(PLATOON_COLORS)])
         sub = _entry_document(base, m, name)
-        lines = _entry_lines(rd.lines, i)
+        lines = {**world_lines, **entry_lines.get(i, {})}
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                one = parse(sub, source=source, lines=lines, plugin_code="load")
+                one = parse(
+                    sub,
+                    source=source,
+                    lines=lines,
+                    plugin_code="load",
+                    varied=_entry_varied(rd.varied, i),
+                )
         except ScenarioError as exc:
             own = {k for k in m if k in _OWN or k == "vehicle"}
             for p in exc.problems:
@@ -181,8 +190,7 @@ def parse_platoons(
         own = {k for k in m if k in _OWN or k == "vehicle"}
         for w in one.warnings:
             w = _at_entry(w, where, own)
-            if w not in messages:
-                messages.append(w)
+            messages.setdefault(w, None)  # each once, in order
         leaders = [v.name for v in one.vehicles if v.leader]
         if len(leaders) != 1:
             rd.fail(
@@ -212,7 +220,7 @@ def parse_platoons(
             else dataclasses.replace(v, color=color)
             for k, v in enumerate(one.vehicles)
         )
-        with _from_loader():  # the file is the world's (equal scenarios compare equal)
+        with from_loader():  # the file is the world's (equal scenarios compare equal)
             one = dataclasses.replace(one, vehicles=painted, source=None, warnings=())
         groups.append((name, color, one))
     if rd.problems or not groups:
@@ -225,10 +233,11 @@ def parse_platoons(
         rows += count
     _starts_apart(rd, vehicles, specs)
     names = [v.name for v in vehicles]
-    failures = _failures(rd, doc.get("failures"), "failures")
+    known = set(names)
+    failures = read_failures(rd, doc.get("failures"), "failures")
     first = groups[0][2]
     for path, f in failures:
-        if f.vehicle not in names:
+        if f.vehicle not in known:
             rd.fail(
                 f"{path}.vehicle",
                 "no such vehicle",
@@ -243,7 +252,7 @@ def parse_platoons(
     )
     if rd.problems:
         raise ScenarioError(_sorted(rd.problems), source)
-    with _from_loader():
+    with from_loader():
         scenario = dataclasses.replace(
             first,
             vehicles=tuple(vehicles),
@@ -255,7 +264,7 @@ def parse_platoons(
             platoons=tuple(specs),
             events=tuple(events),
             plugins=tuple(doc.get("plugins") or ()),
-            warnings=tuple(messages + [w.format(source) for w in rd.warnings]),
+            warnings=tuple([*messages, *(w.format(source) for w in rd.warnings)]),
         )
     return scenario
 
@@ -289,22 +298,45 @@ def _entry_document(base: dict[str, Any], m: dict[Any, Any], name: str) -> dict:
     return sub
 
 
-def _entry_lines(lines: dict[str, int], i: int) -> dict[str, int]:
-    """The lines of the file as the paths of entry ``i``'s document name them."""
+def _entry_lines(
+    lines: dict[str, int],
+) -> tuple[dict[str, int], dict[int, dict[str, int]]]:
+    """The lines of the file as the paths of each entry's document name them.
+
+    Returns the lines of the keys outside ``platoons:`` and, per entry ``i``, those of
+    its own keys without the ``platoons[i].`` prefix: one pass over the file's lines
+    (an entry's document takes the first with its own on top).
+    """
+    world: dict[str, int] = {}
+    entries: dict[int, dict[str, int]] = {}
+    for path, line in lines.items():
+        if not path.startswith("platoons"):
+            world[path] = line
+            continue
+        found = re.match(r"platoons\[(\d+)\]\.", path)
+        if found is not None:
+            entries.setdefault(int(found.group(1)), {})[path[found.end() :]] = line
+    return world, entries
+
+
+def _entry_varied(varied: set[str], i: int) -> frozenset[str]:
+    """The paths set or drawn for the world, as entry ``i``'s document names them."""
     prefix = f"platoons[{i}]."
-    out = {p: n for p, n in lines.items() if not p.startswith("platoons")}
-    out.update({p[len(prefix) :]: n for p, n in lines.items() if p.startswith(prefix)})
-    return out
+    return frozenset(
+        path[len(prefix) :] if path.startswith(prefix) else path
+        for path in varied
+        if path.startswith(prefix) or not path.startswith("platoons")
+    )
 
 
-def _starts_apart(rd: _Reader, vehicles: list, specs: list[PlatoonGroup]) -> None:
+def _starts_apart(rd: Reader, vehicles: list, specs: list[PlatoonGroup]) -> None:
     """Vehicles of different platoons must not start overlapping."""
     pos = np.array([v.pose[:2] for v in vehicles], dtype=float).reshape(-1, 2)
     rad = 0.5 * np.array([v.diameter for v in vehicles], dtype=float)
     group = np.zeros(len(vehicles), dtype=int)
     for k, p in enumerate(specs):
         group[list(p.rows)] = k
-    for a, b, dist in _overlapping_pairs(pos, rad, 5):
+    for a, b, dist in overlapping_pairs(pos, rad, 5):
         if group[a] == group[b]:
             continue
         rd.fail(
@@ -318,56 +350,6 @@ def _starts_apart(rd: _Reader, vehicles: list, specs: list[PlatoonGroup]) -> Non
 
 def _sorted(problems: list[Problem]) -> list[Problem]:
     return sorted(problems, key=lambda p: (p.line is None, p.line or 0))
-
-
-def platoons_document(sc: Scenario) -> dict[str, Any]:
-    """The document of a scenario of several platoons (:meth:`Scenario.to_dict`).
-
-    The top level holds the world's keys and the first platoon's sections; each
-    entry holds its name, colour, vehicles and the sections in which it differs
-    from the first platoon, so that a ``--set`` of a top-level section changes
-    every platoon that shares it.
-    """
-    first = sc.platoons[0].scenario
-    with _from_loader():  # the world's own keys, as one platoon writes them
-        alone = dataclasses.replace(
-            sc,
-            vehicles=first.vehicles,
-            platoon=first.platoon,
-            platoons=(),
-            failures=(),
-            expect=None,
-        )
-    doc = alone.to_dict()
-    for key in ("vehicles", "platoon", *_OWN):
-        doc.pop(key, None)
-    doc["vehicle"] = {"diameter": sc.diameter}
-    shared = first.to_dict()
-    sections = [k for k in _OWN if k not in ("vehicles", "platoon")]
-    doc.update({k: shared[k] for k in sections if k in shared})
-    doc["platoons"] = []
-    for p in sc.platoons:
-        own = p.scenario.to_dict()
-        entry: dict[str, Any] = {"name": p.name, "color": p.color}
-        for key in ("vehicle", "vehicles", "platoon"):
-            if key in own:
-                entry[key] = own[key]
-        for key in _OWN:
-            if key in own and own[key] != shared.get(key):
-                entry[key] = own[key]
-        doc["platoons"].append(entry)
-    failures = [f for f in sc.failures if f.at < sc.duration]
-    if failures:
-        doc["failures"] = []
-        for f in failures:
-            item = {k: v for k, v in dataclasses.asdict(f).items() if v is not None}
-            item.update(item.pop("params"))
-            doc["failures"].append(item)
-    if sc.events:
-        doc["events"] = [e.document() for e in sc.events]
-    if sc.expect is not None:
-        doc["expect"] = sc.expect.to_dict()
-    return doc
 
 
 __all__ = ["PALETTE", "PLATOONS", "PLATOONS_KEYS", "parse_platoons"]

@@ -1,6 +1,6 @@
 """Typed field access for the scenario loader: limits, messages, the problem collector.
 
-:class:`_Reader` reads a field of a document with its type and bounds and records a
+:class:`Reader` reads a field of a document with its type and bounds and records a
 :class:`~sandbox.errors.Problem` (``path: what (got X; expected Y)``, with the field's
 YAML line) instead of raising, so that every problem of a file is reported at once. The
 limits of the format (``MAX_VEHICLES``, ``MIN_DIAMETER``, ...) and the rules for names
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime
 import difflib
+import functools
 import math
 import re
 from collections.abc import Iterator, Mapping
@@ -21,9 +22,7 @@ from sandbox.plugins.registration import (
     REQUIRED,
 )
 
-_REQUIRED = REQUIRED
-
-_LENGTH = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*d\s*$")
+LENGTH = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*d\s*$")
 
 #: Longest rendering of a value in a message (longer ones are cut with "...").
 _SHOW_MAX = 60
@@ -33,6 +32,12 @@ _SHOW_MAX = 60
 MAX_LENGTH = 1e6
 
 MAX_NUMBER = 1e9
+
+#: Smallest value of a number that must be greater than 0 (a gain, a floor, a rate, a
+#: field of view, a limit): such a number divides or is squared somewhere, and below
+#: this its reciprocal's square is no longer a finite float (1e-300 would pass "> 0"
+#: and make a detector's statistics infinite, a braking's periods an infinite count).
+MIN_POSITIVE = 1e-100
 
 #: Smallest vehicle diameter [m] (the physics tolerates 2 mm of contact overlap) and
 #: mass [kg] (the body's moment of inertia must stay a positive float).
@@ -49,15 +54,6 @@ MAX_STEPS = 1e9
 #: Most physics substeps per control period.
 MAX_SUBSTEPS = 10_000
 
-#: Largest recorded state a run may allocate [bytes] (about 100 bytes per vehicle and
-#: recorded sample); beyond it the run is refused at load time instead of failing with a
-#: memory error.
-MAX_RECORD_BYTES = 1e12
-
-_BYTES_PER_SAMPLE = (
-    8 * 13 + 2 + 16
-)  # pose, cmd, chi, slot, target; mode, failed; t, ref
-
 #: Largest ``seed`` (numpy's generators take any 64-bit seed; it is stored as int64).
 MAX_SEED = 2**63 - 1
 
@@ -73,12 +69,12 @@ MAX_NAME = 100
 MAX_FILE_BYTES = 4_000_000
 
 
-def _says(what: str, got: str, expected: str) -> str:
+def says(what: str, got: str, expected: str) -> str:
     """The message form ``what is wrong (got X; expected Y)``."""
     return f"{what} (got {got}; expected {expected})"
 
 
-def _describe(value: Any) -> str:
+def describe(value: Any) -> str:
     """A short rendering of a value for messages."""
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -99,7 +95,7 @@ def _describe(value: Any) -> str:
     return text
 
 
-def _number_kind(
+def number_kind(
     positive: bool = False, minimum: float | None = None, length: bool = False
 ) -> str:
     """What a numeric field expects, in words."""
@@ -111,14 +107,15 @@ def _number_kind(
     return base
 
 
-def _hint(value: Any, allowed: tuple[str, ...]) -> str:
+def hint(value: Any, allowed: tuple[str, ...]) -> str:
+    """A ``; did you mean 'x'?`` suffix for a message, or an empty string."""
     near = difflib.get_close_matches(
         str(value), [str(a) for a in allowed], n=1, cutoff=0.6
     )
     return f"; did you mean {near[0]!r}?" if near else ""
 
 
-class _Reader:
+class Reader:
     """Typed field access that collects problems instead of raising."""
 
     def __init__(self, lines: dict[str, int]) -> None:
@@ -132,12 +129,16 @@ class _Reader:
         self.timed: list[tuple[str, str | None, float | None]] = []
         #: Field paths set by ``--set`` overrides.
         self.overridden: set[str] = set()
+        #: Field paths set by ``--set`` overrides or drawn by ``randomize:`` (a
+        #: plug-in chosen there makes the file's keys of another plug-in no mistake).
+        self.varied: set[str] = set()
         #: The ``plugins:`` entries listed but not loaded (``sandbox validate``).
         self.unloaded: tuple[str, ...] = ()
         #: Sections left unchecked: they select a name an unloaded plug-in may own.
         self.unchecked: list[tuple[str, str]] = []
 
     def line(self, path: str) -> int | None:
+        """The YAML line of a field path (of its nearest listed parent), or None."""
         if path.startswith("--set"):
             return None
         while path:
@@ -151,10 +152,11 @@ class _Reader:
         self, path: str, what: str, got: str | None = None, expected: str | None = None
     ) -> None:
         """Record a problem: ``what (got X; expected Y)`` when ``got`` is given."""
-        message = what if got is None else _says(what, got, expected or "")
+        message = what if got is None else says(what, got, expected or "")
         self.problems.append(Problem(path, message, self.line(path)))
 
     def warn(self, path: str, message: str) -> None:
+        """Record a warning (the document is still valid) at ``path``."""
         self.warnings.append(Problem(path, message, self.line(path)))
 
     # -- structure
@@ -169,7 +171,7 @@ class _Reader:
         if doc is None:
             return
         if not isinstance(doc, list):
-            self.fail(path, "not a list", _describe(doc), f"a list of {what}")
+            self.fail(path, "not a list", describe(doc), f"a list of {what}")
             return
         for i, item in enumerate(doc):
             sub = f"{path}[{i}]"
@@ -178,19 +180,21 @@ class _Reader:
                 yield i, sub, m
 
     def mapping(self, value: Any, path: str) -> dict[Any, Any] | None:
+        """A mapping field as a dict (None: an empty one); a problem if not one."""
         if value is None:
             return {}
         if not isinstance(value, Mapping):
             self.fail(
                 path,
                 "not a mapping",
-                _describe(value),
+                describe(value),
                 "a mapping of keys (key: value)",
             )
             return None
         return dict(value)
 
     def keys(self, m: dict[Any, Any], allowed: tuple[str, ...], path: str) -> None:
+        """Record a problem, with a suggestion, for each key not in ``allowed``."""
         for key in m:
             if isinstance(key, str) and key in allowed:
                 continue
@@ -198,8 +202,8 @@ class _Reader:
             what = "unknown key" if isinstance(key, str) else "unknown key (not a name)"
             self.fail(
                 sub,
-                f"{what}{_hint(key, allowed)}",
-                _describe(key),
+                f"{what}{hint(key, allowed)}",
+                describe(key),
                 f"one of: {', '.join(allowed)}",
             )
 
@@ -211,9 +215,10 @@ class _Reader:
         default: Any,
         expected: str = "a value",
     ) -> tuple[Any, str]:
+        """``(value, path)`` of a key, its default when left out (or a problem)."""
         sub = f"{path}.{key}" if path else key
-        if key not in m or (m[key] is None and default is not _REQUIRED):
-            if default is _REQUIRED:
+        if key not in m or (m[key] is None and default is not REQUIRED):
+            if default is REQUIRED:
                 self.fail(sub, "required key is missing", "nothing", expected)
             return default, sub
         return m[key], sub
@@ -224,16 +229,17 @@ class _Reader:
         m: dict[Any, Any],
         key: str,
         path: str,
-        default: Any = _REQUIRED,
+        default: Any = REQUIRED,
         *,
         positive: bool = False,
         minimum: float | None = None,
         length: bool = False,
     ) -> Any:
-        kind = _number_kind(positive, minimum, length)
+        """A number field with its bounds (lengths in metres or ``'3d'``)."""
+        kind = number_kind(positive, minimum, length)
         value, sub = self.get(m, key, path, default, kind)
         if value is default:
-            return None if default is _REQUIRED else default
+            return None if default is REQUIRED else default
         return self.check_number(
             value, sub, positive=positive, minimum=minimum, length=length
         )
@@ -247,10 +253,11 @@ class _Reader:
         minimum: float | None = None,
         length: bool = False,
     ) -> float | None:
-        kind = _number_kind(positive, minimum, length)
-        shown = _describe(value)
+        """Check a number's type, finiteness and bounds; None after a problem."""
+        kind = number_kind(positive, minimum, length)
+        shown = describe(value)
         if length and isinstance(value, str):
-            match = _LENGTH.match(value)
+            match = LENGTH.match(value)
             if not match:
                 self.fail(path, "not a length", shown, kind)
                 return None
@@ -278,6 +285,14 @@ class _Reader:
         if positive and value <= 0:
             self.fail(path, "must be greater than 0", shown, kind)
             return None
+        if positive and value < MIN_POSITIVE:
+            self.fail(
+                path,
+                "too small to compute with",
+                shown,
+                f"{kind}, at least {MIN_POSITIVE:g}",
+            )
+            return None
         if minimum is not None and value < minimum:
             self.fail(path, f"must be at least {minimum:g}", shown, kind)
             return None
@@ -293,40 +308,71 @@ class _Reader:
         minimum: int,
         maximum: int,
     ) -> Any:
+        """A whole-number field from ``minimum`` to ``maximum``."""
         kind = f"a whole number from {minimum} to {maximum}"
         value, sub = self.get(m, key, path, default, kind)
         if value is default:
             return default
         if isinstance(value, float) and value.is_integer():
             if abs(value) >= 2**53:
-                self.fail(sub, "out of range", _describe(value), kind)
+                self.fail(sub, "out of range", describe(value), kind)
                 return None
             value = int(value)
         if isinstance(value, bool) or not isinstance(value, int):
-            self.fail(sub, "not a whole number", _describe(value), kind)
+            self.fail(sub, "not a whole number", describe(value), kind)
             return None
         if value < minimum or value > maximum:
-            self.fail(sub, "out of range", _describe(value), kind)
+            self.fail(sub, "out of range", describe(value), kind)
             return None
         return value
 
     def boolean(self, m: dict[Any, Any], key: str, path: str, default: bool) -> bool:
+        """A true/false field (its default after a problem)."""
         value, sub = self.get(m, key, path, default, "true or false")
         if not isinstance(value, bool):
-            self.fail(sub, "not a boolean", _describe(value), "true or false")
+            self.fail(sub, "not a boolean", describe(value), "true or false")
             return default
         return value
 
     def string(self, m: dict[Any, Any], key: str, path: str, default: Any) -> Any:
+        """A non-empty string field."""
         value, sub = self.get(m, key, path, default, "a non-empty string")
         if value is default:
             return default
         if not isinstance(value, str) or not value.strip():
             self.fail(
-                sub, "not a non-empty string", _describe(value), "a non-empty string"
+                sub, "not a non-empty string", describe(value), "a non-empty string"
             )
-            return None if default is _REQUIRED else default
+            return None if default is REQUIRED else default
         return value
+
+    def color(self, m: dict[Any, Any], key: str, path: str, default: str) -> str:
+        """A colour: a CSS colour name or ``#rrggbb`` (``#rgb``); the default if not.
+
+        A colour is drawn by the GIF, the figures and the replay page and written
+        back into the run's ``scenario.yaml``: anything else is refused.
+        """
+        value = self.string(m, key, path, default)
+        if not isinstance(value, str) or value is default:
+            return default
+        if HEX_COLOR.fullmatch(value) or value.lower() in color_names():
+            return value
+        if BAD_TEXT.search(value):
+            self.fail(
+                f"{path}.{key}" if path else key,
+                "holds a control character",
+                describe(value),
+                COLOR_RULE,
+            )
+            return default
+        hinted = hint(value.lower(), tuple(sorted(color_names())))
+        self.fail(
+            f"{path}.{key}" if path else key,
+            f"not a colour{hinted}",
+            describe(value),
+            COLOR_RULE,
+        )
+        return default
 
     def name(
         self, m: dict[Any, Any], key: str, path: str, default: Any, *, run: bool = False
@@ -342,10 +388,10 @@ class _Reader:
                 self.fail(
                     f"{path}.{key}" if path else key,
                     "unusable name",
-                    f"{_describe(value)}, which {why}",
+                    f"{describe(value)}, which {why}",
                     NAME_RULE + (" or ." if run else ""),
                 )
-                return None if default is _REQUIRED else default
+                return None if default is REQUIRED else default
         return value
 
     def choice(
@@ -357,6 +403,7 @@ class _Reader:
         choices: tuple[str, ...],
         what: str = "value",
     ) -> Any:
+        """A field that is one of ``choices``, with a suggestion when it is not."""
         expected = f"one of: {', '.join(choices)}"
         value, sub = self.get(m, key, path, default, expected)
         if value is default:
@@ -364,8 +411,8 @@ class _Reader:
         if not isinstance(value, str) or value not in choices:
             self.fail(
                 sub,
-                f"unknown {what}{_hint(value, choices)}",
-                _describe(value),
+                f"unknown {what}{hint(value, choices)}",
+                describe(value),
                 expected,
             )
             return None
@@ -377,25 +424,27 @@ class _Reader:
         key: str,
         path: str,
         size: int,
-        default: Any = _REQUIRED,
+        default: Any = REQUIRED,
         *,
         length: bool = False,
     ) -> Any:
+        """A field of ``size`` numbers (or lengths)."""
         value, sub = self.get(m, key, path, default, _vector_kind(size, length))
         if value is default:
-            return None if default is _REQUIRED else default
+            return None if default is REQUIRED else default
         return self.check_vector(value, sub, size, length=length)
 
     def check_vector(
         self, value: Any, path: str, size: int, *, length: bool = False
     ) -> tuple[float, ...] | None:
+        """Check a list of ``size`` numbers (or lengths); None after a problem."""
         if not isinstance(value, list | tuple) or len(value) != size:
             what = (
                 "wrong number of items"
                 if isinstance(value, list | tuple)
                 else "not a list"
             )
-            self.fail(path, what, _describe(value), _vector_kind(size, length))
+            self.fail(path, what, describe(value), _vector_kind(size, length))
             return None
         out = [
             self.check_number(v, f"{path}[{i}]", length=length)
@@ -408,13 +457,14 @@ class _Reader:
     def points(
         self, m: dict[Any, Any], key: str, path: str, minimum: int
     ) -> tuple[tuple[float, float], ...] | None:
+        """A field of at least ``minimum`` points ``[x1, x2]`` [m]."""
         kind = f"a list of at least {minimum} [x1, x2] points"
-        value, sub = self.get(m, key, path, _REQUIRED, kind)
-        if value is _REQUIRED:
+        value, sub = self.get(m, key, path, REQUIRED, kind)
+        if value is REQUIRED:
             return None
         if not isinstance(value, list) or len(value) < minimum:
             what = "too few points" if isinstance(value, list) else "not a list"
-            self.fail(sub, what, _describe(value), kind)
+            self.fail(sub, what, describe(value), kind)
             return None
         pts = [
             self.check_vector(p, f"{sub}[{i}]", 2, length=True)
@@ -429,12 +479,12 @@ class _Reader:
 #: characters (C0, DEL, C1 such as U+0085), line and paragraph separators,
 #: bidirectional overrides and the byte-order mark (they split lines or rewrite what a
 #: terminal shows).
-_BAD_NAME = re.compile(
+BAD_NAME = re.compile(
     "[,\"'/\\\\\x00-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069\ufeff]"
 )
 
 #: Control characters a description may not hold (all but tab and line feed).
-_BAD_TEXT = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
+BAD_TEXT = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
 
 #: A leading character a spreadsheet reads as the start of a formula (CSV injection).
 _FORMULA_START = ("=", "+", "-", "@")
@@ -443,6 +493,20 @@ NAME_RULE = (
     f"at most {MAX_NAME} characters on one line, without commas, quotes, slashes, "
     "backslashes or control characters, not starting with = + - @"
 )
+
+
+#: A colour written as ``#rgb`` or ``#rrggbb``.
+HEX_COLOR = re.compile(r"#(?:[0-9a-fA-F]{3}){1,2}")
+
+COLOR_RULE = "a colour name (CSS: red, teal, slategray, ...) or #rrggbb"
+
+
+@functools.cache
+def color_names() -> frozenset[str]:
+    """The colour names every renderer knows (the CSS names, lower case)."""
+    from PIL import ImageColor  # on the first colour only: Pillow takes 20 ms
+
+    return frozenset(name.lower() for name in ImageColor.colormap)
 
 
 def name_problem(value: str, *, run: bool = False) -> str | None:
@@ -455,7 +519,7 @@ def name_problem(value: str, *, run: bool = False) -> str | None:
     ``.`` (``.`` and ``..`` name a directory and its parent; other dot names are
     hidden).
     """
-    bad = _BAD_NAME.search(value)
+    bad = BAD_NAME.search(value)
     if bad is not None:
         return f"holds the character {bad.group()!r}"
     if len(value) > MAX_NAME:

@@ -23,10 +23,10 @@ from typing import Any
 from sandbox import plugins
 from sandbox.plugins.registration import KINDS, Param
 from sandbox.scenario import (
-    _BAD_NAME,
-    _LENGTH,
+    BAD_NAME,
     DRIVE,
     GAINS,
+    LENGTH,
     METRICS,
     PLATOON,
     PLATOONS,
@@ -45,11 +45,11 @@ DRAFT = "https://json-schema.org/draft/2020-12/schema"
 SCHEMA_ID = "https://sandbox.example/schemas/scenario.schema.json"
 
 #: A length: metres, or a multiple of the default vehicle diameter (``"3d"``, ``1.5d``).
-LENGTH_PATTERN = _LENGTH.pattern
+LENGTH_PATTERN = LENGTH.pattern
 #: The same, without a minus sign (lengths that must be positive).
-POSITIVE_LENGTH_PATTERN = _LENGTH.pattern.replace("[-+]?", r"\+?", 1)
+POSITIVE_LENGTH_PATTERN = LENGTH.pattern.replace("[-+]?", r"\+?", 1)
 #: A name written into CSV rows and directory names: no commas, quotes or slashes.
-NAME_PATTERN = r"^(?=.*\S)" + _BAD_NAME.pattern.replace("[", "[^", 1) + "+$"
+NAME_PATTERN = r"^(?=.*\S)" + BAD_NAME.pattern.replace("[", "[^", 1) + "+$"
 _DOCS = ("description", "default", "x-unit")
 
 

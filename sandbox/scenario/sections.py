@@ -28,14 +28,14 @@ from sandbox.plugins.registration import (
 )
 from sandbox.scenario.expectations import EXPECT_SCHEMA
 from sandbox.scenario.reader import (
-    _LENGTH,
-    _REQUIRED,
+    LENGTH,
     MAX_RECORD_EVERY,
     MAX_SEED,
     MAX_SUBSTEPS,
-    _describe,
-    _number_kind,
-    _Reader,
+    REQUIRED,
+    Reader,
+    describe,
+    number_kind,
 )
 from sandbox.scenario.specs import (
     DetectionSpec,
@@ -50,11 +50,13 @@ from sandbox.scenario.specs import (
 # Every key of the format is declared once, here or in the plug-in that uses it: the
 # reader below, the JSON Schema (scenario/schema.py) and the documentation checks of
 # scenarios/reference.yaml (tests/test_reference_doc.py) derive from these tables.
-def _section(name: str) -> dict[str, Any]:
+def section_param(name: str) -> dict[str, Any]:
+    """The ``Param`` keywords of a key that holds the section ``name``."""
     return {"type": "custom", "default": None, "schema": {"$ref": f"#/$defs/{name}"}}
 
 
-def _list_of(name: str) -> dict[str, Any]:
+def list_param(name: str) -> dict[str, Any]:
+    """The ``Param`` keywords of a key that holds a list of ``name`` sections."""
     return {
         "type": "custom",
         "default": None,
@@ -174,52 +176,54 @@ TOP: dict[str, Param] = {
         schema={"type": "array", "items": {"type": "string", "minLength": 1}},
     ),
     "vehicle": Param(
-        **_section("vehicleParams"),
+        **section_param("vehicleParams"),
         doc="Defaults for every vehicle (each vehicle may override them)",
     ),
     "reference": Param(
-        **_section("reference"),
+        **section_param("reference"),
         doc="The reference trajectory tracked by the leader (or by every slot with "
         "law virtual)",
     ),
     "formation": Param(
-        **_section("formation"),
+        **section_param("formation"),
         doc="The formation law; required with more than one vehicle",
     ),
-    "vehicles": Param(**_list_of("vehicle"), doc="The listed vehicles"),
+    "vehicles": Param(**list_param("vehicle"), doc="The listed vehicles"),
     "platoon": Param(
-        **_section("platoon"),
+        **section_param("platoon"),
         doc="Followers generated on a pattern, named <prefix>0, <prefix>1, ...",
     ),
-    "recovery": Param(**_section("recovery"), doc="Collision avoidance, section 4"),
-    "failures": Param(**_list_of("failure"), doc="Failures injected into vehicles"),
-    "obstacles": Param(**_list_of("obstacle"), doc="Static obstacles"),
-    "metrics": Param(**_section("metrics"), doc="Parameters of metrics.json"),
+    "recovery": Param(
+        **section_param("recovery"), doc="Collision avoidance, section 4"
+    ),
+    "failures": Param(**list_param("failure"), doc="Failures injected into vehicles"),
+    "obstacles": Param(**list_param("obstacle"), doc="Static obstacles"),
+    "metrics": Param(**section_param("metrics"), doc="Parameters of metrics.json"),
     "sensing": Param(
-        **_section("sensing"),
+        **section_param("sensing"),
         doc="What the vehicles see of each other: a noisy, delayed, lossy broadcast "
-        "of the poses (see sandbox/sensing.py; all 0: the truth)",
+        "of the poses (see sandbox/behaviour/sensing.py; all 0: the truth)",
     ),
     "detection": Param(
-        **_section("detection"),
+        **section_param("detection"),
         doc="How the platoon learns of failures: oracle (the truth, at once) or "
         "residual (observed motion against the broadcast commands, a CUSUM; see "
-        "sandbox/detection.py)",
+        "sandbox/behaviour/detection.py)",
     ),
     "safety": Param(
-        **_section("safety"),
+        **section_param("safety"),
         doc="A safety filter on the commands, after the controller and before the "
-        "failures (see sandbox/safety/; filter none: no filter)",
+        "failures (see sandbox/behaviour/safety/; filter none: no filter)",
     ),
     "sensors": Param(
-        **_section("sensors"),
+        **section_param("sensors"),
         doc="The sensors of every vehicle (a vehicle's own 'sensors' is merged over "
         "them): range, a planar LiDAR (see sandbox/behaviour/ranges.py)",
     ),
     "reconfigure": Param(
-        **_section("reconfigure"),
+        **section_param("reconfigure"),
         doc="Who tracks which slot once a vehicle is believed failed (see "
-        "sandbox/reconfigure.py; default: everyone keeps their slot)",
+        "sandbox/behaviour/reconfigure.py; default: everyone keeps their slot)",
     ),
     "on_leader_failure": Param(
         "choice",
@@ -231,13 +235,13 @@ TOP: dict[str, Param] = {
     ),
     # Several platoons in one world (the keys of an entry: scenario/platoons.py).
     "platoons": Param(
-        **_list_of("platoonEntry"),
+        **list_param("platoonEntry"),
         doc="Several platoons in one world, each with its own name, vehicles, "
         "reference, formation and recovery; the top-level sections are their "
         "defaults (see scenarios/traffic/)",
     ),
     "events": Param(
-        **_list_of("event"),
+        **list_param("event"),
         doc="Merges and splits of platoons, at a time or when one platoon comes "
         "within a distance of another (with platoons:; see sandbox/scenario/events.py)",
     ),
@@ -247,15 +251,15 @@ TOP: dict[str, Param] = {
         doc="Random draws from the seed: field paths (the --set syntax, e.g. "
         "vehicles[1].pose) mapped to {uniform: [low, high]}, {normal: [mean, std]} "
         "(numbers or equal-length lists, elementwise) or {choice: [a, b, ...]}; "
-        "overlapping starts are redrawn (see sandbox/randomize.py)",
+        "overlapping starts are redrawn (see sandbox/scenario/randomize.py)",
         schema=_RANDOMIZE_SCHEMA,
     ),
     "expect": Param(
         "custom",
         None,
         doc="What the run must show, checked by 'sandbox check' and the pytest plugin "
-        "(see sandbox/expectations.py; bounds are inclusive; quantities are those of "
-        "metrics.json)",
+        "(see sandbox/scenario/expectations.py; bounds are inclusive; quantities are "
+        "those of metrics.json)",
         schema=_nullable_keys(EXPECT_SCHEMA),
     ),
 }
@@ -483,26 +487,38 @@ SENSING_KEYS = tuple(SENSING)
 RECONFIGURE_KEYS = tuple(RECONFIGURE)
 
 
-def _length_default(rd: _Reader, value: Any) -> Any:
+def _length_default(rd: Reader, value: Any) -> Any:
     """A default written ``"3d"`` resolved to metres with the default diameter."""
     if isinstance(value, str):
-        match = _LENGTH.match(value)
+        match = LENGTH.match(value)
         if match:
             return float(match.group(1)) * rd.diameter
     return value
 
 
+#: ``read_param``'s default: the declared one.
+DECLARED: Any = type("Declared", (), {"__repr__": lambda self: "DECLARED"})()
+
+
 def read_param(
-    rd: _Reader, m: dict[Any, Any], key: str, path: str, p: Param
+    rd: Reader,
+    m: dict[Any, Any],
+    key: str,
+    path: str,
+    p: Param,
+    default: Any = DECLARED,
 ) -> tuple[Any, bool]:
     """Read one declared key: ``(value, ok)``; problems are recorded in ``rd``.
 
     A missing optional key gives its default (lengths like ``"3d"`` in metres); a
     missing required key, or a value of the wrong type or out of bounds, gives
-    ``(None, False)``.
+    ``(None, False)``. ``default`` replaces the declared one (a vehicle's keys left
+    out take the shared ``vehicle:`` values).
     """
     before = len(rd.problems)
-    default = _REQUIRED if p.required else p.default
+    if default is DECLARED:
+        default = p.default
+    required = default is REQUIRED
     if p.type == "length":
         default = _length_default(rd, default)
     t = p.type
@@ -520,7 +536,7 @@ def read_param(
         )
         if value is not None and len(rd.problems) == before:
             sub = f"{path}.{key}" if path else key
-            kind = _number_kind(positive, minimum, t == "length")
+            kind = number_kind(positive, minimum, t == "length")
             if p.exclusive and not positive and value <= p.minimum:
                 rd.fail(sub, f"must be greater than {p.minimum:g}", f"{value:g}", kind)
             elif p.maximum is not None and value > p.maximum:
@@ -529,10 +545,10 @@ def read_param(
         lo = int(p.minimum) if p.minimum is not None else -(2**63)
         hi = int(p.maximum) if p.maximum is not None else MAX_SEED
         value = rd.integer(m, key, path, default, minimum=lo, maximum=hi)
-        if value is _REQUIRED:
+        if value is REQUIRED:
             value = None
     elif t == "boolean":
-        value = rd.boolean(m, key, path, False if default is _REQUIRED else default)
+        value = rd.boolean(m, key, path, False if default is REQUIRED else default)
     elif t == "string":
         value = rd.string(m, key, path, default)
     elif t == "name":
@@ -544,7 +560,7 @@ def read_param(
             rd.fail(
                 f"{path}.{key}" if path else key,
                 "not a string",
-                _describe(value),
+                describe(value),
                 "a text",
             )
     elif t == "choice":
@@ -553,7 +569,7 @@ def read_param(
         value = rd.vector(m, key, path, 2, default, length=True)
     elif t == "points":
         if key not in m or m[key] is None:
-            if p.required:
+            if required:
                 value = rd.points(m, key, path, p.min_items)
             else:
                 value = default
@@ -561,13 +577,13 @@ def read_param(
             value = rd.points(m, key, path, p.min_items)
     else:
         raise ValueError(f"{path}.{key}: a {t} key is read by its section's code")
-    if value is _REQUIRED:
+    if value is REQUIRED:
         value = None
     return value, len(rd.problems) == before
 
 
 def read_params(
-    rd: _Reader, m: dict[Any, Any], path: str, params: dict[str, Param]
+    rd: Reader, m: dict[Any, Any], path: str, params: dict[str, Param]
 ) -> tuple[dict[str, Any], bool]:
     """Read every declared key of a mapping (not ``custom`` ones): ``(values, ok)``."""
     values, ok = {}, True
@@ -583,8 +599,13 @@ def _and(names: list[str]) -> str:
     return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
+def _plural(title: str) -> str:
+    """``recovery strategies``, ``failure detectors``."""
+    return f"{title[:-1]}ies" if title.endswith("y") else f"{title}s"
+
+
 def read_plugin_section(
-    rd: _Reader,
+    rd: Reader,
     m: dict[Any, Any],
     path: str,
     kind: str,
@@ -608,7 +629,7 @@ def read_plugin_section(
     name = rd.choice(m, info.selector, path, default, registered, info.title)
     own_values, ok = read_params(rd, m, path, own)
     everyone = plugins.all_params(kind)
-    if name is None or name is _REQUIRED:
+    if name is None or name is REQUIRED:
         rd.keys(m, (*own, *everyone), path)
         return None, own_values, {}, False
     plugin = plugins.get(kind, name)
@@ -621,8 +642,8 @@ def read_plugin_section(
                 users = everyone[key]
                 rd.fail(
                     f"{path}.{key}",
-                    f"applies only to the {_and(users)} {info.title}"
-                    f"{'s' if len(users) > 1 else ''}",
+                    f"applies only to the {_and(users)} "
+                    f"{_plural(info.title) if len(users) > 1 else info.title}",
                     f"{key} with {info.selector} {name}",
                     f"no '{key}' ({info.title} {name} does not take it)",
                 )
@@ -630,6 +651,15 @@ def read_plugin_section(
                 declared = plugins.get(kind, everyone[key][0]).params[key]
                 if not declared.required:
                     read_param(rd, m, key, path, declared)
+                users = everyone[key]
+                if f"{path}.{info.selector}" in rd.varied:
+                    continue  # the file's key, for the plug-in the file chose
+                rd.warn(
+                    f"{path}.{key}",
+                    f"does nothing here: it applies only to the {_and(users)} "
+                    f"{_plural(info.title) if len(users) > 1 else info.title}, not "
+                    f"to {info.selector} {name}",
+                )
             continue
         rd.keys({key: None}, allowed, path)
     values, good = read_params(rd, m, path, plugin.params)
@@ -642,7 +672,8 @@ def read_plugin_section(
     return plugin, own_values, values, ok
 
 
-def _reference(rd: _Reader, doc: Any, path: str) -> ReferenceSpec | None:
+def read_reference(rd: Reader, doc: Any, path: str) -> ReferenceSpec | None:
+    """The ``reference:`` section, or None if it has problems (recorded)."""
     m = rd.mapping(doc, path)
     if m is None:
         return None
@@ -652,7 +683,8 @@ def _reference(rd: _Reader, doc: Any, path: str) -> ReferenceSpec | None:
     return ReferenceSpec(plugin.name, values)
 
 
-def _formation(rd: _Reader, doc: Any, path: str) -> FormationSpec | None:
+def read_formation(rd: Reader, doc: Any, path: str) -> FormationSpec | None:
+    """The ``formation:`` section, or None if it has problems (recorded)."""
     m = rd.mapping(doc, path)
     if m is None:
         return None
@@ -662,7 +694,8 @@ def _formation(rd: _Reader, doc: Any, path: str) -> FormationSpec | None:
     return FormationSpec(plugin.name, values)
 
 
-def _recovery(rd: _Reader, doc: Any, path: str) -> RecoverySpec:
+def read_recovery(rd: Reader, doc: Any, path: str) -> RecoverySpec:
+    """The ``recovery:`` section (no strategy when left out or invalid)."""
     m = rd.mapping(doc, path)
     fallback = RecoverySpec(R=3.0 * rd.diameter)
     if m is None:
@@ -687,7 +720,8 @@ def _recovery(rd: _Reader, doc: Any, path: str) -> RecoverySpec:
     )
 
 
-def _detection(rd: _Reader, doc: Any, path: str) -> DetectionSpec:
+def read_detection(rd: Reader, doc: Any, path: str) -> DetectionSpec:
+    """The ``detection:`` section (the oracle when left out or invalid)."""
     m = rd.mapping(doc, path)
     if m is None:
         return DetectionSpec()
@@ -697,7 +731,8 @@ def _detection(rd: _Reader, doc: Any, path: str) -> DetectionSpec:
     return DetectionSpec(method=plugin.name, params=values)
 
 
-def _failures(rd: _Reader, doc: Any, path: str) -> list[tuple[str, FailureSpec]]:
+def read_failures(rd: Reader, doc: Any, path: str) -> list[tuple[str, FailureSpec]]:
+    """The valid entries of ``failures:`` as ``(path, spec)``."""
     out = []
     for _, sub, m in rd.items(doc, path, "failures"):
         plugin, own, values, ok = read_plugin_section(rd, m, sub, "failure")
@@ -732,7 +767,8 @@ def _failures(rd: _Reader, doc: Any, path: str) -> list[tuple[str, FailureSpec]]
     return out
 
 
-def _obstacles(rd: _Reader, doc: Any, path: str) -> list[tuple[str, ObstacleSpec]]:
+def read_obstacles(rd: Reader, doc: Any, path: str) -> list[tuple[str, ObstacleSpec]]:
+    """The valid entries of ``obstacles:`` as ``(path, spec)``."""
     out = []
     for i, sub, m in rd.items(doc, path, "obstacles"):
         plugin, own, values, ok = read_plugin_section(rd, m, sub, "obstacle")
@@ -753,7 +789,7 @@ def _obstacles(rd: _Reader, doc: Any, path: str) -> list[tuple[str, ObstacleSpec
             rd.fail(
                 sub,
                 f"obstacle type {plugin.name} returned no shape",
-                _describe(spec),
+                describe(spec),
                 f"an ObstacleSpec of type {', '.join(SHAPES)}",
             )
             continue
@@ -763,7 +799,7 @@ def _obstacles(rd: _Reader, doc: Any, path: str) -> list[tuple[str, ObstacleSpec
     return out
 
 
-def _safety(rd: _Reader, doc: Any, path: str) -> SafetySpec:
+def read_safety(rd: Reader, doc: Any, path: str) -> SafetySpec:
     """The ``safety:`` section: the filter and its values (default: none)."""
     m = rd.mapping(doc, path)
     if m is None:

@@ -9,21 +9,22 @@ defaults, without a fleet-wide sensor). The sensor itself is
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any
 
 from sandbox.plugins.registration import Param
-from sandbox.scenario.reader import _Reader
-from sandbox.scenario.sections import _section, read_param
+from sandbox.scenario.reader import Reader
+from sandbox.scenario.sections import DECLARED, read_param, section_param
 from sandbox.scenario.specs import RangeSpec, SensorsSpec
 
 #: The most beams of one range sensor (a scan is one pymunk query per beam at worst).
 MAX_BEAMS = 1024
+#: The narrowest field of view [rad] (about 0.06 degrees; one beam has no width).
+MIN_FOV = 1e-3
 
 SENSORS: dict[str, Param] = {
     "range": Param(
-        **_section("range"),
+        **section_param("range"),
         doc="A planar range sensor (LiDAR): beams from the vehicle's centre over a "
         "field of view about the heading, cast against obstacles, walls and the other "
         "vehicles (see sandbox/behaviour/ranges.py)",
@@ -44,8 +45,7 @@ RANGE: dict[str, Param] = {
         "rad",
         "Field of view, centred on the heading; a full turn (2 pi) spaces the beams "
         "2 pi / beams apart from -pi, a narrower one puts beams on both edges",
-        minimum=0.0,
-        exclusive=True,
+        minimum=MIN_FOV,
         maximum=2.0 * math.pi,
     ),
     "max_range": Param(
@@ -91,7 +91,7 @@ RANGE_KEYS = tuple(RANGE)
 
 
 def read_sensors(
-    rd: _Reader, doc: Any, path: str, base: SensorsSpec | None = None
+    rd: Reader, doc: Any, path: str, base: SensorsSpec | None = None
 ) -> SensorsSpec | None:
     """A ``sensors:`` mapping, merged over ``base``; None if it has problems.
 
@@ -113,7 +113,7 @@ def read_sensors(
 
 
 def _read_range(
-    rd: _Reader, doc: Any, path: str, base: RangeSpec | None
+    rd: Reader, doc: Any, path: str, base: RangeSpec | None
 ) -> RangeSpec | None:
     """The ``range:`` mapping, its keys left out from ``base`` (or the defaults)."""
     m = rd.mapping(doc, path)
@@ -122,9 +122,8 @@ def _read_range(
     rd.keys(m, RANGE_KEYS, path)
     values, ok = {}, True
     for key, p in RANGE.items():
-        if base is not None:
-            p = dataclasses.replace(p, default=getattr(base, key))
-        values[key], good = read_param(rd, m, key, path, p)
+        default = getattr(base, key) if base is not None else DECLARED
+        values[key], good = read_param(rd, m, key, path, p, default)
         ok = ok and good
     if not ok:
         return None

@@ -9,8 +9,9 @@ document that parses back to the same scenario.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, field, fields, is_dataclass
@@ -34,6 +35,21 @@ if TYPE_CHECKING:
 PLATOON_PATTERNS = ("grid", "line", "wedge", "ring")
 
 DRIVE_TYPES = ("reference", "commands")
+
+#: The sections an entry of ``platoons:`` replaces whole (its ``vehicle`` is merged
+#: key by key over the top level's); the keys of an entry are declared in
+#: :mod:`sandbox.scenario.platoons` (``PLATOONS``: these, ``name``, ``color`` and
+#: ``vehicle``).
+ENTRY_SECTIONS = (
+    "vehicles",
+    "platoon",
+    "reference",
+    "formation",
+    "recovery",
+    "safety",
+    "reconfigure",
+    "on_leader_failure",
+)
 
 # : Default colours, in vehicle order (the report draws the leader blue, then red,
 # green).
@@ -338,12 +354,31 @@ class ReconfigureSpec:
     close_gap: bool = False
 
 
+#: The loader that validates the document a :class:`Scenario` is built from
+#: (:func:`sandbox.scenario.parse.parse_scenario`). That module imports this one, so
+#: it installs itself here when it is imported (:func:`install_loader`), which
+#: importing :mod:`sandbox.scenario` does before any scenario can be made.
+_LOADER: list[Callable[..., Scenario]] = []
+
+
+def install_loader(parse: Callable[..., Scenario]) -> None:
+    """Make ``parse`` the loader that validates every :class:`Scenario` built."""
+    _LOADER[:] = [parse]
+
+
+def loader() -> Callable[..., Scenario]:
+    """The loader installed by :func:`install_loader`."""
+    if not _LOADER:
+        raise RuntimeError("sandbox.scenario.parse is not imported")
+    return _LOADER[0]
+
+
 #: Set while the loader constructs a scenario (which it has just validated).
 _LOADER_BUILDS: ContextVar[bool] = ContextVar("loader_builds", default=False)
 
 
 @contextmanager
-def _from_loader() -> Iterator[None]:
+def from_loader() -> Iterator[None]:
     """Construct scenarios without validating them again (the loader's own)."""
     token = _LOADER_BUILDS.set(True)
     try:
@@ -407,7 +442,7 @@ class Scenario:
     def __post_init__(self) -> None:
         """Validate a scenario not made by the loader (the constructor, ``replace``).
 
-        The loader builds scenarios under :func:`_from_loader`; any other
+        The loader builds scenarios under :func:`from_loader`; any other
         construction, such as ``dataclasses.replace(sc, dt=0.5)``, is parsed again
         from :meth:`to_dict` by the same loader, so it raises the loader's
         :class:`~sandbox.errors.ScenarioError` for an invalid value and otherwise
@@ -415,8 +450,6 @@ class Scenario:
         """
         if _LOADER_BUILDS.get():
             return
-        from sandbox.scenario.parse import parse_scenario
-
         try:
             doc = self.to_dict()
         except (AttributeError, TypeError, ValueError, IndexError) as exc:
@@ -424,7 +457,7 @@ class Scenario:
                 [Problem("", f"not a valid scenario ({type(exc).__name__}: {exc})")],
                 self.source,
             ) from None
-        checked = parse_scenario(doc, source=self.source)
+        checked = loader()(doc, source=self.source)
         for f in fields(self):
             if f.name != "source":
                 object.__setattr__(self, f.name, getattr(checked, f.name))
@@ -458,12 +491,10 @@ class Scenario:
         """
         import json
 
-        from sandbox.scenario.parse import parse_scenario
-
         sets = list(assignments)
         for key, value in changes.items():
-            sets.append(f"{key}={json.dumps(_plain(value))}")
-        return parse_scenario(self.to_dict(), source=self.source, overrides=sets)
+            sets.append(f"{key}={json.dumps(plain(value))}")
+        return loader()(self.to_dict(), source=self.source, overrides=sets)
 
     @property
     def leader_index(self) -> int:
@@ -483,8 +514,6 @@ class Scenario:
         platoons are written as ``platoons:``, each entry its platoon's own sections.
         """
         if self.platoons:
-            from sandbox.scenario.platoons import platoons_document
-
             return platoons_document(self)
         doc: dict[str, Any] = {
             "name": self.name,
@@ -500,10 +529,10 @@ class Scenario:
             doc["plugins"] = list(self.plugins)
         if self.reference is not None:
             doc["reference"] = {"type": self.reference.type}
-            doc["reference"].update(_plain(self.reference.params, skip_none=True))
+            doc["reference"].update(plain(self.reference.params, skip_none=True))
         if self.formation is not None:
             doc["formation"] = {"law": self.formation.law}
-            doc["formation"].update(_plain(self.formation.params, skip_none=True))
+            doc["formation"].update(plain(self.formation.params, skip_none=True))
         listed = self.vehicles
         if self.platoon is not None:
             listed = self.vehicles[: len(self.vehicles) - self.platoon.count]
@@ -511,16 +540,16 @@ class Scenario:
             for key in ("mass", "v1_max", "v2_max", "max_accel", "motor_accel"):
                 if getattr(made, key) is not None:
                     doc["vehicle"][key] = getattr(made, key)
-            doc["vehicle"]["gains"] = _plain(made.gains)
-            doc["platoon"] = _plain(self.platoon, skip_none=True)
+            doc["vehicle"]["gains"] = plain(made.gains)
+            doc["platoon"] = plain(self.platoon, skip_none=True)
         doc["vehicles"] = []
         for v in listed:
-            item = _plain(v, skip_none=True)
-            item["gains"] = _plain(v.gains)
+            item = plain(v, skip_none=True)
+            item["gains"] = plain(v.gains)
             if v.drive.type == "reference":
                 del item["drive"]
             doc["vehicles"].append(item)
-        doc["recovery"] = _plain(self.recovery, skip_none=True)
+        doc["recovery"] = plain(self.recovery, skip_none=True)
         doc["recovery"].update(doc["recovery"].pop("params"))
         if self.recovery.obstacles == "map":  # the default, left out
             del doc["recovery"]["obstacles"]
@@ -529,35 +558,86 @@ class Scenario:
         if failures:
             doc["failures"] = []
             for f in failures:
-                item = _plain(f, skip_none=True)
+                item = plain(f, skip_none=True)
                 item.update(item.pop("params"))
                 doc["failures"].append(item)
         if self.obstacles:
             doc["obstacles"] = [o.document() for o in self.obstacles]
-        doc["metrics"] = _plain(self.metrics)
+        doc["metrics"] = plain(self.metrics)
         if self.sensing != SensingSpec():
-            doc["sensing"] = _plain(self.sensing)
+            doc["sensing"] = plain(self.sensing)
         if self.detection != DetectionSpec():
             doc["detection"] = {"method": self.detection.method}
-            doc["detection"].update(_plain(self.detection.params, skip_none=True))
+            doc["detection"].update(plain(self.detection.params, skip_none=True))
         if self.safety != SafetySpec():
             doc["safety"] = {"filter": self.safety.filter}
-            doc["safety"].update(_plain(self.safety.params, skip_none=True))
+            doc["safety"].update(plain(self.safety.params, skip_none=True))
         if self.reconfigure != ReconfigureSpec():
-            doc["reconfigure"] = _plain(self.reconfigure)
+            doc["reconfigure"] = plain(self.reconfigure)
         if self.on_leader_failure != "keep":
             doc["on_leader_failure"] = self.on_leader_failure
         if self.sensors != SensorsSpec():
-            doc["sensors"] = _plain(self.sensors, skip_none=True)
+            doc["sensors"] = plain(self.sensors, skip_none=True)
         if self.expect is not None:
             doc["expect"] = self.expect.to_dict()
         return doc
 
 
-def _plain(obj: Any, skip_none: bool = False) -> Any:
+def platoons_document(sc: Scenario) -> dict[str, Any]:
+    """The document of a scenario of several platoons (:meth:`Scenario.to_dict`).
+
+    The top level holds the world's keys and the first platoon's sections; each
+    entry holds its name, colour, vehicles and the sections in which it differs
+    from the first platoon, so that a ``--set`` of a top-level section changes
+    every platoon that shares it.
+    """
+    first = sc.platoons[0].scenario
+    with from_loader():  # the world's own keys, as one platoon writes them
+        alone = dataclasses.replace(
+            sc,
+            vehicles=first.vehicles,
+            platoon=first.platoon,
+            platoons=(),
+            failures=(),
+            expect=None,
+        )
+    doc = alone.to_dict()
+    for key in ("vehicles", "platoon", *ENTRY_SECTIONS):
+        doc.pop(key, None)
+    doc["vehicle"] = {"diameter": sc.diameter}
+    shared = first.to_dict()
+    sections = [k for k in ENTRY_SECTIONS if k not in ("vehicles", "platoon")]
+    doc.update({k: shared[k] for k in sections if k in shared})
+    doc["platoons"] = []
+    for p in sc.platoons:
+        own = p.scenario.to_dict()
+        entry: dict[str, Any] = {"name": p.name, "color": p.color}
+        for key in ("vehicle", "vehicles", "platoon"):
+            if key in own:
+                entry[key] = own[key]
+        for key in ENTRY_SECTIONS:
+            if key in own and own[key] != shared.get(key):
+                entry[key] = own[key]
+        doc["platoons"].append(entry)
+    failures = [f for f in sc.failures if f.at < sc.duration]
+    if failures:
+        doc["failures"] = []
+        for f in failures:
+            item = {k: v for k, v in dataclasses.asdict(f).items() if v is not None}
+            item.update(item.pop("params"))
+            doc["failures"].append(item)
+    if sc.events:
+        doc["events"] = [e.document() for e in sc.events]
+    if sc.expect is not None:
+        doc["expect"] = sc.expect.to_dict()
+    return doc
+
+
+def plain(obj: Any, skip_none: bool = False) -> Any:
+    """A plain document of a value: dataclasses and tuples as dicts and lists."""
     if isinstance(obj, Mapping):
         return {
-            k: _plain(v, skip_none)
+            k: plain(v, skip_none)
             for k, v in obj.items()
             if not (skip_none and v is None)
         }
@@ -567,10 +647,10 @@ def _plain(obj: Any, skip_none: bool = False) -> Any:
             value = getattr(obj, f.name)
             if skip_none and value is None:
                 continue
-            out[f.name] = _plain(value, skip_none)
+            out[f.name] = plain(value, skip_none)
         return out
     if isinstance(obj, tuple | list):
-        return [_plain(v, skip_none) for v in obj]
+        return [plain(v, skip_none) for v in obj]
     if isinstance(obj, np.generic):
         return obj.item()
     return obj

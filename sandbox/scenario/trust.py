@@ -25,9 +25,9 @@ from sandbox.plugins.registration import (
     PluginError,
 )
 from sandbox.scenario.reader import (
-    _describe,
-    _Reader,
-    _says,
+    Reader,
+    describe,
+    says,
 )
 
 #: The environment variable that trusts the plug-in code scenarios list.
@@ -36,7 +36,7 @@ TRUST_ENV = "SANDBOX_TRUST_PLUGINS"
 #: scenario, or leave it unrun and its sections unchecked.
 PLUGIN_CODE = ("load", "refuse", "skip")
 #: The sections a plug-in can own (their names select a registered plug-in).
-_PLUGIN_OWNED = tuple(kind.section for kind in KINDS.values())
+PLUGIN_OWNED = tuple(kind.section for kind in KINDS.values())
 
 
 #: A dotted module name.
@@ -68,14 +68,58 @@ class UncheckedScenario(ScenarioError):
         self.plugins = tuple(plugins)
         sections = ", ".join(f"{path} ({what})" for path, what in self.unchecked)
         note = (
-            f"not checked: {sections}: they name plug-ins whose code is not run "
-            f"here ({', '.join(self.plugins)}); --trust-plugins loads them"
+            f"not checked: {sections}: they name plug-ins whose code validate never "
+            f"runs ({', '.join(self.plugins)}); --plugin "
+            f"{' --plugin '.join(self.plugins)} loads what you trust and checks them"
         )
         super().__init__([Problem("", note)], source)
 
 
-def _load_plugins(
-    rd: _Reader, listed: Any, source: str | None, plugin_code: str
+#: What unlocks the plug-in code of a scenario, by where it is loaded: anywhere (the
+#: library), a command with ``--trust-plugins``, a command with ``--plugin`` only.
+TRUST_ADVICE = {
+    "any": f"--trust-plugins, {TRUST_ENV}=1 or load_scenario(..., trust_plugins=True) "
+    "to run it",
+    "option": f"--trust-plugins or {TRUST_ENV}=1 to run it",
+    "plugin": "--plugin {entries} to run it (a plug-in named on the command line is "
+    "trusted)",
+}
+
+
+class UntrustedScenario(ScenarioError):
+    """A scenario that lists plug-in code, refused without trust.
+
+    ``refused`` holds the entries of ``plugins:`` not run. The message advises
+    ``advice`` (a key of :data:`TRUST_ADVICE`); :meth:`advised` gives the same
+    refusal with the advice of the command that loaded it (only commands that run
+    scenarios take ``--trust-plugins``).
+    """
+
+    def __init__(
+        self,
+        refused: tuple[str, ...],
+        line: int | None,
+        source: str | None,
+        advice: str = "any",
+    ) -> None:
+        self.refused, self.line = tuple(refused), line
+        entries = ", ".join(self.refused)
+        options = " --plugin ".join(self.refused)
+        expected = TRUST_ADVICE[advice].format(entries=options)
+        problem = Problem(
+            "plugins",
+            says("plug-in code is not run without trust", entries, expected),
+            line,
+        )
+        super().__init__([problem], source)
+
+    def advised(self, advice: str) -> UntrustedScenario:
+        """The same refusal advising ``advice`` (a key of :data:`TRUST_ADVICE`)."""
+        return UntrustedScenario(self.refused, self.line, self.source, advice)
+
+
+def load_listed_plugins(
+    rd: Reader, listed: Any, source: str | None, plugin_code: str
 ) -> list[str]:
     """The plug-ins a scenario lists, as they reload from anywhere, loaded or not.
 
@@ -94,7 +138,7 @@ def _load_plugins(
             rd.fail(
                 "plugins",
                 "not a list",
-                _describe(listed),
+                describe(listed),
                 "a list of plug-in files (.py) or module names",
             )
             return []
@@ -109,7 +153,7 @@ def _load_plugins(
         where = f"plugins[{i}]"
         if not isinstance(spec, str) or not spec.strip():
             rd.fail(
-                where, "not a plug-in name", _describe(spec), "a .py file or a module"
+                where, "not a plug-in name", describe(spec), "a .py file or a module"
             )
             continue
         is_file = plugins.looks_like_file(spec)
@@ -147,20 +191,6 @@ def _load_plugins(
                 continue
             out.append(entry)
     if refused:
-        raise ScenarioError(
-            [
-                Problem(
-                    "plugins",
-                    _says(
-                        "plug-in code is not run without trust",
-                        ", ".join(refused),
-                        f"--trust-plugins, {TRUST_ENV}=1 or "
-                        "load_scenario(..., trust_plugins=True) to run it",
-                    ),
-                    rd.line("plugins"),
-                )
-            ],
-            source,
-        )
+        raise UntrustedScenario(tuple(refused), rd.line("plugins"), source)
     rd.unloaded = tuple(unloaded)
     return out

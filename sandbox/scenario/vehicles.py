@@ -21,15 +21,14 @@ from sandbox.plugins.registration import (
     Param,
 )
 from sandbox.scenario.reader import (
-    _BAD_TEXT,
-    _REQUIRED,
     MAX_VEHICLES,
     MIN_DIAMETER,
     MIN_MASS,
-    _describe,
-    _Reader,
+    REQUIRED,
+    Reader,
+    describe,
 )
-from sandbox.scenario.sections import _section, read_param, read_params
+from sandbox.scenario.sections import read_param, read_params, section_param
 from sandbox.scenario.sensors import read_sensors
 from sandbox.scenario.specs import (
     DRIVE_TYPES,
@@ -43,6 +42,10 @@ from sandbox.scenario.specs import (
     VehicleSpec,
 )
 
+#: The least acceleration limit [m/s^2]: a stop from 1 m/s then takes 17 minutes (the
+#: braking barrier plans every vehicle's stop period by period).
+MIN_ACCEL = 1e-3
+
 VEHICLE_PARAMS: dict[str, Param] = {
     "diameter": Param(
         "number",
@@ -53,7 +56,7 @@ VEHICLE_PARAMS: dict[str, Param] = {
     ),
     "mass": Param("number", 10.0, "kg", "Vehicle mass", minimum=MIN_MASS),
     "gains": Param(
-        **_section("gains"),
+        **section_param("gains"),
         doc="Flatness controller gains, eqs. (4)-(6) (default: the report's)",
     ),
     "max_accel": Param(
@@ -61,8 +64,7 @@ VEHICLE_PARAMS: dict[str, Param] = {
         None,
         "m/s^2",
         "Limit on |d chi / dt| (chi is clamped: no wind-up); default: unlimited",
-        minimum=0.0,
-        exclusive=True,
+        minimum=MIN_ACCEL,
     ),
     "v1_max": Param(
         "number",
@@ -88,8 +90,7 @@ VEHICLE_PARAMS: dict[str, Param] = {
         "which may be too weak to follow the commands (the run reports how often); "
         "default: a motor that follows every command while free and pushes with 200 "
         "m/s^2 in contact",
-        minimum=0.0,
-        exclusive=True,
+        minimum=MIN_ACCEL,
     ),
 }
 
@@ -132,13 +133,13 @@ VEHICLE: dict[str, Param] = {
     "color": Param(
         "string",
         None,
-        doc="Colour name or #rrggbb (default: blue, red, green, ... in order)",
+        doc="A CSS colour name or #rrggbb (default: blue, red, green, ... in order)",
     ),
     "drive": Param(
-        **_section("drive"), doc="How the vehicle is driven (default: by its law)"
+        **section_param("drive"), doc="How the vehicle is driven (default: by its law)"
     ),
     "sensors": Param(
-        **_section("sensors"),
+        **section_param("sensors"),
         doc="This vehicle's sensors, merged key by key over the fleet's top-level "
         "'sensors' (default: the fleet's)",
     ),
@@ -219,8 +220,8 @@ PLATOON_KEYS = tuple(PLATOON)
 DRIVE_KEYS = tuple(DRIVE)
 
 
-def _vehicle_params(
-    rd: _Reader, m: dict[Any, Any], path: str, base: dict[str, Any]
+def read_vehicle_params(
+    rd: Reader, m: dict[Any, Any], path: str, base: dict[str, Any]
 ) -> dict:
     """Read the physical/controller parameters of ``vehicle:`` or of one vehicle.
 
@@ -230,8 +231,7 @@ def _vehicle_params(
     out = dict(base)
     for key, p in VEHICLE_PARAMS.items():
         if p.type != "custom":
-            p = dataclasses.replace(p, default=base[key])
-            out[key], _ = read_param(rd, m, key, path, p)
+            out[key], _ = read_param(rd, m, key, path, p, base[key])
     gains_doc, gains_path = rd.get(m, "gains", path, None)
     gains = dict(base["gains"])
     if gains_doc is not None:
@@ -239,27 +239,26 @@ def _vehicle_params(
         if g is not None:
             rd.keys(g, GAIN_KEYS, gains_path)
             for key, p in GAINS.items():
-                p = dataclasses.replace(p, default=gains[key])
-                gains[key], _ = read_param(rd, g, key, gains_path, p)
+                gains[key], _ = read_param(rd, g, key, gains_path, p, gains[key])
     out["gains"] = gains
     return out
 
 
-def _vehicle_defaults() -> dict[str, Any]:
+def vehicle_defaults() -> dict[str, Any]:
     """The declared defaults of ``vehicle:``, gains included."""
     base = {k: p.default for k, p in VEHICLE_PARAMS.items() if p.type != "custom"}
     base["gains"] = {k: p.default for k, p in GAINS.items()}
     return base
 
 
-def _drive(rd: _Reader, doc: Any, path: str) -> DriveSpec | None:
+def _drive(rd: Reader, doc: Any, path: str) -> DriveSpec | None:
     """The drive of one vehicle, or None if it has problems (they are recorded)."""
     before = len(rd.problems)
     drive = _read_drive(rd, doc, path)
     return drive if len(rd.problems) == before else None
 
 
-def _read_drive(rd: _Reader, doc: Any, path: str) -> DriveSpec:
+def _read_drive(rd: Reader, doc: Any, path: str) -> DriveSpec:
     m = rd.mapping(doc, path)
     if m is None:
         return DriveSpec()
@@ -275,14 +274,14 @@ def _read_drive(rd: _Reader, doc: Any, path: str) -> DriveSpec:
             )
         return DriveSpec()
     kind_rows = "a list of [t, v1, v2] rows ([s], [m/s], [rad/s])"
-    rows, sub = rd.get(m, "schedule", path, _REQUIRED, kind_rows)
-    if rows is _REQUIRED:
+    rows, sub = rd.get(m, "schedule", path, REQUIRED, kind_rows)
+    if rows is REQUIRED:
         return DriveSpec()
     if not isinstance(rows, list) or not rows:
         rd.fail(
             sub,
             "not a list of rows" if not isinstance(rows, list) else "no rows",
-            _describe(rows),
+            describe(rows),
             kind_rows,
         )
         return DriveSpec()
@@ -302,8 +301,8 @@ def _read_drive(rd: _Reader, doc: Any, path: str) -> DriveSpec:
     return DriveSpec("commands", tuple(schedule))
 
 
-def _vehicles(
-    rd: _Reader,
+def read_vehicles(
+    rd: Reader,
     doc: Any,
     path: str,
     params: dict[str, Any],
@@ -320,7 +319,7 @@ def _vehicles(
     if doc is None:
         return []
     if not isinstance(doc, list):
-        rd.fail(path, "not a list", _describe(doc), "a list of vehicles")
+        rd.fail(path, "not a list", describe(doc), "a list of vehicles")
         return []
     if len(doc) > MAX_VEHICLES:
         rd.fail(path, "too many vehicles", f"{len(doc)}", f"at most {MAX_VEHICLES}")
@@ -339,16 +338,16 @@ def _vehicles(
             (sub, name if isinstance(name, str) else f"vehicle{i}", leader)
         )
         kind = "a list [x1, x2, x3]: two lengths [m] and a heading [rad]"
-        raw, pose_path = rd.get(m, "pose", sub, _REQUIRED, kind)
+        raw, pose_path = rd.get(m, "pose", sub, REQUIRED, kind)
         pose: Any = None
-        if raw is not _REQUIRED:
+        if raw is not REQUIRED:
             if not isinstance(raw, list | tuple) or len(raw) != 3:
                 what = (
                     "wrong number of items"
                     if isinstance(raw, list | tuple)
                     else "not a list"
                 )
-                rd.fail(pose_path, what, _describe(raw), kind)
+                rd.fail(pose_path, what, describe(raw), kind)
             else:
                 pose = (
                     rd.check_number(raw[0], f"{pose_path}[0]", length=True),
@@ -356,19 +355,11 @@ def _vehicles(
                     rd.check_number(raw[2], f"{pose_path}[2]"),
                 )
         offset = rd.vector(m, "offset", sub, 2, (0.0, 0.0), length=True)
-        color = rd.string(m, "color", sub, PALETTE[i % len(PALETTE)])
-        if isinstance(color, str) and _BAD_TEXT.search(color):
-            rd.fail(
-                f"{sub}.color",
-                "holds a control character",
-                _describe(color),
-                "a colour name or #rrggbb",
-            )
-            color = PALETTE[i % len(PALETTE)]
+        color = rd.color(m, "color", sub, PALETTE[i % len(PALETTE)])
         drive: DriveSpec | None = DriveSpec()
         if m.get("drive") is not None:
             drive = _drive(rd, m["drive"], f"{sub}.drive")
-        p = _vehicle_params(rd, m, sub, params)
+        p = read_vehicle_params(rd, m, sub, params)
         sensors = None
         if m.get("sensors") is not None:
             sensors = read_sensors(rd, m["sensors"], f"{sub}.sensors", fleet_sensors)
@@ -413,7 +404,8 @@ def _make_vehicle(
     )
 
 
-def _platoon(rd: _Reader, doc: Any, path: str) -> PlatoonSpec | None:
+def read_platoon(rd: Reader, doc: Any, path: str) -> PlatoonSpec | None:
+    """The ``platoon:`` section, or None if it has problems (recorded)."""
     m = rd.mapping(doc, path)
     if m is None:
         return None
@@ -446,7 +438,7 @@ def platoon_offsets(spec: PlatoonSpec) -> np.ndarray:
     return np.stack((-(row + 1.0) * s, (col - (cols - 1) / 2.0) * s), -1)
 
 
-def _platoon_frame(
+def platoon_frame(
     formation: FormationSpec | None,
     leader: VehicleSpec | None,
     reference: ReferenceSpec | None,
@@ -491,7 +483,7 @@ def _platoon_frame(
     return x, y, heading, heading
 
 
-def _expand_platoon(
+def expand_platoon(
     spec: PlatoonSpec,
     listed: list[VehicleSpec],
     params: dict[str, Any],
@@ -501,12 +493,12 @@ def _expand_platoon(
 ) -> list[VehicleSpec]:
     """Create the platoon's vehicles, starting on their slots (jittered by ``seed``).
 
-    The slots are those the formation law gives at t = 0 (see :func:`_platoon_frame`),
+    The slots are those the formation law gives at t = 0 (see :func:`platoon_frame`),
     so that an unjittered platoon starts in formation. The jitter is uniform in
     ``[-jitter, jitter]`` on each axis, drawn from ``numpy.random.default_rng(seed)``.
     """
     leader = next((v for v in listed if v.leader), None)
-    x, y, angle, heading = _platoon_frame(formation, leader, reference)
+    x, y, angle, heading = platoon_frame(formation, leader, reference)
     delta = platoon_offsets(spec)
     c, s = math.cos(angle), math.sin(angle)
     world = np.stack(

@@ -17,10 +17,10 @@ from typing import Any
 import yaml
 
 from sandbox.errors import Problem
-from sandbox.scenario.reader import MAX_FILE_BYTES, MAX_NUMBER, _describe, _says
+from sandbox.scenario.reader import MAX_FILE_BYTES, MAX_NUMBER, describe, says
 
 
-class _YAMLLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+class YAMLLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
     """Safe YAML loader that also reads exponent floats like ``1e-3`` as numbers.
 
     YAML 1.1 (PyYAML's default) reads ``1e-3`` and ``2.5e3`` as text; YAML 1.2, JSON and
@@ -31,7 +31,7 @@ class _YAMLLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignor
     """
 
 
-_YAMLLoader.add_implicit_resolver(
+YAMLLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
     list("-+0123456789"),
@@ -56,10 +56,10 @@ def _base_60_as_text(tag: str) -> Any:
 
 
 for _tag in ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float"):
-    _YAMLLoader.add_constructor(_tag, _base_60_as_text(_tag))
+    YAMLLoader.add_constructor(_tag, _base_60_as_text(_tag))
 
 
-def _line_map(node: yaml.Node | None, path: str, out: dict[str, int]) -> None:
+def line_map(node: yaml.Node | None, path: str, out: dict[str, int]) -> None:
     """Record the 1-based line of every field of a composed YAML node tree.
 
     A node reached again through an alias is mapped once (its first path): recursive or
@@ -88,7 +88,7 @@ def _key_text(key: yaml.Node) -> str:
     return str(key.value) if isinstance(key, yaml.ScalarNode) else "?"
 
 
-def _duplicate_keys(root: yaml.Node | None) -> list[Problem]:
+def duplicate_keys(root: yaml.Node | None) -> list[Problem]:
     """Keys given twice in one mapping (PyYAML would silently keep the last one)."""
     problems = []
     seen: set[int] = set()
@@ -111,7 +111,7 @@ def _duplicate_keys(root: yaml.Node | None) -> list[Problem]:
                     problems.append(
                         Problem(
                             sub,
-                            _says(
+                            says(
                                 "duplicate key",
                                 f"{text!r} again on line {line}",
                                 "each key once; first on line "
@@ -139,7 +139,7 @@ _YAML_HINTS = (
 )
 
 
-def _yaml_problem(exc: yaml.YAMLError, text: str) -> Problem:
+def yaml_problem(exc: yaml.YAMLError, text: str) -> Problem:
     """One problem for a YAML syntax error, with its line and the text found there."""
     mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
     what = getattr(exc, "problem", None) or str(exc).splitlines()[0]
@@ -167,14 +167,14 @@ def _yaml_problem(exc: yaml.YAMLError, text: str) -> Problem:
     expected = next(
         (hint for key, hint in _YAML_HINTS if key in what), "well-formed YAML"
     )
-    return Problem("", _says(f"malformed YAML: {what}", got, expected), line)
+    return Problem("", says(f"malformed YAML: {what}", got, expected), line)
 
 
-class _NotAFile(OSError):
+class NotAFile(OSError):
     """A scenario path that is not a regular file of a readable size."""
 
 
-def _read_limited(path: Path) -> bytes:
+def read_limited(path: Path) -> bytes:
     """The bytes of a regular file of at most :data:`MAX_FILE_BYTES` bytes.
 
     Devices, pipes and sockets are refused before they are opened (opening a pipe
@@ -185,21 +185,21 @@ def _read_limited(path: Path) -> bytes:
     if stat.S_ISDIR(mode):
         raise IsADirectoryError(path)
     if not stat.S_ISREG(mode):
-        raise _NotAFile("not a regular file (a device, pipe or socket)")
+        raise NotAFile("not a regular file (a device, pipe or socket)")
     too_big = f"larger than {MAX_FILE_BYTES // 1_000_000} MB"
     if path.stat().st_size > MAX_FILE_BYTES:
-        raise _NotAFile(f"{path.stat().st_size:,} bytes, {too_big}")
+        raise NotAFile(f"{path.stat().st_size:,} bytes, {too_big}")
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     with os.fdopen(fd, "rb") as f:
         if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-            raise _NotAFile("not a regular file (a device, pipe or socket)")
+            raise NotAFile("not a regular file (a device, pipe or socket)")
         data = f.read(MAX_FILE_BYTES + 1)
     if len(data) > MAX_FILE_BYTES:
-        raise _NotAFile(f"more than {MAX_FILE_BYTES:,} bytes, {too_big}")
+        raise NotAFile(f"more than {MAX_FILE_BYTES:,} bytes, {too_big}")
     return data
 
 
-def _long_integer_problem(node: yaml.Node | None, exc: ValueError) -> Problem:
+def long_integer_problem(node: yaml.Node | None, exc: ValueError) -> Problem:
     """The problem of a value YAML cannot construct, like an over-long integer."""
     stack, seen = [node], set()
     while stack:
@@ -211,7 +211,7 @@ def _long_integer_problem(node: yaml.Node | None, exc: ValueError) -> Problem:
             if n.tag.endswith(":int") and len(n.value) > 4000:
                 return Problem(
                     "",
-                    _says(
+                    says(
                         "number too large",
                         "an integer of more than 4000 digits",
                         f"a number within +-{MAX_NUMBER:g}",
@@ -224,9 +224,7 @@ def _long_integer_problem(node: yaml.Node | None, exc: ValueError) -> Problem:
             stack.extend(n.value)
     return Problem(
         "",
-        _says(
-            "a value YAML cannot read", _describe(str(exc)), "valid numbers and dates"
-        ),
+        says("a value YAML cannot read", describe(str(exc)), "valid numbers and dates"),
         None,
     )
 
@@ -293,7 +291,7 @@ def read_yaml_file(
     path : str or Path
         The file.
     loader : type, optional
-        A safe PyYAML loader class (default ``_YAMLLoader``).
+        A safe PyYAML loader class (default ``YAMLLoader``).
     max_nodes : int or None
         Most nodes the document may expand to (see :func:`expanded_nodes`); None
         for no limit (the document is constructed, sharing what aliases name).
@@ -308,16 +306,16 @@ def read_yaml_file(
     name = str(path)
 
     def refuse(what: str, got: str, expected: str, line: int | None = None) -> None:
-        raise ScenarioError([Problem("", _says(what, got, expected), line)], name)
+        raise ScenarioError([Problem("", says(what, got, expected), line)], name)
 
     expected = "a readable YAML file"
     try:
-        data = _read_limited(Path(path))
+        data = read_limited(Path(path))
     except FileNotFoundError:
         refuse("cannot read the file", "no such file", expected)
     except IsADirectoryError:
         refuse("cannot read the file", "a directory", expected)
-    except OSError as exc:  # _NotAFile among them
+    except OSError as exc:  # NotAFile among them
         refuse("cannot read the file", exc.strerror or str(exc), expected)
     try:
         text = data.decode("utf-8")
@@ -327,7 +325,7 @@ def read_yaml_file(
         refuse("not UTF-8 text", got, "a UTF-8 encoded YAML file", line)
     node = None
     try:
-        reader = (loader or _YAMLLoader)(text)
+        reader = (loader or YAMLLoader)(text)
         try:
             node = reader.get_single_node()
             if max_nodes is not None and expanded_nodes(node, max_nodes) > max_nodes:
@@ -342,8 +340,8 @@ def read_yaml_file(
     except ValueError as exc:  # an integer beyond Python's digit limit
         if isinstance(exc, ScenarioError):
             raise
-        raise ScenarioError([_long_integer_problem(node, exc)], name) from None
+        raise ScenarioError([long_integer_problem(node, exc)], name) from None
     except yaml.YAMLError as exc:
-        raise ScenarioError([_yaml_problem(exc, text)], name) from None
+        raise ScenarioError([yaml_problem(exc, text)], name) from None
     except RecursionError:
         refuse("the document is nested too deeply", "hundreds of levels", "a few")

@@ -16,6 +16,10 @@ apply to every run), and prints one row per run:
   ``true``/``false`` in CSV and JSON, which also have a ``status`` column), or, in
   Markdown, the run's status when it did not finish (``diverged``).
 
+A law that hands the controller a moving target (``formation.law`` ``potential`` or
+``flocking``) is judged against its goals: its settling, convergence and deadlocks are
+those of ``metrics.json`` ``formation_goal`` (:mod:`sandbox.run.goals`).
+
 ``--grid PATH=v1,v2,...`` (repeatable) also varies fields for every strategy, e.g.
 ``recovery.tangential=0,1`` (a ``setting`` column; with strategy ``none`` the
 ``recovery.*`` paths take their first value only). ``--columns safety`` prints the
@@ -143,13 +147,14 @@ def row_from_metrics(
     ``healthy`` names the vehicles without an active failure at the end of the run.
     """
     vehicles = metrics["vehicles"]
+    judged = judged_metrics(metrics)  # a moving-target law's: against its goals
     settle = [
-        vehicles[name]["settling_time"]
+        judged["vehicles"][name]["settling_time"]
         for name in healthy
-        if vehicles[name]["formation_error"]["max"] is not None  # it has a slot
+        if judged["vehicles"][name]["formation_error"]["max"] is not None  # a slot
     ]
     total = int(metrics["collisions"]["total"])
-    converged = bool(metrics["converged"])
+    converged = bool(judged["converged"])
     return Row(
         scenario=scenario,
         strategy=strategy,
@@ -163,8 +168,18 @@ def row_from_metrics(
         converged=converged,
         status=metrics["status"],
         success=converged and total == 0 and metrics["status"] == STATUS_OK,
-        deadlocks=len(metrics.get("deadlocks", ())),
+        deadlocks=len(judged.get("deadlocks", ())),
     )
+
+
+def judged_metrics(metrics: dict) -> dict:
+    """The block that says whether a run formed: the run's, or ``formation_goal``.
+
+    A law that hands the controller a moving target (``potential``, ``flocking``) is
+    judged against its goals (:mod:`sandbox.run.goals`): ``vehicles``, ``converged``
+    and ``deadlocks`` of that block.
+    """
+    return metrics.get("formation_goal") or metrics
 
 
 def latest_settling(run: Run, metrics: dict) -> float | None:
@@ -172,10 +187,11 @@ def latest_settling(run: Run, metrics: dict) -> float | None:
     healthy = [
         n for i, n in enumerate(run.names) if len(run.t) and not run.failed[-1, i]
     ]
+    vehicles = judged_metrics(metrics)["vehicles"]
     settle = [
-        metrics["vehicles"][n]["settling_time"]
+        vehicles[n]["settling_time"]
         for n in healthy
-        if metrics["vehicles"][n]["formation_error"]["max"] is not None
+        if vehicles[n]["formation_error"]["max"] is not None
     ]
     return None if not settle or None in settle else max(settle)
 

@@ -66,11 +66,13 @@ def worst_settling(run: Any, metrics: dict[str, Any]) -> float | None:
     """The largest settling time of the healthy vehicles with a slot [s].
 
     Healthy: no failure active at the end of the run (as for ``converged``). None when
-    one of them never settles, or there is none.
+    one of them never settles, or there is none. A law that hands the controller a
+    moving target is judged against its goals (``metrics.json`` ``formation_goal``).
     """
     worst = None
+    judged = metrics.get("formation_goal") or metrics  # a moving-target law's goals
     for i, name in enumerate(run.names):
-        m = metrics["vehicles"][name]
+        m = judged["vehicles"][name]
         if m["formation_error"]["final"] is None:
             continue
         if len(run.t) and bool(run.failed[-1, i]):
@@ -84,16 +86,17 @@ def worst_settling(run: Any, metrics: dict[str, Any]) -> float | None:
 def row_of(run: Any, metrics: dict[str, Any]) -> dict[str, Any]:
     """The measured columns of a run's row in ``results.csv``."""
     col = metrics["collisions"]
+    judged = metrics.get("formation_goal") or metrics  # a moving-target law's goals
     return {
         "status": metrics["status"],
         "collisions.total": col["total"],
         "collisions.vehicle_vehicle": col["vehicle_vehicle"],
         "collisions.healthy": col["healthy"],
         "min_distance": metrics["min_distance"],
-        "converged": metrics["converged"],
+        "converged": judged["converged"],
         "settling_time": worst_settling(run, metrics),
         "effort": sum(m["control_effort"] for m in metrics["vehicles"].values()),
-        "deadlocks": len(metrics.get("deadlocks", ())),
+        "deadlocks": len(judged.get("deadlocks", ())),
     }
 
 
@@ -227,9 +230,9 @@ def _with_seed(scenario: Any, seed: int) -> Any:
     """The loader's scenario with another seed, built as the loader builds it."""
     import dataclasses
 
-    from sandbox.scenario.specs import _from_loader
+    from sandbox.scenario.specs import from_loader
 
-    with _from_loader():
+    with from_loader():
         return dataclasses.replace(scenario, seed=seed)
 
 
@@ -482,6 +485,7 @@ def run_local(
                 return
         return
     import concurrent.futures as cf
+    from concurrent.futures.process import BrokenProcessPool
 
     ctx = pool_context()
     pool = cf.ProcessPoolExecutor(
@@ -502,7 +506,13 @@ def run_local(
                 pending, timeout=STOP_POLL, return_when=cf.FIRST_COMPLETED
             )
             for fut in done:
-                seconds, results = fut.result()
+                try:
+                    seconds, results = fut.result()
+                except BrokenProcessPool:
+                    raise EngineError(
+                        f"a worker process of --jobs {workers} ended abruptly (killed, "
+                        "e.g. by the out-of-memory killer, or crashed)"
+                    ) from None
                 groups.timed(len(results), seconds)
                 yield from results
             if should_stop is not None and should_stop():
@@ -561,8 +571,7 @@ def dask_client(address: str | None, scheduler_file: str | None) -> Any:
     where = address or f"the scheduler of {scheduler_file}"
     try:
         if scheduler_file is not None:
-            if not os.path.isfile(scheduler_file):
-                raise EngineError(f"--scheduler-file {scheduler_file}: no such file")
+            scheduler_address(scheduler_file)  # a clear line for a file that is not one
             return Client(scheduler_file=scheduler_file, timeout=CONNECT_TIMEOUT)
         return Client(address, timeout=CONNECT_TIMEOUT)
     except EngineError:
@@ -571,6 +580,40 @@ def dask_client(address: str | None, scheduler_file: str | None) -> Any:
         raise EngineError(
             f"cannot reach the Dask scheduler at {where}: {exc}"
         ) from None
+    except Exception as exc:  # distributed's own errors for an address it cannot use
+        raise EngineError(
+            f"cannot use the Dask scheduler at {where}: {type(exc).__name__}: {exc}"
+        ) from None
+
+
+def scheduler_address(path: str) -> str:
+    """The address a Dask scheduler file holds (``{"address": "tcp://..."}``).
+
+    Raises
+    ------
+    EngineError
+        No such file, not JSON, or no address string in it.
+    """
+    import json
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            info = json.load(fh)
+    except FileNotFoundError:
+        raise EngineError(f"--scheduler-file {path}: no such file") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise EngineError(
+            f"--scheduler-file {path}: not a Dask scheduler file ({exc})"
+        ) from None
+    address = info.get("address") if isinstance(info, dict) else None
+    if not isinstance(address, str) or "://" not in address:
+        shown = repr(address)[:60]
+        raise EngineError(
+            f"--scheduler-file {path}: not a Dask scheduler file (its address is "
+            f"{shown}; expected a mapping with an address such as "
+            "'tcp://host:8786', as 'dask scheduler --scheduler-file' writes)"
+        )
+    return address
 
 
 def run_dask(

@@ -238,10 +238,10 @@ def normal_value(text: str) -> Any:
     >>> normal_value("01") == normal_value("1.0") == normal_value("1e0")
     True
     """
-    from sandbox.scenario.yamlfile import _YAMLLoader
+    from sandbox.scenario.yamlfile import YAMLLoader
 
     try:
-        value = yaml.load(text, Loader=_YAMLLoader)  # noqa: S506 (a SafeLoader)
+        value = yaml.load(text, Loader=YAMLLoader)  # noqa: S506 (a SafeLoader)
     except (yaml.YAMLError, ValueError, RecursionError):
         return ("text", text)
     return _normal(value)

@@ -8,17 +8,16 @@ and rebuilds ``results.csv`` at the end, also when interrupted.
 
 Signals: until the runs start, SIGINT and SIGTERM act as they do around the call
 (under ``sandbox`` they raise ``KeyboardInterrupt``: exit status 130, nothing
-written but whole files); while runs are computed they stop the sweep, which keeps
-every finished run and returns at once (:class:`StopOnSignal`).
+written but whole files); while runs are computed the first stops the sweep, which
+keeps every finished run and returns at once, and a second stops it where it is (a
+group under way in this process, a blocking plug-in), the finished runs kept
+(:class:`~sandbox._startup.StopOnSignal`).
 """
 
 from __future__ import annotations
 
 import shlex
-import signal
 import sys
-import threading
-import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +25,7 @@ from typing import Any
 
 import yaml
 
+from sandbox._startup import StopOnSignal
 from sandbox.errors import ScenarioError
 from sandbox.study import engine
 from sandbox.study.spec import (
@@ -39,6 +39,11 @@ from sandbox.study.spec import (
 )
 from sandbox.study.store import Store, digest
 
+#: What the first SIGINT/SIGTERM of a sweep says.
+STOP_NOTICE = (
+    "stopping: the runs under way end, the finished ones are stored (a second "
+    "Ctrl-C stops at once; the store keeps every run finished)"
+)
 #: Most rejected run files named one by one (then their count).
 SHOW_REJECTED = 5
 #: With ``keep_runs``, each computed run's directory is ``DIR/run_dirs/<run id>/``.
@@ -57,17 +62,27 @@ class SweepReport:
     interrupted: bool = False
 
 
-def read_base(spec: SweepSpec) -> dict[str, Any]:
-    """The base scenario document, read exactly as ``sandbox run`` reads it."""
-    from sandbox.scenario import _YAMLLoader, load_scenario
+def read_base(spec: SweepSpec, trust_plugins: bool | None = None) -> dict[str, Any]:
+    """The base scenario document, read exactly as ``sandbox run`` reads it.
 
-    load_scenario(spec.base, overrides=list(spec.fixed))  # its problems, with lines
+    ``trust_plugins`` as :func:`~sandbox.scenario.load_scenario` takes it (False:
+    never run the code the base lists, as ``sandbox validate``).
+    """
+    from sandbox.scenario import YAMLLoader, load_scenario
+
+    # its problems, with lines
+    load_scenario(spec.base, overrides=list(spec.fixed), trust_plugins=trust_plugins)
     text = Path(spec.base).read_text(encoding="utf-8")
-    return yaml.load(text, Loader=_YAMLLoader)  # noqa: S506 (a SafeLoader)
+    return yaml.load(text, Loader=YAMLLoader)  # noqa: S506 (a SafeLoader)
 
 
-def check_points(spec: SweepSpec, base_doc: dict[str, Any]) -> None:
+def check_points(
+    spec: SweepSpec, base_doc: dict[str, Any], plugin_code: str | None = None
+) -> None:
     """Validate every grid point on the first seed (before anything runs).
+
+    ``plugin_code`` as :func:`~sandbox.scenario.parse_scenario` takes it
+    (``refuse``: never run the code the base lists).
 
     Raises
     ------
@@ -75,14 +90,29 @@ def check_points(spec: SweepSpec, base_doc: dict[str, Any]) -> None:
         The first grid point whose scenario is invalid, its problems marked with the
         ``--set`` that caused them.
     """
-    from sandbox.scenario import parse_scenario
+    from sandbox.scenario import YAMLLoader, line_map, parse_scenario
 
+    # the file's lines: a warning of the base reads as when the base was loaded (and
+    # is shown once), those of a grid point at their --set
+    lines: dict[str, int] = {}
+    try:
+        loader = YAMLLoader(Path(spec.base).read_text(encoding="utf-8"))
+        try:
+            line_map(loader.get_single_node(), "", lines)
+        finally:
+            loader.dispose()
+    except (OSError, ValueError, yaml.YAMLError):
+        lines = {}
     first = spec.seeds.start
     for point in spec.iter_points():
         task = Task("", 0, tuple((p, t) for p, t, _ in point), first)
         try:
             parse_scenario(
-                base_doc, source=str(spec.base), overrides=task.overrides(spec.fixed)
+                base_doc,
+                source=str(spec.base),
+                lines=lines,
+                overrides=task.overrides(spec.fixed),
+                plugin_code=plugin_code,
             )
         except ScenarioError as exc:
             if any(p.path == "randomize" for p in exc.problems):
@@ -129,7 +159,9 @@ def run_sweep(
     retry_failed : bool
         Also rerun the stored runs whose status is a failure.
     progress : callable, optional
-        Called as ``progress(done, total)`` after each run.
+        Called as ``progress(stored, total)`` when the runs start and after each run
+        stored (``stored`` counts the runs stored before, ``total`` every run of the
+        sweep: what the store holds).
     max_runs : int
         Most runs the sweep may have (:data:`~sandbox.study.spec.MAX_RUNS`).
     warn : callable, optional
@@ -163,7 +195,7 @@ def run_sweep(
         done = store.done(spec.iter_tasks())
         _warn_rejected(store, warn)
         todo = to_compute(spec.iter_tasks(), done, retry_failed)
-        with StopOnSignal() as stop:
+        with StopOnSignal(STOP_NOTICE) as stop:
             engines = (jobs, scheduler, scheduler_file)
             return _compute(
                 spec, store, base_doc, todo, engines, progress, stop, keep_runs
@@ -208,7 +240,14 @@ def _compute(
             for t in todo
         ]
         if scheduler or scheduler_file:
-            client = engine.dask_client(scheduler, scheduler_file)
+            try:
+                client = engine.dask_client(scheduler, scheduler_file)
+            except engine.EngineError as exc:
+                raise engine.EngineError(
+                    f"{exc}; nothing was computed ({report.already} of {total} runs "
+                    f"are stored in {out}): run the same command again with a "
+                    "scheduler that answers, or without --scheduler to compute here"
+                ) from None
             results = engine.run_dask(
                 jobs_list,
                 client,
@@ -220,15 +259,26 @@ def _compute(
             )
         else:
             results = engine.run_local(jobs_list, jobs, should_stop=stop)
+        if progress is not None:
+            progress(report.already, total)
         try:  # every run the engine yields is stored; it stops when asked to
             for run_id, result in results:
                 if result is not None:
                     store.put(by_id[run_id], result)
                     report.computed += 1
                     if progress is not None:
-                        progress(report.computed, len(todo))
+                        progress(report.already + report.computed, total)
         except KeyboardInterrupt:
             stop.raised = True
+        except engine.EngineError as exc:
+            if scheduler or scheduler_file:
+                raise  # the engine's own line says what was kept and how to resume
+            kept = report.already + report.computed
+            raise engine.EngineError(
+                f"{exc}; the {kept} of {total} runs finished are stored in {out}: run "
+                "the same command again to compute the rest (with fewer --jobs if "
+                "memory ran out)"
+            ) from None
         finally:
             results.close()
             report.rows = store.write_results(spec, spec.iter_tasks())
@@ -239,59 +289,6 @@ def _compute(
     store.rejected.clear()
     report.failed = sum(1 for s in statuses if s in engine.FAILED_STATUSES)
     return report
-
-
-class StopOnSignal:
-    """SIGINT/SIGTERM ask the sweep to stop after storing what has finished.
-
-    Only in the main thread (elsewhere signals cannot be caught; the flag stays down).
-    """
-
-    def __init__(self) -> None:
-        self.raised = False
-        self._old: dict[int, Any] = {}
-
-    def __call__(self) -> bool:
-        """Whether a stop was asked for."""
-        return self.raised
-
-    def _handle(self, signum: int, frame: Any) -> None:
-        self.raised = True
-
-    def __enter__(self) -> StopOnSignal:
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._old[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
-
-
-class Progress:
-    """A progress line with rate and ETA on an interactive terminal (else silent)."""
-
-    def __init__(self, stream: Any = None) -> None:
-        self.stream = stream or sys.stderr
-        self.start = time.perf_counter()
-        self.last = 0.0
-
-    def __call__(self, done: int, total: int) -> None:
-        """Show ``done`` of ``total`` runs, their rate and the time left."""
-        now = time.perf_counter()
-        if now - self.last < 0.2 and done < total:
-            return
-        self.last = now
-        rate = done / max(now - self.start, 1e-9)
-        left = (total - done) / rate if rate > 0 else float("inf")
-        eta = f"{int(left // 60)}m{int(left % 60):02d}s" if left < 1e6 else "?"
-        self.stream.write(
-            f"\r  sweep: {done}/{total} runs, {rate:.1f} runs/s, ETA {eta}   "
-        )
-        if done >= total:
-            self.stream.write("\n")
-        self.stream.flush()
 
 
 def describe_dry_run(
@@ -358,7 +355,8 @@ def check_sweep_file(path: str | Path) -> str | None:
         return None
     spec = build_spec(path)
     spec.check_size()
-    check_points(spec, read_base(spec))
+    # never the code the base lists (a plug-in named with --plugin is loaded already)
+    check_points(spec, read_base(spec, trust_plugins=False), plugin_code="refuse")
     points = spec.n_points()
     return (
         f"sweep: {points} grid points x {len(spec.seeds)} seeds = "

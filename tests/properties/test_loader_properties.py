@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 
 from sandbox.errors import SandboxWarning, ScenarioError
 from sandbox.loop.simulation import Simulation
-from sandbox.scenario import Scenario, _YAMLLoader, load_scenario, parse_scenario
+from sandbox.scenario import Scenario, YAMLLoader, load_scenario, parse_scenario
 from sandbox.scenario.schema import build_schema
 
 REPO = Path(__file__).resolve().parents[2]
@@ -35,12 +35,10 @@ BUNDLED = [
     p
     for p in sorted((REPO / "scenarios").rglob("*.yaml"))
     if "base" not in (yaml.safe_load(p.read_text("utf-8")) or {})
-    and len(
-        parse_scenario(yaml.load(p.read_text("utf-8"), Loader=_YAMLLoader)).vehicles
-    )
+    and len(parse_scenario(yaml.load(p.read_text("utf-8"), Loader=YAMLLoader)).vehicles)
     <= 50
 ]
-DOCS = [yaml.load(p.read_text(encoding="utf-8"), Loader=_YAMLLoader) for p in BUNDLED]
+DOCS = [yaml.load(p.read_text(encoding="utf-8"), Loader=YAMLLoader) for p in BUNDLED]
 VALIDATOR = jsonschema.Draft202012Validator(build_schema())
 
 SETTINGS = settings(

@@ -161,11 +161,11 @@ def account_worlds_numpy(
     active = step.active.reshape(k, n).sum(axis=1)
     slack = step.slack.reshape(k, n)
     bad = (slack > TOLERANCE).sum(axis=1)
-    worst = slack.max(axis=1)
+    worst = slack.max(axis=1, initial=0.0)  # (0 when a world has no vehicle)
     if step.by_vehicle is None:
         least = np.full(k, np.inf)
     else:
-        least = step.by_vehicle.reshape(k, n).min(axis=1)
+        least = step.by_vehicle.reshape(k, n).min(axis=1, initial=np.inf)
     finite = np.isfinite(least)
     fallen = step.fallback.reshape(k, n).sum(axis=1) if braking else np.zeros(k, int)
     raised = worst > extremes.max_slack

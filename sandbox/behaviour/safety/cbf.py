@@ -131,6 +131,7 @@ from sandbox.behaviour.safety.braking import (
     pair_geometry,
 )
 from sandbox.behaviour.safety.braking_check import Solved, check_commands, passes
+from sandbox.behaviour.safety.constrained import record_episodes
 from sandbox.behaviour.safety.filter_kernel import covers, usable, velocity_step
 from sandbox.behaviour.safety.priority import PRIORITY, holding
 from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
@@ -568,7 +569,10 @@ def _check(values: dict, section: dict) -> list[tuple]:
 
 @register_filter("cbf", params=PARAMS, check=_check, batched=True)
 def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
-    """Control-barrier-function filter through the look-ahead point (sandbox/safety)."""
+    """Control-barrier-function filter through the look-ahead point.
+
+    Its pieces are the modules of ``sandbox/behaviour/safety/``.
+    """
     state = ctx.memory.get("cbf")
     if state is None:
         state = ctx.memory["cbf"] = CBFState(ctx)
@@ -581,4 +585,5 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
         extremes = ctx.memory["extremes"] = RunningExtremes(world_stats)
     n = len(ctx.pos) // ctx.worlds
     account_worlds(world_stats, ctx.t, state.braking, step, n, extremes)
+    record_episodes(ctx.memory, world_stats, ctx.t, step.active, n)
     return v1, v2

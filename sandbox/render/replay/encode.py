@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from sandbox.run.constrained import constrained_mask, filter_name
 from sandbox.run.record import MODE_NAMES, Run
 
 __all__ = [
@@ -425,7 +426,8 @@ def replay_data(
         ``recovery``, ``camera``, ``leaders`` (``[t, name]``: who leads from ``t``;
         None: the reference), ``modes``, ``samples``, ``stride``, ``notes``; with
         ``platoons:`` also ``platoons`` and ``arrays.platoon_reference`` (see the
-        module docstring).
+        module docstring); with a safety filter also ``filter``, its name (bit 3
+        of ``state``: the filter changed the vehicle's command).
     """
     if metrics is None:
         from sandbox.run.metrics import compute_metrics
@@ -447,6 +449,8 @@ def replay_data(
         keep = np.append(keep, T - 1)
     mode = np.asarray(run.mode, dtype=np.int64)[keep]
     failed = np.asarray(run.failed, dtype=bool)[keep]
+    constrained = constrained_mask(run)
+    filtered = np.zeros_like(failed) if constrained is None else constrained[keep]
     arrays = {
         "t": pack(t[keep], STEPS["t"]),
         "pose": pack(np.asarray(run.pose, dtype=float)[keep], STEPS["pose"]),
@@ -457,8 +461,8 @@ def replay_data(
             np.asarray(run.reference, dtype=float).reshape(T, 2)[keep],
             STEPS["reference"],
         ),
-        # mode in the low bits, the failure flag in bit 2
-        "state": pack(mode + 4 * failed, 1.0, ORDERS["state"]),
+        # mode in the low bits, the failure flag in bit 2, the safety filter's in 3
+        "state": pack(mode + 4 * failed + 8 * filtered, 1.0, ORDERS["state"]),
         "slot_index": pack(run.slot_index[keep], 1.0, ORDERS["slot_index"]),
     }
     platoons = _platoons(run, keep, arrays)
@@ -532,6 +536,8 @@ def replay_data(
     }
     if platoons is not None:
         data["platoons"] = platoons
+    if filter_name(run) is not None:  # the safety filter (state bit 3: it acts)
+        data["filter"] = filter_name(run)
     return data
 
 

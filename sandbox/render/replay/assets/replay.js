@@ -17,7 +17,7 @@
   const SPEEDS = [0.1, 0.2, 0.5, 1, 2, 5, 10];
   const COLOR = {
     obstacle: "#afafaf", obstacleEdge: "#6e6e6e", wall: "#7d7d7d", path: "#808080",
-    avoid: "#ff8c00", external: "#0078ff", collision: "#e10000", zone: "#c8c8c8",
+    avoid: "#ff8c00", external: "#0078ff", filter: "#000000", collision: "#e10000", zone: "#c8c8c8",
     neutral: "#595959",
   };
 
@@ -139,6 +139,7 @@
       x1: lerp(M.pose, 3, 0, s, i), x2: lerp(M.pose, 3, 1, s, i), x3: lerp(M.pose, 3, 2, s, i),
       v1: lerp(M.cmd, 2, 0, s, i), v2: lerp(M.cmd, 2, 1, s, i),
       mode: DATA.modes[code & 3] || String(code & 3), failed: (code & 4) !== 0,
+      filtered: (code & 8) !== 0,
       error: lerp(M.err, 1, 0, s, i), slot: M.slotIndex[k * n + i],
     };
   }
@@ -301,14 +302,15 @@
       list.push(i);
       byColor.set(colors[i], list);
     }
-    // avoidance (orange) and external (blue) halos under the bodies
+    // avoidance (orange), external (blue) and safety-filter (black) halos under the bodies
     for (let i = 0; i < n; i++) {
       const code = M.state[k * n + i], mode = code & 3, failed = (code & 4) !== 0 || mode === 2;
-      if (failed || (mode !== 1 && mode !== 3)) continue;
+      const filtered = (code & 8) !== 0 && mode !== 3;
+      if (failed || (mode !== 1 && mode !== 3 && !filtered)) continue;
       const [u, v] = w2p(xy[2 * i], xy[2 * i + 1]);
       if (!Number.isFinite(u) || !Number.isFinite(v)) continue;
       const r = Math.max(radius[i] * cam.scale, 0.75);
-      ctx.fillStyle = mode === 3 ? COLOR.external : COLOR.avoid;
+      ctx.fillStyle = mode === 3 ? COLOR.external : filtered ? COLOR.filter : COLOR.avoid;
       ctx.beginPath(); ctx.arc(u, v, r + Math.max(2, Math.min(4, 0.25 * r)), 0, 2 * Math.PI); ctx.fill();
     }
     for (const [color, list] of byColor) {
@@ -479,7 +481,7 @@
     const rows = [
       ["x1", fmt(v.x1, 3) + " m"], ["x2", fmt(v.x2, 3) + " m"], ["x3", fmt(v.x3, 3) + " rad"],
       ["v1", fmt(v.v1, 3) + " m/s"], ["v2", fmt(v.v2, 3) + " rad/s"],
-      ["mode", v.mode + (v.failed && v.mode !== "failed" ? " (failed)" : "")],
+      ["mode", v.mode + (v.failed && v.mode !== "failed" ? " (failed)" : "") + (v.filtered ? ` (${DATA.filter} acting)` : "")],
       ["formation error", Number.isFinite(v.error) ? fmt(v.error, 3) + " m" : "no slot"],
     ];
     if (M.hasPlatoon) {
@@ -609,7 +611,7 @@
     }
     parts.push(`<span>converged: ${S.converged ? "yes" : "no"}</span>`);
     if (S.min_distance !== null) parts.push(`<span>min distance: ${fmt(S.min_distance, 3)} m</span>`);
-    parts.push(`<span>${n} vehicle${n === 1 ? "" : "s"}, ${fmt(S.duration, 2)} s, recovery: ${esc(DATA.recovery.strategy)}</span>`);
+    parts.push(`<span>${n} vehicle${n === 1 ? "" : "s"}, ${fmt(S.duration, 2)} s, recovery: ${esc(DATA.recovery.strategy)}${DATA.filter ? `, filter: ${esc(DATA.filter)}` : ""}</span>`);
     $("summary").innerHTML = parts.join("");
     $("notes").innerHTML = DATA.notes.map((x) => `<p>${esc(x)}</p>`).join("");
     if (DATA.description) $("scenario").title = DATA.description;
@@ -625,6 +627,7 @@
     if (!large && M.hasSlots) rows.push(`<div>${svg('<circle cx="7" cy="7" r="4" fill="none" stroke="#555" stroke-width="2"/>')}slot (ring) / target (cross)</div>`);
     if (DATA.reference_path) rows.push(`<div>${svg('<path d="M0 7H5M9 7H14" stroke="#808080"/>')}reference path</div>`);
     rows.push(`<div>${svg(`<circle cx="7" cy="7" r="6" fill="${COLOR.avoid}"/><circle cx="7" cy="7" r="4" fill="#fff" stroke="#000"/>`)}avoiding</div>`);
+    if (DATA.filter) rows.push(`<div>${svg(`<circle cx="7" cy="7" r="6" fill="${COLOR.filter}"/><circle cx="7" cy="7" r="4" fill="#fff" stroke="#000"/>`)}${esc(DATA.filter)} acting (safety filter)</div>`);
     rows.push(`<div>${svg('<path d="M2 2L12 12M2 12L12 2" stroke="#000" stroke-width="2.5"/>')}failed</div>`);
     rows.push(`<div>${svg(`<circle cx="7" cy="7" r="5" fill="none" stroke="${COLOR.collision}" stroke-width="2"/>`)}collision (red cross: a past one)</div>`);
     if (DATA.obstacles.length) rows.push(`<div>${svg(`<rect x="1" y="3" width="12" height="8" fill="${COLOR.obstacle}" stroke="${COLOR.obstacleEdge}"/>`)}obstacle${DATA.obstacles.some((o) => o.wall) ? ` (darker: wall)` : ""}</div>`);
