@@ -32,7 +32,15 @@ from pathlib import Path
 from setuptools import Extension, find_packages, setup
 from setuptools.command.build import build
 
-CSTEP = Extension("sandbox.physics._cstep", ["sandbox/physics/_cstep.c"], optional=True)
+#: The batch's stepping, which reads its named arguments with ``sandbox/accel.h``'s
+#: parser (no numpy: its arguments are addresses and counts).
+CSTEP = Extension(
+    "sandbox.physics._cstep",
+    ["sandbox/physics/_cstep.c"],
+    include_dirs=["sandbox"],
+    depends=["sandbox/accel.h"],
+    optional=True,
+)
 
 #: The headers the loops include.
 HEADERS = [

@@ -135,7 +135,7 @@ def bench(run: Run, label: str, *, fps: float = 25.0, size: int = 640, **kw) -> 
         for _ in render.render_frames(run, fps=fps, size=size, **options):
             pass
 
-    scene, frames = render._indexed_frames(
+    scene, frames = render.indexed_frames(
         run, plan, size=size, speed=1.0, fps=fps, **options
     )
     with Clock() as draw:

@@ -16,7 +16,7 @@ from sandbox.loop import plan as planning
 from sandbox.loop.plan import structure_key
 from sandbox.loop.simulation import Simulation
 from sandbox.loop.tally import row_reduce, row_sum
-from sandbox.physics.stepping import WorldStepper
+from sandbox.physics.stepping import BatchStepper
 from sandbox.run.output import load_run_dir
 from sandbox.study import engine, store
 
@@ -219,7 +219,7 @@ def test_stepping_together_gives_the_bytes_of_world_by_world(tmp_path, monkeypat
     fast_runs = fast.run_all()
     stepper = fast.physics._stepper
     assert stepper is not None and stepper._order is not None
-    monkeypatch.setattr(WorldStepper, "build", classmethod(lambda cls, *a: None))
+    monkeypatch.setattr(BatchStepper, "build", classmethod(lambda cls, *a: None))
     slow = Simulation.stacked(scenarios)
     slow_runs = slow.run_all()
     assert slow.physics._stepper is None

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ctypes
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -26,10 +27,10 @@ from sandbox.behaviour.detection import residual_pass
 from sandbox.behaviour.pair_field import CONTINUOUS, DISCONTINUOUS, ShiftKernel
 from sandbox.behaviour.residual_kernel import ResidualPass
 from sandbox.behaviour.safety import accounting, qp
-from sandbox.behaviour.safety.accounting import FilterStep, WorldCounters
+from sandbox.behaviour.safety.accounting import FilterStep, RunningExtremes
 from sandbox.behaviour.safety.cbf import PARAMS, CBFState, filter_commands
-from sandbox.behaviour.sensing import Broadcast, StackedBroadcast
-from sandbox.geometry.neighbours import NeighbourList, WorldPairs
+from sandbox.behaviour.sensing import Broadcast
+from sandbox.geometry.neighbours import AllPairsByWorld, NeighbourList
 from sandbox.loop.divergence import RowsView, healthy
 from sandbox.loop.simulation import Simulation
 from sandbox.model.flatness import Gains
@@ -319,10 +320,10 @@ def test_a_strategys_shifted_targets_agree_with_numpy(kind):
     r = (None, 0.5)[kind]
     for trial in range(20):
         K, n = 3, int(rng.integers(1, 8))
-        ctx = strategy_context(rng, K, n, trial % 2, WorldPairs(K, n, 1.5))
+        ctx = strategy_context(rng, K, n, trial % 2, AllPairsByWorld(K, n, 1.5))
         beta = 0.3 if trial % 2 else rng.uniform(0.0, 1.0, (K * n, 1))
         kernel = ShiftKernel(
-            WorldPairs(K, n, 1.5), 1.5, r, kind, beta, accel.module("pair_field")
+            AllPairsByWorld(K, n, 1.5), 1.5, r, kind, beta, accel.module("pair_field")
         )
         got = kernel.shifted(ctx.pos, ctx.seen_pos, ctx.may_avoid, ctx.slot)
         with accel.switched_off("pair_field"):
@@ -341,13 +342,12 @@ def test_the_draws_of_a_batch_are_each_worlds_generators(K):
     n = 4
 
     def copies():
-        parts = [Broadcast(0.01, 0.005, 1, 0.2, seed) for seed in range(K)]
-        stacked = StackedBroadcast(parts, n)
+        batch = Broadcast(0.01, 0.005, 1, 0.2, seeds=range(K), n=n)
         pos, theta = np.zeros((K * n, 2)), np.zeros(K * n)
-        return [stacked.update(pos, theta).copy() for _ in range(6)]
+        return [batch.update(pos, theta).copy() for _ in range(6)]
 
     got, want = both_ways(copies, "draws")
-    alone = Broadcast(0.01, 0.005, 1, 0.2, 0)
+    alone = Broadcast(0.01, 0.005, 1, 0.2, seeds=[0], n=n)
     first = [alone.update(np.zeros((n, 2)), np.zeros(n)).copy() for _ in range(6)]
     for a, b, c in zip(got, want, first, strict=True):
         assert np.array_equal(a, b)
@@ -447,7 +447,7 @@ def test_the_worlds_counters_agree_with_numpy():
         k, n = int(rng.integers(1, 6)), int(rng.integers(1, 5))
         braking = trial % 2 == 1
         stats = ([{} for _ in range(k)], [{} for _ in range(k)])
-        counters = (WorldCounters(stats[0]), WorldCounters(stats[1]))
+        counters = (RunningExtremes(stats[0]), RunningExtremes(stats[1]))
         for t in (0.0, 0.01, 0.02, 0.03):
             slack = np.where(rng.random(k * n) < 0.8, 0.0, rng.uniform(0, 1, k * n))
             step = FilterStep(
@@ -595,6 +595,61 @@ def test_the_motor_limits_agree_with_numpy():
     close(got[2], want[2], TIGHT)
 
 
+def motor_arguments(n: int) -> dict:
+    """The named arguments of ``_motors.motor_limits`` for ``n`` vehicles."""
+    rng = np.random.default_rng(n)
+    arrays = {name: rng.uniform(0.5, 5.0, n) for name in (
+        "mass", "moment", "least_force", "least_torque", "force", "torque",
+    )}  # fmt: skip
+    return {
+        "command": rng.normal(0.0, 1.0, (n, 3)),
+        "measured": rng.normal(0.0, 1.0, (n, 3)),
+        "free": rng.random(n) < 0.8,
+        "substep": 0.0025,
+        "headroom": 1.5,
+        **arrays,
+        "tracking": np.ones(n, dtype=bool),
+        "force_out": np.full(n, -1.0),
+        "torque_out": np.full(n, -1.0),
+        "change": np.zeros(n, dtype=bool),
+    }
+
+
+@needs("motors")
+def test_an_entry_point_takes_its_arguments_by_name_in_any_order():
+    c = accel.module("motors")
+    named = motor_arguments(5)
+    in_order = c.motor_limits(**named)
+    written = named["force_out"].copy(), named["change"].copy()
+    again = motor_arguments(5)
+    assert c.motor_limits(**dict(reversed(list(again.items())))) == in_order
+    assert np.array_equal(again["force_out"], written[0])
+    assert np.array_equal(again["change"], written[1])
+
+
+@needs("motors")
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"change": None}, "motor_limits: missing argument 'change'"),
+        ({"chnage": 1}, "motor_limits: no argument 'chnage'"),
+        ({"mass": np.ones(5, dtype=np.float32)}, "motor_limits: mass: expected a"),
+        ({"substep": "0.01"}, "motor_limits: substep: expected a number"),
+        ({"free": np.ones(10, dtype=bool)}, "motor_limits: shapes differ"),
+    ],
+)
+def test_a_bad_named_argument_is_refused_before_anything_is_written(change, message):
+    c = accel.module("motors")
+    named = {**motor_arguments(5), **change}
+    named = {key: value for key, value in named.items() if value is not None}
+    error = ValueError if "shapes" in message else TypeError
+    with pytest.raises(error, match=re.escape(message)):
+        c.motor_limits(**named)
+    assert np.all(named["force_out"] == -1.0)
+    with pytest.raises(TypeError, match="takes keyword arguments only"):
+        c.motor_limits(named["command"])
+
+
 @needs("period")
 def test_the_divergence_fast_path_says_what_numpy_says():
     rng = np.random.default_rng(7)
@@ -643,16 +698,23 @@ class CountedSteps:
     def __init__(self, monkeypatch):
         module = accel.module("stepping")
         self.calls = self.early = 0
-        real = module.advance
+        real_prepare, real_advance = module.prepare, module.advance
+        clocks = {}  # each prepared batch's clock address
 
-        def advance(*args):
+        def prepare(**named):
+            batch = real_prepare(**named)
+            clocks[id(batch)] = (batch, named["clock"])
+            return batch
+
+        def advance(batch, t0, dt):
             self.calls += 1
-            done = real(*args)
-            clock = args[12]  # the clock's address, after the 12 arguments before it
+            done = real_advance(batch, t0, dt)
+            clock = clocks[id(batch)][1]
             if ctypes.c_double.from_address(clock + 8).value:  # clock[1] raised
                 self.early += 1
             return done
 
+        monkeypatch.setattr(module, "prepare", prepare)
         monkeypatch.setattr(module, "advance", advance)
 
 
@@ -707,7 +769,7 @@ def test_a_world_keeps_its_clock_alone_and_leaves_the_shared_one_when_stopped():
 #: Each path's functions that a run of its stage calls.
 CALLED = {
     "laws": ("law_targets",),
-    "pair_field": ("shifted_targets",),
+    "pair_field": ("pair_terms",),
     "draws": ("fill_worlds",),
     "controller": ("controller_step",),
     "filter": ("velocity_step", "world_counts"),
@@ -734,9 +796,9 @@ def test_a_run_takes_every_compiled_path_that_is_on(monkeypatch):
         for function in functions:
             real = getattr(module, function)
 
-            def counted(*args, _key=f"{name}.{function}", _real=real, **kwargs):
+            def counted(*args, _key=f"{name}.{function}", _real=real, **named):
                 calls[_key] = calls.get(_key, 0) + 1
-                return _real(*args, **kwargs)
+                return _real(*args, **named)
 
             monkeypatch.setattr(module, function, counted)
     scenarios = [

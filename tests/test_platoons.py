@@ -404,7 +404,7 @@ def test_a_platoon_reconfigures_itself_and_no_other(tmp_path):
 def test_pictures_label_by_platoon(tmp_path):
     from sandbox.render.camera import _legend_items
     from sandbox.render.figures import formation_error_figure, trajectories_figure
-    from sandbox.render.palette import _build_palette
+    from sandbox.render.palette import build_palette
 
     run = Simulation(load_scenario(_write(tmp_path, TWO))).run()
     fig = formation_error_figure(run)
@@ -414,7 +414,7 @@ def test_pictures_label_by_platoon(tmp_path):
     ]
     labels = [t.get_text() for t in trajectories_figure(run).legends[0].get_texts()]
     assert labels == ["east", "north"]
-    _, body, _ = _build_palette(run.colors)
+    _, body, _ = build_palette(run.colors)
     items = _legend_items(run, body, False)
     assert [i.label for i in items[:2]] == ["east", "north"]
 

@@ -34,21 +34,21 @@ LINE = {
 
 
 def labels(run) -> list[str]:
-    _, body, _ = render_palette._build_palette(run.colors)
+    _, body, _ = render_palette.build_palette(run.colors)
     return [i.label for i in render_camera._legend_items(run, body, False)]
 
 
 def test_legend_names_each_vehicle_in_its_colour() -> None:
     run = make_run(n=3, colors=["blue", "#ff8800", "green"])
     frame = next(iter(render.render_frames(run, fps=10.0, size=400)))
-    bands = render_camera._run_bands(run, 400, True)
+    bands = render_camera.run_bands(run, 400, True)
     strip = frame[400 - bands.bottom :].reshape(-1, 3)
     for color in run.colors:
         assert (strip == ImageColor.getrgb(color)).all(axis=1).sum() > 10
     assert labels(run)[:3] == ["v0", "v1", "v2"]
     # without the legend the strip holds only the scale bar: no vehicle colour there
     bare = next(iter(render.render_frames(run, fps=10.0, size=400, legend=False)))
-    bottom = render_camera._run_bands(run, 400, False).bottom
+    bottom = render_camera.run_bands(run, 400, False).bottom
     assert not (bare[400 - bottom :] == ImageColor.getrgb("#ff8800")).all(-1).any()
 
 
@@ -72,7 +72,7 @@ def test_legend_explains_only_the_marks_the_run_shows() -> None:
 
 def test_large_fleet_legend_gives_the_fleet_size() -> None:
     run = make_run(n=render_overlay.LEGEND_NAMES_MAX + 1)
-    _, body, _ = render_palette._build_palette(run.colors)
+    _, body, _ = render_palette.build_palette(run.colors)
     items = render_camera._legend_items(run, body, True)
     assert items[0].label == f"{run.n_vehicles} vehicles"
     assert "slot" not in [i.label for i in items]  # large fleets draw no slots
@@ -90,17 +90,17 @@ def test_font_grows_with_the_frame_size() -> None:
     heights = {}
     for size in (640, 1280):
         frame = next(iter(render.render_frames(run, fps=10.0, size=size)))
-        heights[size] = _text_rows(frame, render_camera._run_bands(run, size, True).top)
+        heights[size] = _text_rows(frame, render_camera.run_bands(run, size, True).top)
     assert heights[1280] >= 1.7 * heights[640]
 
 
 def test_a_small_frame_drops_the_legend_not_the_view() -> None:
     run = make_run(n=4)
-    bands = render_camera._run_bands(run, 160, True)
+    bands = render_camera.run_bands(run, 160, True)
     assert bands.rows == ()
     assert bands.top + bands.bottom <= render_overlay.MAX_BANDS * 160
     assert render.Camera.for_run(run, 64).scale > 0  # even a tiny frame has a view
-    assert render_camera._run_bands(run, 640, True).rows  # at 640 px it is there
+    assert render_camera.run_bands(run, 640, True).rows  # at 640 px it is there
 
 
 def test_hud_time_digits_keep_their_place() -> None:

@@ -90,7 +90,7 @@ def test_the_delay_shifts_the_seen_leader_pose_by_whole_periods() -> None:
 
 
 def test_a_lost_packet_holds_the_last_received_copy() -> None:
-    b = Broadcast(0.0, 0.0, 0, 0.5, seed=1)
+    b = Broadcast(0.0, 0.0, 0, 0.5, seeds=[1], n=4)
     theta = np.zeros(4)
     received = [b.update(np.full((4, 2), float(s)), theta).copy() for s in range(200)]
     received = np.array(received)[:, :, 0]  # (steps, vehicles): sent value = step

@@ -1,7 +1,7 @@
 /* The sensing draws of many worlds in one C call (sandbox/behaviour/sensing.py).
  *
- * StackedBroadcast draws each world's noise, then its packet losses, from the world's
- * own Generator. Generator.standard_normal and Generator.random fill an array with
+ * Broadcast draws each world's noise, then its packet losses, from the world's own
+ * Generator. Generator.standard_normal and Generator.random fill an array with
  * numpy's random C API (random_standard_normal_fill, random_standard_uniform_fill of
  * numpy/random/distributions.h, in the npyrandom library numpy ships for extensions
  * in numpy/random/lib) on the bit generator's bitgen_t, which BitGenerator.capsule

@@ -94,241 +94,114 @@ add_terms(const double *p, const double *q, int qs, const Py_ssize_t *ci,
     }
 }
 
-PyDoc_STRVAR(pair_field_doc,
-"pair_field(pos, seen, i, j, radius, R, r, kind, shift, active, d2, beta, avoid)\n"
-"    -> None\n"
+/* The arguments of pair_terms, by name (accel.h). */
+#define PAIR_TERMS(X)                                                              \
+    X(pos, FLOATS, 0)                                                              \
+    X(seen, FLOATS, OR_NONE)                                                       \
+    X(cand_i, INTPS, 0)                                                            \
+    X(cand_j, INTPS, 0)                                                            \
+    X(radius, NUMBER, 0)                                                           \
+    X(R, NUMBER, 0)                                                                \
+    X(r, NUMBER, 0)                                                                \
+    X(kind, INTEGER, 0)                                                            \
+    X(beta, VALUES, OR_NONE)                                                       \
+    X(avoid, BYTES, OR_NONE)                                                       \
+    X(slot, FLOATS, OR_NONE)                                                       \
+    X(shift, FLOATS, WRITTEN | OR_NONE)                                            \
+    X(target, FLOATS, WRITTEN | OR_NONE)                                           \
+    X(active, BYTES, WRITTEN | OR_NONE)                                            \
+    X(d2, FLOATS, WRITTEN | OR_NONE)
+NAMED(pair_terms, PAIR_TERMS)
+
+PyDoc_STRVAR(pair_terms_doc,
+"pair_terms(*, pos, seen, cand_i, cand_j, radius, R, r, kind, beta, avoid, slot,\n"
+"           shift, target, active, d2) -> (target, shift, active, d2)\n"
 "\n"
-"The vehicles' terms of the avoidance field of the candidate pairs ``(i[k], j[k])``\n"
-"(intp, in order) of the positions ``pos`` (n, 2): the pairs with ``d2 < radius^2``\n"
-"weighed with ``kind`` 0 (discontinuous) or 1 (continuous, inner radius ``r``) and\n"
-"added to ``shift`` (n, 2), which must hold zeros; ``active`` (n,) bool set where\n"
-"a term weighs above zero; every candidate's squared distance written to ``d2``.\n"
-"``seen`` (n, 2): each vehicle sees the other's broadcast position (None: the\n"
-"true positions). With ``avoid`` (n,) bool (else None) the field is finished as\n"
-"weighted_shift finishes it without static obstacles: ``shift *= beta``, zero and\n"
-"inactive where not ``avoid``.");
+"The vehicles' terms of the avoidance field of the candidate pairs\n"
+"``(cand_i[k], cand_j[k])`` (intp, in order) of the positions ``pos`` (n, 2): the\n"
+"pairs with ``d2 < radius^2`` weighed with ``kind`` 0 (discontinuous) or 1\n"
+"(continuous, inner radius ``r``), their sums written to ``shift`` (n, 2);\n"
+"``active`` (n,) bool set to the vehicles with a term above zero; every\n"
+"candidate's squared distance written to ``d2``. ``seen`` (n, 2) or (n, 3): each\n"
+"vehicle sees the broadcast positions of the others, the position first (None:\n"
+"the true positions). With ``avoid`` (n,) bool the field is finished as\n"
+"weighted_shift finishes it without static obstacles: times ``beta`` (one value,\n"
+"or (n,) each row's), zero and inactive where not ``avoid``; with ``slot`` (n, 2)\n"
+"the shifted targets ``slot + shift`` of eq. (22) / (26) are written to\n"
+"``target`` (None returned without ``slot``). Each of ``shift``, ``target``,\n"
+"``active``, ``d2`` None: a new array (where the module's ALLOCATES).");
 
 static PyObject *
-pair_field(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+pair_terms(PyObject *self, PyObject *const *args, Py_ssize_t nargs, PyObject *kwnames)
 {
-    if (nargs != 13) {
-        PyErr_SetString(PyExc_TypeError, "pair_field takes 13 arguments");
+    pair_terms_args a;
+    if (parse_named(&pair_terms_signature, args, nargs, kwnames, (Arg *)&a) < 0) {
         return NULL;
     }
-    double radius = PyFloat_AsDouble(args[4]);
-    double R = PyFloat_AsDouble(args[5]);
-    double r = PyFloat_AsDouble(args[6]);
-    long kind = PyLong_AsLong(args[7]);
-    int finish = args[12] != Py_None;
-    double beta = finish ? PyFloat_AsDouble(args[11]) : 0.0;
-    if (PyErr_Occurred()) {
-        return NULL;
-    }
-    int with_seen = args[1] != Py_None;
-    Py_buffer avoid;
-    Rows pos, seen, shift, d2;
-    Indices ci, cj;
-    Py_buffer active;
-    int stage = 0; /* what has been acquired, for the release */
     PyObject *result = NULL;
-    if (get_rows(args[0], &pos, 0) < 0) goto done;
-    stage = 1;
-    if (with_seen && get_rows(args[1], &seen, 0) < 0) goto done;
-    stage = 2;
-    if (get_indices(args[2], &ci) < 0) goto done;
-    stage = 3;
-    if (get_indices(args[3], &cj) < 0) goto done;
-    stage = 4;
-    if (get_rows(args[8], &shift, 1) < 0) goto done;
-    stage = 5;
-    if (get_bytes(args[9], &active, 1) < 0) goto done;
-    stage = 6;
-    if (get_rows(args[10], &d2, 1) < 0) goto done;
-    stage = 7;
-    if (finish && get_bytes(args[12], &avoid, 0) < 0) goto done;
-    stage = 8;
-    Py_ssize_t n = shift.len / 2, m = ci.len;
-    if (pos.len != 2 * n || (with_seen && seen.len != 2 * n) || cj.len != m ||
-        d2.len != m || active.len != n || active.itemsize != 1 ||
-        (finish && (avoid.len != n || avoid.itemsize != 1))) {
-        PyErr_SetString(PyExc_ValueError, "pair_field: shapes differ");
+    const Py_ssize_t n = a.pos.len / 2, m = a.cand_i.len;
+    const int finish = a.avoid.b != NULL, targets = a.slot.f != NULL;
+    if ((a.shift.f == NULL && take_new(&a.shift, new_array(2, n, 2, 0), FLOATS) < 0) ||
+        (targets && a.target.f == NULL &&
+         take_new(&a.target, new_array(2, n, 2, 0), FLOATS) < 0) ||
+        (a.active.b == NULL && take_new(&a.active, new_array(1, n, 0, 1), BYTES) < 0) ||
+        (a.d2.f == NULL && take_new(&a.d2, new_array(1, m, 0, 0), FLOATS) < 0)) {
         goto done;
     }
+    const int qs = a.seen.f != NULL && a.seen.len == 3 * n ? 3 : 2;
+    if (a.pos.len != 2 * n || (a.seen.f && a.seen.len != qs * n) ||
+        a.cand_j.len != m || a.d2.len != m || a.active.len != n ||
+        a.shift.len != 2 * n || (targets && (a.slot.len != 2 * n || a.target.len != 2 * n)) ||
+        (finish && (a.avoid.len != n || a.beta.f == NULL ||
+                    (a.beta.len != 1 && a.beta.len != n)))) {
+        PyErr_SetString(PyExc_ValueError, "pair_terms: shapes differ");
+        goto done;
+    }
+    const Py_ssize_t *ci = a.cand_i.i, *cj = a.cand_j.i;
     for (Py_ssize_t k = 0; k < m; k++) {
-        if (ci.data[k] < 0 || ci.data[k] >= n || cj.data[k] < 0 || cj.data[k] >= n) {
-            PyErr_SetString(PyExc_IndexError, "pair_field: a pair out of range");
+        if (ci[k] < 0 || ci[k] >= n || cj[k] < 0 || cj[k] >= n) {
+            PyErr_SetString(PyExc_IndexError, "pair_terms: a pair out of range");
             goto done;
         }
     }
-    add_terms(pos.data, with_seen ? seen.data : NULL, 2, ci.data, cj.data, m,
-              radius, R, r, (int)kind, shift.data, (unsigned char *)active.buf,
-              d2.data);
-    double *out = shift.data;
-    unsigned char *on = (unsigned char *)active.buf;
-    if (finish) { /* shift *= beta; shift[~avoid] = 0; active &= avoid */
-        const unsigned char *may = (const unsigned char *)avoid.buf;
+    double *shifted = a.shift.f;
+    unsigned char *on = a.active.b;
+    memset(shifted, 0, (size_t)(2 * n) * sizeof(double));
+    memset(on, 0, (size_t)n);
+    add_terms(a.pos.f, a.seen.f, qs, ci, cj, m, a.radius.x, a.R.x, a.r.x,
+              (int)a.kind.n, shifted, on, a.d2.f);
+    if (finish) {
+        const double *b = a.beta.f;
+        const unsigned char *may = a.avoid.b;
         for (Py_ssize_t v = 0; v < n; v++) {
-            out[2 * v] = out[2 * v] * beta;
-            out[2 * v + 1] = out[2 * v + 1] * beta;
-            if (!may[v]) {
-                out[2 * v] = 0.0;
-                out[2 * v + 1] = 0.0;
+            double bv = b[v * a.beta.step]; /* shift *= beta, eq. (22) / (26) */
+            shifted[2 * v] = shifted[2 * v] * bv;
+            shifted[2 * v + 1] = shifted[2 * v + 1] * bv;
+            if (!may[v]) { /* shift[~avoid] = 0; active &= avoid */
+                shifted[2 * v] = 0.0;
+                shifted[2 * v + 1] = 0.0;
                 on[v] = 0;
             }
         }
     }
-    result = Py_None;
-    Py_INCREF(result);
+    if (targets) { /* target = slot + shift */
+        const double *s = a.slot.f;
+        double *goal = a.target.f;
+        for (Py_ssize_t v = 0; v < n; v++) {
+            goal[2 * v] = s[2 * v] + shifted[2 * v];
+            goal[2 * v + 1] = s[2 * v + 1] + shifted[2 * v + 1];
+        }
+    }
+    result = PyTuple_Pack(4, targets ? a.target.obj : Py_None, a.shift.obj,
+                          a.active.obj, a.d2.obj);
 done:
-    if (stage >= 8 && finish) PyBuffer_Release(&avoid);
-    if (stage >= 7) PyBuffer_Release(&d2.view);
-    if (stage >= 6) PyBuffer_Release(&active);
-    if (stage >= 5) PyBuffer_Release(&shift.view);
-    if (stage >= 4) PyBuffer_Release(&cj.view);
-    if (stage >= 3) PyBuffer_Release(&ci.view);
-    if (stage >= 2 && with_seen) PyBuffer_Release(&seen.view);
-    if (stage >= 1) PyBuffer_Release(&pos.view);
-    return result;
-}
-
-PyDoc_STRVAR(shifted_targets_doc,
-"shifted_targets(pos, seen, i, j, radius, R, r, kind, beta, avoid, slot, shift,\n"
-"                target, active, d2) -> None\n"
-"\n"
-"The field of pair_field, finished, and the shifted targets of eq. (22) / (26):\n"
-"``shift`` (n, 2) is set to the pairs' terms (as pair_field adds them; ``seen``\n"
-"None, (n, 2) or (n, 3), the broadcast poses, the position first) times ``beta``\n"
-"(one value, or (n,) each row's), zero where not ``avoid`` (n,) bool; ``active``\n"
-"(n,) bool to the vehicles with a term above zero that avoid; ``target`` (n, 2) to\n"
-"``slot + shift``; ``d2`` to every candidate's squared distance. Each of ``shift``,\n"
-"``target``, ``active``, ``d2`` None: a new array (where the module's ALLOCATES).\n"
-"Returns ``(target, shift, active, d2)``.");
-
-static PyObject *
-shifted_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    if (nargs != 15) {
-        PyErr_SetString(PyExc_TypeError, "shifted_targets takes 15 arguments");
-        return NULL;
-    }
-    double radius = PyFloat_AsDouble(args[4]);
-    double R = PyFloat_AsDouble(args[5]);
-    double r = PyFloat_AsDouble(args[6]);
-    long kind = PyLong_AsLong(args[7]);
-    if (PyErr_Occurred()) {
-        return NULL;
-    }
-    int with_seen = args[1] != Py_None;
-    /* float64: pos, seen, beta, slot, shift, target, d2 */
-    static const int at[] = {0, 1, 8, 10, 11, 12, 14};
-    Rows rows[7];
-    int have[7] = {0};
-    Indices ci, cj;
-    Py_buffer avoid, active;
-    int got_i = 0, got_j = 0, got_avoid = 0, got_active = 0;
-    PyObject *result = NULL;
-    /* the outputs, given or new: shift, target, active, d2 */
-    PyObject *out[4] = {NULL, NULL, NULL, NULL};
-    static const int out_at[] = {11, 12, 13, 14};
-    if (get_indices(args[2], &ci) < 0) goto done;
-    got_i = 1;
-    if (get_indices(args[3], &cj) < 0) goto done;
-    got_j = 1;
-    if (get_rows(args[0], &rows[0], 0) < 0) goto done;
-    have[0] = 1;
-    for (int k = 0; k < 4; k++) {
-        PyObject *obj = args[out_at[k]];
-        if (obj == Py_None) {
-            Py_ssize_t N = rows[0].len / 2;
-            out[k] = k < 2    ? new_array(2, N, 2, 0)
-                     : k == 2 ? new_array(1, N, 0, 1)
-                              : new_array(1, ci.len, 0, 0);
-            if (out[k] == NULL) goto done;
-        }
-        else {
-            out[k] = obj;
-            Py_INCREF(obj);
-        }
-    }
-    for (int k = 1; k < 7; k++) {
-        PyObject *obj = args[at[k]];
-        if (at[k] == 11 || at[k] == 12 || at[k] == 14) {
-            obj = out[at[k] == 14 ? 3 : at[k] - 11];
-        }
-        if (obj == Py_None) {
-            continue;
-        }
-        if (get_rows(obj, &rows[k], at[k] >= 11) < 0) goto done;
-        have[k] = 1;
-    }
-    if (get_bytes(args[9], &avoid, 0) < 0) goto done;
-    got_avoid = 1;
-    if (get_bytes(out[2], &active, 1) < 0) goto done;
-    got_active = 1;
-    if (!(have[0] && have[2] && have[3] && have[4] && have[5] && have[6])) {
-        PyErr_SetString(PyExc_TypeError, "shifted_targets: an array is missing");
-        goto done;
-    }
-    Rows *pos = &rows[0], *seen = &rows[1], *beta = &rows[2], *slot = &rows[3];
-    Rows *shift = &rows[4], *target = &rows[5], *d2 = &rows[6];
-    Py_ssize_t n = pos->len / 2, m = ci.len;
-    int qs = with_seen && seen->len == 3 * n ? 3 : 2;
-    if (pos->len != 2 * n || (with_seen && seen->len != qs * n) || cj.len != m ||
-        d2->len != m || active.len != n || active.itemsize != 1 ||
-        avoid.len != n || avoid.itemsize != 1 || slot->len != 2 * n ||
-        shift->len != 2 * n || target->len != 2 * n ||
-        (beta->len != 1 && beta->len != n)) {
-        PyErr_SetString(PyExc_ValueError, "shifted_targets: shapes differ");
-        goto done;
-    }
-    for (Py_ssize_t k = 0; k < m; k++) {
-        if (ci.data[k] < 0 || ci.data[k] >= n || cj.data[k] < 0 || cj.data[k] >= n) {
-            PyErr_SetString(PyExc_IndexError, "shifted_targets: a pair out of range");
-            goto done;
-        }
-    }
-    double *shifted = shift->data, *goal = target->data;
-    const double *s = slot->data, *b = beta->data;
-    unsigned char *on = (unsigned char *)active.buf;
-    const unsigned char *may = (const unsigned char *)avoid.buf;
-    memset(shifted, 0, (size_t)(2 * n) * sizeof(double));
-    memset(on, 0, (size_t)n);
-    add_terms(pos->data, with_seen ? seen->data : NULL, qs, ci.data, cj.data, m,
-              radius, R, r, (int)kind, shifted, on, d2->data);
-    for (Py_ssize_t v = 0; v < n; v++) {
-        double bv = b[v * beta->step]; /* shift *= beta, eq. (22) / (26) */
-        shifted[2 * v] = shifted[2 * v] * bv;
-        shifted[2 * v + 1] = shifted[2 * v + 1] * bv;
-        if (!may[v]) { /* shift[~avoid] = 0; active &= avoid */
-            shifted[2 * v] = 0.0;
-            shifted[2 * v + 1] = 0.0;
-            on[v] = 0;
-        }
-        goal[2 * v] = s[2 * v] + shifted[2 * v]; /* target = slot + shift */
-        goal[2 * v + 1] = s[2 * v + 1] + shifted[2 * v + 1];
-    }
-    result = PyTuple_Pack(4, out[1], out[0], out[2], out[3]);
-done:
-    if (got_active) PyBuffer_Release(&active);
-    if (got_avoid) PyBuffer_Release(&avoid);
-    if (got_j) PyBuffer_Release(&cj.view);
-    if (got_i) PyBuffer_Release(&ci.view);
-    for (int k = 0; k < 7; k++) {
-        if (have[k]) {
-            PyBuffer_Release(&rows[k].view);
-        }
-    }
-    for (int k = 0; k < 4; k++) {
-        Py_XDECREF(out[k]);
-    }
+    release_named(&pair_terms_signature, (Arg *)&a);
     return result;
 }
 
 static PyMethodDef methods[] = {
-    {"pair_field", (PyCFunction)(void (*)(void))pair_field, METH_FASTCALL,
-     pair_field_doc},
-    {"shifted_targets", (PyCFunction)(void (*)(void))shifted_targets, METH_FASTCALL,
-     shifted_targets_doc},
+    {"pair_terms", (PyCFunction)(void (*)(void))pair_terms,
+     METH_FASTCALL | METH_KEYWORDS, pair_terms_doc},
     {NULL, NULL, 0, NULL},
 };
 

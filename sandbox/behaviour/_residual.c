@@ -41,213 +41,158 @@ floored(double x)
     return x > 0.0 ? x : 0.0;
 }
 
-/* A buffer of one of the element types below, C-contiguous. */
-enum { F64, I64, BOOL };
+/* The DetectorState's fields, read by name from the state (accel.h). */
+#define DETECTOR_STATE(X)                                                          \
+    X(pose, FLOATS, WRITTEN)                                                       \
+    X(start, FLOATS, WRITTEN)                                                      \
+    X(vel, FLOATS, WRITTEN)                                                        \
+    X(rate, FLOATS, WRITTEN)                                                       \
+    X(travel, FLOATS, WRITTEN)                                                     \
+    X(last_contact, FLOATS, WRITTEN)                                               \
+    X(g, FLOATS, WRITTEN)                                                          \
+    X(clear, FLOATS, WRITTEN)                                                      \
+    X(acc, FLOATS, WRITTEN)                                                        \
+    X(acc_abs, FLOATS, WRITTEN)                                                    \
+    X(acc_raw, FLOATS, WRITTEN)                                                    \
+    X(acc_obs, FLOATS, WRITTEN)                                                    \
+    X(acc_pred, FLOATS, WRITTEN)                                                   \
+    X(acc_t, FLOATS, WRITTEN)                                                      \
+    X(acc_rot, FLOATS, WRITTEN)                                                    \
+    X(acc_rot0, FLOATS, WRITTEN)                                                   \
+    X(isolating, FLOATS, WRITTEN)                                                  \
+    X(age, INT64S, WRITTEN)                                                        \
+    X(gate, INT64S, WRITTEN)                                                       \
+    X(acc_n, INT64S, WRITTEN)                                                      \
+    X(pending, BYTES, WRITTEN)                                                     \
+    X(detected, BYTES, WRITTEN)
+NAMED(detector_state, DETECTOR_STATE)
 
-typedef struct {
-    Py_buffer view;
-    void *data;
-    Py_ssize_t len; /* elements */
-} Buf;
-
-static int
-get_buf(PyObject *obj, Buf *b, int type, int writable)
-{
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, &b->view, flags) < 0) {
-        return -1;
-    }
-    const char *f = b->view.format;
-    int ok = f != NULL;
-    if (ok && type == F64) {
-        ok = b->view.itemsize == 8 && strcmp(f, "d") == 0;
-    }
-    else if (ok && type == I64) {
-        ok = b->view.itemsize == 8 && (strcmp(f, "l") == 0 || strcmp(f, "q") == 0);
-    }
-    else if (ok) {
-        ok = b->view.itemsize == 1 && strcmp(f, "?") == 0;
-    }
-    if (!ok) {
-        PyBuffer_Release(&b->view);
-        PyErr_SetString(PyExc_TypeError, "residual_period: an array of a wrong type");
-        return -1;
-    }
-    b->data = b->view.buf;
-    b->len = b->view.len / b->view.itemsize;
-    return 0;
-}
-
-/* The arrays: the state's fields (read by name), then the arguments after the state;
- * each one's type, whether written, and columns (0: optional rows of bools, None for
- * "all" or "none"). */
-enum {
-    POSE, START, VEL, RATE, TRAVEL, LAST_CONTACT, G, CLEAR, ACC, ACC_ABS, ACC_RAW,
-    ACC_OBS, ACC_PRED, ACC_T, ACC_ROT, ACC_ROT0, ISOLATING, AGE, GATE, ACC_N,
-    PENDING, DETECTED, N_FIELDS = DETECTED + 1,
-    SEEN = N_FIELDS, FRESH, CONTACT, COMMANDS, MOTOR_ACCEL, TURN_ACCEL, BRAKE, READ,
-    CLEARED, ALARMS, TRACE_ROWS, TRACE_INC, RING_VALUES, RING_FRESH, N_ARRAYS
-};
-
-static const char *FIELDS[N_FIELDS] = {
-    "pose", "start", "vel", "rate", "travel", "last_contact", "g", "clear", "acc",
-    "acc_abs", "acc_raw", "acc_obs", "acc_pred", "acc_t", "acc_rot", "acc_rot0",
-    "isolating", "age", "gate", "acc_n", "pending", "detected",
-};
-static PyObject *field_names[N_FIELDS]; /* interned at the module's import */
-
-static const struct {
-    int type, writable, columns;
-} SPEC[N_ARRAYS] = {
-    [POSE] = {F64, 1, 3}, [START] = {F64, 1, 3}, [VEL] = {F64, 1, 2},
-    [RATE] = {F64, 1, 1}, [TRAVEL] = {F64, 1, 1}, [LAST_CONTACT] = {F64, 1, 1},
-    [G] = {F64, 1, 1}, [CLEAR] = {F64, 1, 1}, [ACC] = {F64, 1, 3},
-    [ACC_ABS] = {F64, 1, 3}, [ACC_RAW] = {F64, 1, 3}, [ACC_OBS] = {F64, 1, 1},
-    [ACC_PRED] = {F64, 1, 1}, [ACC_T] = {F64, 1, 1}, [ACC_ROT] = {F64, 1, 1},
-    [ACC_ROT0] = {F64, 1, 1}, [ISOLATING] = {F64, 1, 1}, [AGE] = {I64, 1, 1},
-    [GATE] = {I64, 1, 1}, [ACC_N] = {I64, 1, 1}, [PENDING] = {BOOL, 1, 1},
-    [DETECTED] = {BOOL, 1, 1}, [SEEN] = {F64, 0, 3}, [FRESH] = {BOOL, 0, 0},
-    [CONTACT] = {BOOL, 0, 0}, [COMMANDS] = {F64, 0, 2}, [MOTOR_ACCEL] = {F64, 0, 1},
-    [TURN_ACCEL] = {F64, 0, 1}, [BRAKE] = {F64, 0, 1}, [READ] = {I64, 1, 1},
-    [CLEARED] = {I64, 1, 1}, [ALARMS] = {I64, 1, 1}, [TRACE_ROWS] = {I64, 1, 1},
-    [TRACE_INC] = {F64, 1, 1}, [RING_VALUES] = {F64, 1, 3}, [RING_FRESH] = {BOOL, 1, 1},
-};
-
-/* The scalars, after the arrays. */
-enum {
-    SLOT, T, H, SUBSTEPS, WINDOW, SP, SH, HEADING_NOISE, MU, LAMBDA, ISOLATION, SETTLE,
-    N_ARGS
-};
-/* The arguments: the state, the arrays after its fields, the scalars. */
-#define N_PASSED (1 + N_ARRAYS - N_FIELDS + N_ARGS)
-
-static void
-release_bufs(Buf *b, const int *present, int count)
-{
-    for (int j = 0; j < count; j++) {
-        if (present[j]) {
-            PyBuffer_Release(&b[j].view);
-        }
-    }
-}
+/* The arguments of residual_period, by name (accel.h). */
+#define RESIDUAL_PERIOD(X)                                                         \
+    X(state, OBJECT, 0)                                                            \
+    X(seen, FLOATS, 0)                                                             \
+    X(fresh, BYTES, OR_NONE)                                                       \
+    X(contact, BYTES, OR_NONE)                                                     \
+    X(commands, FLOATS, 0)                                                         \
+    X(motor_accel, FLOATS, 0)                                                      \
+    X(turn_accel, FLOATS, 0)                                                       \
+    X(brake, FLOATS, 0)                                                            \
+    X(read, INT64S, WRITTEN)                                                       \
+    X(cleared, INT64S, WRITTEN)                                                    \
+    X(alarms, INT64S, WRITTEN)                                                     \
+    X(trace_rows, INT64S, WRITTEN | OR_NONE)                                       \
+    X(trace_inc, FLOATS, WRITTEN | OR_NONE)                                        \
+    X(ring_values, FLOATS, WRITTEN | OR_NONE)                                      \
+    X(ring_fresh, BYTES, WRITTEN | OR_NONE)                                        \
+    X(slot, INTEGER, 0)                                                            \
+    X(t, NUMBER, 0)                                                                \
+    X(h, NUMBER, 0)                                                                \
+    X(substeps, INTEGER, 0)                                                        \
+    X(window, INTEGER, 0)                                                          \
+    X(sp, NUMBER, 0)                                                               \
+    X(sh, NUMBER, 0)                                                               \
+    X(heading_noise, NUMBER, 0)                                                    \
+    X(mu, NUMBER, 0)                                                               \
+    X(lam, NUMBER, 0)                                                              \
+    X(isolation, NUMBER, 0)                                                        \
+    X(settle, NUMBER, 0)
+NAMED(residual_period, RESIDUAL_PERIOD)
 
 PyDoc_STRVAR(residual_period_doc,
-"residual_period(state, seen, fresh, contact, commands, motor_accel, turn_accel,\n"
+"residual_period(*, state, seen, fresh, contact, commands, motor_accel, turn_accel,\n"
 "                brake, read, cleared, alarms, trace_rows, trace_inc, ring_values,\n"
 "                ring_fresh, slot, t, h, substeps, window, sp, sh, heading_noise,\n"
 "                mu, lam, isolation, settle) -> (reads, clears, alarms, used)\n"
 "\n"
 "Stores the observed poses and fresh flags in row ``slot`` of the track\n"
 "history's rings ``ring_values`` (L, n, 3) and ``ring_fresh`` (L, n) (None: no\n"
-"history), then does"
-"one period of the residual detector for n rows: the arrays of the DetectorState\n"
-"``state`` (float64, the ages, gates and counts int64, ``pending`` and\n"
-"``detected`` bool) advance in place from the observations ``seen`` (n, 3),\n"
-"``fresh`` and ``contact`` (n,) bool or None (every row fresh, none in contact),\n"
-"the commands (n, 2) and the drives' limits (n,). Writes the rows read on while\n"
-"isolating, the cleared rows and the alarms to ``read``, ``cleared`` and\n"
-"``alarms`` (int64, n), and where ``trace_rows`` is not None the rows of every\n"
-"window used and their log-likelihood ratios to it and ``trace_inc`` (n); returns\n"
-"how many of each. ``window`` [periods], ``sp``, ``sh`` the residuals' standard\n"
-"deviations, ``mu`` the shift, ``lam`` the threshold, ``isolation`` [s] and\n"
-"``settle`` [s], how long the track must show a braked vehicle at rest.");
+"history), then does one period of the residual detector for n rows: the arrays\n"
+"of the DetectorState ``state`` (float64, the ages, gates and counts int64,\n"
+"``pending`` and ``detected`` bool) advance in place from the observations\n"
+"``seen`` (n, 3), ``fresh`` and ``contact`` (n,) bool or None (every row fresh,\n"
+"none in contact), the commands (n, 2) and the drives' limits (n,). Writes the\n"
+"rows read on while isolating, the cleared rows and the alarms to ``read``,\n"
+"``cleared`` and ``alarms`` (int64, n), and where ``trace_rows`` is not None the\n"
+"rows of every window used and their log-likelihood ratios to it and\n"
+"``trace_inc`` (n); returns how many of each. ``window`` [periods], ``sp``, ``sh``\n"
+"the residuals' standard deviations, ``mu`` the shift, ``lam`` the threshold,\n"
+"``isolation`` [s] and ``settle`` [s], how long the track must show a braked\n"
+"vehicle at rest.");
 
 static PyObject *
-residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
+                PyObject *kwnames)
 {
-    if (nargs != N_PASSED) {
-        PyErr_Format(PyExc_TypeError, "residual_period takes %d arguments", N_PASSED);
+    residual_period_args a;
+    detector_state_args st;
+    if (parse_named(&residual_period_signature, args, nargs, kwnames, (Arg *)&a) < 0) {
         return NULL;
     }
-    double s[N_ARGS];
-    for (int k = 0; k < N_ARGS; k++) {
-        s[k] = PyFloat_AsDouble(args[N_PASSED - N_ARGS + k]);
-    }
-    if (PyErr_Occurred()) {
+    if (parse_attributes(&detector_state_signature, a.state.obj, (Arg *)&st) < 0) {
+        release_named(&residual_period_signature, (Arg *)&a);
         return NULL;
     }
-    long substeps = (long)s[SUBSTEPS], window = (long)s[WINDOW];
-    if (substeps < 1 || (double)substeps != s[SUBSTEPS] ||
-        (double)window != s[WINDOW]) {
-        PyErr_SetString(PyExc_ValueError, "residual_period: bad substeps or window");
-        return NULL;
+    PyObject *result = NULL;
+    const long substeps = (long)a.substeps.n, window = (long)a.window.n;
+    if (substeps < 1) {
+        PyErr_SetString(PyExc_ValueError, "residual_period: bad substeps");
+        goto done;
     }
-    Buf b[N_ARRAYS];
-    int present[N_ARRAYS];
-    for (int k = 0; k < N_ARRAYS; k++) {
-        PyObject *obj;
-        if (k < N_FIELDS) { /* the state's field: a reference while it is read */
-            obj = PyObject_GetAttr(args[0], field_names[k]);
-            if (obj == NULL) {
-                release_bufs(b, present, k);
-                return NULL;
-            }
-        }
-        else {
-            obj = args[1 + k - N_FIELDS];
-        }
-        int optional = SPEC[k].columns == 0 || k == TRACE_ROWS || k == TRACE_INC ||
-                       k == RING_VALUES || k == RING_FRESH;
-        present[k] = !(optional && obj == Py_None);
-        int failed =
-            present[k] && get_buf(obj, &b[k], SPEC[k].type, SPEC[k].writable) < 0;
-        if (k < N_FIELDS) {
-            Py_DECREF(obj); /* the buffer holds the array */
-        }
-        if (failed) {
-            release_bufs(b, present, k);
-            return NULL;
-        }
-    }
-    Py_ssize_t n = b[RATE].len;
-    int shapes = present[TRACE_ROWS] == present[TRACE_INC];
-    for (int k = 0; k < RING_VALUES && shapes; k++) {
-        if (present[k]) {
-            Py_ssize_t columns = SPEC[k].columns ? SPEC[k].columns : 1;
-            shapes = b[k].len == columns * n;
-        }
-    }
+    const Py_ssize_t n = st.rate.len;
+    int shapes = st.pose.len == 3 * n && st.start.len == 3 * n && st.vel.len == 2 * n &&
+                 st.travel.len == n && st.last_contact.len == n && st.g.len == n &&
+                 st.clear.len == n && st.acc.len == 3 * n && st.acc_abs.len == 3 * n &&
+                 st.acc_raw.len == 3 * n && st.acc_obs.len == n &&
+                 st.acc_pred.len == n && st.acc_t.len == n && st.acc_rot.len == n &&
+                 st.acc_rot0.len == n && st.isolating.len == n && st.age.len == n &&
+                 st.gate.len == n && st.acc_n.len == n && st.pending.len == n &&
+                 st.detected.len == n && a.seen.len == 3 * n &&
+                 (!a.fresh.b || a.fresh.len == n) &&
+                 (!a.contact.b || a.contact.len == n) && a.commands.len == 2 * n &&
+                 a.motor_accel.len == n && a.turn_accel.len == n && a.brake.len == n &&
+                 a.read.len == n && a.cleared.len == n && a.alarms.len == n &&
+                 (a.trace_rows.q == NULL) == (a.trace_inc.f == NULL) &&
+                 (!a.trace_rows.q || (a.trace_rows.len == n && a.trace_inc.len == n));
     /* the rings: L rows of n poses and flags, the slot one of them */
-    Py_ssize_t slot = (Py_ssize_t)s[SLOT];
+    const Py_ssize_t slot = a.slot.n;
     double *ring = NULL;
     char *ring_fresh = NULL;
-    if (shapes && (present[RING_VALUES] || present[RING_FRESH])) {
-        Py_ssize_t rows = n ? b[RING_FRESH].len / n : 0;
-        shapes = present[RING_VALUES] && present[RING_FRESH] && n > 0 &&
-                 b[RING_FRESH].len == rows * n && b[RING_VALUES].len == 3 * rows * n &&
-                 (double)slot == s[SLOT] && slot >= 0 && slot < rows;
+    if (shapes && (a.ring_values.f || a.ring_fresh.b)) {
+        Py_ssize_t rows = n ? a.ring_fresh.len / n : 0;
+        shapes = a.ring_values.f && a.ring_fresh.b && n > 0 &&
+                 a.ring_fresh.len == rows * n && a.ring_values.len == 3 * rows * n &&
+                 slot >= 0 && slot < rows;
         if (shapes) {
-            ring = (double *)b[RING_VALUES].data + 3 * n * slot;
-            ring_fresh = (char *)b[RING_FRESH].data + n * slot;
+            ring = a.ring_values.f + 3 * n * slot;
+            ring_fresh = (char *)a.ring_fresh.b + n * slot;
         }
     }
     if (!shapes) {
-        release_bufs(b, present, N_ARRAYS);
         PyErr_SetString(PyExc_ValueError, "residual_period: shapes differ");
-        return NULL;
+        goto done;
     }
-    double *pose = b[POSE].data, *start = b[START].data, *vel = b[VEL].data;
-    double *rate = b[RATE].data, *travel = b[TRAVEL].data;
-    double *last_contact = b[LAST_CONTACT].data, *g = b[G].data;
-    double *clear = b[CLEAR].data, *acc = b[ACC].data, *acc_abs = b[ACC_ABS].data;
-    double *acc_raw = b[ACC_RAW].data, *acc_obs = b[ACC_OBS].data;
-    double *acc_pred = b[ACC_PRED].data, *acc_t = b[ACC_T].data;
-    double *acc_rot = b[ACC_ROT].data, *acc_rot0 = b[ACC_ROT0].data;
-    double *isolating = b[ISOLATING].data;
-    int64_t *age = b[AGE].data, *gate = b[GATE].data, *acc_n = b[ACC_N].data;
-    char *pending = b[PENDING].data, *detected = b[DETECTED].data;
-    const double *seen = b[SEEN].data, *cmd = b[COMMANDS].data;
-    const char *fresh = present[FRESH] ? b[FRESH].data : NULL;
-    const char *contact = present[CONTACT] ? b[CONTACT].data : NULL;
-    const double *accel = b[MOTOR_ACCEL].data, *turn = b[TURN_ACCEL].data;
-    const double *brake = b[BRAKE].data;
-    int64_t *read = b[READ].data, *cleared = b[CLEARED].data;
-    int64_t *alarms = b[ALARMS].data;
-    int64_t *trace_rows = present[TRACE_ROWS] ? b[TRACE_ROWS].data : NULL;
-    double *trace_inc = present[TRACE_INC] ? b[TRACE_INC].data : NULL;
+    double *pose = st.pose.f, *start = st.start.f, *vel = st.vel.f;
+    double *rate = st.rate.f, *travel = st.travel.f;
+    double *last_contact = st.last_contact.f, *g = st.g.f;
+    double *clear = st.clear.f, *acc = st.acc.f, *acc_abs = st.acc_abs.f;
+    double *acc_raw = st.acc_raw.f, *acc_obs = st.acc_obs.f;
+    double *acc_pred = st.acc_pred.f, *acc_t = st.acc_t.f;
+    double *acc_rot = st.acc_rot.f, *acc_rot0 = st.acc_rot0.f;
+    double *isolating = st.isolating.f;
+    int64_t *age = st.age.q, *gate = st.gate.q, *acc_n = st.acc_n.q;
+    char *pending = (char *)st.pending.b, *detected = (char *)st.detected.b;
+    const double *seen = a.seen.f, *cmd = a.commands.f;
+    const char *fresh = (const char *)a.fresh.b;
+    const char *contact = (const char *)a.contact.b;
+    const double *accel = a.motor_accel.f, *turn = a.turn_accel.f;
+    const double *brake = a.brake.f;
+    int64_t *read = a.read.q, *cleared = a.cleared.q;
+    int64_t *alarms = a.alarms.q;
+    int64_t *trace_rows = a.trace_rows.q;
+    double *trace_inc = a.trace_inc.f;
 
-    double t = s[T], h = s[H], sp = s[SP], sh = s[SH], sigma_h = s[HEADING_NOISE];
-    double mu = s[MU], lam = s[LAMBDA], isolation = s[ISOLATION], settle = s[SETTLE];
+    double t = a.t.x, h = a.h.x, sp = a.sp.x, sh = a.sh.x, sigma_h = a.heading_noise.x;
+    double mu = a.mu.x, lam = a.lam.x, isolation = a.isolation.x, settle = a.settle.x;
     double half_mu2 = 0.5 * mu * mu;
     double dts = h / (double)substeps;
     /* Python's max(isolation, braking + window dt + settle) past the alarm */
@@ -357,13 +302,16 @@ residual_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             alarms[n_alarms++] = i;
         }
     }
-    release_bufs(b, present, N_ARRAYS);
-    return Py_BuildValue("(nnnn)", n_read, n_cleared, n_alarms, n_used);
+    result = Py_BuildValue("(nnnn)", n_read, n_cleared, n_alarms, n_used);
+done:
+    release_named(&detector_state_signature, (Arg *)&st);
+    release_named(&residual_period_signature, (Arg *)&a);
+    return result;
 }
 
 static PyMethodDef methods[] = {
-    {"residual_period", (PyCFunction)(void (*)(void))residual_period, METH_FASTCALL,
-     residual_period_doc},
+    {"residual_period", (PyCFunction)(void (*)(void))residual_period,
+     METH_FASTCALL | METH_KEYWORDS, residual_period_doc},
     {NULL, NULL, 0, NULL},
 };
 
@@ -376,11 +324,5 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC
 PyInit__residual(void)
 {
-    for (int k = 0; k < N_FIELDS; k++) {
-        field_names[k] = PyUnicode_InternFromString(FIELDS[k]);
-        if (field_names[k] == NULL) {
-            return NULL;
-        }
-    }
     return PyModule_Create(&module);
 }

@@ -41,7 +41,7 @@ def add_pair_terms(
     beta: float | None = None,
     avoiders: np.ndarray | None = None,
 ) -> None:
-    """Write the pairs' terms of the field (before ``beta``) into ``shift``, ``active``.
+    """Write the pairs' terms of the field (before ``beta``) to ``shift``, ``active``.
 
     With ``beta`` and ``avoiders`` the field is finished as
     :func:`~sandbox.behaviour.recovery.weighted_shift` finishes it without static
@@ -54,36 +54,38 @@ def add_pair_terms(
         True positions: the pairs are those of the neighbour search over them.
     seen : ndarray, shape (n, 2) [m] or None
         The broadcast positions each vehicle sees of the others (None: ``pos``).
-    neighbours : NeighbourList or WorldPairs
+    neighbours : NeighbourList or AllPairsByWorld
         The search (its ``candidates``, ``radius`` and ``remember``).
     R, r : float [m]
         The weight's radii (``r`` unused by the discontinuous weight).
     kind : int
         :data:`DISCONTINUOUS` or :data:`CONTINUOUS`.
-    shift : ndarray, shape (n, 2), float64, C-contiguous, zeros
+    shift : ndarray, shape (n, 2), float64, C-contiguous
+        Written: the sums of the terms.
     active : ndarray, shape (n,), bool, C-contiguous
-        Set where a term weighs above zero.
+        Written: where a term weighs above zero.
     beta : float, optional
         The aggressiveness [m^2], with ``avoiders``.
     avoiders : ndarray, shape (n,), bool, optional
         The vehicles that apply the strategy.
     """
     i, j = neighbours.candidates(pos)
+    finish = avoiders is not None
     d2 = np.empty(len(i))
-    accel.module("pair_field").pair_field(
-        c_float64(pos),
-        None if seen is None else c_float64(seen),
-        i,
-        j,
-        float(neighbours.radius),
-        float(R),
-        0.0 if r is None else float(r),
-        kind,
-        shift,
-        active,
-        d2,
-        0.0 if beta is None else float(beta),
-        None if avoiders is None else np.ascontiguousarray(avoiders, dtype=bool),
+    accel.module("pair_field").pair_terms(
+        pos=c_float64(pos),
+        seen=None if seen is None else c_float64(seen),
+        cand_i=i,
+        cand_j=j,
+        radius=float(neighbours.radius),
+        R=float(R),
+        r=0.0 if r is None else float(r),
+        kind=kind,
+        beta=float(beta) if finish else None,
+        avoid=np.ascontiguousarray(avoiders, dtype=bool) if finish else None,
+        shift=shift,
+        active=active,
+        d2=d2,
     )
     neighbours.remember(pos, d2)
 
@@ -99,7 +101,7 @@ class ShiftKernel:
 
     Parameters
     ----------
-    neighbours : NeighbourList or WorldPairs
+    neighbours : NeighbourList or AllPairsByWorld
         The loop's neighbour search (its candidates, radius and ``remember``).
     R, r : float [m]
         The weight's radii (``r`` unused by the discontinuous weight).
@@ -158,20 +160,31 @@ class ShiftKernel:
         """
         neighbours = self.neighbours
         i, j = neighbours.candidates(pos)
-        c = self._c
-        if c.ALLOCATES:  # the call makes its outputs
-            out = (None, None, None, None)
-        else:
-            N = len(pos)
-            out = (
-                np.empty((N, 2)),
-                np.empty((N, 2)),
-                np.empty(N, bool),
-                np.empty(len(i)),
-            )
-        target, shift, active, d2 = c.shifted_targets(
-            pos, seen, i, j, self.radius, self.R, self.r, self.kind, self.beta,
-            avoiders, slot, *out,
-        )  # fmt: skip
+        N = len(pos)
+        out = {} if self._c.ALLOCATES else _outputs(N, len(i))  # else the call's own
+        target, shift, active, d2 = self._c.pair_terms(
+            pos=pos,
+            seen=seen,
+            cand_i=i,
+            cand_j=j,
+            radius=self.radius,
+            R=self.R,
+            r=self.r,
+            kind=self.kind,
+            beta=self.beta,
+            avoid=avoiders,
+            slot=slot,
+            **out,
+        )
         neighbours.remember(pos, d2)
         return target, shift, active
+
+
+def _outputs(N: int, pairs: int) -> dict[str, np.ndarray]:
+    """The C call's outputs, made here (a build that cannot make them)."""
+    return {
+        "shift": np.empty((N, 2)),
+        "target": np.empty((N, 2)),
+        "active": np.empty(N, bool),
+        "d2": np.empty(pairs),
+    }

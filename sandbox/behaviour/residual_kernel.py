@@ -81,23 +81,18 @@ class ResidualPass:
         window = max(1, int(round(p["window"] / dt)))
         sp = np.sqrt(2.0 * position_noise**2 + p["noise_floor"] ** 2)
         sh = np.sqrt(2.0 * heading_noise**2 + p["heading_floor"] ** 2)
-        self._scalars = (
-            float(dt),
-            max(1, int(substeps)),
-            window,
+        self.substeps, self.window = max(1, int(substeps)), window
+        self.sp, self.sh, self.heading_noise = (
             float(sp),
             float(sh),
             float(heading_noise),
-            float(p["shift"]),
-            float(p["lambda"]),
-            float(p["isolation"]),
-            RECENT_SPEED_WINDOW,
         )
-        self._limits = (
-            c_float64(motor_accel),
-            c_float64(turn_accel),
-            c_float64(brake_accel),
-        )
+        self.mu, self.lam = float(p["shift"]), float(p["lambda"])
+        self.isolation = float(p["isolation"])
+        self.settle = RECENT_SPEED_WINDOW
+        self.motor_accel = c_float64(motor_accel)
+        self.turn_accel = c_float64(turn_accel)
+        self.brake_accel = c_float64(brake_accel)
         self._out = tuple(np.empty(n, dtype=np.intp) for _ in range(3))
         self._trace = (np.empty(n, dtype=np.intp), np.empty(n))
 
@@ -153,24 +148,21 @@ class ResidualPass:
             alarms)``: the rows (ndarray of intp, increasing) read on while
             isolating, cleared, and alarming this period.
         """
-        read, cleared, alarms = self._out
         rows, inc = self._trace if trace is not None else (None, None)
         history = st.history
         ring = (None, None, 0)
         if history is not None:  # its row of this period is filled in C
             ring = (history.values, history.fresh, history.advance(t))
+        observed = (seen, fresh, contact, commands)
         try:
-            counts = self._c.residual_period(
-                st, seen, fresh, contact, commands, *self._limits, read, cleared,
-                alarms, rows, inc, *ring, t, *self._scalars,
-            )  # fmt: skip
+            counts = self._call(st, t, observed, ring, rows, inc)
         except TypeError:  # an observation not a contiguous float64 or bool array
-            counts = self._c.residual_period(
-                st, c_float64(seen), _bools(fresh), _bools(contact),
-                c_float64(commands), *self._limits, read, cleared, alarms, rows, inc,
-                *ring, t, *self._scalars,
-            )  # fmt: skip
+            observed = (c_float64(seen), _bools(fresh), _bools(contact))
+            counts = self._call(
+                st, t, (*observed, c_float64(commands)), ring, rows, inc
+            )
         n_read, n_cleared, n_alarms, n_used = counts
+        read, cleared, alarms = self._out
         if trace is not None and n_used:  # (t, vehicle, l) of every window used
             trace.extend(
                 (t, int(i), float(x))
@@ -182,4 +174,51 @@ class ResidualPass:
             read[:n_read].copy(),
             cleared[:n_cleared].copy(),
             alarms[:n_alarms].copy(),
+        )
+
+    def _call(
+        self,
+        st: Any,
+        t: float,
+        observed: tuple,
+        ring: tuple,
+        rows: np.ndarray | None,
+        inc: np.ndarray | None,
+    ) -> tuple[int, int, int, int]:
+        """The C loop's period: how many rows are read, cleared, alarming, used.
+
+        ``observed``: ``seen``, ``fresh``, ``contact`` and the commands; ``ring``:
+        the track history's rings and this period's row of them (None, None, 0:
+        none); ``rows``, ``inc``: where the trace is written (None: no trace).
+        """
+        seen, fresh, contact, commands = observed
+        read, cleared, alarms = self._out
+        return self._c.residual_period(
+            state=st,
+            seen=seen,
+            fresh=fresh,
+            contact=contact,
+            commands=commands,
+            motor_accel=self.motor_accel,
+            turn_accel=self.turn_accel,
+            brake=self.brake_accel,
+            read=read,
+            cleared=cleared,
+            alarms=alarms,
+            trace_rows=rows,
+            trace_inc=inc,
+            ring_values=ring[0],
+            ring_fresh=ring[1],
+            slot=ring[2],
+            t=t,
+            h=self.dt,
+            substeps=self.substeps,
+            window=self.window,
+            sp=self.sp,
+            sh=self.sh,
+            heading_noise=self.heading_noise,
+            mu=self.mu,
+            lam=self.lam,
+            isolation=self.isolation,
+            settle=self.settle,
         )

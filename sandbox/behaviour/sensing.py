@@ -15,16 +15,19 @@ The draws come from a generator of their own, ``numpy.random.default_rng([seed,
 crc32("sensing")])``: adding sensing changes no other draw of a scenario, and the same
 scenario and seed give the same copies. With every value 0 no broadcast is made at all
 (:func:`make_broadcast` returns None) and runs are bit-identical to runs without the
-section. The worlds of a batch (:class:`StackedBroadcast`) draw, each from its own
-generator in the order it draws alone, into their rows of two stacked buffers: in one
-C call for all of them where the compiled path ``draws`` is on (:mod:`sandbox.accel`;
-numpy's random C API on each world's bit generator, the numbers of its Generator).
+section. One :class:`Broadcast` holds the copies of K worlds (one for a single run):
+each world draws from its own generator in the order it draws alone, into its rows
+of two stacked buffers, in one C call for all of them where the compiled path
+``draws`` is on (:mod:`sandbox.accel`; numpy's random C API on each world's bit
+generator, the numbers of its Generator).
 """
 
 from __future__ import annotations
 
 import zlib
 from collections import deque
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -35,135 +38,90 @@ SENSING_STREAM = zlib.crc32(b"sensing")
 
 
 class Broadcast:
-    """The pose copies the vehicles receive of each other, one update per period.
+    """The pose copies the vehicles of K worlds receive of each other, once a period.
+
+    Every world draws from its own generator, in the order it draws alone (each
+    period its noise, then its losses), into its rows of two stacked buffers: a
+    world of a batch receives the copies it receives alone. The rest is elementwise
+    over the stacked rows, ``n`` a world, world after world. The worlds share the
+    delay (their structure).
 
     Parameters
     ----------
-    position_noise : float [m]
+    position_noise : float or sequence of K floats [m]
         Standard deviation of the noise added to each position coordinate.
-    heading_noise : float [rad]
+    heading_noise : float or sequence of K floats [rad]
         Standard deviation of the noise added to each heading.
     delay_periods : int
         Latency in control periods (``delay / dt``).
-    loss : float
+    loss : float or sequence of K floats
         Probability, in [0, 1), that a vehicle's packet of a period is lost.
-    seed : int
-        The scenario's seed.
+    seeds : sequence of int
+        Each world's scenario seed (K of them).
+    n : int
+        Vehicles per world.
 
     Examples
     --------
-    >>> b = Broadcast(0.0, 0.0, 2, 0.0, seed=0)
+    >>> b = Broadcast(0.0, 0.0, 2, 0.0, seeds=[0], n=1)
     >>> [float(b.update(np.array([[x, 0.0]]), np.zeros(1))[0, 0]) for x in range(4)]
     [0.0, 0.0, 0.0, 1.0]
     """
 
     def __init__(
         self,
-        position_noise: float,
-        heading_noise: float,
+        position_noise: float | Sequence[float],
+        heading_noise: float | Sequence[float],
         delay_periods: int,
-        loss: float,
-        seed: int,
+        loss: float | Sequence[float],
+        seeds: Sequence[int],
+        n: int,
     ) -> None:
-        self.sigma = np.array([position_noise, position_noise, heading_noise])
-        self.loss = loss
-        self.rng = np.random.default_rng([seed, SENSING_STREAM])
+        K = len(seeds)
+        position, heading, lost = (
+            np.broadcast_to(np.asarray(value, dtype=float), (K,))
+            for value in (position_noise, heading_noise, loss)
+        )
+        self.worlds, self.n = K, n
+        #: The noise's standard deviations of every row, shape (K n, 3) [m, m, rad].
+        self.sigma = np.repeat(np.column_stack((position, position, heading)), n, 0)
+        #: The loss probability of every row, shape (K n,).
+        self.loss = np.repeat(lost, n)
+        #: Each world's generator of the draws.
+        self.rngs = [np.random.default_rng([seed, SENSING_STREAM]) for seed in seeds]
         self._sent: deque[np.ndarray] = deque(maxlen=delay_periods + 1)
-        self._seen: np.ndarray | None = None
-        self._fresh: np.ndarray | None = None
-        #: Set by a :class:`StackedBroadcast`: it and this broadcast's rows of it.
-        self.stack: tuple[StackedBroadcast, slice] | None = None
-
-    @property
-    def seen(self) -> np.ndarray | None:
-        """The last received pose of each vehicle, shape (n, 3) [m, m, rad]."""
-        if self.stack is not None:
-            stacked, rows = self.stack
-            return None if stacked.seen is None else stacked.seen[rows]
-        return self._seen
-
-    @seen.setter
-    def seen(self, value: np.ndarray | None) -> None:
-        self._seen = value
-
-    @property
-    def fresh(self) -> np.ndarray | None:
-        """Whether each vehicle's packet of the last update arrived, shape (n,) bool."""
-        if self.stack is not None:
-            stacked, rows = self.stack
-            return None if stacked.fresh is None else stacked.fresh[rows]
-        return self._fresh
-
-    @fresh.setter
-    def fresh(self, value: np.ndarray | None) -> None:
-        self._fresh = value
+        #: The last received pose of every row, shape (K n, 3) [m, m, rad].
+        self.seen: np.ndarray | None = None
+        #: Whether each row's packet of the last update arrived, shape (K n,) bool.
+        self.fresh: np.ndarray | None = None
+        self._noise, self._draws = np.empty((K, n, 3)), np.empty((K, n))
+        # Each world's two draws, with the buffer rows they fill.
+        self._calls = [
+            (rng.standard_normal, self._noise[w], rng.random, self._draws[w])
+            for w, rng in enumerate(self.rngs)
+        ]
+        # Or every world's in one C call, on their bit generators' capsules.
+        self._c = accel.module("draws")
+        self._capsules = [rng.bit_generator.capsule for rng in self.rngs]
 
     def update(self, pos: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """Broadcast the true poses of ``t_k``; return what is received at ``t_k``.
 
         Parameters
         ----------
-        pos : ndarray, shape (n, 2) [m]
-        theta : ndarray, shape (n,) [rad]
+        pos : ndarray, shape (K n, 2) [m]
+        theta : ndarray, shape (K n,) [rad]
             The true poses now.
 
         Returns
         -------
-        ndarray, shape (n, 3) [m, m, rad]
+        ndarray, shape (K n, 3) [m, m, rad]
             The copy of each vehicle's pose the others hold now: the pose sent
             ``delay`` periods ago with its noise, or, where that packet is lost, the
             copy held before. Before ``delay`` periods have passed the first copy is
             held; the first copy is never lost.
         """
-        n = len(pos)
         # Fixed-shape draws every period, so the stream does not depend on the values.
-        noise = self.rng.standard_normal((n, 3)) * self.sigma
-        lost = self.rng.random(n) < self.loss
-        pose = np.column_stack((pos, theta)) + noise
-        self._sent.append(pose)
-        arrived = self._sent[0]
-        if self.seen is None:
-            self.seen = arrived.copy()
-            self.fresh = np.ones(n, dtype=bool)
-        else:
-            self.seen = np.where(lost[:, None], self.seen, arrived)
-            self.fresh = ~lost
-        return self.seen
-
-
-class StackedBroadcast:
-    """The broadcasts of K worlds of ``n`` vehicles as one (their rows stacked).
-
-    Each world draws from its own generator, in the order it draws alone (the
-    noise, then the losses; into its rows of two stacked buffers, the numbers a
-    draw of that shape gives), so that every world receives the copies it
-    receives alone; the rest is elementwise over the stacked rows. The worlds share
-    the delay (their structure). Every world's own :class:`Broadcast` shows its
-    rows of the stacked copies (``seen``, ``fresh``).
-    """
-
-    def __init__(self, broadcasts: list[Broadcast], n: int) -> None:
-        self.parts, self.n = broadcasts, n
-        K = len(broadcasts)
-        self.sigma = np.repeat(np.array([b.sigma for b in broadcasts]), n, axis=0)
-        self.loss = np.repeat(np.array([b.loss for b in broadcasts]), n)
-        self._sent: deque[np.ndarray] = deque(maxlen=broadcasts[0]._sent.maxlen)
-        self.seen: np.ndarray | None = None
-        self.fresh: np.ndarray | None = None
-        self._noise, self._draws = np.empty((K, n, 3)), np.empty((K, n))
-        # Each world's two draws, with the buffer rows they fill.
-        self._calls = [
-            (b.rng.standard_normal, self._noise[w], b.rng.random, self._draws[w])
-            for w, b in enumerate(broadcasts)
-        ]
-        # Or every world's in one C call, on their bit generators' capsules.
-        self._c = accel.module("draws")
-        self._capsules = [b.rng.bit_generator.capsule for b in broadcasts]
-        for w, b in enumerate(broadcasts):
-            b.stack = (self, slice(w * n, (w + 1) * n))
-
-    def update(self, pos: np.ndarray, theta: np.ndarray) -> np.ndarray:
-        """:meth:`Broadcast.update` of every world, shape (K n, 3)."""
         if self._c is not None:
             self._c.fill_worlds(self._capsules, self._noise, self._draws)
         else:
@@ -184,24 +142,32 @@ class StackedBroadcast:
         return self.seen
 
 
-def make_broadcast(spec, dt: float, seed: int) -> Broadcast | None:
-    """The broadcast of a scenario's ``sensing`` section, or None when it is all 0.
+def make_broadcast(
+    specs: Sequence[Any], dt: float, seeds: Sequence[int], n: int
+) -> Broadcast | None:
+    """The broadcast of K worlds' ``sensing`` sections, or None when they are all 0.
 
     Parameters
     ----------
-    spec : SensingSpec
-        The section (see :class:`sandbox.scenario.SensingSpec`).
+    specs : sequence of SensingSpec
+        Each world's section (see :class:`sandbox.scenario.SensingSpec`); their
+        delays are equal, and either every section or none makes a broadcast
+        (their structure).
     dt : float [s]
         The control period; ``spec.delay`` is a whole number of them.
-    seed : int
-        The scenario's seed.
+    seeds : sequence of int
+        Each world's scenario seed.
+    n : int
+        Vehicles per world.
     """
-    if not (spec.position_noise or spec.heading_noise or spec.delay or spec.loss):
+    first = specs[0]
+    if not (first.position_noise or first.heading_noise or first.delay or first.loss):
         return None
     return Broadcast(
-        spec.position_noise,
-        spec.heading_noise,
-        int(round(spec.delay / dt)),
-        spec.loss,
-        seed,
+        [spec.position_noise for spec in specs],
+        [spec.heading_noise for spec in specs],
+        int(round(first.delay / dt)),
+        [spec.loss for spec in specs],
+        seeds,
+        n,
     )

@@ -3,8 +3,9 @@
 :func:`neighbour_pairs` finds the pairs directly (all pairs up to
 :data:`BRUTE_FORCE_MAX` points, a KD-tree of scipy above); :class:`NeighbourList` keeps
 the candidates from one control step to the next (a Verlet list), so the cost per step
-stays about linear in the number of vehicles. Pure numpy: used by the recovery
-strategies, the safety filter and the plug-in contexts alike.
+stays about linear in the number of vehicles; :class:`AllPairsByWorld` holds every
+pair of each of K small worlds stacked; :func:`neighbour_search` chooses. Pure numpy:
+used by the recovery strategies, the safety filter and the plug-in contexts alike.
 """
 
 from __future__ import annotations
@@ -171,28 +172,43 @@ class NeighbourList:
         self.rebuilds += 1
 
 
-class WorldPairs:
-    """Neighbour pairs of K worlds of ``n`` vehicles: never across worlds.
+class AllPairsByWorld:
+    """Every pair of each of K worlds of ``n`` vehicles, never one across worlds.
 
     Every pair of a world is a candidate (as alone, up to
     :data:`~sandbox.geometry.neighbours.BRUTE_FORCE_MAX` vehicles), in the single
     run's ``(i, j)`` order, world after world; so the sums over pairs add each
     vehicle's terms in the order it adds them alone. Obstacle candidates come from a
-    :class:`NeighbourList` over all vehicles (a superset
-    of the pairs in range; the others weigh exactly 0).
+    :class:`NeighbourList` over all vehicles (a superset of the pairs in range; the
+    others weigh exactly 0). Positions of another number of rows give the pairs of
+    worlds of that many vehicles each (as a :class:`NeighbourList` takes them).
     """
 
     def __init__(self, worlds: int, n: int, radius: float) -> None:
         self.radius = float(radius)
-        i, j = np.triu_indices(n, 1)
-        base = (np.arange(worlds) * n)[:, None]
-        self._i = (base + i).ravel().astype(np.intp)
-        self._j = (base + j).ravel().astype(np.intp)
+        self.worlds = worlds
+        self._pairs_of(n)
         self._obstacles = NeighbourList(radius)
         self._last: tuple[np.ndarray, np.ndarray] | None = None
 
+    def _pairs_of(self, n: int) -> None:
+        """The candidates of the worlds of ``n`` vehicles each."""
+        self.rows = self.worlds * n
+        i, j = np.triu_indices(n, 1)
+        base = (np.arange(self.worlds) * n)[:, None]
+        self._i = (base + i).ravel().astype(np.intp)
+        self._j = (base + j).ravel().astype(np.intp)
+
+    def _check(self, pos: np.ndarray) -> None:
+        """The pairs of worlds of as many rows as ``pos`` has, where that changed."""
+        if len(pos) != self.rows:
+            if len(pos) % self.worlds:
+                raise ValueError(f"{len(pos)} positions for {self.worlds} worlds")
+            self._pairs_of(len(pos) // self.worlds)
+
     def near(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Pairs closer than ``radius``, with ``pos[i] - pos[j]`` (as alone)."""
+        self._check(pos)
         rel = np.take(pos, self._i, axis=0)
         rel -= np.take(pos, self._j, axis=0)
         d2 = rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]
@@ -202,6 +218,7 @@ class WorldPairs:
 
     def candidates(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Every pair of every world (the candidates :meth:`near` filters)."""
+        self._check(pos)
         return self._i, self._j
 
     def remember(self, pos: np.ndarray, d2: np.ndarray) -> None:
@@ -226,3 +243,38 @@ class WorldPairs:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Candidate ``(vehicle, obstacle)`` pairs (see ``NeighbourList``)."""
         return self._obstacles.obstacle_pairs(pos, field)
+
+
+def neighbour_search(
+    worlds: int, n: int, radius: float
+) -> AllPairsByWorld | NeighbourList:
+    """The neighbour search of ``worlds`` worlds of ``n`` vehicles, stacked.
+
+    Every pair of each world (:class:`AllPairsByWorld`) up to
+    :data:`BRUTE_FORCE_MAX` vehicles a world, a Verlet list (:class:`NeighbourList`)
+    of a larger fleet, which runs alone.
+
+    Parameters
+    ----------
+    worlds : int
+        The worlds whose rows are stacked, world after world.
+    n : int
+        Vehicles per world.
+    radius : float [m]
+
+    Raises
+    ------
+    ValueError
+        Several worlds of more than :data:`BRUTE_FORCE_MAX` vehicles.
+
+    >>> [type(neighbour_search(k, n, 1.5)).__name__ for k, n in ((4, 3), (1, 60))]
+    ['AllPairsByWorld', 'NeighbourList']
+    """
+    if n <= BRUTE_FORCE_MAX:
+        return AllPairsByWorld(worlds, n, radius)
+    if worlds > 1:
+        raise ValueError(
+            f"{worlds} worlds of {n} vehicles: a fleet of more than "
+            f"{BRUTE_FORCE_MAX} vehicles runs alone"
+        )
+    return NeighbourList(radius)

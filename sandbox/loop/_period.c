@@ -12,14 +12,14 @@
  * mean heading, with the C library's sin and cos.
  *
  * record_sample: a sample of every world into the record's buffers
- * (sandbox/loop/recording.py, WorldsRecorder.append): copies only.
+ * (sandbox/loop/recording.py, LoopRecord.append): copies only.
  *
  * read_state: the bodies' rows split into positions, headings, velocities and the
- * motors' measured velocities (sandbox/loop/stepping.py, WorldsPhysics.read):
+ * motors' measured velocities (sandbox/loop/stepping.py, LoopPhysics.read):
  * copies only.
  *
  * command_rows: the motors' commands of a period from the loop metrics' velocities
- * along the mean heading (WorldsPhysics.advance): copies only.
+ * along the mean heading (LoopPhysics.advance): copies only.
  *
  * flush_periods: the loop metrics' buffered periods accounted for at once
  * (sandbox/loop/tally.py, LoopTally.flush): the efforts summed period after period,
@@ -73,9 +73,28 @@ healthy(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     return PyBool_FromLong(ok);
 }
 
+/* The arguments of buffer_period, by name (accel.h). */
+#define BUFFER_PERIOD(X)                                                           \
+    X(pos, FLOATS, 0)                                                              \
+    X(i, INTPS, OR_NONE)                                                           \
+    X(j, INTPS, OR_NONE)                                                           \
+    X(v1, FLOATS, 0)                                                               \
+    X(v2, FLOATS, 0)                                                               \
+    X(vel, FLOATS, 0)                                                              \
+    X(contact, BYTES, 0)                                                           \
+    X(theta, FLOATS, 0)                                                            \
+    X(h, NUMBER, 0)                                                                \
+    X(d2, FLOATS, WRITTEN | OR_NONE)                                               \
+    X(v, FLOATS, WRITTEN)                                                          \
+    X(vel_out, FLOATS, WRITTEN)                                                    \
+    X(free, BYTES, WRITTEN)                                                        \
+    X(cmd, FLOATS, WRITTEN)                                                        \
+    X(d2_known, FLOATS, OR_NONE)
+NAMED(buffer_period, BUFFER_PERIOD)
+
 PyDoc_STRVAR(buffer_period_doc,
-"buffer_period(pos, i, j, v1, v2, vel, contact, theta, h, d2, v, vel_out, free,\n"
-"              cmd[, d2_known]) -> None\n"
+"buffer_period(*, pos, i, j, v1, v2, vel, contact, theta, h, d2, v, vel_out, free,\n"
+"              cmd, d2_known) -> None\n"
 "\n"
 "For N vehicles: ``pos``, ``vel`` (N, 2), ``v1``, ``v2``, ``theta`` (N,), ``contact``\n"
 "(N,) bool, the pairs ``i``, ``j`` (intp, each world's rows from 0, P of them) or\n"
@@ -84,69 +103,33 @@ PyDoc_STRVAR(buffer_period_doc,
 "without pairs, ``d2_known`` (K P) if given is copied into ``d2``.");
 
 static PyObject *
-buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
+              PyObject *kwnames)
 {
-    if (nargs != 14 && nargs != 15) {
-        PyErr_SetString(PyExc_TypeError, "buffer_period takes 14 or 15 arguments");
+    buffer_period_args a;
+    if (parse_named(&buffer_period_signature, args, nargs, kwnames, (Arg *)&a) < 0) {
         return NULL;
     }
-    double h = PyFloat_AsDouble(args[8]);
-    if (PyErr_Occurred()) {
-        return NULL;
-    }
-    int pairs = args[1] != Py_None;
-    int known = !pairs && nargs == 15 && args[14] != Py_None; /* d2 given: copied */
-    Rows given;
-    memset(&given.view, 0, sizeof(Py_buffer));
-    /* float arrays: pos, v1, v2, vel, theta, d2, v, vel_out, cmd */
-    static const int at[] = {0, 3, 4, 5, 7, 9, 10, 11, 13};
-    Rows r[9];
-    Indices ib, jb;
-    Py_buffer cb, fb;
-    int got = 0, got_i = 0, got_j = 0, got_c = 0, got_f = 0;
     PyObject *result = NULL;
-    if (known && get_rows(args[14], &given, 0) < 0) goto done;
-    for (int k = 0; k < 9; k++) {
-        if (at[k] == 9 && !pairs && !known) {
-            r[k].len = 0;
-            r[k].data = NULL;
-            memset(&r[k].view, 0, sizeof(Py_buffer));
-            got++;
-            continue;
-        }
-        if (get_rows(args[at[k]], &r[k], at[k] >= 9) < 0) goto done;
-        got++;
-    }
-    if (pairs) {
-        if (get_indices(args[1], &ib) < 0) goto done;
-        got_i = 1;
-        if (get_indices(args[2], &jb) < 0) goto done;
-        got_j = 1;
-        if (ib.len != jb.len) {
-            PyErr_SetString(PyExc_ValueError, "buffer_period: shapes differ");
-            goto done;
-        }
-    }
-    if (get_bytes(args[6], &cb, 0) < 0) goto done;
-    got_c = 1;
-    if (get_bytes(args[12], &fb, 1) < 0) goto done;
-    got_f = 1;
-    Rows *pos = &r[0], *v1 = &r[1], *v2 = &r[2], *vel = &r[3], *theta = &r[4];
-    Rows *d2 = &r[5], *v = &r[6], *vel_out = &r[7], *cmd = &r[8];
-    Py_ssize_t N = v1->len;
-    Py_ssize_t P = pairs ? ib.len : 0;
+    const double h = a.h.x;
+    const int pairs = a.i.i != NULL, known = !pairs && a.d2_known.f != NULL;
+    const Arg *pos = &a.pos, *v1 = &a.v1, *v2 = &a.v2, *vel = &a.vel;
+    const Arg *theta = &a.theta, *d2 = &a.d2, *v = &a.v, *vel_out = &a.vel_out;
+    const Arg *cmd = &a.cmd, *given = &a.d2_known;
+    const Py_ssize_t N = v1->len, P = pairs ? a.i.len : 0;
     if (pos->len != 2 * N || v2->len != N || vel->len != 2 * N || theta->len != N ||
         v->len != 2 * N || vel_out->len != 2 * N || cmd->len != 2 * N ||
-        cb.len != N || cb.itemsize != 1 || fb.len != N || fb.itemsize != 1 ||
-        (pairs && (P == 0 || d2->len % P != 0)) || (known && given.len != d2->len)) {
+        a.contact.len != N || a.free.len != N || (pairs && a.j.len != P) ||
+        ((pairs || known) && d2->f == NULL) || (pairs && (P == 0 || d2->len % P != 0)) ||
+        (known && given->len != d2->len)) {
         PyErr_SetString(PyExc_ValueError, "buffer_period: shapes differ");
         goto done;
     }
     if (known) {
-        memcpy(d2->data, given.data, (size_t)d2->len * sizeof(double));
+        memcpy(d2->f, given->f, (size_t)d2->len * sizeof(double));
     }
     if (pairs) {
-        const Py_ssize_t *ii = ib.data, *jj = jb.data;
+        const Py_ssize_t *ii = a.i.i, *jj = a.j.i;
         Py_ssize_t K = d2->len / P, n = K ? N / K : 0;
         if (K * n != N) {
             PyErr_SetString(PyExc_ValueError, "buffer_period: shapes differ");
@@ -158,10 +141,10 @@ buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 goto done;
             }
         }
-        const double *p = pos->data;
+        const double *p = pos->f;
         for (Py_ssize_t w = 0; w < K; w++) {
             const double *pw = p + 2 * n * w;
-            double *out = d2->data + P * w;
+            double *out = d2->f + P * w;
             for (Py_ssize_t q = 0; q < P; q++) {
                 double x = pw[2 * ii[q]] - pw[2 * jj[q]];
                 double y = pw[2 * ii[q] + 1] - pw[2 * jj[q] + 1];
@@ -169,37 +152,55 @@ buffer_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             }
         }
     }
-    const unsigned char *contact = cb.buf;
-    unsigned char *free_ = fb.buf;
+    const unsigned char *contact = a.contact.b;
+    unsigned char *free_ = a.free.b;
     for (Py_ssize_t k = 0; k < N; k++) {
-        double a = v1->data[k], b = v2->data[k];
-        v->data[k] = a;
-        v->data[N + k] = b;
-        vel_out->data[2 * k] = vel->data[2 * k];
-        vel_out->data[2 * k + 1] = vel->data[2 * k + 1];
+        double speed = v1->f[k], turn = v2->f[k];
+        v->f[k] = speed;
+        v->f[N + k] = turn;
+        vel_out->f[2 * k] = vel->f[2 * k];
+        vel_out->f[2 * k + 1] = vel->f[2 * k + 1];
         free_[k] = !contact[k];
-        double heading = theta->data[k] + 0.5 * b * h;
-        cmd->data[2 * k] = a * cos(heading);
-        cmd->data[2 * k + 1] = a * sin(heading);
+        double heading = theta->f[k] + 0.5 * turn * h;
+        cmd->f[2 * k] = speed * cos(heading);
+        cmd->f[2 * k + 1] = speed * sin(heading);
     }
     result = Py_None;
     Py_INCREF(result);
 done:
-    for (int k = 0; k < got; k++) {
-        if (r[k].view.obj != NULL) {
-            PyBuffer_Release(&r[k].view);
-        }
-    }
-    if (got_i) PyBuffer_Release(&ib.view);
-    if (got_j) PyBuffer_Release(&jb.view);
-    if (got_c) PyBuffer_Release(&cb);
-    if (got_f) PyBuffer_Release(&fb);
-    PyBuffer_Release(&given.view); /* nothing where not acquired (obj NULL) */
+    release_named(&buffer_period_signature, (Arg *)&a);
     return result;
 }
 
+/* The arguments of flush_periods, by name (accel.h). */
+#define FLUSH_PERIODS(X)                                                           \
+    X(m, INTEGER, 0)                                                               \
+    X(K, INTEGER, 0)                                                               \
+    X(n, INTEGER, 0)                                                               \
+    X(rel_tol, NUMBER, 0)                                                          \
+    X(abs_tol, NUMBER, 0)                                                          \
+    X(has_prev, INTEGER, 0)                                                        \
+    X(has_cmd, INTEGER, 0)                                                         \
+    X(d2, FLOATS, 0)                                                               \
+    X(v, FLOATS, 0)                                                                \
+    X(vel, FLOATS, 0)                                                              \
+    X(cmd, FLOATS, 0)                                                              \
+    X(free, BYTES, 0)                                                              \
+    X(best, FLOATS, WRITTEN)                                                       \
+    X(effort_v1, FLOATS, WRITTEN)                                                  \
+    X(effort_v2, FLOATS, WRITTEN)                                                  \
+    X(peak_v1, FLOATS, WRITTEN)                                                    \
+    X(prev, FLOATS, WRITTEN)                                                       \
+    X(commanded, FLOATS, WRITTEN)                                                  \
+    X(was_free, BYTES, WRITTEN)                                                    \
+    X(max_velocity_error, FLOATS, WRITTEN)                                         \
+    X(max_speed_error, FLOATS, WRITTEN)                                            \
+    X(free_periods, INT64S, WRITTEN)                                               \
+    X(saturated_periods, INT64S, WRITTEN)
+NAMED(flush_periods, FLUSH_PERIODS)
+
 PyDoc_STRVAR(flush_periods_doc,
-"flush_periods(m, K, n, rel_tol, abs_tol, has_prev, has_cmd, d2, v, vel, cmd,\n"
+"flush_periods(*, m, K, n, rel_tol, abs_tol, has_prev, has_cmd, d2, v, vel, cmd,\n"
 "              free, best, effort_v1, effort_v2, peak_v1, prev, commanded,\n"
 "              was_free, max_velocity_error, max_speed_error, free_periods,\n"
 "              saturated_periods) -> None\n"
@@ -212,69 +213,41 @@ PyDoc_STRVAR(flush_periods_doc,
 "int64.");
 
 static PyObject *
-flush_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+flush_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
+              PyObject *kwnames)
 {
-    if (nargs != 23) {
-        PyErr_SetString(PyExc_TypeError, "flush_periods takes 23 arguments");
+    flush_periods_args a;
+    if (parse_named(&flush_periods_signature, args, nargs, kwnames, (Arg *)&a) < 0) {
         return NULL;
     }
-    Py_ssize_t m = PyLong_AsSsize_t(args[0]);
-    Py_ssize_t K = PyLong_AsSsize_t(args[1]);
-    Py_ssize_t n = PyLong_AsSsize_t(args[2]);
-    double rel_tol = PyFloat_AsDouble(args[3]);
-    double abs_tol = PyFloat_AsDouble(args[4]);
-    int has_prev = PyObject_IsTrue(args[5]);
-    int has_cmd = PyObject_IsTrue(args[6]);
-    if (PyErr_Occurred() || has_prev < 0 || has_cmd < 0) {
-        return NULL;
-    }
-    /* float64: d2, v, vel, cmd, best, effort_v1, effort_v2, peak_v1, prev,
-       commanded, max_velocity_error, max_speed_error */
-    static const int at[] = {7, 8, 9, 10, 12, 13, 14, 15, 16, 17, 19, 20};
-    Rows r[12];
-    Py_buffer fb, wb, cb_free, cb_sat;
-    int got = 0, got_f = 0, got_w = 0, got_cf = 0, got_cs = 0;
     PyObject *result = NULL;
-    for (int k = 0; k < 12; k++) {
-        if (get_rows(args[at[k]], &r[k], at[k] >= 12) < 0) goto done;
-        got++;
-    }
-    if (get_bytes(args[11], &fb, 0) < 0) goto done;
-    got_f = 1;
-    if (get_bytes(args[18], &wb, 1) < 0) goto done;
-    got_w = 1;
-    /* the counts: int64 (numpy's default integer here, checked by the caller) */
-    if (PyObject_GetBuffer(args[21], &cb_free, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0)
-        goto done;
-    got_cf = 1;
-    if (PyObject_GetBuffer(args[22], &cb_sat, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0)
-        goto done;
-    got_cs = 1;
-    Py_ssize_t N = K * n;
-    Rows *d2 = &r[0], *v = &r[1], *vel = &r[2], *cmd = &r[3], *best = &r[4];
-    Rows *e1 = &r[5], *e2 = &r[6], *peak = &r[7], *prev = &r[8], *commanded = &r[9];
-    Rows *mve = &r[10], *mse = &r[11];
+    const Py_ssize_t m = a.m.n, K = a.K.n, n = a.n.n, N = K * n;
+    const double rel_tol = a.rel_tol.x, abs_tol = a.abs_tol.x;
+    const int has_prev = a.has_prev.n != 0, has_cmd = a.has_cmd.n != 0;
+    const Arg *d2 = &a.d2, *v = &a.v, *vel = &a.vel, *cmd = &a.cmd, *best = &a.best;
+    const Arg *e1 = &a.effort_v1, *e2 = &a.effort_v2, *peak = &a.peak_v1;
+    const Arg *prev = &a.prev, *commanded = &a.commanded;
+    const Arg *mve = &a.max_velocity_error, *mse = &a.max_speed_error;
     Py_ssize_t P = K > 0 && m > 0 ? d2->len / (m * K) : 0;
     if (m < 1 || K < 1 || n < 1 || d2->len != m * K * P || v->len != m * 2 * N ||
-        vel->len != m * 2 * N || cmd->len != m * 2 * N || fb.len != m * N ||
-        fb.itemsize != 1 || best->len != K || e1->len != N || e2->len != N ||
-        peak->len != N || prev->len != 2 * N || commanded->len != 2 * N ||
-        wb.len != N || wb.itemsize != 1 || mve->len != K || mse->len != K ||
-        cb_free.len != K * 8 || cb_free.itemsize != 8 || cb_sat.len != K * 8 ||
-        cb_sat.itemsize != 8) {
+        vel->len != m * 2 * N || cmd->len != m * 2 * N || a.free.len != m * N ||
+        best->len != K || e1->len != N || e2->len != N || peak->len != N ||
+        prev->len != 2 * N || commanded->len != 2 * N || a.was_free.len != N ||
+        mve->len != K || mse->len != K || a.free_periods.len != K ||
+        a.saturated_periods.len != K) {
         PyErr_SetString(PyExc_ValueError, "flush_periods: shapes differ");
         goto done;
     }
-    const unsigned char *free_ = fb.buf;
-    unsigned char *was_free = wb.buf;
-    long long *free_periods = cb_free.buf, *saturated = cb_sat.buf;
+    const unsigned char *free_ = a.free.b;
+    unsigned char *was_free = a.was_free.b;
+    int64_t *free_periods = a.free_periods.q, *saturated = a.saturated_periods.q;
     /* closest approach: each period's least squared distance of each world, its
        root, the least over the periods, then against the best so far */
     if (P > 0) {
         for (Py_ssize_t w = 0; w < K; w++) {
             double least = 0.0;
             for (Py_ssize_t t = 0; t < m; t++) {
-                const double *row = d2->data + (t * K + w) * P;
+                const double *row = d2->f + (t * K + w) * P;
                 double low = row[0];
                 for (Py_ssize_t c = 1; c < P; c++) {
                     low = smaller(low, row[c]);
@@ -282,41 +255,41 @@ flush_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 low = sqrt(low);
                 least = t == 0 ? low : smaller(least, low);
             }
-            best->data[w] = smaller(best->data[w], least);
+            best->f[w] = smaller(best->f[w], least);
         }
     }
     /* control effort, period after period as the loop adds them, and |v1|'s peak */
-    const double *v0 = v->data;
+    const double *v0 = v->f;
     if (!has_prev) {
-        memcpy(prev->data, v0, 2 * N * sizeof(double));
+        memcpy(prev->f, v0, 2 * N * sizeof(double));
     }
     for (Py_ssize_t t = has_prev ? 0 : 1; t < m; t++) {
-        const double *now = v->data + t * 2 * N;
-        const double *before = t == 0 ? prev->data : now - 2 * N;
+        const double *now = v->f + t * 2 * N;
+        const double *before = t == 0 ? prev->f : now - 2 * N;
         for (Py_ssize_t i = 0; i < N; i++) {
-            e1->data[i] = e1->data[i] + fabs(now[i] - before[i]);
-            e2->data[i] = e2->data[i] + fabs(now[N + i] - before[N + i]);
+            e1->f[i] = e1->f[i] + fabs(now[i] - before[i]);
+            e2->f[i] = e2->f[i] + fabs(now[N + i] - before[N + i]);
         }
     }
     for (Py_ssize_t i = 0; i < N; i++) {
         /* the largest, NaN left out (fmax) */
         double top = fabs(v0[i]);
         for (Py_ssize_t t = 1; t < m; t++) {
-            top = fmax(top, fabs(v->data[t * 2 * N + i]));
+            top = fmax(top, fabs(v->f[t * 2 * N + i]));
         }
-        peak->data[i] = fmax(peak->data[i], top);
+        peak->f[i] = fmax(peak->f[i], top);
     }
-    memcpy(prev->data, v->data + (m - 1) * 2 * N, 2 * N * sizeof(double));
+    memcpy(prev->f, v->f + (m - 1) * 2 * N, 2 * N * sizeof(double));
     /* the motor check: each period's velocities read against the last commanded */
     for (Py_ssize_t w = 0; w < K; w++) {
         double worst_v = -INFINITY, worst_s = -INFINITY;
         long long checked = 0, over = 0;
         for (Py_ssize_t t = has_cmd ? 0 : 1; t < m; t++) {
-            const double *c_at = t == 0 ? commanded->data : cmd->data + (t - 1) * 2 * N;
+            const double *c_at = t == 0 ? commanded->f : cmd->f + (t - 1) * 2 * N;
             const unsigned char *f_at = t == 0 ? was_free : free_ + (t - 1) * N;
             for (Py_ssize_t j = 0; j < n; j++) {
                 Py_ssize_t i = w * n + j;
-                const double *got_v = vel->data + (t * N + i) * 2, *c = c_at + 2 * i;
+                const double *got_v = vel->f + (t * N + i) * 2, *c = c_at + 2 * i;
                 if (!(free_[t * N + i] && f_at[i] && isfinite(got_v[0]) &&
                       isfinite(got_v[1]))) {
                     continue;
@@ -330,21 +303,17 @@ flush_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 over += err > larger(rel_tol * want, abs_tol);
             }
         }
-        mve->data[w] = larger(mve->data[w], worst_v);
-        mse->data[w] = larger(mse->data[w], worst_s);
+        mve->f[w] = larger(mve->f[w], worst_v);
+        mse->f[w] = larger(mse->f[w], worst_s);
         free_periods[w] += checked;
         saturated[w] += over;
     }
-    memcpy(commanded->data, cmd->data + (m - 1) * 2 * N, 2 * N * sizeof(double));
+    memcpy(commanded->f, cmd->f + (m - 1) * 2 * N, 2 * N * sizeof(double));
     memcpy(was_free, free_ + (m - 1) * N, (size_t)N);
     result = Py_None;
     Py_INCREF(result);
 done:
-    release(r, got);
-    if (got_f) PyBuffer_Release(&fb);
-    if (got_w) PyBuffer_Release(&wb);
-    if (got_cf) PyBuffer_Release(&cb_free);
-    if (got_cs) PyBuffer_Release(&cb_sat);
+    release_named(&flush_periods_signature, (Arg *)&a);
     return result;
 }
 
@@ -461,9 +430,31 @@ command_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_RETURN_NONE;
 }
 
+/* The arguments of record_sample, by name (accel.h). */
+#define RECORD_SAMPLE(X)                                                           \
+    X(c, INTEGER, 0)                                                               \
+    X(pos, FLOATS, 0)                                                              \
+    X(theta, FLOATS, 0)                                                            \
+    X(v1, FLOATS, 0)                                                               \
+    X(v2, FLOATS, 0)                                                               \
+    X(chi, FLOATS, 0)                                                              \
+    X(slot, FLOATS, 0)                                                             \
+    X(target, FLOATS, 0)                                                           \
+    X(mode, BYTES, 0)                                                              \
+    X(failed, BYTES, 0)                                                            \
+    X(pose_out, FLOATS, WRITTEN)                                                   \
+    X(cmd_out, FLOATS, WRITTEN)                                                    \
+    X(chi_out, FLOATS, WRITTEN)                                                    \
+    X(slot_out, FLOATS, WRITTEN)                                                   \
+    X(target_out, FLOATS, WRITTEN)                                                 \
+    X(mode_out, BYTES, WRITTEN)                                                    \
+    X(failed_out, BYTES, WRITTEN)
+NAMED(record_sample, RECORD_SAMPLE)
+
 PyDoc_STRVAR(record_sample_doc,
-"record_sample(c, pos, theta, v1, v2, chi, slot, target, mode, failed, pose_out,\n"
-"              cmd_out, chi_out, slot_out, target_out, mode_out, failed_out) -> None\n"
+"record_sample(*, c, pos, theta, v1, v2, chi, slot, target, mode, failed, pose_out,\n"
+"              cmd_out, chi_out, slot_out, target_out, mode_out, failed_out)\n"
+"    -> None\n"
 "\n"
 "Sample ``c`` of every world into the record's buffers (a copy): ``pos``, ``chi``,\n"
 "``slot``, ``target`` (N, 2), ``theta``, ``v1``, ``v2`` (N,) float64, ``mode`` (N,)\n"
@@ -472,77 +463,55 @@ PyDoc_STRVAR(record_sample_doc,
 "(T, N, 2), ``mode_out`` and ``failed_out`` (T, N), at row ``c``.");
 
 static PyObject *
-record_sample(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+record_sample(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
+              PyObject *kwnames)
 {
-    if (nargs != 17) {
-        PyErr_SetString(PyExc_TypeError, "record_sample takes 17 arguments");
+    record_sample_args a;
+    if (parse_named(&record_sample_signature, args, nargs, kwnames, (Arg *)&a) < 0) {
         return NULL;
     }
-    Py_ssize_t c = PyLong_AsSsize_t(args[0]);
-    if (c == -1 && PyErr_Occurred()) {
-        return NULL;
-    }
-    /* float64: pos, theta, v1, v2, chi, slot, target, then the five buffers */
-    static const int at[] = {1, 2, 3, 4, 5, 6, 7, 10, 11, 12, 13, 14};
-    Rows r[12];
-    Py_buffer b[4]; /* mode, failed, mode_out, failed_out */
-    static const int bytes_at[] = {8, 9, 15, 16};
-    int got = 0, got_b = 0;
     PyObject *result = NULL;
-    for (int k = 0; k < 12; k++) {
-        if (get_rows(args[at[k]], &r[k], at[k] >= 10) < 0) goto done;
-        got++;
-    }
-    for (int k = 0; k < 4; k++) {
-        if (get_bytes(args[bytes_at[k]], &b[k], bytes_at[k] >= 15) < 0) goto done;
-        got_b++;
-    }
-    Rows *pos = &r[0], *theta = &r[1], *v1 = &r[2], *v2 = &r[3], *chi = &r[4];
-    Rows *slot = &r[5], *target = &r[6];
-    Py_ssize_t N = theta->len;
-    int fits = pos->len == 2 * N && v1->len == N && v2->len == N &&
-               chi->len == 2 * N && slot->len == 2 * N && target->len == 2 * N &&
-               b[0].len == N && b[1].len == N && b[0].itemsize == 1 &&
-               b[1].itemsize == 1 && b[2].itemsize == 1 && b[3].itemsize == 1 &&
-               c >= 0 && (c + 1) * 3 * N <= r[7].len && (c + 1) * 2 * N <= r[8].len &&
-               (c + 1) * 2 * N <= r[9].len && (c + 1) * 2 * N <= r[10].len &&
-               (c + 1) * 2 * N <= r[11].len && (c + 1) * N <= b[2].len &&
-               (c + 1) * N <= b[3].len;
+    const Py_ssize_t c = a.c.n, N = a.theta.len;
+    int fits = a.pos.len == 2 * N && a.v1.len == N && a.v2.len == N &&
+               a.chi.len == 2 * N && a.slot.len == 2 * N && a.target.len == 2 * N &&
+               a.mode.len == N && a.failed.len == N && c >= 0 &&
+               (c + 1) * 3 * N <= a.pose_out.len && (c + 1) * 2 * N <= a.cmd_out.len &&
+               (c + 1) * 2 * N <= a.chi_out.len && (c + 1) * 2 * N <= a.slot_out.len &&
+               (c + 1) * 2 * N <= a.target_out.len && (c + 1) * N <= a.mode_out.len &&
+               (c + 1) * N <= a.failed_out.len;
     if (!fits) {
         PyErr_SetString(PyExc_ValueError, "record_sample: shapes differ");
         goto done;
     }
-    double *pose = r[7].data + c * 3 * N, *cmd = r[8].data + c * 2 * N;
+    const double *pos = a.pos.f, *theta = a.theta.f, *v1 = a.v1.f, *v2 = a.v2.f;
+    double *pose = a.pose_out.f + c * 3 * N, *cmd = a.cmd_out.f + c * 2 * N;
     for (Py_ssize_t k = 0; k < N; k++) {
-        pose[3 * k] = pos->data[2 * k];
-        pose[3 * k + 1] = pos->data[2 * k + 1];
-        pose[3 * k + 2] = theta->data[k];
-        cmd[2 * k] = v1->data[k];
-        cmd[2 * k + 1] = v2->data[k];
+        pose[3 * k] = pos[2 * k];
+        pose[3 * k + 1] = pos[2 * k + 1];
+        pose[3 * k + 2] = theta[k];
+        cmd[2 * k] = v1[k];
+        cmd[2 * k + 1] = v2[k];
     }
-    memcpy(r[9].data + c * 2 * N, chi->data, 2 * N * sizeof(double));
-    memcpy(r[10].data + c * 2 * N, slot->data, 2 * N * sizeof(double));
-    memcpy(r[11].data + c * 2 * N, target->data, 2 * N * sizeof(double));
-    memcpy((char *)b[2].buf + c * N, b[0].buf, (size_t)N);
-    memcpy((char *)b[3].buf + c * N, b[1].buf, (size_t)N);
+    memcpy(a.chi_out.f + c * 2 * N, a.chi.f, 2 * N * sizeof(double));
+    memcpy(a.slot_out.f + c * 2 * N, a.slot.f, 2 * N * sizeof(double));
+    memcpy(a.target_out.f + c * 2 * N, a.target.f, 2 * N * sizeof(double));
+    memcpy(a.mode_out.b + c * N, a.mode.b, (size_t)N);
+    memcpy(a.failed_out.b + c * N, a.failed.b, (size_t)N);
     result = Py_None;
     Py_INCREF(result);
 done:
-    release(r, got);
-    for (int k = 0; k < got_b; k++) {
-        PyBuffer_Release(&b[k]);
-    }
+    release_named(&record_sample_signature, (Arg *)&a);
     return result;
 }
 
 static PyMethodDef methods[] = {
     {"healthy", (PyCFunction)(void (*)(void))healthy, METH_FASTCALL, healthy_doc},
-    {"buffer_period", (PyCFunction)(void (*)(void))buffer_period, METH_FASTCALL,
-     buffer_period_doc},
-    {"record_sample", (PyCFunction)(void (*)(void))record_sample, METH_FASTCALL,
-     record_sample_doc},
-    {"flush_periods", (PyCFunction)(void (*)(void))flush_periods, METH_FASTCALL,
-     flush_periods_doc},
+    {"buffer_period", (PyCFunction)(void (*)(void))buffer_period,
+     METH_FASTCALL | METH_KEYWORDS, buffer_period_doc},
+    {"record_sample", (PyCFunction)(void (*)(void))record_sample,
+     METH_FASTCALL | METH_KEYWORDS, record_sample_doc},
+    {"flush_periods", (PyCFunction)(void (*)(void))flush_periods,
+     METH_FASTCALL | METH_KEYWORDS, flush_periods_doc},
     {"read_state", (PyCFunction)(void (*)(void))read_state, METH_FASTCALL,
      read_state_doc},
     {"command_rows", (PyCFunction)(void (*)(void))command_rows, METH_FASTCALL,

@@ -20,7 +20,7 @@ import numpy as np
 
 from sandbox.behaviour.ranges import avoid_field
 from sandbox.errors import PluginRunError
-from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, NeighbourList, WorldPairs
+from sandbox.geometry.neighbours import NeighbourList, neighbour_search
 from sandbox.loop.layout import Layout
 from sandbox.loop.liveness import Failed
 from sandbox.loop.perception import Perception
@@ -94,10 +94,8 @@ class Avoidance:
             )
             for w, sc in enumerate(scenarios)
         ]
-        if layout.n <= BRUTE_FORCE_MAX:
-            self.neighbours: Any = WorldPairs(layout.K, layout.n, self.rec.R)
-        else:  # one world (structure_key): the Verlet list of a large fleet
-            self.neighbours = NeighbourList(self.rec.R)
+        # every pair of each world, or the Verlet list of a large fleet (alone)
+        self.neighbours: Any = neighbour_search(layout.K, layout.n, self.rec.R)
         self._world_neighbours = [NeighbourList(sc.recovery.R) for sc in scenarios]
         #: The strategy's period in one C call (plan_kernel.py; set by the build).
         self.kernel: Any = None

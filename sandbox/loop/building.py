@@ -12,7 +12,6 @@ descriptions, the record and the loop metrics (:class:`LoopParts`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from types import SimpleNamespace
 
 from sandbox.loop.acting import Acting
 from sandbox.loop.avoidance import Avoidance
@@ -149,31 +148,9 @@ def build(scenarios: list[Scenario], worlds: list[Physics | None]) -> LoopParts:
             description.update(reconfiguration.records())
         info.append(description)
     # the plan's law and strategy as C calls where they cover them (plan_kernel)
-    formation.kernel = law_kernel_of(
-        SimpleNamespace(
-            law=formation.law,
-            _law_per_world=formation.per_world,
-            _stacked_law=formation.reforming,
-            platoons=platoons,
-            _law_inputs=formation.inputs,
-            reference=formation.reference,
-            _ref_table=formation.rows,
-            leader=int(formation.leaders[0]),
-        )
-    )
-    formation.kernel_table = _kernel_table
-    avoidance.kernel = shift_kernel_of(
-        SimpleNamespace(
-            scenario=scenarios[0],
-            strategy_params=avoidance.params,
-            _avoid_field=avoidance.field,
-            _strategy_per_world=avoidance.per_world,
-            _strategy_built_in=avoidance.built_in,
-            platoons=platoons,
-            neighbours=avoidance.neighbours,
-            rec=avoidance.rec,
-        )
-    )
+    formation.kernel = law_kernel_of(formation, platoons is not None)
+    formation.kernel_table = reference_table
+    avoidance.kernel = shift_kernel_of(avoidance, platoons is not None)
     avoidance.kernel_strategy = avoidance.strategy  # what the C call replaces
     capacity = layout.steps // layout.record_every + 1
     return LoopParts(
@@ -193,8 +170,3 @@ def build(scenarios: list[Scenario], worlds: list[Physics | None]) -> LoopParts:
         tally=LoopTally(K, n, h),
         shift_motion=BatchDifference(h, K),
     )
-
-
-def _kernel_table(chunk: tuple) -> tuple | None:
-    """A chunk of the reference's rows as the law's C call reads them."""
-    return reference_table(SimpleNamespace(_ref_table=chunk))

@@ -1,8 +1,8 @@
 """What the vehicles of K worlds perceive at ``t_k``: broadcast, estimate, ranges.
 
 :class:`Perception` holds the loop's sensing (``sensing:``: every world's broadcast,
-each drawing from its own random stream, stepped at once by
-:class:`~sandbox.behaviour.sensing.StackedBroadcast`), the estimate the braking
+each drawing from its own random stream, one
+:class:`~sandbox.behaviour.sensing.Broadcast` of K worlds), the estimate the braking
 barrier makes of the copies (:func:`~sandbox.behaviour.estimation.platoon_estimate`)
 and the range sensors of every world (``sensors.range``,
 :class:`~sandbox.behaviour.ranges.RangeReadings`). :meth:`Perception.update` turns
@@ -19,7 +19,7 @@ import numpy as np
 
 from sandbox.behaviour.estimation import platoon_estimate
 from sandbox.behaviour.ranges import RangeReadings, context_fields
-from sandbox.behaviour.sensing import StackedBroadcast, make_broadcast
+from sandbox.behaviour.sensing import make_broadcast
 from sandbox.loop.layout import Layout
 from sandbox.loop.state import Fleet
 from sandbox.model.obstacle_field import ObstacleField
@@ -40,16 +40,14 @@ class Perception:
     def __init__(self, layout: Layout, worlds: list[Any], obstacles: ObstacleField):
         scenarios, h = layout.scenarios, layout.h
         first = scenarios[0]
-        #: Each world's broadcast (its own random stream), None without sensing.
-        self.broadcasts = [make_broadcast(sc.sensing, h, sc.seed) for sc in scenarios]
-        #: Every world's broadcast stepped at once (None without sensing).
-        self.broadcast: StackedBroadcast | None = None
-        if self.broadcasts[0] is not None:
-            self.broadcast = StackedBroadcast(self.broadcasts, layout.n)
+        self._layout = layout
+        #: Every world's broadcast (each its own random stream), None without sensing.
+        self.broadcast = make_broadcast(
+            [sc.sensing for sc in scenarios], h, [sc.seed for sc in scenarios], layout.n
+        )
         #: Each world's declared ``sensing:`` values (None: no broadcast).
         self.sensing = [
-            None if b is None else asdict(sc.sensing)
-            for sc, b in zip(scenarios, self.broadcasts, strict=True)
+            None if self.broadcast is None else asdict(sc.sensing) for sc in scenarios
         ]
         #: The estimate of the copies the law and the recovery see (braking only).
         self.estimate = platoon_estimate(first, h, layout.substeps)
@@ -88,8 +86,8 @@ class Perception:
 
     def fresh(self, w: int | None = None) -> np.ndarray | None:
         """Which copies of the last period arrived (world ``w``'s; None: all rows)."""
-        if self.broadcast is None:
+        if self.broadcast is None or self.broadcast.fresh is None:
             return None
         if w is None:
             return self.broadcast.fresh
-        return self.broadcasts[w].fresh
+        return self.broadcast.fresh[self._layout.rows(w)]

@@ -1,14 +1,15 @@
 """Which parts of the plan stage run as C calls: chosen once, when the loop is built.
 
-Every period :meth:`Simulation._plan <sandbox.loop.simulation.Simulation._plan>`
+Every period the formation stage (:class:`~sandbox.loop.formation.Formation`)
 evaluates the formation law (with the loop's overwrite of the reference-tracking and
-commanded rows) and the recovery strategy (with ``target = slot + shift``). With
-numpy these are some thirty small calls, most of a small fleet's plan. Two optional
-C calls do the same, where they cover the loop's configuration:
+commanded rows) and the avoidance stage (:class:`~sandbox.loop.avoidance.Avoidance`)
+the recovery strategy (with ``target = slot + shift``). With numpy these are some
+thirty small calls, most of a small fleet's plan. Two optional C calls do the same,
+where they cover the loop's configuration:
 
 - the law, :class:`~sandbox.model.law_kernel.LawKernel`: a built-in law class of
   all worlds (one law, one leader index; not the re-forming worlds of
-  :mod:`sandbox.loop.stacked_law`, not a world's own law, not several platoons),
+  :mod:`sandbox.loop.reforming`, not a world's own law, not several platoons),
   with the reference's table (every built-in reference) or none;
 - the strategy, :class:`~sandbox.behaviour.pair_field.ShiftKernel`: the built-in
   ``discontinuous`` and ``continuous`` strategies called once for all worlds,
@@ -23,7 +24,7 @@ is on; the two agree with the numpy path within rtol 1e-12
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from sandbox import accel
 from sandbox.behaviour import pair_field
@@ -34,59 +35,89 @@ from sandbox.model.obstacle_field import ObstacleField
 from sandbox.plugins.registration import get
 
 if TYPE_CHECKING:
-    from sandbox.loop.simulation import Simulation
+    from sandbox.loop.avoidance import Avoidance
+    from sandbox.loop.formation import Formation
 
 #: The strategies :class:`~sandbox.behaviour.pair_field.ShiftKernel` computes.
-_KINDS = {
+KINDS = {
     "discontinuous": pair_field.DISCONTINUOUS,
     "continuous": pair_field.CONTINUOUS,
 }
 
 
-def law_kernel_of(sim: Simulation) -> LawKernel | None:
-    """The C call of the loop's law, or None where the numpy path runs."""
+def law_kernel_of(formation: Formation, platoons: bool) -> LawKernel | None:
+    """The C call of the formation stage's law, or None where numpy runs.
+
+    Parameters
+    ----------
+    formation : Formation
+        The stage as built: its law, whether each world has its own law
+        (``per_world``) or re-forms apart (``reforming``), whether the law is a
+        built-in class of :class:`~sandbox.model.laws.LawInputs` (``inputs``), the
+        reference and its rows, the worlds' leaders.
+    platoons : bool
+        Whether the worlds have several platoons (``platoons:``).
+    """
     if (
-        sim.law is None
-        or sim._law_per_world
-        or sim._stacked_law is not None
-        or sim.platoons is not None
-        or not sim._law_inputs
-        or (sim.reference is not None and sim._ref_table is None)
+        formation.law is None
+        or formation.per_world
+        or formation.reforming is not None
+        or platoons
+        or not formation.inputs
+        or (formation.reference is not None and formation.rows is None)
     ):
         return None
-    return LawKernel.make(sim.law, sim.leader)
+    return LawKernel.make(formation.law, int(formation.leaders[0]))
 
 
-def shift_kernel_of(sim: Simulation) -> ShiftKernel | None:
-    """The C call of the loop's strategy, or None where the numpy path runs."""
-    name = sim.scenario.recovery.strategy
-    params = sim.strategy_params
-    field = sim._avoid_field
+def shift_kernel_of(avoidance: Avoidance, platoons: bool) -> ShiftKernel | None:
+    """The C call of the avoidance stage's strategy, or None where numpy runs.
+
+    Parameters
+    ----------
+    avoidance : Avoidance
+        The stage as built: the ``recovery:`` section (``rec``), the strategy's
+        values (``params``), where it finds the static obstacles (``field``),
+        whether it is called world by world (``per_world``) and a built-in one
+        (``built_in``), the neighbour search.
+    platoons : bool
+        Whether the worlds have several platoons (``platoons:``).
+    """
+    name = avoidance.rec.strategy
+    params = avoidance.params
+    field = avoidance.field
+    c = accel.module("pair_field")
     if (
-        name not in _KINDS
-        or sim._strategy_per_world
-        or not sim._strategy_built_in
+        name not in KINDS
+        or avoidance.per_world
+        or not avoidance.built_in
         or not get("strategy", name).origin.startswith("built-in")
-        or sim.platoons is not None
+        or platoons
         or params.get("tangential", 0.0) != 0.0
         or type(field) is not ObstacleField
         or not field.empty
-        or sim.neighbours is None
-        or accel.module("pair_field") is None
+        or avoidance.neighbours is None
+        or c is None
     ):
         return None
     return ShiftKernel(
-        sim.neighbours,
-        sim.rec.R,
+        avoidance.neighbours,
+        avoidance.rec.R,
         params.get("r"),
-        _KINDS[name],
+        KINDS[name],
         params["beta"],
-        accel.module("pair_field"),
+        c,
     )
 
 
-def reference_table(sim: Simulation) -> tuple | None:
-    """The reference's table as the law's C call reads it (C-contiguous float64)."""
-    if sim._ref_table is None:
+def reference_table(chunk: tuple[Any, ...] | None) -> tuple[Any, ...] | None:
+    """A chunk of the reference's rows as the law's C call reads them.
+
+    Parameters
+    ----------
+    chunk : tuple of 3 ndarray (T, 2), or None
+        The reference's points and their first and second derivatives.
+    """
+    if chunk is None:
         return None
-    return tuple(c_float64(a) for a in sim._ref_table)
+    return tuple(c_float64(a) for a in chunk)

@@ -9,7 +9,7 @@ platoons' structure (:func:`~sandbox.loop.plan.structure_key`), so section by
 section the call can take the rows of all worlds instead of one world's:
 :class:`PlatoonSections` makes one call of each section for K worlds, with that
 section's parameters (``beta`` a row each where the worlds differ), its neighbour
-pairs within each world (:class:`~sandbox.geometry.neighbours.WorldPairs`), one
+pairs within each world (:class:`~sandbox.geometry.neighbours.AllPairsByWorld`), one
 memory for the section, and each world's counters of the section, which it sums
 into the world's filter counters as a world alone does.
 
@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, WorldPairs
+from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, AllPairsByWorld
 from sandbox.loop.platoons import Platoons, sum_counters
 from sandbox.plugins.registration import get
 
@@ -60,7 +60,7 @@ class PlatoonSections:
                     params["beta"] = np.repeat(np.array(betas, dtype=float), n)[:, None]
             rows = np.tile(mask, K)
             self._recoveries.append(
-                (strategy, params, spec.R, WorldPairs(K, n, spec.R), rows)
+                (strategy, params, spec.R, AllPairsByWorld(K, n, spec.R), rows)
             )
         self._filters = [
             (flt, dict(spec.params), np.tile(mask, K), {})

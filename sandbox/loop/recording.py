@@ -98,10 +98,24 @@ class LoopRecord:
             b = self._buf
             try:
                 period.record_sample(
-                    c, pos, theta, v1, v2, chi, slot, target, mode, failed,
-                    b["pose"], b["cmd"], b["chi"], b["slot"], b["target"], b["mode"],
-                    b["failed"],
-                )  # fmt: skip
+                    c=c,
+                    pos=pos,
+                    theta=theta,
+                    v1=v1,
+                    v2=v2,
+                    chi=chi,
+                    slot=slot,
+                    target=target,
+                    mode=mode,
+                    failed=failed,
+                    pose_out=b["pose"],
+                    cmd_out=b["cmd"],
+                    chi_out=b["chi"],
+                    slot_out=b["slot"],
+                    target_out=b["target"],
+                    mode_out=b["mode"],
+                    failed_out=b["failed"],
+                )
             except (BufferError, TypeError, ValueError):  # not such arrays: numpy
                 self._write(
                     c, None, t, pos, theta, v1, v2, chi, slot, target, mode, failed

@@ -50,7 +50,7 @@ import numpy as np
 from sandbox.behaviour.detection import BatchDetection
 from sandbox.behaviour.ranges import observation_fields
 from sandbox.behaviour.reconfigure import Reconfiguration
-from sandbox.behaviour.sensing import StackedBroadcast
+from sandbox.behaviour.sensing import Broadcast
 from sandbox.errors import PluginRunError
 from sandbox.loop import plan as planning
 from sandbox.loop.building import LoopParts, build
@@ -768,7 +768,7 @@ class Simulation:
         return self._formation.reconfigurations[0]
 
     @property
-    def broadcast(self) -> StackedBroadcast | None:
+    def broadcast(self) -> Broadcast | None:
         """The broadcast of every world's rows (``sensing:``), None without sensing.
 
         Each world draws from its own random stream; ``seen``, ``fresh`` and

@@ -5,7 +5,7 @@ pymunk :class:`~sandbox.physics.world.World` the worlds are read, written and st
 together: their motor arrays become views of stacked ones (sized at once by
 :func:`~sandbox.physics.world.motor_limits`), their control bodies read their
 velocities straight from one stacked command array, and from the second period on
-:class:`~sandbox.physics.stepping.WorldStepper` calls Chipmunk for all of them with no
+:class:`~sandbox.physics.stepping.BatchStepper` calls Chipmunk for all of them with no
 Python between worlds (one C call per period where its extension is built and no
 contact episode is open). Any other back-end (``Simulation(scenario, world=...)``) is
 reached through the :class:`~sandbox.physics.Physics` interface only. Both give the
@@ -20,7 +20,7 @@ import numpy as np
 
 from sandbox import accel
 from sandbox.physics.interface import Physics
-from sandbox.physics.stepping import WorldStepper
+from sandbox.physics.stepping import BatchStepper
 from sandbox.physics.world import MAX_FORCE_SETTER, World, motor_limits
 
 #: The motor arrays of a World that become views of stacked ones.
@@ -57,7 +57,7 @@ class LoopPhysics:
         self.failed = np.zeros(self.N, dtype=bool)
         for w, world in enumerate(self.worlds):
             world.failed = self.failed[w * n : (w + 1) * n]
-        self._stepper: WorldStepper | None = None
+        self._stepper: BatchStepper | None = None
         if not self.pymunk:
             return
         for name in _MOTOR_ARRAYS:
@@ -229,7 +229,7 @@ class LoopPhysics:
                         world._update_episodes(ends[s])
             state[w] = world.read_rows(measure=False)
         if first:  # every body is checked in now
-            self._stepper = WorldStepper.build(self.worlds, out, state, substeps)
+            self._stepper = BatchStepper.build(self.worlds, out, state, substeps)
             if self._stepper is not None:
                 self._stepper.live(self.live)
 

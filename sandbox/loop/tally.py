@@ -152,10 +152,22 @@ class LoopTally:
                 i, j = self._i, self._j
         commanded = self._buf_cmd[m]  # valid until the slot is written again
         period.buffer_period(
-            b.pos, i, j, b.v1, b.v2, b.vel, contact, b.theta, float(self.h),
-            self._buf_d2[m], self._buf_v[m], self._buf_vel[m], self._buf_free[m],
-            commanded, d2,
-        )  # fmt: skip
+            pos=b.pos,
+            i=i,
+            j=j,
+            v1=b.v1,
+            v2=b.v2,
+            vel=b.vel,
+            contact=contact,
+            theta=b.theta,
+            h=self.h,
+            d2=self._buf_d2[m],
+            v=self._buf_v[m],
+            vel_out=self._buf_vel[m],
+            free=self._buf_free[m],
+            cmd=commanded,
+            d2_known=d2,
+        )
         self.commanded, self.commanded_at = commanded, b.k
         self._m = m + 1
         if self._m == CHUNK:
@@ -212,13 +224,30 @@ class LoopTally:
         was_free = self._was_free if has_cmd else np.empty(K * n, dtype=bool)
         try:
             period.flush_periods(
-                m, K, n, MOTOR_REL_TOL, MOTOR_ABS_TOL, has_prev, has_cmd,
-                self._buf_d2[:m], self._buf_v[:m], self._buf_vel[:m],
-                self._buf_cmd[:m], self._buf_free[:m], self.best, self.effort_v1,
-                self.effort_v2, self.peak_v1, prev, commanded, was_free,
-                self.max_velocity_error, self.max_speed_error, self.free_periods,
-                self.saturated_periods,
-            )  # fmt: skip
+                m=m,
+                K=K,
+                n=n,
+                rel_tol=MOTOR_REL_TOL,
+                abs_tol=MOTOR_ABS_TOL,
+                has_prev=has_prev,
+                has_cmd=has_cmd,
+                d2=self._buf_d2[:m],
+                v=self._buf_v[:m],
+                vel=self._buf_vel[:m],
+                cmd=self._buf_cmd[:m],
+                free=self._buf_free[:m],
+                best=self.best,
+                effort_v1=self.effort_v1,
+                effort_v2=self.effort_v2,
+                peak_v1=self.peak_v1,
+                prev=prev,
+                commanded=commanded,
+                was_free=was_free,
+                max_velocity_error=self.max_velocity_error,
+                max_speed_error=self.max_speed_error,
+                free_periods=self.free_periods,
+                saturated_periods=self.saturated_periods,
+            )
         except (BufferError, TypeError, ValueError):
             return False
         self._prev, self._commanded, self._was_free = prev, commanded, was_free

@@ -43,8 +43,33 @@ difference(const double *x, Py_ssize_t m, long long count, double h, double *pre
     }
 }
 
+/* The arguments of law_targets, by name (accel.h). */
+#define LAW_TARGETS(X)                                                             \
+    X(kind, INTEGER, 0)                                                            \
+    X(delta, FLOATS, 0)                                                            \
+    X(n, INTEGER, 0)                                                               \
+    X(pose, FLOATS, 0)                                                             \
+    X(theta, FLOATS, OR_NONE)                                                      \
+    X(leader, INTEGER, 0)                                                          \
+    X(ref_p, FLOATS, OR_NONE)                                                      \
+    X(ref_dp, FLOATS, OR_NONE)                                                     \
+    X(ref_ddp, FLOATS, OR_NONE)                                                    \
+    X(row, INTEGER, 0)                                                             \
+    X(rotate, INTEGER, 0)                                                          \
+    X(tangent, NUMBER, 0)                                                          \
+    X(h, NUMBER, 0)                                                                \
+    X(count, INTEGER, 0)                                                           \
+    X(prev_x, FLOATS, WRITTEN | OR_NONE)                                           \
+    X(prev_v, FLOATS, WRITTEN | OR_NONE)                                           \
+    X(track, INTPS, 0)                                                             \
+    X(commanded, INTPS, 0)                                                         \
+    X(slot, FLOATS, WRITTEN | OR_NONE)                                             \
+    X(v_ref, FLOATS, WRITTEN | OR_NONE)                                            \
+    X(a_ref, FLOATS, WRITTEN | OR_NONE)
+NAMED(law_targets, LAW_TARGETS)
+
 PyDoc_STRVAR(law_targets_doc,
-"law_targets(kind, delta, n, pose, theta, leader, ref_p, ref_dp, ref_ddp, row,\n"
+"law_targets(*, kind, delta, n, pose, theta, leader, ref_p, ref_dp, ref_ddp, row,\n"
 "            rotate, tangent, h, count, prev_x, prev_v, track, commanded, slot,\n"
 "            v_ref, a_ref) -> (slot, v_ref, a_ref, tangent)\n"
 "\n"
@@ -63,81 +88,50 @@ PyDoc_STRVAR(law_targets_doc,
 "tangent angle now.");
 
 static PyObject *
-law_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+law_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs, PyObject *kwnames)
 {
-    if (nargs != 21) {
-        PyErr_SetString(PyExc_TypeError, "law_targets takes 21 arguments");
+    law_targets_args a;
+    if (parse_named(&law_targets_signature, args, nargs, kwnames, (Arg *)&a) < 0) {
         return NULL;
     }
-    long kind = PyLong_AsLong(args[0]);
-    Py_ssize_t n = PyLong_AsSsize_t(args[2]);
-    Py_ssize_t leader = PyLong_AsSsize_t(args[5]);
-    Py_ssize_t row = PyLong_AsSsize_t(args[9]);
-    long rotate = PyLong_AsLong(args[10]);
-    double tangent = PyFloat_AsDouble(args[11]);
-    double h = PyFloat_AsDouble(args[12]);
-    long long count = PyLong_AsLongLong(args[13]);
-    if (PyErr_Occurred()) {
-        return NULL;
-    }
-    int has_theta = args[4] != Py_None, has_ref = args[6] != Py_None;
-    int has_history = args[14] != Py_None;
-    /* float64 arrays: delta, pose, theta, ref_p, ref_dp, ref_ddp, prev_x, prev_v,
-     * slot, v_ref, a_ref; absent ones (None) are skipped */
-    static const int at[] = {1, 3, 4, 6, 7, 8, 14, 15, 18, 19, 20};
-    Rows r[11];
-    int have[11] = {0};
-    Indices track, cmd;
-    int got_track = 0, got_cmd = 0;
-    PyObject *result = NULL, *out[3] = {NULL, NULL, NULL};
-    for (int k = 0; k < 11; k++) {
-        PyObject *obj = args[at[k]];
-        if (k >= 8) { /* the outputs: the given arrays, or new ones */
-            if (obj == Py_None) {
-                out[k - 8] = new_array(2, have[0] ? r[0].len / 2 : 0, 2, 0);
-                if (out[k - 8] == NULL) goto done;
-            }
-            else {
-                out[k - 8] = obj;
-                Py_INCREF(obj);
-            }
-            obj = out[k - 8];
+    PyObject *result = NULL;
+    const long kind = (long)a.kind.n;
+    const Py_ssize_t n = a.n.n, leader = a.leader.n, row = a.row.n;
+    const int rotate = a.rotate.n != 0;
+    const long long count = (long long)a.count.n;
+    const double h = a.h.x;
+    double tangent = a.tangent.x;
+    const int has_theta = a.theta.f != NULL, has_ref = a.ref_p.f != NULL;
+    const int has_history = a.prev_x.f != NULL;
+    const Py_ssize_t N = a.delta.len / 2, K = n > 0 ? N / n : 0;
+    Arg *outputs[3] = {&a.slot, &a.v_ref, &a.a_ref};
+    for (int k = 0; k < 3; k++) { /* the outputs: the given arrays, or new ones */
+        if (outputs[k]->f == NULL &&
+            take_new(outputs[k], new_array(2, N, 2, 0), FLOATS) < 0) {
+            goto done;
         }
-        else if (obj == Py_None) {
-            continue;
-        }
-        int writable = at[k] >= 14;
-        if (get_rows(obj, &r[k], writable) < 0) goto done;
-        have[k] = 1;
     }
-    if (get_indices(args[16], &track) < 0) goto done;
-    got_track = 1;
-    if (get_indices(args[17], &cmd) < 0) goto done;
-    got_cmd = 1;
-    if (!(have[0] && have[1] && have[8] && have[9] && have[10])) {
-        PyErr_SetString(PyExc_TypeError, "law_targets: an array is missing");
-        goto done;
-    }
-    Rows *delta = &r[0], *pose = &r[1], *theta = &r[2];
-    Rows *slot = &r[8], *v_ref = &r[9], *a_ref = &r[10];
-    Py_ssize_t N = slot->len / 2, K = n > 0 ? N / n : 0;
-    int stride = has_theta ? 2 : 3;
-    int needs_leader = kind != VIRTUAL;
-    int needs_ref = kind == VIRTUAL || kind == LEADER_REF;
-    int leader_motion = kind == FIXED || kind == ROTATING;
-    Py_ssize_t hist = leader_motion ? 2 * K : 2 * N; /* the history's values */
+    const Indices track = {.data = a.track.i, .len = a.track.len};
+    const Indices cmd = {.data = a.commanded.i, .len = a.commanded.len};
+    const Arg *delta = &a.delta, *pose = &a.pose, *theta = &a.theta;
+    const int stride = has_theta ? 2 : 3;
+    const int needs_leader = kind != VIRTUAL;
+    const int needs_ref = kind == VIRTUAL || kind == LEADER_REF;
+    const int leader_motion = kind == FIXED || kind == ROTATING;
+    const Py_ssize_t hist = leader_motion ? 2 * K : 2 * N; /* the history's values */
     int fits = kind >= FIXED && kind <= OWN_ESTIMATE && n > 0 && N == K * n &&
-               delta->len == 2 * N && v_ref->len == 2 * N &&
-               a_ref->len == 2 * N && pose->len == stride * N &&
+               delta->len == 2 * N && a.slot.len == 2 * N && a.v_ref.len == 2 * N &&
+               a.a_ref.len == 2 * N && pose->len == stride * N &&
                (!has_theta || theta->len == N) &&
                (!needs_leader || (leader >= 0 && leader < n)) &&
                (!needs_ref || has_ref) &&
                has_history == (leader_motion || kind == OWN_ESTIMATE) &&
-               (!has_history || (have[7] && r[6].len == hist && r[7].len == hist));
+               (!has_history ||
+                (a.prev_v.f && a.prev_x.len == hist && a.prev_v.len == hist));
     if (fits && has_ref) {
-        Py_ssize_t T = r[3].len / 2;
-        fits = have[4] && have[5] && r[4].len == 2 * T && r[5].len == 2 * T &&
-               row >= 0 && row < T;
+        Py_ssize_t T = a.ref_p.len / 2;
+        fits = a.ref_dp.f && a.ref_ddp.f && a.ref_dp.len == 2 * T &&
+               a.ref_ddp.len == 2 * T && row >= 0 && row < T;
     }
     for (Py_ssize_t k = 0; fits && k < track.len; k++) {
         fits = track.data[k] >= 0 && track.data[k] < N;
@@ -149,11 +143,12 @@ law_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         PyErr_SetString(PyExc_ValueError, "law_targets: shapes differ");
         goto done;
     }
-    const double *d = delta->data, *ps = pose->data;
-    const double *p = has_ref ? r[3].data + 2 * row : NULL;
-    const double *dp = has_ref ? r[4].data + 2 * row : NULL;
-    const double *ddp = has_ref ? r[5].data + 2 * row : NULL;
-    double *s = slot->data, *v = v_ref->data, *a = a_ref->data;
+    const double *d = delta->f, *ps = pose->f;
+    const double *p = has_ref ? a.ref_p.f + 2 * row : NULL;
+    const double *dp = has_ref ? a.ref_dp.f + 2 * row : NULL;
+    const double *ddp = has_ref ? a.ref_ddp.f + 2 * row : NULL;
+    double *s = a.slot.f, *v = a.v_ref.f, *acc = a.a_ref.f;
+    double *prev_x = a.prev_x.f, *prev_v = a.prev_v.f;
     if (rotate && (kind == VIRTUAL || kind == LEADER_REF)) {
         if (hypot(dp[0], dp[1]) >= REST_SPEED) {
             tangent = atan2(dp[1], dp[0]); /* eq. (15) */
@@ -168,14 +163,13 @@ law_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         const double *lp = needs_leader ? ps + stride * (w * n + leader) : NULL;
         double c = ct, sn = st;
         if (kind == ROTATING || kind == OWN_ESTIMATE) { /* the leader's heading */
-            double th = has_theta ? theta->data[w * n + leader] : lp[2];
+            double th = has_theta ? theta->f[w * n + leader] : lp[2];
             c = cos(th);
             sn = sin(th);
         }
         if (leader_motion) { /* eqs. (8)-(9) of the leader's position */
             double x[2] = {lp[0], lp[1]};
-            difference(x, 2, count, h, r[6].data + 2 * w, r[7].data + 2 * w, lead_v,
-                       lead_a);
+            difference(x, 2, count, h, prev_x + 2 * w, prev_v + 2 * w, lead_v, lead_a);
         }
         for (Py_ssize_t i = 0; i < n; i++) {
             Py_ssize_t e = 2 * (w * n + i);
@@ -195,19 +189,19 @@ law_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             if (leader_motion) {
                 v[e] = lead_v[0];
                 v[e + 1] = lead_v[1];
-                a[e] = lead_a[0];
-                a[e + 1] = lead_a[1];
+                acc[e] = lead_a[0];
+                acc[e + 1] = lead_a[1];
             }
             else if (kind != OWN_ESTIMATE) { /* the reference's own derivatives */
                 v[e] = dp[0];
                 v[e + 1] = dp[1];
-                a[e] = ddp[0];
-                a[e + 1] = ddp[1];
+                acc[e] = ddp[0];
+                acc[e + 1] = ddp[1];
             }
         }
     }
     if (kind == OWN_ESTIMATE) { /* eqs. (18)-(19) of every slot */
-        difference(s, 2 * N, count, h, r[6].data, r[7].data, v, a);
+        difference(s, 2 * N, count, h, prev_x, prev_v, v, acc);
     }
     if (has_ref) { /* the rows that track the reference */
         for (Py_ssize_t k = 0; k < track.len; k++) {
@@ -216,8 +210,8 @@ law_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             s[e + 1] = p[1];
             v[e] = dp[0];
             v[e + 1] = dp[1];
-            a[e] = ddp[0];
-            a[e + 1] = ddp[1];
+            acc[e] = ddp[0];
+            acc[e + 1] = ddp[1];
         }
     }
     for (Py_ssize_t k = 0; k < cmd.len; k++) { /* open loop: no slot */
@@ -225,24 +219,15 @@ law_targets(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         s[e] = NAN;
         s[e + 1] = NAN;
     }
-    result = Py_BuildValue("(OOOd)", out[0], out[1], out[2], tangent);
+    result = Py_BuildValue("(OOOd)", a.slot.obj, a.v_ref.obj, a.a_ref.obj, tangent);
 done:
-    if (got_cmd) PyBuffer_Release(&cmd.view);
-    if (got_track) PyBuffer_Release(&track.view);
-    for (int k = 0; k < 11; k++) {
-        if (have[k]) {
-            PyBuffer_Release(&r[k].view);
-        }
-    }
-    for (int k = 0; k < 3; k++) {
-        Py_XDECREF(out[k]);
-    }
+    release_named(&law_targets_signature, (Arg *)&a);
     return result;
 }
 
 static PyMethodDef methods[] = {
-    {"law_targets", (PyCFunction)(void (*)(void))law_targets, METH_FASTCALL,
-     law_targets_doc},
+    {"law_targets", (PyCFunction)(void (*)(void))law_targets,
+     METH_FASTCALL | METH_KEYWORDS, law_targets_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -40,8 +40,6 @@ KINDS: dict[type, int] = {
 }
 #: The estimator of each law class with one (eqs. (8)-(9) or (18)-(19)).
 _MOTION = {0: "leader_motion", 1: "leader_motion", 4: "slot_motion"}
-#: The C call's outputs made by the call itself (numpy's C API).
-_NEW = (None, None, None)
 
 
 def overwrite_rows(
@@ -146,11 +144,28 @@ class LawKernel:
             prev_x, prev_v = self._prev
         p, dp, ddp = (None, None, None) if table is None else table
         c = self._c
+        out = {} if c.ALLOCATES else _outputs(len(pose))  # else the call's own
         slot, v_ref, a_ref, tangent = c.law_targets(
-            self.kind, law.delta, self.n, pose, theta, self.leader, p, dp, ddp, row,
-            self.turns, law._tangent, law.h, count, prev_x, prev_v, track, commanded,
-            *(_NEW if c.ALLOCATES else _empty(len(pose))),
-        )  # fmt: skip
+            kind=self.kind,
+            delta=law.delta,
+            n=self.n,
+            pose=pose,
+            theta=theta,
+            leader=self.leader,
+            ref_p=p,
+            ref_dp=dp,
+            ref_ddp=ddp,
+            row=row,
+            rotate=self.turns,
+            tangent=law._tangent,
+            h=law.h,
+            count=count,
+            prev_x=prev_x,
+            prev_v=prev_v,
+            track=track,
+            commanded=commanded,
+            **out,
+        )
         if motion is not None:
             motion.count = count + 1
         if self.turns:
@@ -172,9 +187,9 @@ class LawKernel:
         self._prev = (prev_x, prev_v)
 
 
-def _empty(N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Three arrays (N, 2) for the C call's outputs (a build that cannot make them)."""
-    return np.empty((N, 2)), np.empty((N, 2)), np.empty((N, 2))
+def _outputs(N: int) -> dict[str, np.ndarray]:
+    """The C call's outputs, (N, 2) each, made here (a build that cannot make them)."""
+    return {name: np.empty((N, 2)) for name in ("slot", "v_ref", "a_ref")}
 
 
 def covers(law: Any, leader: int) -> bool:

@@ -9,23 +9,27 @@
 
 #include "accel.h"
 
-/* A bool array (numpy's, one byte an element) and its length. */
-static int
-get_flags(PyObject *obj, Py_buffer *view, int writable)
-{
-    if (get_bytes(obj, view, writable) < 0) {
-        return -1;
-    }
-    if (view->itemsize != 1) {
-        PyBuffer_Release(view);
-        PyErr_SetString(PyExc_TypeError, "expected a contiguous bool array");
-        return -1;
-    }
-    return 0;
-}
+/* The arguments of motor_limits, by name (accel.h). */
+#define MOTOR_LIMITS(X)                                                            \
+    X(command, FLOATS, 0)                                                          \
+    X(measured, FLOATS, 0)                                                         \
+    X(free, BYTES, 0)                                                              \
+    X(substep, NUMBER, 0)                                                          \
+    X(headroom, NUMBER, 0)                                                         \
+    X(mass, FLOATS, 0)                                                             \
+    X(moment, FLOATS, 0)                                                           \
+    X(least_force, FLOATS, 0)                                                      \
+    X(least_torque, FLOATS, 0)                                                     \
+    X(force, FLOATS, 0)                                                            \
+    X(torque, FLOATS, 0)                                                           \
+    X(tracking, BYTES, 0)                                                          \
+    X(force_out, FLOATS, WRITTEN)                                                  \
+    X(torque_out, FLOATS, WRITTEN)                                                 \
+    X(change, BYTES, WRITTEN)
+NAMED(motor_limits, MOTOR_LIMITS)
 
 PyDoc_STRVAR(motor_limits_doc,
-"motor_limits(command, measured, free, substep, headroom, mass, moment,\n"
+"motor_limits(*, command, measured, free, substep, headroom, mass, moment,\n"
 "             least_force, least_torque, force, torque, tracking, force_out,\n"
 "             torque_out, change) -> int\n"
 "\n"
@@ -35,51 +39,30 @@ PyDoc_STRVAR(motor_limits_doc,
 "do.");
 
 static PyObject *
-motor_limits(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+motor_limits(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
+             PyObject *kwnames)
 {
-    if (nargs != 15) {
-        PyErr_SetString(PyExc_TypeError, "motor_limits takes 15 arguments");
+    motor_limits_args a;
+    if (parse_named(&motor_limits_signature, args, nargs, kwnames, (Arg *)&a) < 0) {
         return NULL;
     }
-    double substep = PyFloat_AsDouble(args[3]);
-    double headroom = PyFloat_AsDouble(args[4]);
-    if (PyErr_Occurred()) {
-        return NULL;
-    }
-    /* float arrays: 0 command, 1 measured, 5..10 and 12, 13; flags: 2, 11, 14 */
-    static const int float_at[] = {0, 1, 5, 6, 7, 8, 9, 10, 12, 13};
-    static const int flag_at[] = {2, 11, 14};
-    Rows r[10];
-    Py_buffer f[3];
-    int got_r = 0, got_f = 0;
     PyObject *result = NULL;
-    for (int k = 0; k < 10; k++) {
-        if (get_rows(args[float_at[k]], &r[k], float_at[k] >= 12) < 0) goto done;
-        got_r++;
-    }
-    for (int k = 0; k < 3; k++) {
-        if (get_flags(args[flag_at[k]], &f[k], k == 2) < 0) goto done;
-        got_f++;
-    }
-    Py_ssize_t n = r[2].len;
-    for (int k = 2; k < 10; k++) {
-        if (r[k].len != n) {
-            PyErr_SetString(PyExc_ValueError, "motor_limits: shapes differ");
-            goto done;
-        }
-    }
-    if (r[0].len != 3 * n || r[1].len != 3 * n || f[0].len != n || f[1].len != n ||
-        f[2].len != n) {
+    Py_ssize_t n = a.mass.len;
+    if (a.command.len != 3 * n || a.measured.len != 3 * n || a.free.len != n ||
+        a.moment.len != n || a.least_force.len != n || a.least_torque.len != n ||
+        a.force.len != n || a.torque.len != n || a.tracking.len != n ||
+        a.force_out.len != n || a.torque_out.len != n || a.change.len != n) {
         PyErr_SetString(PyExc_ValueError, "motor_limits: shapes differ");
         goto done;
     }
-    const double *cmd = r[0].data, *meas = r[1].data;
-    const double *mass = r[2].data, *moment = r[3].data;
-    const double *least_f = r[4].data, *least_t = r[5].data;
-    const double *cur_f = r[6].data, *cur_t = r[7].data;
-    double *force = r[8].data, *torque = r[9].data;
-    const unsigned char *free_ = f[0].buf, *tracking = f[1].buf;
-    unsigned char *change = f[2].buf;
+    const double substep = a.substep.x, headroom = a.headroom.x;
+    const double *cmd = a.command.f, *meas = a.measured.f;
+    const double *mass = a.mass.f, *moment = a.moment.f;
+    const double *least_f = a.least_force.f, *least_t = a.least_torque.f;
+    const double *cur_f = a.force.f, *cur_t = a.torque.f;
+    double *force = a.force_out.f, *torque = a.torque_out.f;
+    const unsigned char *free_ = a.free.b, *tracking = a.tracking.b;
+    unsigned char *change = a.change.b;
     Py_ssize_t changed = 0;
     for (Py_ssize_t i = 0; i < n; i++) {
         double d0 = cmd[3 * i] - meas[3 * i];
@@ -98,16 +81,13 @@ motor_limits(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     result = PyLong_FromSsize_t(changed);
 done:
-    release(r, got_r);
-    for (int k = 0; k < got_f; k++) {
-        PyBuffer_Release(&f[k]);
-    }
+    release_named(&motor_limits_signature, (Arg *)&a);
     return result;
 }
 
 static PyMethodDef methods[] = {
-    {"motor_limits", (PyCFunction)(void (*)(void))motor_limits, METH_FASTCALL,
-     motor_limits_doc},
+    {"motor_limits", (PyCFunction)(void (*)(void))motor_limits,
+     METH_FASTCALL | METH_KEYWORDS, motor_limits_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -1,11 +1,11 @@
 """The physics of a batch of worlds stepped with a few Python calls per substep.
 
-:class:`~sandbox.loop.stepping.WorldsPhysics` steps K independent pymunk worlds each
+:class:`~sandbox.loop.stepping.LoopPhysics` steps K independent pymunk worlds each
 control period: write every world's commands to its control bodies, call Chipmunk's
 ``cpSpaceStep`` ``substeps`` times per world, update the open contact episodes, read
 every world's bodies back. Done world by world in Python this costs about as much as
 the physics itself (a dozen calls and attribute look-ups per world and period).
-:class:`WorldStepper` makes the same C calls with the same arguments, in C-level loops
+:class:`BatchStepper` makes the same C calls with the same arguments, in C-level loops
 (``map`` over prepared handles), and lets Chipmunk's bulk iterators write and read the
 batch's stacked arrays in place:
 
@@ -22,18 +22,19 @@ Where the compiled path ``stepping`` is on (:mod:`sandbox.accel`; ``_cstep.c``) 
 no world has an open contact episode, a whole period is one C call: the commands
 written, each substep's clock written and every live world stepped, the state read,
 through the addresses of pymunk's own ``cpSpaceStep``, ``cpSpaceEachBody`` and
-batched iterators (``ffi.addressof``; nothing is linked against Chipmunk). The clock
-is a numpy array of two doubles that the worlds' ``begin`` callbacks read and that
-the C loop writes; a callback that opens a contact episode raises its second value,
-and the C loop then returns after that substep, so that the episodes are updated
-and the period finished by the Python path: the same calls, in the same order, with
-the same arguments. Where the path is off, every period takes the Python path.
+batched iterators (``ffi.addressof``; nothing is linked against Chipmunk), which the
+extension's ``prepare`` takes by name once for the live worlds. The clock is a numpy
+array of two doubles that the worlds' ``begin`` callbacks read and that the C loop
+writes; a callback that opens a contact episode raises its second value, and the C
+loop then returns after that substep, so that the episodes are updated and the
+period finished by the Python path: the same calls, in the same order, with the
+same arguments. Where the path is off, every period takes the Python path.
 
 Worlds are independent (each its own Space; a callback touches only its own world), so
 stepping substep by substep across the worlds, rather than world by world, computes
 exactly the same numbers: results stay bit-identical to single runs. Where this
 pymunk lacks the internals used, or the worlds differ in body layout,
-:meth:`WorldStepper.build` returns None and the batch steps world by world.
+:meth:`BatchStepper.build` returns None and the batch steps world by world.
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ def _exhaust(iterator: Any) -> None:
     deque(iterator, maxlen=0)
 
 
-class WorldStepper:
+class BatchStepper:
     """Writes, steps and reads K worlds of one batch (see the module docstring).
 
     Build it with :meth:`build`; call :meth:`advance` once per control period. The
@@ -129,20 +130,20 @@ class WorldStepper:
         self._read_num = np.frombuffer(ffi.buffer(self._read_arrays), np.int32)[::4]
         self._write_num = np.frombuffer(ffi.buffer(self._write_arrays), np.int32)[::4]
         self._keep = (commands, self._read)  # the memory the records point into
-        self._one_call = None
-        cstep = accel.module("stepping")
-        if cstep is not None:
+        #: The compiled path's module and its prepared batch (None: Python path).
+        self._cstep = accel.module("stepping")
+        self._batch: Any = None
+        if self._cstep is not None:
             address = self._address
-            self._one_call = cstep.advance
-            self._functions = tuple(
-                address(ffi.addressof(lib, name))
-                for name in (
-                    "cpSpaceStep",
-                    "cpSpaceEachBody",
-                    "pmSpaceBodySetIteratorFuncBatched",
-                    "pmSpaceBodyGetIteratorFuncBatched",
+            self._functions = {
+                key: address(ffi.addressof(lib, name))
+                for key, name in (
+                    ("step", "cpSpaceStep"),
+                    ("each", "cpSpaceEachBody"),
+                    ("set", "pmSpaceBodySetIteratorFuncBatched"),
+                    ("get", "pmSpaceBodyGetIteratorFuncBatched"),
                 )
-            )
+            }
         self.live(list(range(K)))
 
     def _address(self, pointer: Any) -> int:
@@ -156,7 +157,7 @@ class WorldStepper:
         commands: np.ndarray,
         state: np.ndarray,
         substeps: int,
-    ) -> WorldStepper | None:
+    ) -> BatchStepper | None:
         """The stepper of these worlds, or None where the fast path cannot be used.
 
         None when this pymunk lacks the C functions and records used, when a world
@@ -213,28 +214,32 @@ class WorldStepper:
         for world in self._live:
             world._substeps = self.substeps
             world._clock = self._clock
-        if self._one_call is not None:
+        if self._cstep is not None:
             # The C loop's arrays of addresses, in the order of the Python path's.
             lists = (self._spaces, self._controls, self._writes, self._reads)
             self._pointers = [
                 np.array([self._address(p) for p in pointers], dtype=np.uintp)
                 for pointers in lists
             ]
-            self._args = (
-                *self._functions,
-                *(int(a.ctypes.data) for a in self._pointers),
-                len(worlds),
-                self.substeps,
+            spaces, controls, writes, reads = (
+                int(a.ctypes.data) for a in self._pointers
             )
-            # the clock, and the pmFloatArray records whose num the call resets
             ffi = self._ffi
-            self._tail = (
-                int(self._clock.ctypes.data),
-                self._address(self._write_arrays),
-                self._address(self._read_arrays),
-                len(ws),
-                ffi.sizeof("pmFloatArray"),
-                ffi.offsetof("pmFloatArray", "num"),
+            # the clock, and the pmFloatArray records whose num the call resets
+            self._batch = self._cstep.prepare(
+                **self._functions,
+                spaces=spaces,
+                controls=controls,
+                writes=writes,
+                reads=reads,
+                count=len(worlds),
+                substeps=self.substeps,
+                clock=int(self._clock.ctypes.data),
+                write_arrays=self._address(self._write_arrays),
+                read_arrays=self._address(self._read_arrays),
+                arrays=len(ws),
+                size=ffi.sizeof("pmFloatArray"),
+                num_at=ffi.offsetof("pmFloatArray", "num"),
             )
 
     def advance(self, t0: float, h: float) -> None:
@@ -249,9 +254,9 @@ class WorldStepper:
         step = h / substeps
         opens, clock = self._opens, self._clock
         first = 0
-        if self._one_call is not None and not any(opens):
+        if self._batch is not None and not any(opens):
             # the counters and clock[1] reset by the call itself
-            first = self._one_call(*self._args, t0, step, *self._tail)
+            first = self._cstep.advance(self._batch, t0, step)
             if not clock[1]:  # every substep stepped, the state read
                 if self._order is not None:
                     self._state[:] = self._read[:, self._order]

@@ -235,10 +235,22 @@ def motor_limits(
         force, torque, change = out
         try:
             changed = c.motor_limits(
-                command, measured, free, substep, MOTOR_HEADROOM, m._mass, m._moment,
-                m._least_force, m._least_torque, m._force, m._torque, m._tracking,
-                force, torque, change,
-            )  # fmt: skip
+                command=command,
+                measured=measured,
+                free=free,
+                substep=substep,
+                headroom=MOTOR_HEADROOM,
+                mass=m._mass,
+                moment=m._moment,
+                least_force=m._least_force,
+                least_torque=m._least_torque,
+                force=m._force,
+                torque=m._torque,
+                tracking=m._tracking,
+                force_out=force,
+                torque_out=torque,
+                change=change,
+            )
         except (BufferError, TypeError, ValueError):  # not float64 C arrays: numpy
             pass
         else:

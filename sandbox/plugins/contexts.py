@@ -279,7 +279,8 @@ class FilterContext:
         ``batched=True`` called once for a loop of K worlds: ``n`` rows each, world
         after world).
     world_stats : list of dict or None
-        With ``worlds > 1``, each world's counters (``stats`` is then unused).
+        Each world's counters, in the order of its rows (None: ``stats``, the
+        counters of one world).
     slot : ndarray (n, 2) or None
         Each vehicle's formation slot [m] (NaN where undefined); None: unknown.
     substeps : int

@@ -558,7 +558,7 @@ def register_filter(
     With ``batched=True`` a loop of K worlds calls the filter once, on the rows of
     all worlds (``ctx.worlds`` is K, each world's counters in ``ctx.world_stats``);
     each world's rows must be the commands it gets alone, its pairs never across
-    worlds (:class:`~sandbox.geometry.neighbours.WorldPairs`). Without it (the
+    worlds (:class:`~sandbox.geometry.neighbours.AllPairsByWorld`). Without it (the
     default) the filter is called world by world. ``cbf`` is batched.
     """
     return register("filter", name, params, doc=doc, check=check, batched=batched)

@@ -155,7 +155,7 @@ def _check_follow(follow: str | None) -> None:
         )
 
 
-def _indexed_frames(
+def indexed_frames(
     run: Run,
     plan: FramePlan,
     *,
@@ -237,7 +237,7 @@ def render_frames(
         One RGB frame per entry of :func:`frame_plan`.
     """
     plan = frame_plan(run, fps, speed)
-    scene, frames = _indexed_frames(
+    scene, frames = indexed_frames(
         run,
         plan,
         size=size,
@@ -335,7 +335,7 @@ def write_gif(
         )
     path = Path(path)
     plan = frame_plan(run, fps, speed)
-    scene, frames = _indexed_frames(
+    scene, frames = indexed_frames(
         run,
         plan,
         size=size,

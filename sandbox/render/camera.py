@@ -27,7 +27,7 @@ from sandbox.render.overlay import (
     LegendItem,
     frame_bands,
 )
-from sandbox.render.palette import _build_palette
+from sandbox.render.palette import build_palette
 from sandbox.run.constrained import constrained_mask, filter_name
 from sandbox.run.record import MODE_AVOID, MODE_EXTERNAL, MODE_FAILED, Run
 
@@ -228,7 +228,7 @@ class Camera:
         Camera
         """
         height = frame_height(run, size, follow, aspect)
-        bands = _run_bands(run, size, legend, height)
+        bands = run_bands(run, size, legend, height)
         edges = (bands.top, bands.bottom)
         framing = camera_track(run, follow)
         if framing is None:  # a square frame keeps the square box it always had
@@ -296,7 +296,7 @@ def frame_height(
         lo, hi = content_bounds(run, _reach(run), square=False)
         extent = np.maximum(hi - lo, 1e-9)
         x0, _, x1, _ = _viewport(size)
-        bands = _run_bands(run, size, True)
+        bands = run_bands(run, size, True)
         view = (x1 - x0) * extent[1] / extent[0]
         height = view + bands.top + bands.bottom + 2.0 * _MARGIN * size
         height = max(height, (bands.top + bands.bottom) / MAX_BANDS + 1.0)  # a legend
@@ -484,14 +484,14 @@ def _legend_items(run: Run, body: np.ndarray, large: bool) -> list[LegendItem]:
     return items
 
 
-def _run_bands(run: Run, size: int, legend: bool, height: int | None = None) -> Bands:
+def run_bands(run: Run, size: int, legend: bool, height: int | None = None) -> Bands:
     """Layout of the text bands of ``run``'s frames (no legend rows without legend).
 
     The frames are ``size`` px wide and ``height`` px high (default ``size``).
     """
     if not legend:
         return frame_bands(int(size), [], height)
-    _, body, _ = _build_palette(run.colors)
+    _, body, _ = build_palette(run.colors)
     return frame_bands(
         int(size), _legend_items(run, body, run.n_vehicles > LARGE_FLEET), height
     )

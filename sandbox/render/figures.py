@@ -95,7 +95,7 @@ _REFERENCE = "0.45"
 
 
 # ------------------------------------------------------------------------- helpers
-def _colors(run: Run) -> list[str]:
+def vehicle_colors(run: Run) -> list[str]:
     """Return each vehicle's colour, or a default where matplotlib cannot read it."""
     return [
         c if isinstance(c, str) and is_color_like(c) else f"C{k % 10}"
@@ -130,7 +130,7 @@ def _in_frame(xy: np.ndarray, origin: np.ndarray) -> np.ndarray:
     return np.stack((c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]), -1)
 
 
-def _draw_obstacles(ax: Axes, run: Run) -> None:
+def draw_obstacles(ax: Axes, run: Run) -> None:
     """Add the obstacles of ``info["obstacles"]`` as grey patches."""
     for ob in _info(run, "obstacles") or []:
         kind = ob.get("type")
@@ -319,7 +319,7 @@ def trajectories_figure(run: Run) -> Figure:
     Figure
         One axes, equal aspect, ``x1 [m]`` against ``x2 [m]``.
     """
-    colors = _colors(run)
+    colors = vehicle_colors(run)
     pose = run.pose  # may be memory-mapped: read only the samples drawn
     pos = np.asarray(pose[_thin(run), :, :2], dtype=float)
     radius = np.asarray(run.diameter, dtype=float) / 2.0
@@ -332,7 +332,7 @@ def trajectories_figure(run: Run) -> Figure:
         layout="constrained",
     )
     ax = fig.add_subplot()
-    _draw_obstacles(ax, run)
+    draw_obstacles(ax, run)
     groups = platoon_groups(run)  # with platoons: a legend entry per platoon
     if groups is not None:
         lead = {name: rows[0] for name, rows in groups}
@@ -452,7 +452,7 @@ def leader_frame_figure(run: Run) -> Figure:
     """
     fig = Figure(figsize=(6.5, 6.0), layout="constrained")
     ax = fig.add_subplot()
-    colors = _colors(run)
+    colors = vehicle_colors(run)
     radius = np.asarray(run.diameter, dtype=float) / 2.0
     idx = _thin(run)
     pos = np.asarray(run.pose[idx, :, :2], dtype=float)
@@ -570,7 +570,7 @@ def formation_error_figure(run: Run) -> Figure:
     per_platoon = platoon_error_figure(run)  # with platoons: one panel each
     if per_platoon is not None:
         return per_platoon
-    colors = _colors(run)
+    colors = vehicle_colors(run)
     idx = _thin(run)
     t = np.asarray(run.t, dtype=float)
     err = np.linalg.norm(run.pose[idx, :, :2] - run.slot[idx], axis=-1)  # (T', n) [m]
@@ -663,7 +663,7 @@ def commands_figure(run: Run) -> Figure:
     fig = Figure(figsize=(9.0, 8.0 if cars else 6.0), layout="constrained")
     axes = list(fig.subplots(3 if cars else 2, 1, sharex=True))
     top, bottom = axes[0], axes[-1]
-    colors = _colors(run)
+    colors = vehicle_colors(run)
     idx = _thin(run)
     t = np.asarray(run.t, dtype=float)
     cmd = np.asarray(run.cmd[idx], dtype=float)

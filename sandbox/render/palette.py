@@ -58,7 +58,7 @@ def color_rgb(color: str, k: int) -> tuple[int, int, int]:
     return (int(rgb[0]), int(rgb[1]), int(rgb[2]))
 
 
-def _build_palette(colors: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def build_palette(colors: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Palette of a run.
 
     Returns
@@ -92,10 +92,10 @@ def _build_palette(colors: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.nd
     return np.array(entries, dtype=np.uint8).reshape(-1, 3), body, trail
 
 
-def _nice_length(target: float) -> float:
+def nice_length(target: float) -> float:
     """Largest 1, 2 or 5 times a power of ten not above ``target`` [m].
 
-    >>> _nice_length(3.7), _nice_length(0.12), _nice_length(10.0)
+    >>> nice_length(3.7), nice_length(0.12), nice_length(10.0)
     (2.0, 0.1, 10.0)
     """
     if not (target > 0 and math.isfinite(target)):
@@ -108,7 +108,7 @@ def _nice_length(target: float) -> float:
     return float(f"{best:.12g}")
 
 
-def _dashes(path: np.ndarray, on: float, off: float) -> np.ndarray:
+def dash_segments(path: np.ndarray, on: float, off: float) -> np.ndarray:
     """Dash segments along a polyline, shape (k, 2, 2), in the polyline's units."""
     seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
     s = np.concatenate(([0.0], np.cumsum(seg)))
@@ -123,7 +123,7 @@ def _dashes(path: np.ndarray, on: float, off: float) -> np.ndarray:
     return np.stack((a, b), axis=1)
 
 
-def _stamp_discs(
+def stamp_discs(
     canvas: np.ndarray,
     centers: np.ndarray,
     radius: np.ndarray,
@@ -218,6 +218,6 @@ def _stamp_discs(
         canvas[rr[paint], cc[paint]] = val[paint].astype(np.uint8)
 
 
-def _flat(points: np.ndarray) -> list[float]:
+def flat_points(points: np.ndarray) -> list[float]:
     """Flatten pixel points (m, 2) for ``ImageDraw`` (whose integer x is a centre)."""
     return (points - 0.5).ravel().tolist()

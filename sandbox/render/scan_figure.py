@@ -15,7 +15,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
-from sandbox.render.figures import _colors, _draw_obstacles
+from sandbox.render.figures import draw_obstacles, vehicle_colors
 from sandbox.run.record import Run
 
 __all__ = ["scan_figure"]
@@ -60,10 +60,10 @@ def scan_figure(run: Run, t: float, vehicle: str | None = None) -> Figure:
         ]
     )
     pose = np.asarray(run.pose[k], dtype=float)
-    colors = _colors(run)
+    colors = vehicle_colors(run)
     fig = Figure(figsize=(10.0, 4.6), layout="constrained")
     world, polar = fig.subplots(1, 2, width_ratios=(1.15, 1.0))
-    _draw_obstacles(world, run)
+    draw_obstacles(world, run)
     a = pose[row, 2] + angles[row]
     ends = pose[row, :2] + ranges[row][:, None] * np.stack((np.cos(a), np.sin(a)), -1)
     ok = np.isfinite(ranges[row])

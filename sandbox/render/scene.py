@@ -18,11 +18,11 @@ from PIL import Image, ImageDraw
 from sandbox.render.camera import (
     LARGE_FLEET,
     Camera,
-    _run_bands,
     camera_track,
     drawn_obstacles,
     frame_height,
     reference_path,
+    run_bands,
 )
 from sandbox.render.cars import car_bodies, car_lines, car_wheelbases
 from sandbox.render.overlay import (
@@ -39,11 +39,11 @@ from sandbox.render.palette import (
     RED,
     WHITE,
     ZONE,
-    _build_palette,
-    _dashes,
-    _flat,
-    _nice_length,
-    _stamp_discs,
+    build_palette,
+    dash_segments,
+    flat_points,
+    nice_length,
+    stamp_discs,
 )
 from sandbox.render.platoons import platoon_paths, platoon_references
 from sandbox.run.constrained import constrained_mask
@@ -82,9 +82,9 @@ class Scene:
         self.theta = np.asarray(run.pose[:, :, 2], dtype=float)
         self.n = run.n_vehicles
         self.large = self.n > LARGE_FLEET
-        self.rgb, self.body, self.trail_idx = _build_palette(run.colors)
+        self.rgb, self.body, self.trail_idx = build_palette(run.colors)
         self.camera = Camera.for_run(run, self.size, follow, legend, aspect)
-        self.bands = _run_bands(run, self.size, legend, self.height)
+        self.bands = run_bands(run, self.size, legend, self.height)
         self.stamps = TextStamps(self.bands.px)
         framing = camera_track(run, follow)
         self.track = None if framing is None else framing[0]
@@ -133,14 +133,16 @@ class Scene:
         self.obstacles = drawn_obstacles(run)
         path = reference_path(run)
         on, off = (v / self.camera.scale for v in _DASH_PX)
-        self.dashes = np.zeros((0, 2, 2)) if path is None else _dashes(path, on, off)
+        self.dashes = (
+            np.zeros((0, 2, 2)) if path is None else dash_segments(path, on, off)
+        )
         paths = platoon_paths(run)  # with platoons: every platoon's reference
         if paths is not None:
             self.reference = platoon_references(run)
             self.dashes = np.concatenate(
-                [np.zeros((0, 2, 2))] + [_dashes(p, on, off) for _, p in paths]
+                [np.zeros((0, 2, 2))] + [dash_segments(p, on, off) for _, p in paths]
             )
-        self.bar = _nice_length(0.22 * self.size / self.camera.scale)
+        self.bar = nice_length(0.22 * self.size / self.camera.scale)
         self.bottom_band = draw_bottom_band(
             self.bands,
             bar_m=self.bar,
@@ -202,7 +204,7 @@ class Scene:
                     outline=OBSTACLE_EDGE,
                 )
             else:
-                pts = _flat(cam.world_to_pixel(geom))
+                pts = flat_points(cam.world_to_pixel(geom))
                 draw.polygon(pts, fill=OBSTACLE, outline=OBSTACLE_EDGE)
         if len(self.dashes):
             seg = cam.world_to_pixel(self.dashes)  # (k, 2, 2)
@@ -210,7 +212,7 @@ class Scene:
             edge = np.array([self.size, self.height]) + 2
             seen = (hi > -2).all(axis=1) & (lo < edge).all(axis=1)
             for a in seg[seen]:
-                draw.line(_flat(a), fill=PATH, width=1)
+                draw.line(flat_points(a), fill=PATH, width=1)
         return img
 
     # ------------------------------------------------------------ one frame
@@ -251,7 +253,7 @@ class Scene:
         halo = max(2.0, min(4.0, 0.25 * float(np.median(radius))))  # [px]
         if self.large:  # vectorized stamps; no slot marks
             canvas = np.array(img)
-            _stamp_discs(
+            stamp_discs(
                 canvas,
                 centers,
                 radius,

@@ -30,7 +30,7 @@ import numpy as np
 
 from sandbox._about import install_hint
 from sandbox.errors import SandboxError
-from sandbox.render.animation import _indexed_frames, frame_plan
+from sandbox.render.animation import frame_plan, indexed_frames
 from sandbox.run.record import Run
 
 __all__ = [
@@ -128,7 +128,7 @@ def write_mp4(
 
     path = Path(path)
     plan = frame_plan(run, fps, speed)
-    scene, frames = _indexed_frames(
+    scene, frames = indexed_frames(
         run,
         plan,
         size=size,

@@ -24,172 +24,118 @@
 #include "accel.h"
 #include "qp_project.h"
 
-/* The float parameters, in filter_kernel.py's order. */
-enum {
-    P_GAMMA,
-    P_LOOK,
-    P_MARGIN,
-    P_RADIUS,
-    P_DT,
-    P_PASS_RIGHT,
-    P_TOLERANCE,
-    P_MIN_DIST,
-    P_MIN_SPEED,
-    P_STALL_START,
-    P_STALL_FULL,
-    P_STALL_SPEED,
-    P_COUNT
-};
-
-/* The flags. */
-#define F_REVERSE 1
-#define F_SPEED_ONLY 2
-#define F_BROADCAST 4
-
-/* Buffers held for one call, released together. */
-typedef struct {
-    Py_buffer views[32];
-    int count;
-} Held;
-
-static void
-let_go(Held *h)
-{
-    for (int k = 0; k < h->count; k++) {
-        PyBuffer_Release(&h->views[k]);
-    }
-    h->count = 0;
-}
-
-/* A C-contiguous array of ``len`` items (any length if len < 0) of the kind 'd'
- * (float64), 'b' (bool) or 'n' (intp): an ndarray's data through numpy's C API where
- * the build has it (accel.h), else the buffer interface (held in ``h`` for the
- * release); None gives NULL if optional. An array of another kind raises TypeError,
- * of another length ValueError, before any write. */
-static int
-hold(Held *h, PyObject *obj, char kind, Py_ssize_t len, int writable, int optional,
-     void **out, Py_ssize_t *got_len)
-{
-    *out = NULL;
-    if (obj == Py_None && optional) {
-        if (got_len) *got_len = 0;
-        return 0;
-    }
-    Py_ssize_t n;
-    void *data = NULL;
-#ifdef SANDBOX_NUMPY_API
-    int type = kind == 'd' ? NPY_DOUBLE : (kind == 'n' ? NPY_INTP : NPY_BOOL);
-    data = numpy_data(obj, type, writable, &n);
-#endif
-    if (data == NULL) {
-        Py_buffer *v = &h->views[h->count];
-        int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-        if (PyObject_GetBuffer(obj, v, flags) < 0) {
-            return -1;
-        }
-        h->count++;
-        const char *f = v->format ? v->format : "B";
-        int ok;
-        if (kind == 'd') {
-            ok = v->itemsize == 8 && strcmp(f, "d") == 0;
-        }
-        else if (kind == 'n') {
-            ok = v->itemsize == (Py_ssize_t)sizeof(Py_ssize_t) &&
-                 (strcmp(f, "l") == 0 || strcmp(f, "q") == 0 || strcmp(f, "n") == 0);
-        }
-        else {
-            ok = v->itemsize == 1 && strcmp(f, "?") == 0;
-        }
-        if (!ok) {
-            PyErr_Format(PyExc_TypeError, "expected a contiguous array of kind '%c'",
-                         kind);
-            return -1;
-        }
-        n = v->len / v->itemsize;
-        data = v->buf;
-    }
-    if (len >= 0 && n != len) {
-        PyErr_Format(PyExc_ValueError, "expected %zd items, got %zd", len, n);
-        return -1;
-    }
-    if (got_len) *got_len = n;
-    *out = data;
-    return 0;
-}
-
 /* One half-plane a . w <= b of vehicle ``veh`` (a turned into z once kept). */
 typedef struct {
     Py_ssize_t veh;
     double a0, a1, b;
 } Row;
 
+/* The arguments of velocity_step, by name (accel.h). */
+#define VELOCITY_STEP(X)                                                           \
+    X(pos, FLOATS, 0)                                                              \
+    X(theta, FLOATS, 0)                                                            \
+    X(vel, FLOATS, 0)                                                              \
+    X(v1, FLOATS, 0)                                                               \
+    X(v2, FLOATS, 0)                                                               \
+    X(diameter, FLOATS, 0)                                                         \
+    X(v1_prev, FLOATS, OR_NONE)                                                    \
+    X(v2_prev, FLOATS, OR_NONE)                                                    \
+    X(known_failed, BYTES, OR_NONE)                                                \
+    X(commanded, BYTES, OR_NONE)                                                   \
+    X(seen, FLOATS, OR_NONE)                                                       \
+    X(v1_max, FLOATS, 0)                                                           \
+    X(lateral, FLOATS, 0)                                                          \
+    X(accel, FLOATS, 0)                                                            \
+    X(cand_i, INTPS, 0)                                                            \
+    X(cand_j, INTPS, 0)                                                            \
+    X(obs_rows, INTPS, OR_NONE)                                                    \
+    X(obs_signed, FLOATS, OR_NONE)                                                 \
+    X(obs_away, FLOATS, OR_NONE)                                                   \
+    X(gamma, NUMBER, 0)                                                            \
+    X(look, NUMBER, 0)                                                             \
+    X(margin, NUMBER, 0)                                                           \
+    X(radius, NUMBER, 0)                                                           \
+    X(dt, NUMBER, 0)                                                               \
+    X(pass_right, NUMBER, 0)                                                       \
+    X(tolerance, NUMBER, 0)                                                        \
+    X(min_dist, NUMBER, 0)                                                         \
+    X(min_speed, NUMBER, 0)                                                        \
+    X(stall_start, NUMBER, 0)                                                      \
+    X(stall_full, NUMBER, 0)                                                       \
+    X(stall_speed, NUMBER, 0)                                                      \
+    X(reverse, INTEGER, 0)                                                         \
+    X(speed_only, INTEGER, 0)                                                      \
+    X(broadcast, INTEGER, 0)                                                       \
+    X(max_rows, INTEGER, 0)                                                        \
+    X(v1_out, FLOATS, WRITTEN)                                                     \
+    X(v2_out, FLOATS, WRITTEN)                                                     \
+    X(active, BYTES, WRITTEN)                                                      \
+    X(slack, FLOATS, WRITTEN)                                                      \
+    X(by_vehicle, FLOATS, WRITTEN)                                                 \
+    X(pending, INTPS, WRITTEN)                                                     \
+    X(pending_m, INTPS, WRITTEN)                                                   \
+    X(pending_mat, FLOATS, WRITTEN)                                                \
+    X(pending_off, FLOATS, WRITTEN)
+NAMED(velocity_step, VELOCITY_STEP)
+
 PyDoc_STRVAR(velocity_step_doc,
-"velocity_step(pos, theta, vel, v1, v2, diameter, v1_prev, v2_prev, known_failed,\n"
-"    commanded, seen, v1_max, lateral, accel, cand_i, cand_j, obs_rows, obs_signed,\n"
-"    obs_away, params, flags, max_rows, v1_out, v2_out, active, slack, by_vehicle,\n"
-"    pending, pending_m, pending_mat, pending_off) -> (rows, least, n_pending)\n"
+"velocity_step(*, pos, theta, vel, v1, v2, diameter, v1_prev, v2_prev,\n"
+"    known_failed, commanded, seen, v1_max, lateral, accel, cand_i, cand_j,\n"
+"    obs_rows, obs_signed, obs_away, gamma, look, margin, radius, dt, pass_right,\n"
+"    tolerance, min_dist, min_speed, stall_start, stall_full, stall_speed,\n"
+"    reverse, speed_only, broadcast, max_rows, v1_out, v2_out, active, slack,\n"
+"    by_vehicle, pending, pending_m, pending_mat, pending_off)\n"
+"    -> (rows, least, n_pending)\n"
 "\n"
 "The velocity barrier's filtered commands of n vehicles (see filter_kernel.py):\n"
-"``v1_out``, ``v2_out``, ``active``, ``slack`` and ``by_vehicle`` (or None) written;\n"
-"``rows`` is -1 where no vehicle is filtered. The vehicles whose problems have no\n"
-"point are listed in ``pending`` (their row count in ``pending_m``, their problems\n"
+"``v1_out``, ``v2_out``, ``active``, ``slack`` and ``by_vehicle`` written; ``rows``\n"
+"is -1 where no vehicle is filtered. The vehicles whose problems have no point\n"
+"are listed in ``pending`` (their row count in ``pending_m``, their problems\n"
 "(4 + max_rows, 2) and (4 + max_rows,) in ``pending_mat`` and ``pending_off``), their\n"
-"commands left as given, for numpy to solve.");
+"commands left as given, for numpy to solve. ``v1_prev``, ``v2_prev``,\n"
+"``known_failed``, ``commanded``, ``seen`` and the obstacles' rows may be None.");
 
 static PyObject *
-velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
+              PyObject *kwnames)
 {
-    if (nargs != 31) {
-        PyErr_SetString(PyExc_TypeError, "velocity_step takes 31 arguments");
+    velocity_step_args a;
+    if (parse_named(&velocity_step_signature, args, nargs, kwnames, (Arg *)&a) < 0) {
         return NULL;
     }
-    long flags = PyLong_AsLong(args[20]);
-    Py_ssize_t max_rows = PyLong_AsSsize_t(args[21]);
-    if (PyErr_Occurred()) {
-        return NULL;
-    }
-    if (max_rows < 1) {
-        PyErr_SetString(PyExc_ValueError, "velocity_step: max_rows < 1");
-        return NULL;
-    }
-    Held h = {.count = 0};
     PyObject *result = NULL;
     char *scratch = NULL;
-    double *pos, *theta, *vel, *v1, *v2, *diam, *v1p, *v2p, *seen, *v1_max, *lateral;
-    double *accel, *signed_d, *away, *par, *v1_out, *v2_out, *slack, *by, *pmat, *poff;
-    unsigned char *failed, *commanded, *active;
-    Py_ssize_t *ci, *cj, *orow, *pend, *pend_m;
-    Py_ssize_t N, nc, no, width = 4 + max_rows;
-    if (hold(&h, args[1], 'd', -1, 0, 0, (void **)&theta, &N) < 0) goto done;
-    if (hold(&h, args[0], 'd', 2 * N, 0, 0, (void **)&pos, NULL) < 0 ||
-        hold(&h, args[2], 'd', 2 * N, 0, 0, (void **)&vel, NULL) < 0 ||
-        hold(&h, args[3], 'd', N, 0, 0, (void **)&v1, NULL) < 0 ||
-        hold(&h, args[4], 'd', N, 0, 0, (void **)&v2, NULL) < 0 ||
-        hold(&h, args[5], 'd', N, 0, 0, (void **)&diam, NULL) < 0 ||
-        hold(&h, args[6], 'd', N, 0, 1, (void **)&v1p, NULL) < 0 ||
-        hold(&h, args[7], 'd', N, 0, 1, (void **)&v2p, NULL) < 0 ||
-        hold(&h, args[8], 'b', N, 0, 1, (void **)&failed, NULL) < 0 ||
-        hold(&h, args[9], 'b', N, 0, 1, (void **)&commanded, NULL) < 0 ||
-        hold(&h, args[10], 'd', 3 * N, 0, 1, (void **)&seen, NULL) < 0 ||
-        hold(&h, args[11], 'd', N, 0, 0, (void **)&v1_max, NULL) < 0 ||
-        hold(&h, args[12], 'd', N, 0, 0, (void **)&lateral, NULL) < 0 ||
-        hold(&h, args[13], 'd', N, 0, 0, (void **)&accel, NULL) < 0 ||
-        hold(&h, args[14], 'n', -1, 0, 0, (void **)&ci, &nc) < 0 ||
-        hold(&h, args[15], 'n', nc, 0, 0, (void **)&cj, NULL) < 0 ||
-        hold(&h, args[16], 'n', -1, 0, 1, (void **)&orow, &no) < 0 ||
-        hold(&h, args[17], 'd', no, 0, 1, (void **)&signed_d, NULL) < 0 ||
-        hold(&h, args[18], 'd', 2 * no, 0, 1, (void **)&away, NULL) < 0 ||
-        hold(&h, args[19], 'd', P_COUNT, 0, 0, (void **)&par, NULL) < 0 ||
-        hold(&h, args[22], 'd', N, 1, 0, (void **)&v1_out, NULL) < 0 ||
-        hold(&h, args[23], 'd', N, 1, 0, (void **)&v2_out, NULL) < 0 ||
-        hold(&h, args[24], 'b', N, 1, 0, (void **)&active, NULL) < 0 ||
-        hold(&h, args[25], 'd', N, 1, 0, (void **)&slack, NULL) < 0 ||
-        hold(&h, args[26], 'd', N, 1, 1, (void **)&by, NULL) < 0 ||
-        hold(&h, args[27], 'n', N, 1, 0, (void **)&pend, NULL) < 0 ||
-        hold(&h, args[28], 'n', N, 1, 0, (void **)&pend_m, NULL) < 0 ||
-        hold(&h, args[29], 'd', 2 * N * width, 1, 0, (void **)&pmat, NULL) < 0 ||
-        hold(&h, args[30], 'd', N * width, 1, 0, (void **)&poff, NULL) < 0)
+    const Py_ssize_t max_rows = a.max_rows.n, width = 4 + max_rows;
+    const Py_ssize_t N = a.theta.len, nc = a.cand_i.len, no = a.obs_rows.len;
+    if (max_rows < 1) {
+        PyErr_SetString(PyExc_ValueError, "velocity_step: max_rows < 1");
         goto done;
+    }
+    if (a.pos.len != 2 * N || a.vel.len != 2 * N || a.v1.len != N || a.v2.len != N ||
+        a.diameter.len != N || (a.v1_prev.f && a.v1_prev.len != N) ||
+        (a.v2_prev.f && a.v2_prev.len != N) ||
+        (a.known_failed.b && a.known_failed.len != N) ||
+        (a.commanded.b && a.commanded.len != N) || (a.seen.f && a.seen.len != 3 * N) ||
+        a.v1_max.len != N || a.lateral.len != N || a.accel.len != N ||
+        a.cand_j.len != nc || (a.obs_signed.f && a.obs_signed.len != no) ||
+        (a.obs_away.f && a.obs_away.len != 2 * no) || a.v1_out.len != N ||
+        a.v2_out.len != N || a.active.len != N || a.slack.len != N ||
+        a.by_vehicle.len != N || a.pending.len != N || a.pending_m.len != N ||
+        a.pending_mat.len != 2 * N * width || a.pending_off.len != N * width) {
+        PyErr_SetString(PyExc_ValueError, "velocity_step: shapes differ");
+        goto done;
+    }
+    const double *pos = a.pos.f, *theta = a.theta.f, *vel = a.vel.f, *v1 = a.v1.f;
+    const double *v2 = a.v2.f, *diam = a.diameter.f, *v1p = a.v1_prev.f;
+    const double *v2p = a.v2_prev.f, *seen = a.seen.f, *v1_max = a.v1_max.f;
+    const double *lateral = a.lateral.f, *accel = a.accel.f;
+    const double *signed_d = a.obs_signed.f, *away = a.obs_away.f;
+    const unsigned char *failed = a.known_failed.b, *commanded = a.commanded.b;
+    const Py_ssize_t *ci = a.cand_i.i, *cj = a.cand_j.i, *orow = a.obs_rows.i;
+    double *v1_out = a.v1_out.f, *v2_out = a.v2_out.f, *slack = a.slack.f;
+    double *by = a.by_vehicle.f, *pmat = a.pending_mat.f, *poff = a.pending_off.f;
+    unsigned char *active = a.active.b;
+    Py_ssize_t *pend = a.pending.i, *pend_m = a.pending_m.i;
     if ((v1p == NULL) != (v2p == NULL) ||
         (orow != NULL && (signed_d == NULL || away == NULL))) {
         PyErr_SetString(PyExc_ValueError, "velocity_step: arrays missing");
@@ -207,14 +153,13 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             goto done;
         }
     }
-    const double gamma = par[P_GAMMA], look = par[P_LOOK], margin = par[P_MARGIN];
-    const double radius = par[P_RADIUS], dt = par[P_DT], angle = par[P_PASS_RIGHT];
-    const double tol = par[P_TOLERANCE], min_dist = par[P_MIN_DIST];
-    const double min_speed = par[P_MIN_SPEED], start = par[P_STALL_START];
-    const double full = par[P_STALL_FULL], slow = par[P_STALL_SPEED];
-    const int reverse = (flags & F_REVERSE) != 0;
-    const int speed_only = (flags & F_SPEED_ONLY) != 0;
-    const int broadcast = (flags & F_BROADCAST) != 0, prev = v1p != NULL;
+    const double gamma = a.gamma.x, look = a.look.x, margin = a.margin.x;
+    const double radius = a.radius.x, dt = a.dt.x, angle = a.pass_right.x;
+    const double tol = a.tolerance.x, min_dist = a.min_dist.x;
+    const double min_speed = a.min_speed.x, start = a.stall_start.x;
+    const double full = a.stall_full.x, slow = a.stall_speed.x;
+    const int reverse = a.reverse.n != 0, speed_only = a.speed_only.n != 0;
+    const int broadcast = a.broadcast.n != 0, prev = v1p != NULL;
 
     /* One block for the call: per vehicle 17 doubles and 3 counts, per candidate
      * pair its place, distance and barrier, rows for both directions of every pair
@@ -543,14 +488,34 @@ velocity_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     result = Py_BuildValue("(ndn)", kept_rows, least, pending);
 done:
     PyMem_Free(scratch);
-    let_go(&h);
+    release_named(&velocity_step_signature, (Arg *)&a);
     return result;
 }
 
+/* The arguments of world_counts, by name (accel.h). */
+#define WORLD_COUNTS(X)                                                            \
+    X(worlds, INTEGER, 0)                                                          \
+    X(active, BYTES, 0)                                                            \
+    X(slack, FLOATS, 0)                                                            \
+    X(by_vehicle, FLOATS, OR_NONE)                                                 \
+    X(fallback, BYTES, OR_NONE)                                                    \
+    X(max_slack, FLOATS, WRITTEN)                                                  \
+    X(min_barrier, FLOATS, WRITTEN)                                                \
+    X(started, INTEGER, 0)                                                         \
+    X(out_active, INTPS, WRITTEN)                                                  \
+    X(out_bad, INTPS, WRITTEN)                                                     \
+    X(out_worst, FLOATS, WRITTEN)                                                  \
+    X(out_least, FLOATS, WRITTEN)                                                  \
+    X(out_fallen, INTPS, WRITTEN)                                                  \
+    X(out_changes, INTPS, WRITTEN)                                                 \
+    X(touched, INTPS, WRITTEN)                                                     \
+    X(tolerance, NUMBER, 0)
+NAMED(world_counts, WORLD_COUNTS)
+
 PyDoc_STRVAR(world_counts_doc,
-"world_counts(worlds, active, slack, by_vehicle, fallback, max_slack, min_barrier,\n"
-"    started, out_active, out_bad, out_worst, out_least, out_fallen, out_changes,\n"
-"    touched, tolerance) -> count\n"
+"world_counts(*, worlds, active, slack, by_vehicle, fallback, max_slack,\n"
+"    min_barrier, started, out_active, out_bad, out_worst, out_least, out_fallen,\n"
+"    out_changes, touched, tolerance) -> count\n"
 "\n"
 "accounting.account_worlds' reductions of one step over ``worlds`` worlds of n rows:\n"
 "each world's active count, count of slack above ``tolerance``, largest slack, least\n"
@@ -560,41 +525,36 @@ PyDoc_STRVAR(world_counts_doc,
 "``started``) are listed in ``touched``, their count returned.");
 
 static PyObject *
-world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
+             PyObject *kwnames)
 {
-    if (nargs != 16) {
-        PyErr_SetString(PyExc_TypeError, "world_counts takes 16 arguments");
+    world_counts_args a;
+    if (parse_named(&world_counts_signature, args, nargs, kwnames, (Arg *)&a) < 0) {
         return NULL;
     }
-    Py_ssize_t K = PyLong_AsSsize_t(args[0]);
-    int started = PyObject_IsTrue(args[7]);
-    double tol = PyFloat_AsDouble(args[15]);
-    if (PyErr_Occurred() || started < 0) {
-        return NULL;
-    }
-    Held h = {.count = 0};
     PyObject *result = NULL;
-    unsigned char *active, *fallback;
-    double *slack, *by, *max_slack, *min_barrier, *worst, *least;
-    Py_ssize_t *n_active, *n_bad, *n_fallen, *changes, *touched, N;
-    if (hold(&h, args[1], 'b', -1, 0, 0, (void **)&active, &N) < 0) goto done;
-    if (K <= 0 || N % K != 0) {
-        PyErr_SetString(PyExc_ValueError, "world_counts: rows not K n");
+    const Py_ssize_t K = a.worlds.n, N = a.active.len;
+    const int started = a.started.n != 0;
+    const double tol = a.tolerance.x;
+    if (K <= 0 || N % K != 0 || N == 0) {
+        PyErr_SetString(PyExc_ValueError, "world_counts: rows not K n, n > 0");
         goto done;
     }
-    if (hold(&h, args[2], 'd', N, 0, 0, (void **)&slack, NULL) < 0 ||
-        hold(&h, args[3], 'd', N, 0, 1, (void **)&by, NULL) < 0 ||
-        hold(&h, args[4], 'b', N, 0, 1, (void **)&fallback, NULL) < 0 ||
-        hold(&h, args[5], 'd', K, 1, 0, (void **)&max_slack, NULL) < 0 ||
-        hold(&h, args[6], 'd', K, 1, 0, (void **)&min_barrier, NULL) < 0 ||
-        hold(&h, args[8], 'n', K, 1, 0, (void **)&n_active, NULL) < 0 ||
-        hold(&h, args[9], 'n', K, 1, 0, (void **)&n_bad, NULL) < 0 ||
-        hold(&h, args[10], 'd', K, 1, 0, (void **)&worst, NULL) < 0 ||
-        hold(&h, args[11], 'd', K, 1, 0, (void **)&least, NULL) < 0 ||
-        hold(&h, args[12], 'n', K, 1, 0, (void **)&n_fallen, NULL) < 0 ||
-        hold(&h, args[13], 'n', K, 1, 0, (void **)&changes, NULL) < 0 ||
-        hold(&h, args[14], 'n', K, 1, 0, (void **)&touched, NULL) < 0)
+    if (a.slack.len != N || (a.by_vehicle.f && a.by_vehicle.len != N) ||
+        (a.fallback.b && a.fallback.len != N) || a.max_slack.len != K ||
+        a.min_barrier.len != K || a.out_active.len != K || a.out_bad.len != K ||
+        a.out_worst.len != K || a.out_least.len != K || a.out_fallen.len != K ||
+        a.out_changes.len != K || a.touched.len != K) {
+        PyErr_SetString(PyExc_ValueError, "world_counts: shapes differ");
         goto done;
+    }
+    const unsigned char *active = a.active.b, *fallback = a.fallback.b;
+    const double *slack = a.slack.f, *by = a.by_vehicle.f;
+    double *max_slack = a.max_slack.f, *min_barrier = a.min_barrier.f;
+    double *worst = a.out_worst.f, *least = a.out_least.f;
+    Py_ssize_t *n_active = a.out_active.i, *n_bad = a.out_bad.i;
+    Py_ssize_t *n_fallen = a.out_fallen.i, *changes = a.out_changes.i;
+    Py_ssize_t *touched = a.touched.i;
     Py_ssize_t n = N / K, out = 0;
     for (Py_ssize_t w = 0; w < K; w++) {
         Py_ssize_t on = 0, bad = 0, fallen = 0;
@@ -630,7 +590,7 @@ world_counts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     result = PyLong_FromSsize_t(out);
 done:
-    let_go(&h);
+    release_named(&world_counts_signature, (Arg *)&a);
     return result;
 }
 
@@ -688,10 +648,10 @@ done:
 }
 
 static PyMethodDef methods[] = {
-    {"velocity_step", (PyCFunction)(void (*)(void))velocity_step, METH_FASTCALL,
-     velocity_step_doc},
-    {"world_counts", (PyCFunction)(void (*)(void))world_counts, METH_FASTCALL,
-     world_counts_doc},
+    {"velocity_step", (PyCFunction)(void (*)(void))velocity_step,
+     METH_FASTCALL | METH_KEYWORDS, velocity_step_doc},
+    {"world_counts", (PyCFunction)(void (*)(void))world_counts,
+     METH_FASTCALL | METH_KEYWORDS, world_counts_doc},
     {"project", (PyCFunction)(void (*)(void))project, METH_FASTCALL, project_doc},
     {NULL, NULL, 0, NULL},
 };

@@ -1,9 +1,9 @@
 """The CBF filter's counters of each world (``metrics.json`` ``safety``).
 
 Split from :mod:`sandbox.behaviour.safety.cbf`, which adds each step of the filter
-(:class:`FilterStep`) to the counters of its one world through :func:`account`, or of
-its K stacked worlds through :func:`account_worlds` (the same counters, each world's
-reductions taken at once over a ``(K, n)`` view of the rows).
+(:class:`FilterStep`) to the counters of each of its K stacked worlds (one for a
+single run) through :func:`account_worlds`: each world's reductions taken at once
+over a ``(K, n)`` view of the rows.
 
 Where the compiled path ``filter`` is on (:mod:`sandbox.accel`), the reductions of
 :func:`account_worlds` and the choice of the worlds it writes are one C loop over
@@ -47,7 +47,8 @@ class FilterStep:
         Vehicles whose braking conditions had no common point (rounding only: the
         braking command keeps them all), which brake.
     by_vehicle : ndarray, shape (n,), or None
-        Each vehicle's least barrier value (a batched call of several worlds only).
+        Each vehicle's least barrier value (None: no vehicle filtered), whose
+        least over a world's rows is the world's.
     """
 
     active: np.ndarray
@@ -56,17 +57,6 @@ class FilterStep:
     min_barrier: float = np.inf
     fallback: np.ndarray | None = None
     by_vehicle: np.ndarray | None = None
-
-
-def account(
-    stats: dict, t: float, braking: bool, step: FilterStep, rows: slice, least: float
-) -> None:
-    """Add one step of the filter's rows ``rows`` to a world's counters ``stats``."""
-    active, slack = step.active[rows], step.slack[rows]
-    worst = float(slack.max()) if len(slack) else 0.0
-    fallen = int(step.fallback[rows].sum()) if braking else 0
-    bad = int((slack > TOLERANCE).sum())
-    _add(stats, t, braking, int(active.sum()), bad, worst, least, fallen)
 
 
 def _add(
@@ -101,11 +91,12 @@ def _add(
         }
 
 
-class WorldCounters:
-    """Copies of the K worlds' largest slack and least barrier, kept between steps.
+class RunningExtremes:
+    """Each of K worlds' largest slack and least barrier so far, kept between steps.
 
-    With them a step finds, for all worlds at once, which world's counters it
-    changes, and writes only those (most steps change few of them).
+    Copies of the worlds' counters ``max_slack`` and ``min_barrier``: with them a
+    step finds, for all worlds at once, which world's counters it changes, and
+    writes only those (most steps change few of them).
 
     Parameters
     ----------
@@ -128,12 +119,12 @@ def account_worlds(
     braking: bool,
     step: FilterStep,
     n: int,
-    counters: WorldCounters,
+    extremes: RunningExtremes,
 ) -> None:
-    """Add one step of a batched call to the counters of each of its K worlds.
+    """Add one step of the filter to the counters of each of its K worlds.
 
-    Each world's counters are those :func:`account` gives for its rows
-    ``w n : (w + 1) n`` alone (counts, exact maxima and minima); the reductions are
+    Each world's counters are those of its rows ``w n : (w + 1) n`` alone (counts,
+    exact maxima and minima, as :func:`_add` adds a world's step); the reductions are
     taken for all worlds at once, and a world's counters are written where the step
     changes them (every world's at the first step).
 
@@ -148,13 +139,13 @@ def account_worlds(
         The step of the stacked rows, shape ``(K n,)`` each.
     n : int
         Vehicles per world.
-    counters : WorldCounters
+    extremes : RunningExtremes
         The worlds' largest slack and least barrier so far (updated).
     """
     c = accel.module("filter")
-    if c is not None and _account_c(c, world_stats, t, braking, step, counters):
+    if c is not None and _account_c(c, world_stats, t, braking, step, extremes):
         return
-    account_worlds_numpy(world_stats, t, braking, step, n, counters)
+    account_worlds_numpy(world_stats, t, braking, step, n, extremes)
 
 
 def account_worlds_numpy(
@@ -163,32 +154,32 @@ def account_worlds_numpy(
     braking: bool,
     step: FilterStep,
     n: int,
-    counters: WorldCounters,
+    extremes: RunningExtremes,
 ) -> None:
     """:func:`account_worlds` by numpy (the reference)."""
     k = len(world_stats)
     active = step.active.reshape(k, n).sum(axis=1)
     slack = step.slack.reshape(k, n)
     bad = (slack > TOLERANCE).sum(axis=1)
-    worst = slack.max(axis=1)
+    worst = slack.max(axis=1, initial=0.0)  # (0 when a world has no vehicle)
     if step.by_vehicle is None:
         least = np.full(k, np.inf)
     else:
-        least = step.by_vehicle.reshape(k, n).min(axis=1)
+        least = step.by_vehicle.reshape(k, n).min(axis=1, initial=np.inf)
     finite = np.isfinite(least)
     fallen = step.fallback.reshape(k, n).sum(axis=1) if braking else np.zeros(k, int)
-    raised = worst > counters.max_slack
-    lowered = finite & (least < counters.min_barrier)
-    if counters.started:
+    raised = worst > extremes.max_slack
+    lowered = finite & (least < extremes.min_barrier)
+    if extremes.started:
         touched = np.flatnonzero(
             (active > 0) | (bad > 0) | raised | lowered | (fallen > 0)
         )
     else:
         touched = np.arange(k)
-    counters.max_slack[raised] = worst[raised]
-    counters.min_barrier[lowered] = least[lowered]
+    extremes.max_slack[raised] = worst[raised]
+    extremes.min_barrier[lowered] = least[lowered]
     if len(touched) == 0:
-        counters.started = True
+        extremes.started = True
         return
     active, bad, worst = active.tolist(), bad.tolist(), worst.tolist()
     least, fallen = least.tolist(), fallen.tolist()
@@ -196,7 +187,7 @@ def account_worlds_numpy(
         _add(
             world_stats[w], t, braking, active[w], bad[w], worst[w], least[w], fallen[w]
         )
-    counters.started = True
+    extremes.started = True
 
 
 def _account_c(
@@ -205,32 +196,44 @@ def _account_c(
     t: float,
     braking: bool,
     step: FilterStep,
-    counters: WorldCounters,
+    extremes: RunningExtremes,
 ) -> bool:
     """:func:`account_worlds` with its reductions in C; False where it cannot run.
 
     It cannot where an array is not C-contiguous of its type (bool, float64), the
-    counters' included (the numpy path takes them as they are). After the first
+    extremes' included (the numpy path takes them as they are). After the first
     step, which writes every counter of every world (:func:`_add`), a world's
-    counters all exist, and ``counters`` holds its largest slack and least barrier:
+    counters all exist, and ``extremes`` holds its largest slack and least barrier:
     what :func:`_add` then changes is the sums it adds to and the slack and barrier
     the step raised or lowered, and so the C path changes only those.
     """
     k = len(world_stats)
-    if counters.out is None or len(counters.out[0]) != k:
+    if extremes.out is None or len(extremes.out[0]) != k:
         counts = tuple(np.zeros(k, dtype=np.intp) for _ in range(5))
-        counters.out = (*counts, np.zeros(k), np.zeros(k))
-    active, bad, fallen, changes, touched, worst, least = counters.out
+        extremes.out = (*counts, np.zeros(k), np.zeros(k))
+    active, bad, fallen, changes, touched, worst, least = extremes.out
     try:  # the C loop holds every buffer before it writes any
         count = c.world_counts(
-            k, step.active, step.slack, step.by_vehicle,
-            step.fallback if braking else None, counters.max_slack,
-            counters.min_barrier, counters.started, active, bad, worst, least,
-            fallen, changes, touched, TOLERANCE,
-        )  # fmt: skip
+            worlds=k,
+            active=step.active,
+            slack=step.slack,
+            by_vehicle=step.by_vehicle,
+            fallback=step.fallback if braking else None,
+            max_slack=extremes.max_slack,
+            min_barrier=extremes.min_barrier,
+            started=extremes.started,
+            out_active=active,
+            out_bad=bad,
+            out_worst=worst,
+            out_least=least,
+            out_fallen=fallen,
+            out_changes=changes,
+            touched=touched,
+            tolerance=TOLERANCE,
+        )
     except (TypeError, ValueError, BufferError):
         return False
-    started, counters.started = counters.started, True
+    started, extremes.started = extremes.started, True
     if not count:
         return True
     rows = touched[:count]

@@ -127,8 +127,7 @@ import numpy as np
 
 from sandbox.behaviour.safety.accounting import (
     FilterStep,
-    WorldCounters,
-    account,
+    RunningExtremes,
     account_worlds,
 )
 from sandbox.behaviour.safety.braking import (
@@ -472,7 +471,7 @@ def filter_commands(
     )
     reach = reach * (1.0 + 1e-9) + 1e-9 if prune else None
     fallback = np.zeros(n, dtype=bool)
-    by_vehicle = np.full(n, np.inf) if ctx.worlds > 1 else None
+    by_vehicle = np.full(n, np.inf)  # each vehicle's least h, for its world's
     hold = walls = None  # the priority's holders, and their obstacles' row count
     if state.priority != "none":
         hold, walls = holding(state, ctx, filtered)
@@ -480,12 +479,9 @@ def filter_commands(
     if state.braking:
         veh, a_w, b, h = braking_rows(state, ctx, filtered, pending, braked)
         least = float(h.min()) if len(h) else np.inf
-        if by_vehicle is not None:
-            np.minimum.at(by_vehicle, veh, h)
+        np.minimum.at(by_vehicle, veh, h)
     else:
-        found: dict[str, object] = {}
-        if by_vehicle is not None:
-            found["by_vehicle"] = by_vehicle
+        found: dict[str, object] = {"by_vehicle": by_vehicle}
         veh, a_w, b = barrier_rows(state, ctx, filtered, reach, found)
         least = found.get("min_barrier", np.inf)
     if "walls" in pending:  # the braking barrier's obstacle rows (two a pair at most)
@@ -608,14 +604,12 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
         state = ctx.memory["cbf"] = CBFState(ctx)
     v1, v2, step = filter_commands(state, ctx)
     ctx.memory["last"] = step
-    if ctx.worlds == 1:
-        account(ctx.stats, ctx.t, state.braking, step, slice(None), step.min_barrier)
-        record_episodes(ctx.memory, [ctx.stats], ctx.t, step.active, len(ctx.pos))
-        return v1, v2
-    counters = ctx.memory.get("counters")
-    if counters is None:
-        counters = ctx.memory["counters"] = WorldCounters(ctx.world_stats)
-    n = len(ctx.pos) // ctx.worlds  # each world's own counters
-    account_worlds(ctx.world_stats, ctx.t, state.braking, step, n, counters)
-    record_episodes(ctx.memory, ctx.world_stats, ctx.t, step.active, n)
+    # each world's own counters (one world's: ctx.stats, where no list is given)
+    world_stats = [ctx.stats] if ctx.world_stats is None else ctx.world_stats
+    extremes = ctx.memory.get("extremes")
+    if extremes is None:
+        extremes = ctx.memory["extremes"] = RunningExtremes(world_stats)
+    n = len(ctx.pos) // ctx.worlds
+    account_worlds(world_stats, ctx.t, state.braking, step, n, extremes)
+    record_episodes(ctx.memory, world_stats, ctx.t, step.active, n)
     return v1, v2

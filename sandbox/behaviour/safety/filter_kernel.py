@@ -30,6 +30,7 @@ the numpy path, as does every run where the path is off.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -48,17 +49,13 @@ from sandbox.behaviour.safety.right_hand import (
     STALL_START,
     pass_right,
 )
-from sandbox.geometry.neighbours import BRUTE_FORCE_MAX, WorldPairs
+from sandbox.geometry.neighbours import AllPairsByWorld
 from sandbox.model.barriers import MIN_DIST, MIN_SPEED
 from sandbox.model.kernels import c_float64
 
 if TYPE_CHECKING:
     from sandbox.behaviour.safety.state import CBFState
     from sandbox.plugins.contexts import FilterContext
-
-#: The flags of the C loop: ``reverse: true``, ``projection: speed``,
-#: ``neighbour_velocity: broadcast``.
-REVERSE, SPEED_ONLY, BROADCAST = 1, 2, 4
 
 
 def covers(state: CBFState) -> bool:
@@ -85,29 +82,7 @@ class Arguments:
     def __init__(self, state: CBFState, n: int, dt: float) -> None:
         self.c = accel.module("filter")
         self.n, self.dt = n, dt
-        self.params = np.array(
-            [
-                state.gamma,
-                state.look,
-                state.margin,
-                state.neighbours.radius,
-                dt,
-                state.pass_right,
-                TOLERANCE,
-                MIN_DIST,
-                MIN_SPEED,
-                STALL_START,
-                STALL_FULL,
-                STALL_SPEED,
-            ],
-            dtype=float,
-        )
-        self.flags = (
-            (REVERSE if state.reverse else 0)
-            | (SPEED_ONLY if state.speed_only else 0)
-            | (BROADCAST if state.broadcast else 0)
-        )
-        self.limits = tuple(
+        self.v1_max, self.lateral, self.accel = (
             c_float64(np.broadcast_to(a, (n,)))
             for a in (state.v1_max, state.lateral, state.accel)
         )
@@ -148,12 +123,12 @@ def _any_filtered(ctx: FilterContext) -> bool:
 def _candidates(state: CBFState, ctx: FilterContext) -> tuple[np.ndarray, ...]:
     """The neighbour search's candidate pairs, those ``near`` filters by distance.
 
-    Every pair of each world up to :data:`BRUTE_FORCE_MAX` vehicles (whatever the
-    positions given); a larger single world's kept list is brought up to date on
-    the seen look-ahead points, as ``near`` does (when some vehicle is filtered).
+    Every pair of each small world (whatever the positions given); a larger single
+    world's kept list is brought up to date on the seen look-ahead points, as
+    ``near`` does (when some vehicle is filtered).
     """
     search = state.neighbours
-    if isinstance(search, WorldPairs) or len(ctx.pos) <= BRUTE_FORCE_MAX:
+    if isinstance(search, AllPairsByWorld):
         return search.candidates(ctx.pos)
     if not _any_filtered(ctx):
         return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
@@ -189,31 +164,115 @@ def velocity_step(
         if near is not None:
             rows = np.ascontiguousarray(near[0], dtype=np.intp)
             signed, away = c_float64(near[1]), c_float64(near[2])
-    i, j = _candidates(state, ctx)
-    v1, v2, slack = np.empty(n), np.empty(n), np.empty(n)
-    active = np.empty(n, dtype=bool)
-    by_vehicle = np.empty(n) if ctx.worlds > 1 else None
-    given = (
-        ctx.pos, ctx.theta, ctx.vel, ctx.v1, ctx.v2, ctx.diameter, ctx.v1_prev,
-        ctx.v2_prev, ctx.known_failed, ctx.commanded, ctx.seen,
-    )  # fmt: skip
-    rest = (
-        *args.limits, i, j, rows, signed, away, args.params, args.flags,
-        state.max_rows, v1, v2, active, slack, by_vehicle, args.pending,
-        args.pending_m, args.pending_mat, args.pending_off,
-    )  # fmt: skip
+    pairs = _candidates(state, ctx)
+    out = (np.empty(n), np.empty(n), np.empty(n, dtype=bool), np.empty(n), np.empty(n))
     try:  # the arrays as they are, where each is C-contiguous of its type
-        count, least, pending = args.c.velocity_step(*given, *rest)
+        count, least, pending = _call(
+            state, ctx, args, pairs, (rows, signed, away), out
+        )
     except (TypeError, ValueError, BufferError):
-        floats = [_floats(a) for a in given]
-        floats[8], floats[9] = _bools(given[8]), _bools(given[9])
-        count, least, pending = args.c.velocity_step(*floats, *rest)
+        count, least, pending = _call(
+            state, _contiguous(ctx), args, pairs, (rows, signed, away), out
+        )
+    v1, v2, active, slack, by_vehicle = out
     fallback = np.zeros(n, dtype=bool)
     if count < 0:  # no vehicle is filtered
         return v1, v2, FilterStep(active, slack, 0, np.inf, fallback)
     if pending:
         _settle(state, ctx, args, pending, v1, v2, active, slack)
     return v1, v2, FilterStep(active, slack, count, least, fallback, by_vehicle)
+
+
+def _contiguous(ctx: FilterContext) -> FilterContext:
+    """``ctx`` with its arrays C-contiguous float64 (bool for the flags)."""
+    return replace(
+        ctx,
+        **{
+            name: _floats(getattr(ctx, name))
+            for name in ("pos", "theta", "vel", "v1", "v2", "diameter", "seen")
+        },
+        v1_prev=_floats(ctx.v1_prev),
+        v2_prev=_floats(ctx.v2_prev),
+        known_failed=_bools(ctx.known_failed),
+        commanded=_bools(ctx.commanded),
+    )
+
+
+def _call(
+    state: CBFState,
+    ctx: FilterContext,
+    args: Arguments,
+    pairs: tuple[np.ndarray, np.ndarray],
+    obstacles: tuple[np.ndarray | None, ...],
+    out: tuple[np.ndarray, ...],
+) -> tuple[int, float, int]:
+    """The C loop's step: its kept rows (-1: none filtered), least ``h``, pending.
+
+    Parameters
+    ----------
+    state : CBFState
+    ctx : FilterContext
+    args : Arguments
+    pairs : tuple of 2 ndarray of intp
+        The neighbour search's candidates.
+    obstacles : tuple of 3 ndarray or None
+        The obstacles' rows: the vehicles, the signed distances [m] and the unit
+        vectors away (:func:`~sandbox.behaviour.safety.braking.obstacle_normals`).
+    out : tuple of 5 ndarray (n,)
+        ``v1``, ``v2``, ``active``, ``slack``, ``by_vehicle``: written.
+
+    Raises
+    ------
+    TypeError, ValueError, BufferError
+        An array that is not C-contiguous of its type (nothing is written then).
+    """
+    v1, v2, active, slack, by_vehicle = out
+    return args.c.velocity_step(
+        pos=ctx.pos,
+        theta=ctx.theta,
+        vel=ctx.vel,
+        v1=ctx.v1,
+        v2=ctx.v2,
+        diameter=ctx.diameter,
+        v1_prev=ctx.v1_prev,
+        v2_prev=ctx.v2_prev,
+        known_failed=ctx.known_failed,
+        commanded=ctx.commanded,
+        seen=ctx.seen,
+        v1_max=args.v1_max,
+        lateral=args.lateral,
+        accel=args.accel,
+        cand_i=pairs[0],
+        cand_j=pairs[1],
+        obs_rows=obstacles[0],
+        obs_signed=obstacles[1],
+        obs_away=obstacles[2],
+        gamma=state.gamma,
+        look=state.look,
+        margin=state.margin,
+        radius=state.neighbours.radius,
+        dt=ctx.dt,
+        pass_right=state.pass_right,
+        tolerance=TOLERANCE,
+        min_dist=MIN_DIST,
+        min_speed=MIN_SPEED,
+        stall_start=STALL_START,
+        stall_full=STALL_FULL,
+        stall_speed=STALL_SPEED,
+        reverse=state.reverse,
+        speed_only=state.speed_only,
+        broadcast=state.broadcast,
+        max_rows=state.max_rows,
+        v1_out=v1,
+        v2_out=v2,
+        active=active,
+        slack=slack,
+        by_vehicle=by_vehicle,
+        pending=args.pending,
+        pending_m=args.pending_m,
+        pending_mat=args.pending_mat,
+        pending_off=args.pending_off,
+    )
 
 
 def _settle(

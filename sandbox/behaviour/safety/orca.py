@@ -65,8 +65,7 @@ import numpy as np
 
 from sandbox.behaviour.safety.accounting import (
     FilterStep,
-    WorldCounters,
-    account,
+    RunningExtremes,
     account_worlds,
 )
 from sandbox.behaviour.safety.cbf import PARAMS as CBF_PARAMS
@@ -79,7 +78,7 @@ from sandbox.behaviour.safety.holonomic import (
 )
 from sandbox.behaviour.safety.orca_lines import surface_lines, vehicle_lines
 from sandbox.behaviour.safety.orca_program import HalfPlanes, det, solve
-from sandbox.geometry.neighbours import NeighbourList, WorldPairs
+from sandbox.geometry.neighbours import neighbour_search
 from sandbox.model.barriers import MIN_DIST
 from sandbox.model.dynamics import CLIP
 from sandbox.model.obstacle_field import ObstacleField
@@ -192,10 +191,8 @@ class ORCAState:
             else 0.0
         )
         search = max(self.range, self.reach + float(np.max(self.radius, initial=0.0)))
-        if ctx.worlds > 1:  # a batched call: pairs within each world only
-            self.index = WorldPairs(ctx.worlds, n // ctx.worlds, search)
-        else:
-            self.index = NeighbourList(search)
+        # pairs within each world only, every pair of a small world
+        self.index = neighbour_search(ctx.worlds, n // ctx.worlds, search)
 
 
 def _vehicle_rows(
@@ -453,14 +450,13 @@ def orca_commands(
         limit = state.v2_max[rows_on]
         v2[rows_on] = CLIP(v2[rows_on], -limit, limit)
     state.velocity = preferred
-    by_vehicle = least if ctx.worlds > 1 else None
     step = FilterStep(
         active,
         slack,
         rows,
         float(least.min(initial=np.inf)),
         np.zeros(n, dtype=bool),
-        by_vehicle,
+        least,  # each vehicle's least barrier, for its world's
     )
     return v1, v2, step
 
@@ -473,14 +469,12 @@ def orca(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
         state = ctx.memory["orca"] = ORCAState(ctx)
     v1, v2, step = orca_commands(state, ctx)
     ctx.memory["last"] = step
-    if ctx.worlds == 1:
-        account(ctx.stats, ctx.t, False, step, slice(None), step.min_barrier)
-        record_episodes(ctx.memory, [ctx.stats], ctx.t, step.active, len(ctx.pos))
-        return v1, v2
-    counters = ctx.memory.get("counters")
-    if counters is None:
-        counters = ctx.memory["counters"] = WorldCounters(ctx.world_stats)
+    # each world's own counters (one world's: ctx.stats, where no list is given)
+    world_stats = [ctx.stats] if ctx.world_stats is None else ctx.world_stats
+    extremes = ctx.memory.get("extremes")
+    if extremes is None:
+        extremes = ctx.memory["extremes"] = RunningExtremes(world_stats)
     n = len(ctx.pos) // ctx.worlds
-    account_worlds(ctx.world_stats, ctx.t, False, step, n, counters)
-    record_episodes(ctx.memory, ctx.world_stats, ctx.t, step.active, n)
+    account_worlds(world_stats, ctx.t, False, step, n, extremes)
+    record_episodes(ctx.memory, world_stats, ctx.t, step.active, n)
     return v1, v2

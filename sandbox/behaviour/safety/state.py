@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sandbox.behaviour.estimation import BroadcastEstimate
-from sandbox.geometry.neighbours import NeighbourList, WorldPairs
+from sandbox.geometry.neighbours import neighbour_search
 from sandbox.model.barriers import ESTIMATE_GAIN, sensing_margin
 
 if TYPE_CHECKING:
@@ -126,10 +126,8 @@ class CBFState:
                 ctx.dt,
             )
         self.range = float(radius)
-        if ctx.worlds > 1:  # a batched call: pairs within each world only
-            self.neighbours = WorldPairs(ctx.worlds, n // ctx.worlds, self.range)
-        else:
-            self.neighbours = NeighbourList(self.range)
+        # pairs within each world only, every pair of a small world
+        self.neighbours = neighbour_search(ctx.worlds, n // ctx.worlds, self.range)
         #: The C loop's arguments kept between steps (filter_kernel.Arguments).
         self.c_args = None
 
