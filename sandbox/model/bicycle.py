@@ -36,7 +36,7 @@ import numpy as np
 
 from sandbox.model.dynamics import CLIP, wrap_angle
 from sandbox.model.flatness import (
-    CHI_HOLD,
+    CHI_REST,
     Gains,
     advance_extension,
     extension_rate,
@@ -223,7 +223,7 @@ def limit_steer(
     norm = np.hypot(c1, c2)
     angle = np.arctan2(c2, c1)
     off = wrap_angle(angle - theta)
-    outside = (np.abs(off) > limit) & (norm >= CHI_HOLD)
+    outside = (np.abs(off) > limit) & (norm >= CHI_REST)
     if not np.count_nonzero(outside):  # every chi within its cone: as it is
         nowhere = np.empty(norm.shape)
         nowhere.fill(np.nan)
@@ -258,7 +258,7 @@ def car_controller_step(
     the cone of its new speed; then eq. (5) and the clip of ``v2`` to ``v2_max``. The
     commands still ask for any turn rate; :func:`steer_commands` makes them a
     steering angle within the car's limits. A car whose target is at rest (``|x_ref'|
-    < CHI_HOLD``) within one least turning radius **parks**: its chi is shortened as
+    < CHI_REST``) within one least turning radius **parks**: its chi is shortened as
     the unicycle's (:func:`~sandbox.model.flatness.limit_turn`), so it stops where
     the target falls behind it instead of looping around a point it cannot reach
     without reversing.
@@ -286,7 +286,7 @@ def car_controller_step(
     # Where the target rests within one least turning radius, a car parks: chi is
     # shortened as a unicycle's (it stops where the target falls behind) instead of
     # being kept for a loop around a point it would only orbit.
-    parks = np.hypot(v_ref[:, 0], v_ref[:, 1]) < CHI_HOLD
+    parks = np.hypot(v_ref[:, 0], v_ref[:, 1]) < CHI_REST
     if np.count_nonzero(parks):
         away = aim_at - pos
         parks &= np.hypot(away[:, 0], away[:, 1]) < limits.radius

@@ -331,13 +331,13 @@ class Scene:
         cars = np.flatnonzero(np.isfinite(steer))
         bodies = car_bodies(pose, steer, self.wheelbase, self.diameter)
         for i, corners in zip(cars, cam.world_to_pixel(bodies), strict=True):
-            draw.polygon(_flat(corners), outline=int(self.body[i]), width=1)
+            draw.polygon(flat_points(corners), outline=int(self.body[i]), width=1)
         chassis, wheels = car_lines(pose, steer, self.wheelbase, self.diameter)
         r = float(np.median(radius))
         thin, thick = max(1, round(0.12 * r)), max(2, round(0.3 * r))
         for width, lines in ((thin, chassis), (thick, wheels)):
             for a in cam.world_to_pixel(lines):
-                draw.line(_flat(a), fill=BLACK, width=width)
+                draw.line(flat_points(a), fill=BLACK, width=width)
 
     def _draw_trails(self, draw: ImageDraw.ImageDraw, cam: Camera, k: int) -> None:
         k0 = int(self.trail_start[k])
