@@ -16,12 +16,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from sandbox import accel
+from sandbox.behaviour.safety.constrained import record_episodes
 from sandbox.behaviour.safety.qp import TOLERANCE
+
+if TYPE_CHECKING:
+    from sandbox.plugins.contexts import FilterContext
 
 #: What a step changed of a world's counters (``world_counts``' flags).
 RAISED, LOWERED = 1, 2
@@ -111,6 +115,26 @@ class RunningExtremes:
         self.started = False
         #: The C loop's outputs of a step (made at its first step).
         self.out: tuple[np.ndarray, ...] | None = None
+
+
+def account_step(ctx: FilterContext, step: FilterStep, braking: bool) -> None:
+    """A filter's step in its worlds' counters and constrained episodes.
+
+    The step is kept as the filter's ``last`` (``ctx.memory``), added to each world's
+    counters (:func:`account_worlds`, with the worlds' running extremes kept in the
+    memory too) and its active vehicles to the episodes of
+    :func:`~sandbox.behaviour.safety.constrained.record_episodes`. ``braking``: whether
+    the filter's barrier is the braking one (its fallback steps counted).
+    """
+    ctx.memory["last"] = step
+    # each world's own counters (one world's: ctx.stats, where no list is given)
+    world_stats = [ctx.stats] if ctx.world_stats is None else ctx.world_stats
+    extremes = ctx.memory.get("extremes")
+    if extremes is None:
+        extremes = ctx.memory["extremes"] = RunningExtremes(world_stats)
+    n = len(ctx.pos) // ctx.worlds
+    account_worlds(world_stats, ctx.t, braking, step, n, extremes)
+    record_episodes(ctx.memory, world_stats, ctx.t, step.active, n)
 
 
 def account_worlds(

@@ -125,11 +125,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from sandbox.behaviour.safety.accounting import (
-    FilterStep,
-    RunningExtremes,
-    account_worlds,
-)
+from sandbox.behaviour.safety.accounting import FilterStep, account_step
 from sandbox.behaviour.safety.braking import (
     braking_fallback,
     braking_rows,
@@ -140,7 +136,6 @@ from sandbox.behaviour.safety.braking import (
 )
 from sandbox.behaviour.safety.braking_check import Solved, check_commands, passes
 from sandbox.behaviour.safety.cars import CarCone, solved_groups, with_cars
-from sandbox.behaviour.safety.constrained import record_episodes
 from sandbox.behaviour.safety.filter_kernel import covers, usable, velocity_step
 from sandbox.behaviour.safety.priority import PRIORITY, holding
 from sandbox.behaviour.safety.qp import TOLERANCE, bounded_problems, solve
@@ -603,13 +598,5 @@ def cbf(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     if state is None:
         state = ctx.memory["cbf"] = CBFState(ctx)
     v1, v2, step = filter_commands(state, ctx)
-    ctx.memory["last"] = step
-    # each world's own counters (one world's: ctx.stats, where no list is given)
-    world_stats = [ctx.stats] if ctx.world_stats is None else ctx.world_stats
-    extremes = ctx.memory.get("extremes")
-    if extremes is None:
-        extremes = ctx.memory["extremes"] = RunningExtremes(world_stats)
-    n = len(ctx.pos) // ctx.worlds
-    account_worlds(world_stats, ctx.t, state.braking, step, n, extremes)
-    record_episodes(ctx.memory, world_stats, ctx.t, step.active, n)
+    account_step(ctx, step, state.braking)
     return v1, v2

@@ -63,13 +63,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sandbox.behaviour.safety.accounting import (
-    FilterStep,
-    RunningExtremes,
-    account_worlds,
-)
+from sandbox.behaviour.safety.accounting import FilterStep, account_step
 from sandbox.behaviour.safety.cbf import PARAMS as CBF_PARAMS
-from sandbox.behaviour.safety.constrained import record_episodes
 from sandbox.behaviour.safety.holonomic import (
     CORNERS,
     drive_lines,
@@ -468,13 +463,5 @@ def orca(ctx: FilterContext) -> tuple[np.ndarray, np.ndarray]:
     if state is None:
         state = ctx.memory["orca"] = ORCAState(ctx)
     v1, v2, step = orca_commands(state, ctx)
-    ctx.memory["last"] = step
-    # each world's own counters (one world's: ctx.stats, where no list is given)
-    world_stats = [ctx.stats] if ctx.world_stats is None else ctx.world_stats
-    extremes = ctx.memory.get("extremes")
-    if extremes is None:
-        extremes = ctx.memory["extremes"] = RunningExtremes(world_stats)
-    n = len(ctx.pos) // ctx.worlds
-    account_worlds(world_stats, ctx.t, False, step, n, extremes)
-    record_episodes(ctx.memory, world_stats, ctx.t, step.active, n)
+    account_step(ctx, step, False)
     return v1, v2
