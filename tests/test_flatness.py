@@ -15,6 +15,7 @@ from sandbox.model.flatness import (
     discrete_spectral_radius,
     extension_rate,
     flat_inputs,
+    parking,
     travel_direction,
 )
 
@@ -180,6 +181,20 @@ def test_the_direction_of_travel_is_chosen_when_chi_comes_back(
         v(*chi), v(*chi_next), np.zeros(1), np.array([travel], dtype=np.int8)
     )
     assert got.dtype == np.int8 and got.tolist() == [want]
+
+
+def test_a_vehicle_travels_backward_only_where_it_parks() -> None:
+    # chi reverses behind a vehicle heading along +x1: backward where its target rests
+    # within PARK_RADIUS, forward (the report's eq. (5)) where it does not
+    pos = np.zeros((3, 2))
+    aim = np.array([[-0.1, 0.0], [-0.1, 0.0], [-2.0, 0.0]])
+    v_ref = np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 0.0]])
+    parks = parking(pos, aim, v_ref)
+    assert parks.tolist() == [True, False, False]
+    chi, chi_next = np.tile([0.05, 0.0], (3, 1)), np.tile([-0.02, 0.0], (3, 1))
+    forward = np.full(3, TRAVEL_FORWARD, dtype=np.int8)
+    got = travel_direction(chi, chi_next, np.zeros(3), forward, parks)
+    assert got.tolist() == [TRAVEL_BACKWARD, TRAVEL_FORWARD, TRAVEL_FORWARD]
 
 
 # ---------------------------------------------------------------------------- limits

@@ -211,6 +211,7 @@ def test_backward_differences_are_linear_so_estimate_reads_the_shifted_target():
 # ----------------------------------------------------------------- in a simulation
 LAWS_THAT_REPEL = {"potential", "flocking"}  # eqs. of [2] and [3]: repulsion built in
 
+
 def crossing(law: str, strategy: str, **recovery) -> dict:
     """Two followers that must swap sides behind a leader on a straight line."""
     doc = {

@@ -19,6 +19,7 @@
 
 /* The controller's constants (sandbox/model/flatness.py). */
 #define CHI_REST 0.01
+#define PARK_RADIUS 0.25 /* flatness.PARK_RADIUS */
 #define TRAVEL_NONE 0
 #define TRAVEL_FORWARD 1
 #define TRAVEL_BACKWARD (-1)
@@ -66,11 +67,23 @@ extension_row(const double *p, const double *c, const double *g, const double *v
     *norm_out = norm;
 }
 
+/* parking, one row: whether the target ``target`` (a NaN coordinate aims at the
+ * position's) rests (``|v_ref| < CHI_REST``) within PARK_RADIUS of ``pos``. */
+static inline int
+parking_row(const double *pos, const double *target, const double *v_ref)
+{
+    double a0 = isnan(target[0]) ? 0.0 : target[0] - pos[0];
+    double a1 = isnan(target[1]) ? 0.0 : target[1] - pos[1];
+    return a0 * a0 + a1 * a1 < PARK_RADIUS * PARK_RADIUS &&
+           v_ref[0] * v_ref[0] + v_ref[1] * v_ref[1] < CHI_REST * CHI_REST;
+}
+
 /* travel_direction, one row: the direction of travel for chi ``x`` of the next
  * period, from chi ``c`` now and the direction ``travel`` now (heading's cosine and
- * sine ``cth``, ``sth``). */
+ * sine ``cth``, ``sth``); backward only where the row ``parks``. */
 static inline int
-travel_row(const double *c, const double *x, double cth, double sth, int travel)
+travel_row(const double *c, const double *x, double cth, double sth, int travel,
+           int parks)
 {
     double n1 = x[0], n2 = x[1];
     if (!(n1 * n1 + n2 * n2 >= CHI_REST * CHI_REST)) {
@@ -84,7 +97,7 @@ travel_row(const double *c, const double *x, double cth, double sth, int travel)
         out = travel == TRAVEL_NONE ? TRAVEL_FORWARD
                                     : (ahead < 0.0 ? TRAVEL_BACKWARD : TRAVEL_FORWARD);
     }
-    if (out == TRAVEL_BACKWARD && ahead > 0.0) {
+    if ((out == TRAVEL_BACKWARD && ahead > 0.0) || !parks) {
         out = TRAVEL_FORWARD;
     }
     return out == TRAVEL_NONE ? TRAVEL_FORWARD : out;
@@ -283,7 +296,9 @@ controller_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
                       k4->data[i * k4->step], accel->data[i * accel->step],
                       v1_max->data[i * v1_max->step], dt, nxt, &norm);
         int now = travel[i];
-        int next = travel_row(c, nxt, cth, sth, now);
+        int parks = parking_row(pos->data + 2 * i, target->data + 2 * i,
+                                v_ref->data + 2 * i);
+        int next = travel_row(c, nxt, cth, sth, now, parks);
         double angle_chi = atan2(c[1], c[0]);
         travel_next[i] = (signed char)flat_row(
             th, cth, sth, c, nxt, norm, angle_chi, kp->data[i * kp->step],

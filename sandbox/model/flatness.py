@@ -28,6 +28,14 @@ from sandbox.model.dynamics import CLIP, wrap_angle
 #: round it at 14-20 m/s.
 CHI_REST = 0.01
 
+#: A vehicle may travel backward only where its target rests (``|x_ref'| <
+#: CHI_REST``) within this distance [m] of it (:func:`travel_direction`): about three
+#: times the overshoot past a point it stops at from the report's top speed (3.7 cm per
+#: m/s for the report's gains). Farther, as when a safety filter or another vehicle
+#: holds it metres from its slot, eq. (5) drives forward as in the report: a vehicle
+#: that backed away there from a vehicle it faced in a door never passed it.
+PARK_RADIUS = 0.25
+
 #: The direction of travel along the heading (:func:`travel_direction`): not yet
 #: travelled, forward (eq. (5)), backward (eq. (5) for ``-chi``).
 TRAVEL_NONE, TRAVEL_FORWARD, TRAVEL_BACKWARD = 0, 1, -1
@@ -156,24 +164,43 @@ def flat_inputs(
     return v1, v2
 
 
+def parking(pos: np.ndarray, aim: np.ndarray, v_ref: np.ndarray) -> np.ndarray:
+    """The rows that park, shape (n,) bool.
+
+    A row parks where its target rests (``|x_ref'| < CHI_REST``) within
+    :data:`PARK_RADIUS` of the vehicle: there :func:`travel_direction` may choose to
+    travel backward. ``aim`` is the target with a NaN coordinate replaced by the
+    position's.
+    """
+    away = aim - pos
+    near = away[:, 0] ** 2 + away[:, 1] ** 2 < PARK_RADIUS * PARK_RADIUS
+    rest = v_ref[:, 0] ** 2 + v_ref[:, 1] ** 2 < CHI_REST * CHI_REST
+    return near & rest
+
+
 def travel_direction(
-    chi: np.ndarray, chi_next: np.ndarray, theta: np.ndarray, travel: np.ndarray
+    chi: np.ndarray,
+    chi_next: np.ndarray,
+    theta: np.ndarray,
+    travel: np.ndarray,
+    parks: np.ndarray | None = None,
 ) -> np.ndarray:
     """The direction of travel along the heading for the next period.
 
     Eq. (5) drives forward (``v1 = |chi| >= 0``): a vehicle whose chi points behind
     it turns round first. That is right when it sets off, but not when the ideal
-    velocity vanishes: at the end of a reference that stops, or at a stabilization
-    point, the vehicle overshoots by a few centimetres (for the report's gains,
-    3.7 % of the speed it had, in metres per m/s) and chi comes back pointing behind
-    it. Turning round for that made the vehicle spin and orbit its point. So the
-    direction of travel is chosen again whenever chi comes back from having
-    vanished (it was at rest, ``|chi| < CHI_REST``, or it reversed within one
-    period, ``chi . chi_next < 0``): the vehicle keeps its heading line and travels
-    forward or backward, whichever is along chi (it turns by less than a quarter
-    turn). A vehicle that has not travelled yet sets off forward (the report's
-    start); a vehicle travelling backward goes forward again once chi points ahead
-    of it.
+    velocity vanishes at the point it parks at: at the end of a reference that stops,
+    or at a stabilization point, the vehicle overshoots by a few centimetres (for the
+    report's gains, 3.7 % of the speed it had, in metres per m/s) and chi comes back
+    pointing behind it. Turning round for that made the vehicle spin and orbit its
+    point. So where the vehicle parks (``parks``, :func:`parking`: its target rests
+    within :data:`PARK_RADIUS`), the direction of travel is chosen again whenever chi
+    comes back from having vanished (it was at rest, ``|chi| < CHI_REST``, or it
+    reversed within one period, ``chi . chi_next < 0``): the vehicle keeps its
+    heading line and travels forward or backward, whichever is along chi (it turns by
+    less than a quarter turn). Everywhere else, and for a vehicle that has not
+    travelled yet, the direction is forward, as in the report; a vehicle travelling
+    backward goes forward again once chi points ahead of it or it no longer parks.
 
     Parameters
     ----------
@@ -184,6 +211,8 @@ def travel_direction(
     travel : ndarray, shape (n,), int8
         The direction now: :data:`TRAVEL_NONE` (not travelled yet),
         :data:`TRAVEL_FORWARD` or :data:`TRAVEL_BACKWARD`.
+    parks : ndarray, shape (n,), bool, optional
+        The rows that park (:func:`parking`); None: every row.
 
     Returns
     -------
@@ -209,6 +238,8 @@ def travel_direction(
     chosen = np.where(travel == TRAVEL_NONE, TRAVEL_FORWARD, line)
     out = np.where(vanished, chosen, travel)
     out = np.where((out == TRAVEL_BACKWARD) & (ahead > 0.0), TRAVEL_FORWARD, out)
+    if parks is not None:
+        out = np.where(parks, out, TRAVEL_FORWARD)
     out = np.where(out == TRAVEL_NONE, TRAVEL_FORWARD, out)
     return np.where(moves, out, travel).astype(np.int8)
 

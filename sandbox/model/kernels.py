@@ -30,6 +30,7 @@ from sandbox.model.flatness import (
     extension_rate,
     flat_inputs,
     limit_turn,
+    parking,
     travel_direction,
 )
 
@@ -138,7 +139,8 @@ class Controller:
         chi_next, chi_dot = advance_extension(
             chi, chi_dot, self.dt, self.v1_max, self.accel_max
         )
-        travel_next = travel_direction(chi, chi_next, theta, travel)
+        parks = parking(pos, aim, v_ref)
+        travel_next = travel_direction(chi, chi_next, theta, travel, parks)
         turn = None
         if self.turn_max is not None:  # the turn-rate limit of the anti-windup
             chi_next, turn = limit_turn(
