@@ -55,7 +55,7 @@ def test_scenarios_with_sensors_are_batched_each_world_as_alone() -> None:
 
 @pytest.mark.parametrize(
     ("pass_right", "closest", "final"),
-    [(None, "1.670", "0.0002, 0.0002"), (0, "0.808", "0.0000, 0.0001")],
+    [(None, "1.670", "0.0000, 0.0000"), (0, "0.808", "0.0000, 0.0000")],
 )
 def test_head_on_swap_under_the_filter_keeps_the_documented_distance(
     pass_right: int | None, closest: str, final: str
@@ -68,7 +68,7 @@ def test_head_on_swap_under_the_filter_keeps_the_documented_distance(
     assert metrics["collisions"]["total"] == 0
     assert f"{metrics['min_distance']:.3f}" == closest
     finals = [v["formation_error"]["final"] for v in metrics["vehicles"].values()]
-    assert ", ".join(f"{e:.4f}" for e in finals) == final  # parked within 0.2 mm
+    assert ", ".join(f"{e:.4f}" for e in finals) == final  # parked within 0.05 mm
     row = "| `safety.filter: cbf` (defaults) | 0 | "
     if pass_right is not None:
         row = "| `safety.filter: cbf`, `safety.pass_right: 0` | 0 | "

@@ -123,15 +123,15 @@ def test_eq5_at_chi_zero_holds_heading_without_nan() -> None:
 
 
 def test_eq5_at_rest_holds_the_heading_and_moves_along_it() -> None:
-    # |chi| = 0.005 < CHI_REST: the angle of chi means nothing. The heading is held
+    # |chi| = 0.0005 < CHI_REST: the angle of chi means nothing. The heading is held
     # (v2 = 0, whatever chi') and v1 is chi's component along it: heading 0, chi
-    # (0.003, 0.004): v1 = 0.003; heading pi: v1 = -0.003.
-    assert 0.005 < CHI_REST
-    chi = v(0.003, 0.004)
+    # (0.0003, 0.0004): v1 = 0.0003; heading pi: v1 = -0.0003.
+    assert 0.0005 < CHI_REST
+    chi = v(0.0003, 0.0004)
     v1, v2 = flat_inputs(np.array([0.0]), chi, v(0, 1), 2.0)
-    assert v1[0] == pytest.approx(0.003) and v2[0] == 0.0
+    assert v1[0] == pytest.approx(0.0003) and v2[0] == 0.0
     v1, v2 = flat_inputs(np.array([math.pi]), chi, v(50, -80), 2.0)
-    assert v1[0] == pytest.approx(-0.003) and v2[0] == 0.0
+    assert v1[0] == pytest.approx(-0.0003) and v2[0] == 0.0
 
 
 def test_eq5_backward_is_eq5_for_minus_chi() -> None:
@@ -160,16 +160,16 @@ def test_eq5_backward_is_eq5_for_minus_chi() -> None:
         # forward, chi turns past a quarter turn without vanishing: still forward
         ((0.0, 1.0), (-0.1, 1.0), TRAVEL_FORWARD, TRAVEL_FORWARD),
         # at rest, chi comes back behind: backward (no turn round)
-        ((0.001, 0.0), (-0.5, 0.2), TRAVEL_FORWARD, TRAVEL_BACKWARD),
+        ((0.0005, 0.0), (-0.5, 0.2), TRAVEL_FORWARD, TRAVEL_BACKWARD),
         # ... and ahead: forward
-        ((0.001, 0.0), (0.5, 0.2), TRAVEL_BACKWARD, TRAVEL_FORWARD),
+        ((0.0005, 0.0), (0.5, 0.2), TRAVEL_BACKWARD, TRAVEL_FORWARD),
         # never travelled: sets off forward whatever the side of chi
         ((0.0, 0.0), (-0.5, 0.0), TRAVEL_NONE, TRAVEL_FORWARD),
         # backward, chi points ahead: forward again
         ((-0.5, 0.0), (-0.5, 0.6), TRAVEL_BACKWARD, TRAVEL_BACKWARD),
         ((0.0, 0.5), (0.1, 0.5), TRAVEL_BACKWARD, TRAVEL_FORWARD),
         # chi_next at rest: unchanged
-        ((0.05, 0.0), (-0.005, 0.0), TRAVEL_FORWARD, TRAVEL_FORWARD),
+        ((0.05, 0.0), (-0.0005, 0.0), TRAVEL_FORWARD, TRAVEL_FORWARD),
         ((0.0, 0.0), (0.0, 0.0), TRAVEL_NONE, TRAVEL_NONE),
     ],
 )

@@ -28,8 +28,9 @@ REC = ("safety.filter=cbf", KAPPA)
 
 #: (file, overrides, deadlocks, contact episodes (None: some), converged)
 OUTCOMES = [
-    # exact swaps: every neighbouring pair of the ring touches at the centre once
-    ("circle_swap_3", (), 0, 3, True),
+    # exact swaps: every neighbouring pair of the ring touches at the centre once (the
+    # discontinuous strategy of the 3-ring's file: two pairs again on the way out)
+    ("circle_swap_3", (), 0, 5, True),
     ("circle_swap_3", ("recovery.strategy=none",), 1, 3, False),
     ("circle_swap_3", (KAPPA,), 0, 3, True),
     ("circle_swap_8", (), 1, 8, False),
@@ -122,12 +123,12 @@ def test_the_stall_short_of_a_slot_beyond_a_stopped_vehicle() -> None:
 
 def test_the_door_under_the_recommended_configuration() -> None:
     # a_k and b_k start symmetric about the door's centre and cannot both pass the gap
-    # at once; they wait until the rounding of the physics breaks the tie: one pair
-    # passes the door, the other four vehicles drive round the ends of the wall, 6 m
-    # from it. Which of a0 and b0 goes first, and when, is the rounding's: it differs
-    # between CPUs (numpy's sine and cosine on AVX-512 and on AVX2 differ in the last
-    # bit). Measured: b0 at 25.3 s and a0 at 27.9 s on one machine, a0 at 25.3 s and
-    # b0 at 30.6 s on another; the last settles at 57.2 s and 56.4 s.
+    # at once. Every vehicle gets to the other side: a1, a2, b1, b2 round the ends of
+    # the wall, 6 m from the door; a0 and b0, held face to face in the door, either
+    # pass it once the rounding of the physics breaks the tie (before the controller
+    # held its heading at rest: b0 at 25.3 s and a0 at 27.9 s on one machine, the
+    # other way round on another) or go round too (as measured now: a0 and b0 round
+    # the wall at 35.0 s and 35.6 s; the last settles at 56.4 s).
     run, m = run_scenario(SAFETY / "door.yaml", *REC)
     through, around = {}, {}
     for name in ("a0", "a1", "a2", "b0", "b1", "b2"):
@@ -135,9 +136,10 @@ def test_the_door_under_the_recommended_configuration() -> None:
         cross = np.flatnonzero(np.sign(v.x1[1:]) != np.sign(v.x1[:-1]))
         for k in cross:
             (through if abs(v.x2[k]) < 0.5 else around)[name] = run.t[k]
-    assert sorted(through) == ["a0", "b0"]
-    assert min(through.values()) > 15.0  # the tie holds until rounding breaks it
-    assert sorted(around) == ["a1", "a2", "b1", "b2"]
+    assert set(through) <= {"a0", "b0"}
+    assert not through or min(through.values()) > 15.0  # the tie holds till then
+    assert set(through) | set(around) == {"a0", "a1", "a2", "b0", "b1", "b2"}
+    assert {"a1", "a2", "b1", "b2"} <= set(around)
     assert m["collisions"]["total"] == 0 and m["deadlocks"] == []
     assert m["converged"]
     last = max(v["settling_time"] for v in m["vehicles"].values())

@@ -18,7 +18,7 @@
 #include "motor_model.h"
 
 /* The controller's constants (sandbox/model/flatness.py). */
-#define CHI_REST 0.01
+#define CHI_REST 0.001
 #define PARK_RADIUS 0.25 /* flatness.PARK_RADIUS */
 #define TRAVEL_NONE 0
 #define TRAVEL_FORWARD 1

@@ -25,8 +25,10 @@ from sandbox.model.dynamics import CLIP, wrap_angle
 #: (:data:`sandbox.model.laws.REST_SPEED`). Turning towards chi there would make a
 #: turn rate of ``kp`` times an angle of noise: a vehicle parked at its point spun at
 #: 5-7 rad/s, and a leader spinning at the end of its path swung a rotating formation
-#: round it at 14-20 m/s.
-CHI_REST = 0.01
+#: round it at 14-20 m/s. 1 mm/s: the speed below which eq. (5) set ``v1 = 0`` before;
+#: 1 cm/s held vehicles that a filter or their neighbours had slowed, and changed how
+#: the report's traffic scenes resolve (`traffic/intersection_four` no longer settled).
+CHI_REST = 0.001
 
 #: A vehicle may travel backward only where its target rests (``|x_ref'| <
 #: CHI_REST``) within this distance [m] of it (:func:`travel_direction`): about three
