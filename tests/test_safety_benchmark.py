@@ -60,7 +60,7 @@ OUTCOMES = [
     # the recommended configuration: the tangential term and the CBF filter with its
     # right-hand rule out of stalls (pass_right pi/2, the default): success in every
     # case, no contact, no deadlock, every vehicle settled by the end of its file (the
-    # door in 57.2 s of its 60, the crossing platoons in 13.3 s of 20)
+    # door in 56.4 s of its 60, the crossing platoons in 12.9 s of 20)
     ("circle_swap_3", REC, 0, 0, True),
     ("circle_swap_8", REC, 0, 0, True),
     ("circle_swap_20", REC, 0, 0, True),
