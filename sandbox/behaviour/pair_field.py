@@ -161,7 +161,8 @@ class ShiftKernel:
         neighbours = self.neighbours
         i, j = neighbours.candidates(pos)
         N = len(pos)
-        out = {} if self._c.ALLOCATES else _outputs(N, len(i))  # else the call's own
+        # None: the call makes its own outputs (a build with numpy's C API)
+        out = _NO_OUTPUTS if self._c.ALLOCATES else _outputs(N, len(i))
         target, shift, active, d2 = self._c.pair_terms(
             pos=pos,
             seen=seen,
@@ -174,17 +175,19 @@ class ShiftKernel:
             beta=self.beta,
             avoid=avoiders,
             slot=slot,
-            **out,
+            shift=out[0],
+            target=out[1],
+            active=out[2],
+            d2=out[3],
         )
         neighbours.remember(pos, d2)
         return target, shift, active
 
 
-def _outputs(N: int, pairs: int) -> dict[str, np.ndarray]:
+#: The C call's outputs where it makes them: ``shift``, ``target``, ``active``, ``d2``.
+_NO_OUTPUTS = (None, None, None, None)
+
+
+def _outputs(N: int, pairs: int) -> tuple[np.ndarray, ...]:
     """The C call's outputs, made here (a build that cannot make them)."""
-    return {
-        "shift": np.empty((N, 2)),
-        "target": np.empty((N, 2)),
-        "active": np.empty(N, bool),
-        "d2": np.empty(pairs),
-    }
+    return np.empty((N, 2)), np.empty((N, 2)), np.empty(N, bool), np.empty(pairs)

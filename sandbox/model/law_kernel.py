@@ -144,7 +144,8 @@ class LawKernel:
             prev_x, prev_v = self._prev
         p, dp, ddp = (None, None, None) if table is None else table
         c = self._c
-        out = {} if c.ALLOCATES else _outputs(len(pose))  # else the call's own
+        # None: the call makes its own outputs (a build with numpy's C API)
+        out = (None, None, None) if c.ALLOCATES else _outputs(len(pose))
         slot, v_ref, a_ref, tangent = c.law_targets(
             kind=self.kind,
             delta=law.delta,
@@ -164,7 +165,9 @@ class LawKernel:
             prev_v=prev_v,
             track=track,
             commanded=commanded,
-            **out,
+            slot=out[0],
+            v_ref=out[1],
+            a_ref=out[2],
         )
         if motion is not None:
             motion.count = count + 1
@@ -187,9 +190,9 @@ class LawKernel:
         self._prev = (prev_x, prev_v)
 
 
-def _outputs(N: int) -> dict[str, np.ndarray]:
+def _outputs(N: int) -> tuple[np.ndarray, ...]:
     """The C call's outputs, (N, 2) each, made here (a build that cannot make them)."""
-    return {name: np.empty((N, 2)) for name in ("slot", "v_ref", "a_ref")}
+    return np.empty((N, 2)), np.empty((N, 2)), np.empty((N, 2))
 
 
 def covers(law: Any, leader: int) -> bool:
