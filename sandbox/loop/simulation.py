@@ -454,9 +454,13 @@ class Simulation:
             self._stage_failed("act", exc)
             return
         self._control_time += time.perf_counter() - start
-        if not self._stage("record", self._record, self.plan):
+        try:
+            self._record(self.plan)
+        except Exception as exc:  # a defect: the run ends, its outputs kept
+            self._stage_failed("record", exc, last=False)
             return
-        self._spill_failed()
+        if self.recorder.on_disk:  # a spill that failed ends its world
+            self._spill_failed()
         if not live.count:
             live.closed = True
             return
@@ -466,7 +470,10 @@ class Simulation:
                 live.info[w]["interrupted"] = {"t": self.k * self._layout.h}
                 self._end_world(w, STATUS_INTERRUPTED, last=False)
             return
-        if not self._stage("physics", self._advance, following):
+        try:
+            self._advance(following)
+        except Exception as exc:
+            self._stage_failed("physics", exc, last=False)
             return
         try:
             sensed = self._sense()
