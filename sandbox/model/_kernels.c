@@ -169,63 +169,32 @@ flat_row(double th, double cth, double sth, const double *c, const double *x,
     return travel_next;
 }
 
-/* The keyword arguments of controller_step, in the order of ``args`` below. */
-enum {
-    A_POS, A_CHI, A_THETA, A_TARGET, A_V_REF, A_A_REF, A_K1, A_K2, A_K3, A_K4,
-    A_ACCEL_MAX, A_V1_MAX, A_KP, A_TURN_MAX, A_V2_MAX, A_CHI_NEXT, A_V1, A_V2,
-    A_TRAVEL, A_TRAVEL_NEXT, A_DT, A_TURNING, A_COUNT
-};
-/* float64 arrays: A_POS .. A_V2 (the last three written). */
-#define A_ROWS (A_V2 + 1)
-static const char *const controller_names[A_COUNT] = {
-    "pos", "chi", "theta", "target", "v_ref", "a_ref", "k1", "k2", "k3", "k4",
-    "accel_max", "v1_max", "kp", "turn_max", "v2_max", "chi_next", "v1", "v2",
-    "travel", "travel_next", "dt", "turning",
-};
-/* The names as interned strings (made at import): a caller's keywords are the same
- * objects, matched by identity before any comparison of text. */
-static PyObject *controller_keys[A_COUNT];
-
-/* ``args`` in the order of controller_names from a call by keywords only; -1 with
- * TypeError on a positional argument, an unknown, repeated or missing keyword. */
-static int
-keywords(PyObject *const *args, Py_ssize_t nargs, PyObject *kwnames,
-         PyObject **out)
-{
-    Py_ssize_t given = kwnames == NULL ? 0 : PyTuple_GET_SIZE(kwnames);
-    if (nargs != 0 || given != A_COUNT) {
-        PyErr_Format(PyExc_TypeError,
-                     "controller_step takes its %d arguments by keyword only", A_COUNT);
-        return -1;
-    }
-    for (int k = 0; k < A_COUNT; k++) {
-        out[k] = NULL;
-    }
-    for (Py_ssize_t j = 0; j < given; j++) {
-        PyObject *key = PyTuple_GET_ITEM(kwnames, j);
-        int at = -1;
-        for (int k = 0; k < A_COUNT && at < 0; k++) {
-            if (key == controller_keys[k]) {
-                at = k;
-            }
-        }
-        for (int k = 0; k < A_COUNT && at < 0; k++) {
-            if (PyUnicode_Compare(key, controller_keys[k]) == 0) {
-                at = k;
-            }
-        }
-        if (PyErr_Occurred()) {
-            return -1;
-        }
-        if (at < 0 || out[at] != NULL) {
-            PyErr_Format(PyExc_TypeError, "controller_step: %s keyword %R",
-                         at < 0 ? "unknown" : "repeated", key);
-            return -1;
-        }
-        out[at] = args[nargs + j];
-    }
-    return 0;
-}
+/* The arguments of controller_step, by name (accel.h): the gains and limits (n,) or
+ * (1,) (one value for every row). */
+#define CONTROLLER_STEP(X)                                                         \
+    X(pos, FLOATS, 0)                                                              \
+    X(chi, FLOATS, 0)                                                              \
+    X(theta, FLOATS, 0)                                                            \
+    X(target, FLOATS, 0)                                                           \
+    X(v_ref, FLOATS, 0)                                                            \
+    X(a_ref, FLOATS, 0)                                                            \
+    X(k1, FLOATS, 0)                                                               \
+    X(k2, FLOATS, 0)                                                               \
+    X(k3, FLOATS, 0)                                                               \
+    X(k4, FLOATS, 0)                                                               \
+    X(accel_max, FLOATS, 0)                                                        \
+    X(v1_max, FLOATS, 0)                                                           \
+    X(kp, FLOATS, 0)                                                               \
+    X(turn_max, FLOATS, 0)                                                         \
+    X(v2_max, FLOATS, 0)                                                           \
+    X(chi_next, FLOATS, WRITTEN)                                                   \
+    X(v1, FLOATS, WRITTEN)                                                         \
+    X(v2, FLOATS, WRITTEN)                                                         \
+    X(travel, BYTES, 0)                                                            \
+    X(travel_next, BYTES, WRITTEN)                                                 \
+    X(dt, NUMBER, 0)                                                               \
+    X(turning, INTEGER, 0)
+NAMED(controller_step, CONTROLLER_STEP)
 
 PyDoc_STRVAR(controller_step_doc,
 "controller_step(*, pos, chi, theta, target, v_ref, a_ref, k1, k2, k3, k4,\n"
@@ -244,71 +213,52 @@ static PyObject *
 controller_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
                 PyObject *kwnames)
 {
-    PyObject *a[A_COUNT];
-    if (keywords(args, nargs, kwnames, a) < 0) {
+    controller_step_args a;
+    if (parse_named(&controller_step_signature, args, nargs, kwnames, (Arg *)&a) < 0) {
         return NULL;
     }
-    double dt = PyFloat_AsDouble(a[A_DT]);
-    int turning_limit = PyObject_IsTrue(a[A_TURNING]);
-    if ((dt == -1.0 && PyErr_Occurred()) || turning_limit < 0) {
-        return NULL;
+    const double dt = a.dt.x;
+    const int turning_limit = a.turning.n != 0;
+    const Arg *k1 = &a.k1, *k2 = &a.k2, *k3 = &a.k3, *k4 = &a.k4;
+    const Arg *accel = &a.accel_max, *v1_max = &a.v1_max, *kp = &a.kp;
+    const Arg *turn = &a.turn_max, *v2_max = &a.v2_max;
+    const Py_ssize_t n = a.theta.len;
+    const Arg *gains[] = {k1, k2, k3, k4, accel, v1_max, kp, turn, v2_max};
+    int shapes = a.pos.len == 2 * n && a.chi.len == 2 * n && a.target.len == 2 * n &&
+                 a.v_ref.len == 2 * n && a.a_ref.len == 2 * n &&
+                 a.chi_next.len == 2 * n && a.v1.len == n && a.v2.len == n &&
+                 a.travel.len == n && a.travel_next.len == n;
+    for (int g = 0; g < 9 && shapes; g++) {
+        shapes = gains[g]->len == n || gains[g]->len == 1;
     }
-    Rows r[A_ROWS];
-    if (get_all_rows(a, r, A_ROWS, A_CHI_NEXT) < 0) {
-        return NULL;
-    }
-    Py_buffer tv, tn;
-    if (get_bytes(a[A_TRAVEL], &tv, 0) < 0) {
-        release(r, A_ROWS);
-        return NULL;
-    }
-    if (get_bytes(a[A_TRAVEL_NEXT], &tn, 1) < 0) {
-        PyBuffer_Release(&tv);
-        release(r, A_ROWS);
-        return NULL;
-    }
-    Rows *pos = &r[A_POS], *chi = &r[A_CHI], *theta = &r[A_THETA];
-    Rows *target = &r[A_TARGET], *v_ref = &r[A_V_REF], *a_ref = &r[A_A_REF];
-    Rows *k1 = &r[A_K1], *k2 = &r[A_K2], *k3 = &r[A_K3], *k4 = &r[A_K4];
-    Rows *accel = &r[A_ACCEL_MAX], *v1_max = &r[A_V1_MAX], *kp = &r[A_KP];
-    Rows *turn = &r[A_TURN_MAX], *v2_max = &r[A_V2_MAX];
-    Rows *chi_next = &r[A_CHI_NEXT], *v1_out = &r[A_V1], *v2_out = &r[A_V2];
-    Py_ssize_t n = theta->len;
-    if (pos->len != 2 * n || chi->len != 2 * n || target->len != 2 * n ||
-        v_ref->len != 2 * n || a_ref->len != 2 * n || chi_next->len != 2 * n ||
-        v1_out->len != n || v2_out->len != n || tv.len != n || tn.len != n) {
-        PyBuffer_Release(&tn);
-        PyBuffer_Release(&tv);
-        release(r, A_ROWS);
+    if (!shapes) {
+        release_named(&controller_step_signature, (Arg *)&a);
         PyErr_SetString(PyExc_ValueError, "controller_step: shapes differ");
         return NULL;
     }
-    const signed char *travel = (const signed char *)tv.buf;
-    signed char *travel_next = (signed char *)tn.buf;
+    const double *pos = a.pos.f, *chi = a.chi.f, *theta = a.theta.f;
+    const double *target = a.target.f, *v_ref = a.v_ref.f, *a_ref = a.a_ref.f;
+    const signed char *travel = (const signed char *)a.travel.b;
+    signed char *travel_next = (signed char *)a.travel_next.b;
     for (Py_ssize_t i = 0; i < n; i++) {
-        const double *c = chi->data + 2 * i;
-        double th = theta->data[i];
+        const double *c = chi + 2 * i;
+        double th = theta[i];
         double cth = cos(th), sth = sin(th);
         double nxt[2], norm;
-        extension_row(pos->data + 2 * i, c, target->data + 2 * i, v_ref->data + 2 * i,
-                      a_ref->data + 2 * i, k1->data[i * k1->step],
-                      k2->data[i * k2->step], k3->data[i * k3->step],
-                      k4->data[i * k4->step], accel->data[i * accel->step],
-                      v1_max->data[i * v1_max->step], dt, nxt, &norm);
+        extension_row(pos + 2 * i, c, target + 2 * i, v_ref + 2 * i, a_ref + 2 * i,
+                      k1->f[i * k1->step], k2->f[i * k2->step], k3->f[i * k3->step],
+                      k4->f[i * k4->step], accel->f[i * accel->step],
+                      v1_max->f[i * v1_max->step], dt, nxt, &norm);
         int now = travel[i];
-        int parks = parking_row(pos->data + 2 * i, target->data + 2 * i,
-                                v_ref->data + 2 * i);
+        int parks = parking_row(pos + 2 * i, target + 2 * i, v_ref + 2 * i);
         int next = travel_row(c, nxt, cth, sth, now, parks);
         double angle_chi = atan2(c[1], c[0]);
         travel_next[i] = (signed char)flat_row(
-            th, cth, sth, c, nxt, norm, angle_chi, kp->data[i * kp->step],
-            turn->data[i * turn->step], v2_max->data[i * v2_max->step], dt,
-            turning_limit, now, next, chi_next->data + 2 * i, v1_out->data + i,
-            v2_out->data + i);
+            th, cth, sth, c, nxt, norm, angle_chi, kp->f[i * kp->step],
+            turn->f[i * turn->step], v2_max->f[i * v2_max->step], dt, turning_limit,
+            now, next, a.chi_next.f + 2 * i, a.v1.f + i, a.v2.f + i);
     }
-    PyBuffer_Release(&tn);
-    PyBuffer_Release(&tv);
-    release(r, A_ROWS);
+    release_named(&controller_step_signature, (Arg *)&a);
     Py_RETURN_NONE;
 }
 
@@ -381,13 +331,5 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC
 PyInit__kernels(void)
 {
-    for (int k = 0; k < A_COUNT; k++) {
-        if (controller_keys[k] == NULL) {
-            controller_keys[k] = PyUnicode_InternFromString(controller_names[k]);
-            if (controller_keys[k] == NULL) {
-                return NULL;
-            }
-        }
-    }
     return PyModule_Create(&module);
 }
