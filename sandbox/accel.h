@@ -49,7 +49,12 @@ numpy_data(PyObject *obj, int type, int writable, Py_ssize_t *count)
     if ((PyArray_FLAGS(a) & need) != need || PyArray_TYPE(a) != type) {
         return NULL;
     }
-    *count = PyArray_SIZE(a);
+    npy_intp size = 1; /* PyArray_SIZE without its call through numpy's table */
+    const npy_intp *dims = PyArray_DIMS(a);
+    for (int d = PyArray_NDIM(a) - 1; d >= 0; d--) {
+        size *= dims[d];
+    }
+    *count = size;
     return PyArray_DATA(a);
 }
 #endif

@@ -49,7 +49,7 @@ from __future__ import annotations
 import importlib
 import os
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from types import ModuleType
@@ -129,29 +129,24 @@ PATHS: tuple[CompiledPath, ...] = (
 )
 
 _BY_NAME = {p.name: p for p in PATHS}
-#: Each path's module once looked up (None: off), and why it is off.
-_modules: dict[str, ModuleType | None] = {}
+
+
+class _Found(dict):
+    """Each path's module once looked up (None: off); a name not yet asked is."""
+
+    def __missing__(self, name: str) -> ModuleType | None:
+        return _look_up(_BY_NAME[name])
+
+
+_modules = _Found()
 _reasons: dict[str, str] = {}
 _setting: str | None = None
 
-
-def module(name: str) -> ModuleType | None:
-    """The extension module of the compiled path ``name``, or None where it is off.
-
-    Parameters
-    ----------
-    name : str
-        One of :data:`PATHS`' names, e.g. ``"controller"``.
-
-    Raises
-    ------
-    KeyError
-        ``name`` is not a compiled path.
-    """
-    try:
-        return _modules[name]
-    except KeyError:
-        return _look_up(_BY_NAME[name])
+#: ``module(name)``: the extension module of the compiled path ``name``, or None
+#: where it is off; KeyError where ``name`` is not one of :data:`PATHS`' names (e.g.
+#: ``"controller"``). The lookup of the dict itself, a call without a Python frame:
+#: the loop asks it several times a period.
+module: Callable[[str], ModuleType | None] = _modules.__getitem__
 
 
 def _look_up(path: CompiledPath) -> ModuleType | None:
@@ -235,20 +230,21 @@ def switched_off(*names: str) -> Iterator[None]:
     ...     module("controller") is None
     True
     """
-    global _modules, _reasons
     off = names or tuple(_BY_NAME)
     unknown = [name for name in off if name not in _BY_NAME]
     if unknown:
         raise KeyError(f"not compiled paths: {', '.join(unknown)}")
-    saved = _modules, _reasons
-    _modules, _reasons = dict(_modules), dict(_reasons)
     for name in _BY_NAME:
         if name not in off:
             module(name)  # looked up now, as it stands outside the block
+    saved = dict(_modules), dict(_reasons)
     for name in off:
         _modules[name] = None
         _reasons[name] = "switched off (sandbox.accel.switched_off)"
     try:
         yield
-    finally:
-        _modules, _reasons = saved
+    finally:  # in place: ``module`` is bound to this very dict
+        _modules.clear()
+        _modules.update(saved[0])
+        _reasons.clear()
+        _reasons.update(saved[1])

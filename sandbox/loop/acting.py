@@ -204,11 +204,14 @@ class Acting:
             detecting.intend(v1, v2)
         # The drive executes a failure within its acceleration limit (a crash aside).
         fs = self._failures
-        v1, v2, failing, frozen, errors = fs.apply(
-            t, live, v1, v2, fleet.v1, self.accel_max * h
-        )
-        for w, exc in errors:  # a failure plug-in failed: its world ends now
-            failed(w, exc)
+        if self._fails:
+            v1, v2, failing, frozen, errors = fs.apply(
+                t, live, v1, v2, fleet.v1, self.accel_max * h
+            )
+            for w, exc in errors:  # a failure plug-in failed: its world ends now
+                failed(w, exc)
+        else:  # no vehicle ever fails: the shared read-only flags
+            failing = frozen = fs.none
         if cars is not None and self._fails:  # a failure's commands steered too
             v2, steer = cars.steer(v1, v2, fleet.steer, steer, failing)
         if detecting.on:

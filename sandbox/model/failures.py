@@ -208,8 +208,8 @@ class Failures:
         self._on = np.zeros(len(specs), dtype=bool)
         self._waiting = len(specs)  # failures not started yet
         #: No vehicle of any world (read-only: the flags of a period without failures).
-        self._none = np.zeros(self.N, dtype=bool)
-        self._none.flags.writeable = False
+        self.none = np.zeros(self.N, dtype=bool)
+        self.none.flags.writeable = False
 
     def __len__(self) -> int:
         return len(self.specs)
@@ -256,7 +256,7 @@ class Failures:
         N = self.N
         errors: list[tuple[int, PluginRunError]] = []
         if not len(self.specs):  # no vehicle ever fails: shared read-only flags
-            return v1, v2, self._none, self._none, errors
+            return v1, v2, self.none, self.none, errors
         failed = np.zeros(N, dtype=bool)
         frozen = np.zeros(N, dtype=bool)
         v1, v2 = v1.copy(), v2.copy()
