@@ -351,34 +351,12 @@ kind_text(int kind)
     }
 }
 
-/* The array ``obj`` of ``kind`` into ``arg``: through numpy's C API where it can
- * (nothing held), else the buffer interface (held in arg->view). */
-static inline int
-take_array(const char *function, const Param *p, Arg *arg, PyObject *obj)
+/* The array ``obj`` of ``p->kind`` into ``arg`` through the buffer interface (held
+ * in arg->view): any object that exports a buffer of the element type. */
+static int
+take_buffer(const char *function, const Param *p, Arg *arg, PyObject *obj)
 {
     int writable = (p->flags & WRITTEN) != 0;
-#ifdef SANDBOX_NUMPY_API
-    Py_ssize_t count;
-    void *data = NULL;
-    switch (p->kind) {
-    case FLOATS:
-    case VALUES: data = numpy_data(obj, NPY_DOUBLE, writable, &count); break;
-    case BYTES:
-        data = numpy_data(obj, NPY_BOOL, writable, &count);
-        if (data == NULL) {
-            data = numpy_data(obj, NPY_INT8, writable, &count);
-        }
-        break;
-    case INTPS: data = numpy_data(obj, NPY_INTP, writable, &count); break;
-    default: data = numpy_data(obj, NPY_INT64, writable, &count); break;
-    }
-    if (data != NULL) {
-        arg->data = data;
-        arg->len = count;
-        arg->step = count == 1 && (p->kind == FLOATS || p->kind == VALUES) ? 0 : 1;
-        return 0;
-    }
-#endif
     int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
     if (PyObject_GetBuffer(obj, &arg->view, flags) < 0) {
         return -1;
@@ -407,6 +385,37 @@ take_array(const char *function, const Param *p, Arg *arg, PyObject *obj)
     arg->len = arg->view.len / size;
     arg->step = arg->len == 1 && (p->kind == FLOATS || p->kind == VALUES) ? 0 : 1;
     return 0;
+}
+
+/* The array ``obj`` of ``kind`` into ``arg``: through numpy's C API where it can
+ * (nothing held; the common case, inline), else the buffer interface. */
+static inline int
+take_array(const char *function, const Param *p, Arg *arg, PyObject *obj)
+{
+#ifdef SANDBOX_NUMPY_API
+    int writable = (p->flags & WRITTEN) != 0;
+    Py_ssize_t count;
+    void *data = NULL;
+    switch (p->kind) {
+    case FLOATS:
+    case VALUES: data = numpy_data(obj, NPY_DOUBLE, writable, &count); break;
+    case BYTES:
+        data = numpy_data(obj, NPY_BOOL, writable, &count);
+        if (data == NULL) {
+            data = numpy_data(obj, NPY_INT8, writable, &count);
+        }
+        break;
+    case INTPS: data = numpy_data(obj, NPY_INTP, writable, &count); break;
+    default: data = numpy_data(obj, NPY_INT64, writable, &count); break;
+    }
+    if (data != NULL) {
+        arg->data = data;
+        arg->len = count;
+        arg->step = count == 1 && (p->kind == FLOATS || p->kind == VALUES) ? 0 : 1;
+        return 0;
+    }
+#endif
+    return take_buffer(function, p, arg, obj);
 }
 
 /* Argument ``k`` of ``sig`` from ``obj``: an array, a number, an integer or an
