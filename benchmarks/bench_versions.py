@@ -15,9 +15,12 @@ run's time is its own cost plus whatever the machine did meanwhile, and the fast
 turn holds the least of the latter (the medians of single runs were seen to move by
 30 % from one measurement to the next here). The last column is the median over the
 turns of the other tree's run time over this one's, each pair of runs timed one
-right after the other.
+right after the other. With ``--vector K ...``, rows of ``VehicleVectorEnv`` of K
+worlds of the Fig. 15 platoon (random actions through episode ends), 100 vector steps
+a turn: env steps per second of each side's fastest turn, and the paired median.
 
     python benchmarks/bench_versions.py --other /path/to/checkout
+    python benchmarks/bench_versions.py --other /path/to/checkout --vector 16 64 256
     python benchmarks/bench_versions.py --other ../old --other-python ../old/env/bin/py
 
 The other checkout must hold ``benchmarks/bench_scale.py`` and
@@ -44,6 +47,9 @@ ROWS = (
     ("N = 3, fig15 (12 s)", "fig15"),
 )
 
+#: Vector steps of each turn of a ``VehicleVectorEnv`` row.
+VECTOR_STEPS = 100
+
 #: The worker: builds the rows' scenarios in its own tree, then times what it is
 #: asked, one JSON line a request ("run ROW" or "bare ROW") on stdin.
 WORKER = r"""
@@ -57,6 +63,8 @@ from sandbox.loop.simulation import Simulation
 from sandbox.run.metrics import compute_metrics
 from sandbox.scenario import load_scenario
 
+VECTOR_STEPS = int(sys.argv[2])
+
 def build(key):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -65,9 +73,29 @@ def build(key):
         path = root / "scenarios" / "paper" / "fig15_continuous_beta1.yaml"
         return load_scenario(path, overrides=["duration=12"])
 
+def vector_steps(key):
+    import numpy as np
+    from sandbox.envs import VehicleVectorEnv
+    env = VehicleVectorEnv("paper/fig15_continuous_beta1", num_envs=int(key[7:]))
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    shape = env.action_space.shape
+    def steps(count):
+        t0 = time.perf_counter()
+        for _ in range(count):
+            env.step(rng.uniform(-1, 1, size=shape).astype(np.float32))
+        return time.perf_counter() - t0
+    steps(20)  # warm
+    return steps
+
 scenarios = {}
 for line in sys.stdin:
     what, key = line.split()
+    if what == "steps":
+        if key not in scenarios:
+            scenarios[key] = vector_steps(key)
+        print(json.dumps(scenarios[key](VECTOR_STEPS)), flush=True)
+        continue
     sc = scenarios.get(key)
     if sc is None:
         sc = scenarios[key] = build(key)
@@ -86,7 +114,7 @@ for line in sys.stdin:
 def start(python: str, root: Path) -> subprocess.Popen:
     """A worker of the tree ``root`` run by ``python``."""
     return subprocess.Popen(
-        [python, "-c", WORKER, str(root)],
+        [python, "-c", WORKER, str(root), str(VECTOR_STEPS)],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
@@ -112,6 +140,14 @@ def main(argv: list[str] | None = None) -> int:
         help="its Python (default: OTHER/.venv/bin/python)",
     )
     p.add_argument("--repeat", type=int, default=30, help="turns of each row")
+    p.add_argument(
+        "--vector",
+        type=int,
+        nargs="*",
+        default=[],
+        metavar="K",
+        help="VehicleVectorEnv rows of K worlds as well (e.g. --vector 16 64 256)",
+    )
     args = p.parse_args(argv)
     other = args.other.resolve()
     other_python = args.other_python or str(other / ".venv" / "bin" / "python")
@@ -141,6 +177,28 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"| {name} | {best['other']:.3f} | {best['this']:.3f} | "
                 f"{best['this'] / best['other']:.2f} | {paired:.2f} |",
+                flush=True,
+            )
+        if args.vector:
+            print()
+            print(
+                "| VehicleVectorEnv (Fig. 15, random actions) | other: env steps/s "
+                "| this | this / other (speed) | step time other / this, median of "
+                "turns |"
+            )
+            print("|---|---:|---:|---:|---:|")
+        for K in args.vector:
+            times = {side: [] for side in sides}
+            for rep in range(args.repeat):
+                order = ("other", "this") if rep % 2 == 0 else ("this", "other")
+                for side in order:
+                    times[side].append(ask(sides[side], "steps", f"vector:{K}"))
+            rate = {side: VECTOR_STEPS * K / min(t) for side, t in times.items()}
+            pairs = zip(times["other"], times["this"], strict=True)
+            paired = statistics.median(a / b for a, b in pairs)
+            print(
+                f"| num_envs = {K} | {rate['other']:,.0f} | {rate['this']:,.0f} | "
+                f"{rate['this'] / rate['other']:.2f} | {paired:.2f} |",
                 flush=True,
             )
     finally:
