@@ -86,6 +86,7 @@ def test_switched_off_turns_paths_off_within_its_block_only():
             pass
 
 
+@pytest.mark.slow
 def test_only_the_registry_imports_the_extensions():
     extensions = {p.module for p in accel.PATHS}
     found = []
@@ -136,6 +137,7 @@ def test_a_value_of_the_switch_that_is_neither_0_nor_1_is_named():
     assert "SANDBOX_ACCEL='off' is neither 0" in done.stderr
 
 
+@pytest.mark.slow
 def test_a_path_not_built_is_named_by_info_and_run(tmp_path):
     missing = f"{module_of('controller')},{module_of('filter')}"
     done = sandbox("info", missing=missing)

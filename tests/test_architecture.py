@@ -201,18 +201,21 @@ def circles_of(graph: dict[str, set[str]]) -> list[frozenset[str]]:
     return circles
 
 
+@pytest.mark.slow
 def test_no_import_circle_but_the_known_ones() -> None:
     circles = circles_of(import_graph())
     new = [sorted(c) for c in circles if not any(c <= k for k in KNOWN_CIRCLES)]
     assert new == []
 
 
+@pytest.mark.slow
 def test_the_known_circles_still_exist() -> None:
     # a circle gone from the code leaves the list (the lead empties it)
     circles = circles_of(import_graph())
     assert all(any(c <= known for c in circles) for known in KNOWN_CIRCLES)
 
 
+@pytest.mark.slow
 def test_the_known_edges_still_exist() -> None:
     # an edge gone from the code leaves the list (the lead empties it)
     found = {

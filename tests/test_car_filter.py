@@ -171,6 +171,7 @@ def test_groups_keep_unicycles_apart_from_cars() -> None:
     assert [(m, g.tolist()) for m, g in kept][:2] == [(0, [1]), (0, [0])]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("barrier", ["velocity", "braking"])
 def test_a_batch_of_cars_and_unicycles_with_the_filter_is_each_world_alone(
     barrier,

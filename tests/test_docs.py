@@ -122,6 +122,7 @@ def test_the_runnable_blocks_of_a_page_run(page: Path, tmp_path: Path) -> None:
     ),
     reason="needs the docs extra (mkdocs, mkdocs-material, mkdocstrings)",
 )
+@pytest.mark.slow
 def test_the_site_builds_strictly(tmp_path: Path) -> None:
     site = tmp_path / "site"
     done = subprocess.run(

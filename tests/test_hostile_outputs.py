@@ -143,6 +143,7 @@ def run_dir(tmp_path: Path, scenario: Path) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_plot_never_replaces_a_users_figure(
     tmp_path: Path, run_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

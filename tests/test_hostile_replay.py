@@ -157,6 +157,7 @@ def substituted(
     return count
 
 
+@pytest.mark.slow
 def test_every_bundled_name_and_description_stays_text(
     small: tuple[Run, dict],
 ) -> None:

@@ -432,6 +432,7 @@ def test_command_schedules_of_many_worlds_at_once_give_the_bytes_alone(tmp_path)
     assert np.all(cmd[t >= 2.5] == 0.0)
 
 
+@pytest.mark.slow
 def test_the_platoons_sections_of_many_worlds_are_called_once_for_all(tmp_path):
     # Each recovery and safety section of the worlds' platoons is one call for all
     # worlds (loop/platoon_sections.py), a world's own beta on its rows; the files

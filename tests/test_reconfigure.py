@@ -325,6 +325,7 @@ def test_a_handover_without_a_leader_warns_that_it_has_no_effect() -> None:
     assert any("on_leader_failure" in w and "no effect" in w for w in sc.warnings)
 
 
+@pytest.mark.slow
 def test_reconfiguring_worlds_in_one_loop_give_the_runs_alone() -> None:
     # each world re-forms on its own events, its law its own, in the one loop
     base = load_scenario(FAILURES / "column_close.yaml")

@@ -403,6 +403,7 @@ def test_a_damaged_page_says_so(
         ctx.close()
 
 
+@pytest.mark.slow
 def test_two_platoons_draw_both_reference_paths_in_their_colours(
     browser: object, tmp_path: Path
 ) -> None:

@@ -162,6 +162,7 @@ def test_the_run_barrier_by_hand_and_the_better_backup() -> None:
     assert v1[0] > 0.95 + 0.03 and step.slack.max() == 0.0
 
 
+@pytest.mark.slow
 def test_a_runaway_that_hit_a_braked_leader_no_longer_touches() -> None:
     # Seed 0 of the randomised runaway, sensing (2 cm, 50 ms) and the residual
     # detector: the leader, braked to a stop by the filter on the runaway's arc,

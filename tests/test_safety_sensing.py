@@ -110,6 +110,7 @@ def test_the_gains_by_hand() -> None:
     assert again[0, 0] == 4.25
 
 
+@pytest.mark.slow
 def test_the_error_is_within_the_stated_bound() -> None:
     # 20,000 periods of a vehicle weaving at 1-2 m/s, copies 5 periods late with
     # 2 cm / 0.02 rad of noise, K = 0.1: the error's standard deviation tends to

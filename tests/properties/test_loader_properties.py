@@ -158,6 +158,7 @@ def _json_safe(doc: Any) -> bool:
     return json.loads(text) == doc and "1e400" not in text
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(mutated(most=1))
 def test_what_the_loader_accepts_the_schema_accepts(doc: Any) -> None:
